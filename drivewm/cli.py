@@ -1,0 +1,62 @@
+"""The ``drivewm`` command: one sub-command per stage (DESIGN.md section 8).
+
+Each stage owns a small ``commands.py`` module with ``register(subparsers)``: it adds its
+sub-parser(s) and sets ``func(args) -> int | None``. Those modules import only argparse-level
+things at the top, so ``drivewm --help`` stays fast; the heavy imports happen inside ``func``.
+This file parses, dispatches and turns :class:`DrivewmError` into one line and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from drivewm import __version__
+from drivewm.errors import DrivewmError
+
+#: Modules that register sub-commands, in help order.
+COMMAND_MODULES = (
+    "drivewm.sim.commands",  # simulate, view
+    "drivewm.curate.commands",  # curate, import-video
+    "drivewm.tokenizer.commands",  # tokenizer train|encode|decode|eval
+    "drivewm.diffusion.commands",  # pretrain, generate
+    "drivewm.multiview.commands",  # posttrain, rollout
+    "drivewm.eval.commands",  # eval
+    "drivewm.quickstart",  # quickstart
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="drivewm", description="Multi-camera driving world models.")
+    parser.add_argument("--version", action="version", version=f"drivewm {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:  # a stage not built yet: its commands are simply absent
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 1
+    try:
+        return int(args.func(args) or 0)
+    except DrivewmError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

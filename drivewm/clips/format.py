@@ -1,0 +1,120 @@
+"""The clip: synchronized multi-camera frames, ego poses and metadata (DESIGN.md section 4).
+
+On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`) and
+``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) inside a WebDataset tar.
+Generated samples use the same format, so the benchmark scores real and generated clips alike.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import numpy as np
+
+from drivewm.clips.video import decode_mp4
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig, rig_from_dict
+
+CLIP_FORMAT_VERSION = 1
+KEY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
+
+
+@dataclasses.dataclass
+class ClipMeta:
+    """``KEY.json``. Times are integer ns; the rig is at the clip's image size.
+
+    ``trajectory_ego``: the future ego trajectory the multi-view model is conditioned on,
+    (N, 3) waypoints (m) in the first frame's ego frame, spaced ``trajectory_dt_s`` apart
+    starting one step after the first frame. ``quality``: filter scores by filter name.
+    ``sync_error_ns``: worst camera skew against the reference clock over the clip.
+    ``extra``: anything else (generated clips record model, prompt, seed, trajectory name).
+    """
+
+    key: str
+    source_log: str
+    start_time_ns: int
+    fps: float
+    timestamps_ns: list[int]
+    rig: dict
+    caption: str = ""
+    view_captions: dict[str, str] = dataclasses.field(default_factory=dict)
+    tags: dict[str, str] = dataclasses.field(default_factory=dict)
+    quality: dict[str, float] = dataclasses.field(default_factory=dict)
+    sync_error_ns: int = 0
+    trajectory_ego: list[list[float]] = dataclasses.field(default_factory=list)
+    trajectory_dt_s: float = 0.0
+    extra: dict = dataclasses.field(default_factory=dict)
+    format_version: int = CLIP_FORMAT_VERSION
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.timestamps_ns)
+
+    @property
+    def cameras(self) -> list[str]:
+        return [c["name"] for c in self.rig["cameras"]]
+
+    def get_rig(self) -> Rig:
+        return rig_from_dict(self.rig, f"clip {self.key}")
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict, where: str) -> "ClipMeta":
+        version = data.get("format_version")
+        if version != CLIP_FORMAT_VERSION:
+            raise DrivewmError(f"{where}: clip format_version {version!r}, this drivewm reads {CLIP_FORMAT_VERSION}")
+        names = {f.name for f in dataclasses.fields(cls)}
+        try:
+            return cls(**{k: v for k, v in data.items() if k in names})
+        except TypeError as exc:
+            raise DrivewmError(f"{where}: bad clip metadata ({exc})") from None
+
+
+@dataclasses.dataclass
+class Clip:
+    """One clip in memory. ``mp4`` holds the encoded video per camera (rig order); ``videos``
+    decodes on first use to uint8 RGB (T, H, W, 3) per camera."""
+
+    meta: ClipMeta
+    mp4: dict[str, bytes]
+    T_world_from_ego: np.ndarray
+    _decoded: dict[str, np.ndarray] = dataclasses.field(default_factory=dict, repr=False)
+
+    @property
+    def key(self) -> str:
+        return self.meta.key
+
+    def video(self, camera: str) -> np.ndarray:
+        """Frames of one camera, uint8 RGB (T, H, W, 3)."""
+        if camera not in self._decoded:
+            if camera not in self.mp4:
+                raise DrivewmError(f"clip {self.key}: no video for camera {camera!r}")
+            self._decoded[camera] = decode_mp4(self.mp4[camera], self.meta.num_frames, f"clip {self.key} {camera}")
+        return self._decoded[camera]
+
+    def videos(self) -> np.ndarray:
+        """All cameras in rig order, uint8 (V, T, H, W, 3)."""
+        return np.stack([self.video(c) for c in self.meta.cameras])
+
+
+def clip_from_arrays(meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18) -> Clip:
+    """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta)."""
+    from drivewm.clips.video import encode_mp4
+
+    validate_meta(meta)
+    mp4 = {c: encode_mp4(frames[c], meta.fps, crf) for c in meta.cameras}
+    clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
+    clip._decoded.update({c: frames[c] for c in meta.cameras})
+    return clip
+
+
+def validate_meta(meta: ClipMeta) -> None:
+    """Raise DrivewmError if the metadata breaks the contract."""
+    if not KEY_PATTERN.match(meta.key):
+        raise DrivewmError(f"clip key {meta.key!r}: use only letters, digits, '_' and '-' (no dots)")
+    if meta.fps <= 0 or meta.num_frames == 0:
+        raise DrivewmError(f"clip {meta.key}: needs fps > 0 and at least one timestamp")
+    meta.get_rig()

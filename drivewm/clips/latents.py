@@ -1,0 +1,95 @@
+"""The latent cache: tokenizer latents of curated clips, read by the diffusion stages.
+
+Layout, next to the clips: ``CLIPDIR/latents/NAME/`` (NAME defaults to the tokenizer folder's
+name) holding ``index.json`` and one ``KEY.safetensors`` per clip with tensors
+``latents`` ((V, c, t, h, w) float32, raw tokenizer output, *not* normalised) and
+``T_world_from_ego`` ((T, 4, 4) float64). ``index.json``::
+
+    {"format_version": 1,
+     "tokenizer": {"path": ..., "config": {...}, "latent_mean": [c], "latent_std": [c]},
+     "clips": [{"key": ..., "file": "KEY.safetensors", "meta": <ClipMeta json>}, ...]}
+
+The diffusion stages normalise with ``(z - mean) / std`` per channel from the index.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+
+from drivewm.atomic import atomic_path, write_json
+from drivewm.clips.format import ClipMeta
+from drivewm.errors import DrivewmError
+
+LATENT_CACHE_VERSION = 1
+
+
+@dataclasses.dataclass
+class LatentClip:
+    """One cached clip: ``latents`` (V, c, t, h, w) float32, ``T_world_from_ego`` (T, 4, 4)."""
+
+    meta: ClipMeta
+    latents: torch.Tensor
+    T_world_from_ego: np.ndarray
+
+
+def write_latent_clip(cache_dir: str | Path, meta: ClipMeta, latents: torch.Tensor, T_world_from_ego: np.ndarray) -> dict:
+    """Atomically write one clip's latents; returns its index row."""
+    if latents.ndim != 5:
+        raise DrivewmError(f"clip {meta.key}: latents must be (V, c, t, h, w), got {tuple(latents.shape)}")
+    path = Path(cache_dir) / f"{meta.key}.safetensors"
+    tensors = {
+        "latents": latents.detach().to(torch.float32).contiguous().cpu(),
+        "T_world_from_ego": torch.as_tensor(np.asarray(T_world_from_ego, dtype=np.float64)),
+    }
+    with atomic_path(path) as tmp:
+        save_file(tensors, str(tmp))
+    return {"key": meta.key, "file": path.name, "meta": meta.to_json()}
+
+
+def write_latent_index(cache_dir: str | Path, tokenizer_info: dict, rows: list[dict]) -> None:
+    """Atomically write ``index.json`` (see module docstring)."""
+    write_json(Path(cache_dir) / "index.json", {"format_version": LATENT_CACHE_VERSION, "tokenizer": tokenizer_info, "clips": rows})
+
+
+class LatentCache:
+    """Read a latent cache folder. ``len(cache)``, ``cache[i]`` -> :class:`LatentClip`."""
+
+    def __init__(self, cache_dir: str | Path):
+        self.dir = Path(cache_dir)
+        index_path = self.dir / "index.json"
+        if not index_path.is_file():
+            raise DrivewmError(f"{self.dir}: not a latent cache (no index.json); run 'drivewm tokenizer encode' first")
+        index = json.loads(index_path.read_text())
+        if index.get("format_version") != LATENT_CACHE_VERSION:
+            raise DrivewmError(f"{index_path}: latent cache version {index.get('format_version')!r} unsupported")
+        self.tokenizer: dict = index["tokenizer"]
+        self.rows: list[dict] = index["clips"]
+        if not self.rows:
+            raise DrivewmError(f"{self.dir}: latent cache holds no clips")
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    @property
+    def latent_mean(self) -> torch.Tensor:
+        return torch.tensor(self.tokenizer["latent_mean"], dtype=torch.float32)
+
+    @property
+    def latent_std(self) -> torch.Tensor:
+        return torch.tensor(self.tokenizer["latent_std"], dtype=torch.float32)
+
+    def __getitem__(self, i: int) -> LatentClip:
+        row = self.rows[i]
+        path = self.dir / row["file"]
+        try:
+            tensors = load_file(str(path))
+        except Exception as exc:  # safetensors raises several types for bad files
+            raise DrivewmError(f"{path}: cannot read latents ({exc.__class__.__name__})") from None
+        meta = ClipMeta.from_json(row["meta"], str(path))
+        return LatentClip(meta, tensors["latents"], tensors["T_world_from_ego"].numpy())

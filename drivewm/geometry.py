@@ -1,0 +1,318 @@
+"""Geometry shared by every stage: SE(3), quaternions, pinhole cameras, rigs, epipolar relations.
+
+Conventions (DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
+origin on the ground under the rear axle. Cameras are OpenCV (x right, y down, z forward).
+Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points are (..., 3).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from drivewm.errors import DrivewmError
+
+# Rotation taking OpenCV camera axes (x right, y down, z forward) to a z-up body frame looking
+# along its +x (x forward, y left, z up): columns are the camera axes written in body coordinates.
+R_BODY_FROM_OPENCV = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+# ----------------------------------------------------------------------------- SE(3)
+
+
+def make_T(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """4x4 transform from a 3x3 rotation and a translation (3,)."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.asarray(t, dtype=np.float64).reshape(3)
+    return T
+
+
+def invert_T(T: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform (..., 4, 4), without a general matrix inverse."""
+    R = T[..., :3, :3]
+    t = T[..., :3, 3]
+    out = np.zeros_like(T)
+    Rt = np.swapaxes(R, -1, -2)
+    out[..., :3, :3] = Rt
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, t)
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def transform_points(T_b_from_a: np.ndarray, points_a: np.ndarray) -> np.ndarray:
+    """Map points (..., 3) in frame a into frame b."""
+    return points_a @ T_b_from_a[:3, :3].T + T_b_from_a[:3, 3]
+
+
+def rot_z(yaw_rad: float) -> np.ndarray:
+    """Rotation about +z by ``yaw_rad`` (counter-clockwise seen from above)."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def euler_to_R(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    """Rotation R = Rz(yaw) Ry(pitch) Rx(roll) (intrinsic z-y'-x'', ISO 8855 angles)."""
+    cr, sr = np.cos(roll_rad), np.sin(roll_rad)
+    cp, sp = np.cos(pitch_rad), np.sin(pitch_rad)
+    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    return rot_z(yaw_rad) @ Ry @ Rx
+
+
+def T_from_xyz_yaw(x: float, y: float, z: float, yaw_rad: float) -> np.ndarray:
+    """Planar pose: translation (x, y, z) and heading ``yaw_rad`` about +z."""
+    return make_T(rot_z(yaw_rad), [x, y, z])
+
+
+def yaw_of(T: np.ndarray) -> float:
+    """Heading of a transform's x axis in the xy plane, radians."""
+    return float(np.arctan2(T[1, 0], T[0, 0]))
+
+
+def quat_xyzw_to_R(quat_xyzw: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) -> 3x3 rotation. The input is normalised first."""
+    x, y, z, w = np.asarray(quat_xyzw, dtype=np.float64) / np.linalg.norm(quat_xyzw)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def R_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
+    """3x3 rotation -> unit quaternion (x, y, z, w) with w >= 0 (Shepperd's method)."""
+    m = np.asarray(R, dtype=np.float64)
+    tr = np.trace(m)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q if q[3] >= 0 else -q
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """Angle of a rotation matrix in degrees (geodesic distance to identity)."""
+    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    return float(np.degrees(np.arccos(c)))
+
+
+def check_pose(T: np.ndarray, where: str) -> None:
+    """Raise DrivewmError if ``T`` is not a finite rigid 4x4 transform."""
+    T = np.asarray(T)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise DrivewmError(f"{where}: pose is not a finite 4x4 transform")
+    R = T[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
+        raise DrivewmError(f"{where}: pose rotation is not orthonormal")
+
+
+# ----------------------------------------------------------------------------- pinhole
+
+
+def project(K: np.ndarray, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole projection of camera-frame points (N, 3) -> pixels (N, 2) and depth z (N,).
+
+    Pixel centres are at integer coordinates (OpenCV). Points with z <= 0 get NaN pixels.
+    """
+    z = points_cam[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (points_cam[:, :2] / z[:, None]) @ K[:2, :2].T + K[:2, 2]
+    uv[z <= 0] = np.nan
+    return uv, z
+
+
+def backproject(K: np.ndarray, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) at depths z (N,) -> camera-frame points (N, 3)."""
+    rays = pixel_rays(K, uv)
+    return rays * np.asarray(depth)[:, None]
+
+
+def pixel_rays(K: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Camera-frame ray directions with z = 1 for pixels (N, 2)."""
+    xy = (uv - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T
+    return np.concatenate([xy, np.ones((len(uv), 1))], axis=1)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """Cross-product matrix [v]_x."""
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def essential_from_T(T_b_from_a: np.ndarray) -> np.ndarray:
+    """Essential matrix E with x_b^T E x_a = 0 for normalised points of cameras a and b.
+
+    E = [t]_x R (Hartley & Zisserman eq. 9.8) where (R, t) = T_b_from_a.
+    """
+    return skew(T_b_from_a[:3, 3]) @ T_b_from_a[:3, :3]
+
+
+def fundamental_from_T(K_a: np.ndarray, K_b: np.ndarray, T_b_from_a: np.ndarray) -> np.ndarray:
+    """Fundamental matrix F with x_b^T F x_a = 0 in pixels: F = K_b^-T E K_a^-1 (H&Z eq. 9.12)."""
+    F = np.linalg.inv(K_b).T @ essential_from_T(T_b_from_a) @ np.linalg.inv(K_a)
+    return F / np.linalg.norm(F)
+
+
+def sampson_distance_sq(F: np.ndarray, x_a: np.ndarray, x_b: np.ndarray) -> np.ndarray:
+    """Squared Sampson distance (px^2) of correspondences x_a <-> x_b (N, 2) under x_b^T F x_a = 0.
+
+    H&Z eq. 11.9: (x_b^T F x_a)^2 / ((F x_a)_1^2 + (F x_a)_2^2 + (F^T x_b)_1^2 + (F^T x_b)_2^2);
+    the same quantity as OpenCV's ``cv2.sampsonDistance(x_a, x_b, F)``.
+    """
+    ha = np.concatenate([x_a, np.ones((len(x_a), 1))], axis=1)
+    hb = np.concatenate([x_b, np.ones((len(x_b), 1))], axis=1)
+    Fa = ha @ F.T
+    Fb = hb @ F
+    num = np.sum(hb * Fa, axis=1) ** 2
+    den = Fa[:, 0] ** 2 + Fa[:, 1] ** 2 + Fb[:, 0] ** 2 + Fb[:, 1] ** 2
+    return num / den
+
+
+# ----------------------------------------------------------------------------- rigs
+
+
+@dataclasses.dataclass
+class Camera:
+    """One calibrated camera of a rig.
+
+    ``K`` is the 3x3 pinhole matrix in pixels for an image of ``width`` x ``height``;
+    ``distortion`` holds OpenCV coefficients (k1, k2, p1, p2[, k3...]) or is empty;
+    ``T_ego_from_cam`` maps OpenCV camera-frame points into the ego frame.
+    """
+
+    name: str
+    K: np.ndarray
+    width: int
+    height: int
+    T_ego_from_cam: np.ndarray
+    distortion: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+
+    def scaled(self, width: int, height: int) -> "Camera":
+        """The same camera at another image size (intrinsics scaled per axis)."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0] *= sx
+        K[1] *= sy
+        return dataclasses.replace(self, K=K, width=width, height=height)
+
+    def to_dict(self) -> dict:
+        """YAML/JSON-ready dict (the rig-file layout)."""
+        return {
+            "name": self.name,
+            "width": self.width,
+            "height": self.height,
+            "K": self.K.tolist(),
+            "distortion": self.distortion.tolist(),
+            "T_ego_from_cam": self.T_ego_from_cam.tolist(),
+        }
+
+
+@dataclasses.dataclass
+class Rig:
+    """An ordered list of cameras (DESIGN.md section 3). Order is the view order in models."""
+
+    name: str
+    cameras: list[Camera]
+
+    @property
+    def names(self) -> list[str]:
+        return [c.name for c in self.cameras]
+
+    def camera(self, name: str) -> Camera:
+        for c in self.cameras:
+            if c.name == name:
+                return c
+        raise DrivewmError(f"rig {self.name}: no camera named {name!r} (has {self.names})")
+
+    def scaled(self, width: int, height: int) -> "Rig":
+        """Every camera at a new image size."""
+        return Rig(self.name, [c.scaled(width, height) for c in self.cameras])
+
+    def subset(self, names: list[str]) -> "Rig":
+        """The cameras named, in that order."""
+        return Rig(self.name, [self.camera(n) for n in names])
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "cameras": [c.to_dict() for c in self.cameras]}
+
+
+def rig_search_dirs() -> list[Path]:
+    """Folders searched for ``NAME.yaml`` rigs: $DRIVEWM_RIGS (os.pathsep-separated), then the
+    repository's ``multiview/rigs`` next to the installed package (editable installs)."""
+    dirs = [Path(p) for p in os.environ.get("DRIVEWM_RIGS", "").split(os.pathsep) if p]
+    dirs.append(Path(__file__).resolve().parent.parent / "multiview" / "rigs")
+    return dirs
+
+
+def load_rig(name_or_path: str | Path) -> Rig:
+    """Load a rig by name (``nuscenes6``) or YAML path. See ``multiview/rigs/README.md``."""
+    path = Path(name_or_path)
+    if not path.is_file():
+        for d in rig_search_dirs():
+            if (d / f"{name_or_path}.yaml").is_file():
+                path = d / f"{name_or_path}.yaml"
+                break
+        else:
+            raise DrivewmError(f"rig {name_or_path!r}: no such file or named rig in {[str(d) for d in rig_search_dirs()]}")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError:
+        raise DrivewmError(f"{path}: not valid YAML") from None
+    return rig_from_dict(data, str(path))
+
+
+def rig_from_dict(data: dict, where: str = "rig") -> Rig:
+    """Build a rig from its dict form: explicit ``K``/``T_ego_from_cam`` or the compact form
+    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see multiview/rigs/README.md)."""
+    if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
+        raise DrivewmError(f"{where}: a rig needs a non-empty 'cameras' list")
+    defaults = data.get("defaults", {})
+    cams = [_camera_from_dict({**defaults, **c}, f"{where}: camera {i}") for i, c in enumerate(data["cameras"])]
+    names = [c.name for c in cams]
+    if len(set(names)) != len(names):
+        raise DrivewmError(f"{where}: duplicate camera names {names}")
+    return Rig(str(data.get("name", Path(where).stem)), cams)
+
+
+def _camera_from_dict(d: dict, where: str) -> Camera:
+    try:
+        name, width, height = str(d["name"]), int(d["width"]), int(d["height"])
+    except KeyError as exc:
+        raise DrivewmError(f"{where}: missing key {exc.args[0]!r}") from None
+    if width <= 0 or height <= 0:
+        raise DrivewmError(f"{where} ({name}): image size must be positive")
+    if "K" in d:
+        K = np.asarray(d["K"], dtype=np.float64)
+    elif "hfov_deg" in d:
+        f = 0.5 * width / np.tan(np.radians(float(d["hfov_deg"])) / 2)
+        K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
+    else:
+        raise DrivewmError(f"{where} ({name}): give K or hfov_deg")
+    if "T_ego_from_cam" in d:
+        T = np.asarray(d["T_ego_from_cam"], dtype=np.float64)
+    elif "xyz" in d:
+        R_ego_from_body = euler_to_R(*np.radians([d.get("roll_deg", 0.0), d.get("pitch_deg", 0.0), d.get("yaw_deg", 0.0)]))
+        T = make_T(R_ego_from_body @ R_BODY_FROM_OPENCV, d["xyz"])
+    else:
+        raise DrivewmError(f"{where} ({name}): give T_ego_from_cam or xyz + yaw_deg")
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise DrivewmError(f"{where} ({name}): K must be a finite 3x3 matrix")
+    check_pose(T, f"{where} ({name}) T_ego_from_cam")
+    dist = np.asarray(d.get("distortion", []), dtype=np.float64).reshape(-1)
+    return Camera(name, K, width, height, T, dist)

@@ -1,0 +1,97 @@
+"""The in-memory drive log every reader returns and every writer takes.
+
+Simulated logs, Foxglove (protobuf or JSON) logs and ROS 2 logs all become the same
+:class:`DriveLog`, so curation never knows where a drive came from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig
+
+#: Scene tag keys every log carries (values are free strings; these are the known ones).
+SCENE_TAG_KEYS = ("weather", "time_of_day", "road_type", "traffic_density", "source")
+WEATHERS = ("clear", "overcast", "rain", "snow", "fog")
+TIMES_OF_DAY = ("day", "dusk", "night")
+
+
+@dataclasses.dataclass
+class ImageFrame:
+    """One compressed camera image as stored in the log (``data`` is JPEG or PNG bytes)."""
+
+    timestamp_ns: int
+    data: bytes
+    format: str = "jpeg"
+
+    def decode(self) -> np.ndarray:
+        """The image as uint8 RGB, H x W x 3. Undecodable bytes raise DrivewmError."""
+        buf = np.frombuffer(self.data, dtype=np.uint8)
+        bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise DrivewmError(f"image at {self.timestamp_ns} ns: cannot decode {self.format} data")
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+@dataclasses.dataclass
+class AgentBox:
+    """Another road user as an oriented 3D box in the world frame.
+
+    ``center_xyz`` is the box centre (m), ``size_lwh`` length/width/height (m), ``yaw_rad`` its
+    heading about +z; ``color_rgb`` in [0, 1]; ``category`` e.g. car, truck, pedestrian.
+    """
+
+    track_id: str
+    category: str
+    center_xyz: np.ndarray
+    size_lwh: np.ndarray
+    yaw_rad: float
+    color_rgb: tuple[float, float, float] = (0.5, 0.5, 0.5)
+
+
+@dataclasses.dataclass
+class SceneInfo:
+    """The scene channel: tags (weather, time_of_day, road_type, traffic_density, source, ...)
+    and a free-text description."""
+
+    tags: dict[str, str]
+    description: str = ""
+
+
+@dataclasses.dataclass
+class DriveLog:
+    """One drive, as read from (or to be written to) one MCAP file.
+
+    ``rig``: calibration of every camera (K, size, distortion, static ``T_ego_from_cam``), in
+    the log's camera order. ``images``: camera name -> frames sorted by ``timestamp_ns``.
+    ``pose_timestamps_ns`` (N,) int64 and ``T_world_from_ego`` (N, 4, 4): the per-tick ego pose.
+    ``agents``: optional (timestamp_ns, boxes) per tick, for viewers (simulated logs have them).
+    """
+
+    path: str
+    rig: Rig
+    images: dict[str, list[ImageFrame]]
+    pose_timestamps_ns: np.ndarray
+    T_world_from_ego: np.ndarray
+    scene: SceneInfo
+    agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
+
+    @property
+    def camera_names(self) -> list[str]:
+        return self.rig.names
+
+    def validate(self) -> None:
+        """Raise DrivewmError naming the file if the log breaks the contract."""
+        if not any(self.images.get(n) for n in self.camera_names):
+            raise DrivewmError(f"{self.path}: log has no camera images")
+        for name in self.images:
+            if name not in self.camera_names:
+                raise DrivewmError(f"{self.path}: images for camera {name!r} without calibration")
+        if len(self.pose_timestamps_ns) == 0:
+            raise DrivewmError(f"{self.path}: log has no ego poses (T_world_from_ego)")
+        if self.T_world_from_ego.shape != (len(self.pose_timestamps_ns), 4, 4):
+            raise DrivewmError(f"{self.path}: ego pose array has shape {self.T_world_from_ego.shape}")

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Install drivewm with its test extras into .venv and run the whole test suite (CPU only).
+# PyTorch is pinned first: a bare torch requirement would pull the CUDA build.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+python3 -m venv .venv
+. .venv/bin/activate
+python -m pip install -q --upgrade pip
+python -m pip install -q torch==2.13.0
+python -m pip install -q -e ".[test]"
+if ! command -v chromium >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+  (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || echo "chromium not installed: the report browser test will say so"
+fi
+export RAY_AUTH_MODE=disabled RAY_USAGE_STATS_ENABLED=0 SDL_VIDEODRIVER=offscreen
+python -m pytest -q "$@"
