@@ -1,0 +1,98 @@
+"""Foxglove messages (protobuf or JSON encoding) -> drivewm values.
+
+Protobuf messages come from mcap-protobuf-support (attributes; times are
+``google.protobuf.Timestamp`` with ``seconds``/``nanos``); JSON messages are dicts (times are
+``{"sec", "nsec"}``, bytes are base64 strings), per the Foxglove schema docs.
+"""
+
+from __future__ import annotations
+
+import base64
+from typing import Any
+
+import numpy as np
+
+from drivewm.logs.transforms import join_T, sec_nsec_to_ns, yaw_from_quat_xyzw
+from drivewm.logs.types import AgentBox
+
+IMAGE = "foxglove.CompressedImage"
+CALIBRATION = "foxglove.CameraCalibration"
+TRANSFORMS = "foxglove.FrameTransforms"
+TRANSFORM = "foxglove.FrameTransform"
+SCENE_UPDATE = "foxglove.SceneUpdate"
+
+
+def field(msg: Any, name: str, default: Any = None) -> Any:
+    """A field of a protobuf message or a JSON dict."""
+    if isinstance(msg, dict):
+        return msg.get(name, default)
+    return getattr(msg, name, default)
+
+
+def time_ns(stamp: Any) -> int:
+    """Foxglove time (protobuf Timestamp or JSON {sec, nsec}) -> ns; 0 if unset."""
+    if stamp is None:
+        return 0
+    if isinstance(stamp, dict):
+        return sec_nsec_to_ns(stamp.get("sec", 0), stamp.get("nsec", 0))
+    return sec_nsec_to_ns(stamp.seconds, stamp.nanos)
+
+
+def as_bytes(value: Any) -> bytes:
+    """A bytes field: raw in protobuf, base64 text in JSON."""
+    return base64.b64decode(value) if isinstance(value, str) else bytes(value)
+
+
+def vec3(v: Any) -> np.ndarray:
+    return np.array([field(v, "x", 0.0), field(v, "y", 0.0), field(v, "z", 0.0)], dtype=np.float64)
+
+
+def quat_xyzw(q: Any) -> np.ndarray:
+    return np.array([field(q, k, 0.0) for k in "xyzw"], dtype=np.float64)
+
+
+def image(msg: Any) -> tuple[str, int, bytes, str]:
+    """CompressedImage -> (frame_id, stamp_ns, data, format)."""
+    return field(msg, "frame_id", ""), time_ns(field(msg, "timestamp")), as_bytes(field(msg, "data", b"")), field(msg, "format", "")
+
+
+def calibration(msg: Any) -> tuple[str, np.ndarray, np.ndarray, int, int]:
+    """CameraCalibration -> (frame_id, K (3, 3), D (n,), width, height)."""
+    K = np.asarray(list(field(msg, "K", [])), dtype=np.float64)
+    D = np.asarray(list(field(msg, "D", [])), dtype=np.float64)
+    return field(msg, "frame_id", ""), K, D, int(field(msg, "width", 0)), int(field(msg, "height", 0))
+
+
+def transforms(msg: Any, schema_name: str) -> list[tuple[int, str, str, np.ndarray]]:
+    """FrameTransforms or FrameTransform -> [(stamp_ns, parent, child, T_parent_from_child)]."""
+    items = field(msg, "transforms", []) if schema_name == TRANSFORMS else [msg]
+    out = []
+    for tf in items:
+        T = join_T(vec3(field(tf, "translation", {})), quat_xyzw(field(tf, "rotation", {})))
+        out.append((time_ns(field(tf, "timestamp")), field(tf, "parent_frame_id", ""), field(tf, "child_frame_id", ""), T))
+    return out
+
+
+def agents(msg: Any) -> tuple[int, list[AgentBox]]:
+    """SceneUpdate of cube entities -> (stamp_ns, boxes); the first cube of each entity is its box."""
+    boxes, stamp = [], 0
+    for ent in field(msg, "entities", []):
+        cubes = list(field(ent, "cubes", []))
+        if not cubes:
+            continue
+        stamp = stamp or time_ns(field(ent, "timestamp"))
+        cube = cubes[0]
+        pose = field(cube, "pose", {})
+        meta = {field(kv, "key"): field(kv, "value") for kv in field(ent, "metadata", [])}
+        color = field(cube, "color", {})
+        boxes.append(
+            AgentBox(
+                track_id=field(ent, "id", ""),
+                category=meta.get("category", "unknown"),
+                center_xyz=vec3(field(pose, "position", {})),
+                size_lwh=vec3(field(cube, "size", {})),
+                yaw_rad=yaw_from_quat_xyzw(quat_xyzw(field(pose, "orientation", {"w": 1.0}))),
+                color_rgb=(float(field(color, "r", 0.5)), float(field(color, "g", 0.5)), float(field(color, "b", 0.5))),
+            )
+        )
+    return stamp, boxes

@@ -1,0 +1,30 @@
+"""Topic and frame names of drivewm's own drive logs (DESIGN.md section 4, apis.md).
+
+Written logs use these; the reader uses them as the defaults for Foxglove files, and a topic map
+(``datasets/topicmaps/``) overrides them for fleet logs.
+"""
+
+from __future__ import annotations
+
+#: Frame of the per-tick ego pose's parent (``T_world_from_ego`` maps ego into it).
+WORLD_FRAME = "world"
+#: The vehicle frame (ISO 8855: x forward, y left, z up, origin under the rear axle).
+EGO_FRAME = "ego"
+
+TF_TOPIC = "/tf"  # foxglove.FrameTransforms world -> ego, one per tick
+TF_STATIC_TOPIC = "/tf_static"  # foxglove.FrameTransforms ego -> CAMERA (T_ego_from_cam)
+SCENE_TOPIC = "/scene"  # JSON {"tags": {...}, "description": "..."}
+AGENTS_TOPIC = "/agents"  # foxglove.SceneUpdate, one cube entity per agent
+SCENE_SCHEMA_NAME = "drivewm.Scene"
+#: Name of the MCAP metadata record holding the rig name and camera order.
+METADATA_NAME = "drivewm"
+
+
+def image_topic(camera: str) -> str:
+    """``/CAMERA/image``: foxglove.CompressedImage with frame_id = camera name."""
+    return f"/{camera}/image"
+
+
+def calibration_topic(camera: str) -> str:
+    """``/CAMERA/calibration``: foxglove.CameraCalibration with frame_id = camera name."""
+    return f"/{camera}/calibration"

@@ -1,0 +1,84 @@
+"""Topic maps: how a fleet log's topics and frames become drivewm cameras and ego poses.
+
+A topic map is a YAML file in ``datasets/topicmaps/`` (see its README). Without one, the reader
+finds cameras by schema (Foxglove: ``foxglove.CompressedImage`` + ``foxglove.CameraCalibration``;
+ROS 2: ``sensor_msgs`` images + ``CameraInfo``) and names each camera by its ``frame_id``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from drivewm.config import from_dict, load_yaml
+from drivewm.errors import DrivewmError
+
+
+@dataclasses.dataclass
+class CameraTopics:
+    """Where one camera lives in the log."""
+
+    image: str
+    """Image topic (foxglove.CompressedImage, sensor_msgs/CompressedImage or sensor_msgs/Image)."""
+    calibration: str
+    """Calibration topic (foxglove.CameraCalibration or sensor_msgs/CameraInfo)."""
+    frame: str | None = None
+    """TF frame of the (OpenCV-convention) camera; None: the calibration message's frame_id."""
+
+
+@dataclasses.dataclass
+class EgoPoseTopic:
+    """A topic carrying the ego pose directly instead of TF."""
+
+    topic: str
+    """geometry_msgs/PoseStamped, geometry_msgs/PoseWithCovarianceStamped or nav_msgs/Odometry."""
+
+
+@dataclasses.dataclass
+class TopicMap:
+    """Mapping of one family of logs (one vehicle/recorder) onto the drivewm drive-log contract."""
+
+    name: str = ""
+    """Rig name given to the cameras read (default: the file's own, or its stem)."""
+    cameras: dict[str, CameraTopics] = dataclasses.field(default_factory=dict)
+    """Camera name -> topics, in rig order. Empty: discover cameras by schema, named by frame_id."""
+    world_frame: str | None = None
+    """TF frame of the world (default: "world" for Foxglove logs, "map" for ROS 2, REP 105)."""
+    ego_frame: str | None = None
+    """TF frame of the vehicle (default: "ego" for Foxglove logs, "base_link" for ROS 2)."""
+    ego_pose: EgoPoseTopic | None = None
+    """Read T_world_from_ego from this topic instead of the world -> ego TF."""
+    timestamps: str = "header"
+    """"header": message stamps (falling back to log time when zero); "log_time": MCAP log time."""
+    tags: dict[str, str] = dataclasses.field(default_factory=dict)
+    """Scene tags for logs without a scene channel (e.g. source: fleet); the log's own tags win."""
+    description: str = ""
+    """Scene description for logs without a scene channel."""
+
+    def validate(self) -> None:
+        if self.timestamps not in ("header", "log_time"):
+            raise DrivewmError(f"topic map {self.name}: timestamps must be 'header' or 'log_time'")
+
+    def required_topics(self) -> list[str]:
+        """Every topic the map names that must exist in the log."""
+        topics = [t for c in self.cameras.values() for t in (c.image, c.calibration)]
+        return topics + ([self.ego_pose.topic] if self.ego_pose else [])
+
+
+def topicmap_search_dirs() -> list[Path]:
+    """``datasets/topicmaps`` of the repository next to the installed package (editable installs)."""
+    return [Path(__file__).resolve().parents[2] / "datasets" / "topicmaps"]
+
+
+def load_topic_map(name_or_path: str | Path) -> TopicMap:
+    """Load a topic map by path or by name (``reductstore_demo`` -> datasets/topicmaps/reductstore_demo.yaml)."""
+    path = Path(name_or_path)
+    if not path.is_file():
+        candidates = [d / f"{name_or_path}.yaml" for d in topicmap_search_dirs()]
+        found = [c for c in candidates if c.is_file()]
+        if not found:
+            raise DrivewmError(f"topic map {name_or_path!r}: no such file or named map in {[str(c.parent) for c in candidates]}")
+        path = found[0]
+    data = load_yaml(path)
+    data.setdefault("name", path.stem)
+    return from_dict(TopicMap, data, str(path))

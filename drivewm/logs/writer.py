@@ -1,0 +1,245 @@
+"""Write drive logs as MCAP with the Foxglove SDK (protobuf Foxglove schemas, DESIGN.md section 4).
+
+Topics (see :mod:`drivewm.logs.names`): ``/CAMERA/image`` (foxglove.CompressedImage, frame_id =
+camera), ``/CAMERA/calibration`` (foxglove.CameraCalibration), ``/tf_static`` (FrameTransforms
+ego -> CAMERA, i.e. ``T_ego_from_cam``), ``/tf`` (FrameTransforms world -> ego per tick, i.e.
+``T_world_from_ego``), ``/scene`` (JSON tags + description) and ``/agents`` (foxglove.SceneUpdate).
+Every message's MCAP log time is its ``timestamp_ns``. Static messages (calibration, tf_static,
+scene) are logged at the first timestamp the writer sees.
+
+Each writer owns a private ``foxglove.Context``, so several logs can be written at once in one
+process, and writes to a temporary name that is renamed onto ``path`` on a clean close.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from drivewm.atomic import atomic_path
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Camera, Rig
+from drivewm.logs import names
+from drivewm.logs.transforms import ns_to_sec_nsec, quat_xyzw_from_yaw, split_T
+from drivewm.logs.types import AgentBox, DriveLog, SceneInfo
+
+IMAGE_FORMATS = ("jpeg", "png")
+SCENE_JSON_SCHEMA = {
+    "type": "object",
+    "title": names.SCENE_SCHEMA_NAME,
+    "properties": {
+        "tags": {"type": "object", "additionalProperties": {"type": "string"}},
+        "description": {"type": "string"},
+    },
+}
+
+
+def _fg():
+    """The Foxglove SDK modules, imported on first use (they load a native extension)."""
+    import foxglove
+    from foxglove import channels, messages
+    from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+    return foxglove, channels, messages, MCAPCompression, MCAPWriteOptions
+
+
+class LogWriter:
+    """Write one drive to ``path`` (atomic: temp name, renamed on close).
+
+    ``rig``: the cameras (their order is kept in the file's ``drivewm`` metadata record).
+    ``scene``: tags + description for the ``/scene`` channel. ``image_format``: "jpeg" or "png"
+    for :meth:`write_images`; ``jpeg_quality``: OpenCV JPEG quality 0-100.
+    Use as a context manager; leaving the block on an exception discards the file.
+    """
+
+    def __init__(self, path: str | Path, rig: Rig, scene: SceneInfo, image_format: str = "jpeg", jpeg_quality: int = 92):
+        if image_format not in IMAGE_FORMATS:
+            raise DrivewmError(f"{path}: image_format must be one of {IMAGE_FORMATS}, got {image_format!r}")
+        self.path = Path(path)
+        self.rig, self.scene = rig, scene
+        self.image_format, self.jpeg_quality = image_format, int(jpeg_quality)
+        self._stack = contextlib.ExitStack()
+        tmp = self._stack.enter_context(atomic_path(self.path))
+        self._open(tmp)
+        self._static_written = False
+        self._closed = False
+
+    # ------------------------------------------------------------------ set-up
+
+    def _open(self, tmp: Path) -> None:
+        foxglove, channels, messages, MCAPCompression, MCAPWriteOptions = _fg()
+        self._msg = messages
+        self._ctx = foxglove.Context()
+        # zstd without worker threads: the images are already JPEG/PNG, the rest compresses well.
+        options = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_threads=0)
+        self._mcap = foxglove.open_mcap(tmp, context=self._ctx, writer_options=options)
+        ctx = self._ctx
+        self._image_ch = {c.name: channels.CompressedImageChannel(names.image_topic(c.name), context=ctx) for c in self.rig.cameras}
+        self._calib_ch = {
+            c.name: channels.CameraCalibrationChannel(names.calibration_topic(c.name), context=ctx) for c in self.rig.cameras
+        }
+        self._tf_static_ch = channels.FrameTransformsChannel(names.TF_STATIC_TOPIC, context=ctx)
+        self._tf_ch = channels.FrameTransformsChannel(names.TF_TOPIC, context=ctx)
+        self._agents_ch = channels.SceneUpdateChannel(names.AGENTS_TOPIC, context=ctx)
+        schema = foxglove.Schema(
+            name=names.SCENE_SCHEMA_NAME, encoding="jsonschema", data=json.dumps(SCENE_JSON_SCHEMA).encode()
+        )
+        self._scene_ch = foxglove.Channel(names.SCENE_TOPIC, schema=schema, message_encoding="json", context=ctx)
+        self._mcap.write_metadata(names.METADATA_NAME, {"rig": self.rig.name, "cameras": ",".join(self.rig.names)})
+
+    def _timestamp(self, timestamp_ns: int):
+        sec, nsec = ns_to_sec_nsec(timestamp_ns)
+        return self._msg.Timestamp(sec, nsec)
+
+    def _ensure_static(self, timestamp_ns: int) -> None:
+        """Log calibration, tf_static and scene once, at the first timestamp seen."""
+        if self._static_written:
+            return
+        self._static_written = True
+        for cam in self.rig.cameras:
+            self._calib_ch[cam.name].log(self._calibration_msg(cam, timestamp_ns), log_time=timestamp_ns)
+        statics = [self._transform_msg(timestamp_ns, names.EGO_FRAME, c.name, c.T_ego_from_cam) for c in self.rig.cameras]
+        self._tf_static_ch.log(self._msg.FrameTransforms(transforms=statics), log_time=timestamp_ns)
+        scene = {"tags": dict(self.scene.tags), "description": self.scene.description}
+        self._scene_ch.log(scene, log_time=timestamp_ns)
+
+    # ------------------------------------------------------------------ messages
+
+    def _calibration_msg(self, cam: Camera, timestamp_ns: int):
+        P = np.concatenate([cam.K, np.zeros((3, 1))], axis=1)
+        return self._msg.CameraCalibration(
+            timestamp=self._timestamp(timestamp_ns),
+            frame_id=cam.name,
+            width=cam.width,
+            height=cam.height,
+            distortion_model="rational_polynomial" if len(cam.distortion) > 5 else "plumb_bob",
+            D=[float(v) for v in cam.distortion],
+            K=[float(v) for v in cam.K.reshape(-1)],
+            R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            P=[float(v) for v in P.reshape(-1)],
+        )
+
+    def _transform_msg(self, timestamp_ns: int, parent: str, child: str, T_parent_from_child: np.ndarray):
+        t, q = split_T(T_parent_from_child)
+        return self._msg.FrameTransform(
+            timestamp=self._timestamp(timestamp_ns),
+            parent_frame_id=parent,
+            child_frame_id=child,
+            translation=self._msg.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+            rotation=self._msg.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+        )
+
+    def _cube_entity(self, timestamp_ns: int, box: AgentBox):
+        m = self._msg
+        c, s, q = box.center_xyz, box.size_lwh, quat_xyzw_from_yaw(box.yaw_rad)
+        pose = m.Pose(
+            position=m.Vector3(x=float(c[0]), y=float(c[1]), z=float(c[2])),
+            orientation=m.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+        )
+        r, g, b = (float(v) for v in box.color_rgb)
+        cube = m.CubePrimitive(pose=pose, size=m.Vector3(x=float(s[0]), y=float(s[1]), z=float(s[2])), color=m.Color(r=r, g=g, b=b, a=1.0))
+        meta = [m.KeyValuePair(key="category", value=box.category)]
+        return m.SceneEntity(timestamp=self._timestamp(timestamp_ns), frame_id=names.WORLD_FRAME, id=box.track_id, cubes=[cube], metadata=meta)
+
+    # ------------------------------------------------------------------ public API
+
+    def write_image(self, camera: str, timestamp_ns: int, image: np.ndarray) -> None:
+        """Encode one camera's uint8 RGB H x W x 3 image (the rig's size) and log it."""
+        cam = self.rig.camera(camera)
+        image = np.asarray(image)
+        if image.dtype != np.uint8 or image.shape != (cam.height, cam.width, 3):
+            raise DrivewmError(
+                f"{self.path}: image for {camera} must be uint8 ({cam.height}, {cam.width}, 3), got {image.dtype} {image.shape}"
+            )
+        self.write_encoded_image(camera, timestamp_ns, encode_image(image, self.image_format, self.jpeg_quality), self.image_format)
+
+    def write_images(self, timestamp_ns: int, images: dict[str, np.ndarray]) -> None:
+        """Log one image per camera name (uint8 RGB H x W x 3) at ``timestamp_ns``."""
+        for camera, image in images.items():
+            self.write_image(camera, timestamp_ns, image)
+
+    def write_encoded_image(self, camera: str, timestamp_ns: int, data: bytes, format: str) -> None:
+        """Log already-compressed image bytes (``format`` "jpeg" or "png") unchanged."""
+        if camera not in self._image_ch:
+            raise DrivewmError(f"{self.path}: camera {camera!r} is not in rig {self.rig.name} ({self.rig.names})")
+        self._ensure_static(timestamp_ns)
+        msg = self._msg.CompressedImage(timestamp=self._timestamp(timestamp_ns), frame_id=camera, data=bytes(data), format=format)
+        self._image_ch[camera].log(msg, log_time=int(timestamp_ns))
+
+    def write_pose(self, timestamp_ns: int, T_world_from_ego: np.ndarray) -> None:
+        """Log the ego pose (4x4, NaN allowed for a gap) as a world -> ego FrameTransform."""
+        self._ensure_static(timestamp_ns)
+        tf = self._transform_msg(timestamp_ns, names.WORLD_FRAME, names.EGO_FRAME, T_world_from_ego)
+        self._tf_ch.log(self._msg.FrameTransforms(transforms=[tf]), log_time=int(timestamp_ns))
+
+    def write_agents(self, timestamp_ns: int, boxes: list[AgentBox]) -> None:
+        """Log the other road users at one tick: the scene is replaced (delete all, then cubes)."""
+        self._ensure_static(timestamp_ns)
+        m = self._msg
+        deletion = m.SceneEntityDeletion(timestamp=self._timestamp(timestamp_ns), type=m.SceneEntityDeletionType.All)
+        update = m.SceneUpdate(deletions=[deletion], entities=[self._cube_entity(timestamp_ns, b) for b in boxes])
+        self._agents_ch.log(update, log_time=int(timestamp_ns))
+
+    def close(self) -> Path:
+        """Finish the MCAP file and rename it onto ``path``."""
+        if not self._closed:
+            self._closed = True
+            self._ensure_static(0)
+            self._mcap.close()
+            self._stack.close()
+        return self.path
+
+    def abort(self) -> None:
+        """Stop writing and discard the file (``path`` is left as it was)."""
+        if not self._closed:
+            self._closed = True
+            self._mcap.close()
+            self._stack.__exit__(DrivewmError, DrivewmError("aborted"), None)
+
+    def __enter__(self) -> "LogWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+def encode_image(image_rgb: np.ndarray, image_format: str = "jpeg", jpeg_quality: int = 92) -> bytes:
+    """uint8 RGB H x W x 3 -> JPEG or PNG bytes (OpenCV)."""
+    bgr = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)
+    ext, params = (".jpg", [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)]) if image_format == "jpeg" else (".png", [])
+    ok, buf = cv2.imencode(ext, bgr, params)
+    if not ok:
+        raise DrivewmError(f"cannot encode image of shape {image_rgb.shape} as {image_format}")
+    return buf.tobytes()
+
+
+def write_log(log: DriveLog, path: str | Path) -> Path:
+    """Write an in-memory :class:`DriveLog` to ``path``; images are copied as stored (no re-encoding).
+
+    Messages are written in time order (poses, then agents, then images at equal times).
+    """
+    events: list[tuple[int, int, object]] = []
+    for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
+        events.append((int(ts), 0, ("pose", T)))
+    for ts, boxes in log.agents:
+        events.append((int(ts), 1, ("agents", boxes)))
+    for cam, frames in log.images.items():
+        for f in frames:
+            events.append((int(f.timestamp_ns), 2, ("image", cam, f)))
+    events.sort(key=lambda e: (e[0], e[1]))
+    with LogWriter(path, log.rig, log.scene) as w:
+        for ts, _, ev in events:
+            if ev[0] == "pose":
+                w.write_pose(ts, ev[1])
+            elif ev[0] == "agents":
+                w.write_agents(ts, ev[1])
+            else:
+                w.write_encoded_image(ev[1], ts, ev[2].data, ev[2].format)
+    return Path(path)
