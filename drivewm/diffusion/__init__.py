@@ -1,0 +1,1 @@
+"""Text2World diffusion: DiT backbone (dit.py), EDM preconditioning and loss (denoiser.py), samplers."""

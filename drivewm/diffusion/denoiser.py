@@ -1,0 +1,140 @@
+"""EDM preconditioning and training loss (Karras et al. 2022, "Elucidating the Design Space of
+Diffusion-Based Generative Models", arXiv 2206.00364), with classifier-free-guidance text dropout
+and optional Video2World conditioning on clean first latent frames.
+
+The denoiser is ``D(x; sigma) = c_skip(sigma) x + c_out(sigma) F(c_in(sigma) x; c_noise(sigma))``
+around a raw backbone F (the DiT), Table 1 of the paper. Latents here are normalised per channel,
+so ``sigma_data = 0.5`` as in Cosmos.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import torch
+from torch import nn
+
+
+@dataclasses.dataclass
+class EDMConfig:
+    """Preconditioning, noise distribution and conditioning dropout."""
+
+    sigma_data: float = 0.5
+    """Standard deviation of the (normalised) data, EDM Table 1."""
+    p_mean: float = -1.2
+    """Mean of ln(sigma) during training (EDM Table 1, P_mean)."""
+    p_std: float = 1.2
+    """Std of ln(sigma) during training (EDM Table 1, P_std)."""
+    text_dropout: float = 0.1
+    """Probability of dropping a sample's caption during training (classifier-free guidance)."""
+    cond_frames: int = 0
+    """Video2World: clean first latent frames given as conditioning (loss on the rest); 0 = Text2World."""
+
+
+@dataclasses.dataclass
+class Conditioning:
+    """Everything the backbone is conditioned on besides the noisy latents, batch-first."""
+
+    text_emb: torch.Tensor
+    """(B, L, text_dim) caption token embeddings."""
+    text_mask: torch.Tensor
+    """(B, L) bool; all False = caption dropped (the unconditional branch of CFG)."""
+    fps: torch.Tensor
+    """(B,) video frame rate of the clip."""
+    cond_latents: torch.Tensor | None = None
+    """(B, C, T, H, W) clean latents whose first ``cond_frames`` frames condition (Video2World)."""
+    cond_frames: int = 0
+    """How many first latent frames of ``cond_latents`` are given."""
+    extra_token_cond: torch.Tensor | None = None
+    """(B, N, D) added to the DiT's patch tokens."""
+    extra_global_cond: torch.Tensor | None = None
+    """(B, D) added to the DiT's timestep embedding."""
+    num_views: int = 1
+    """Views folded into B (multi-view models)."""
+
+    def drop_text(self, keep: torch.Tensor) -> "Conditioning":
+        """A copy where samples with ``keep`` (B,) False have their caption masked out."""
+        return dataclasses.replace(self, text_mask=self.text_mask & keep[:, None])
+
+    def unconditional(self) -> "Conditioning":
+        """The same conditioning without any caption (CFG's unconditional branch)."""
+        return dataclasses.replace(self, text_mask=torch.zeros_like(self.text_mask))
+
+
+def edm_scalings(sigma: torch.Tensor, sigma_data: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(c_skip, c_out, c_in, c_noise) of EDM Table 1 for ``sigma`` (any shape)."""
+    sd2 = sigma_data**2
+    c_skip = sd2 / (sigma**2 + sd2)
+    c_out = sigma * sigma_data / (sigma**2 + sd2).sqrt()
+    c_in = 1 / (sigma**2 + sd2).sqrt()
+    c_noise = sigma.log() / 4
+    return c_skip, c_out, c_in, c_noise
+
+
+def edm_loss_weight(sigma: torch.Tensor, sigma_data: float) -> torch.Tensor:
+    """lambda(sigma) = (sigma^2 + sigma_data^2) / (sigma * sigma_data)^2 (EDM Table 1), so the
+    effective target of F has unit variance at every noise level."""
+    return (sigma**2 + sigma_data**2) / (sigma * sigma_data) ** 2
+
+
+def frame_mask(shape: torch.Size, cond_frames: int, device: torch.device) -> torch.Tensor:
+    """(1, 1, T, 1, 1) float: 1 on the first ``cond_frames`` latent frames (given), 0 on the rest."""
+    mask = torch.zeros(1, 1, shape[2], 1, 1, device=device)
+    mask[:, :, :cond_frames] = 1.0
+    return mask
+
+
+class EDMDenoiser(nn.Module):
+    """``D(x; sigma, cond)`` around a backbone; ``forward(x, sigma, cond) -> denoised (B, C, T, H, W)``."""
+
+    def __init__(self, backbone: nn.Module, cfg: EDMConfig, cond_mask_channel: bool = False):
+        super().__init__()
+        self.backbone = backbone  # the raw network F, e.g. the DiT
+        self.cfg = cfg  # sigma_data and the Video2World setting
+        self.cond_mask_channel = cond_mask_channel  # the backbone takes one more input channel (mask)
+
+    def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond: Conditioning) -> torch.Tensor:
+        """``x`` (B, C, T, H, W) noisy latents at ``sigma`` (B,) -> denoised latents (B, C, T, H, W)."""
+        c_skip, c_out, c_in, c_noise = (s.view(-1, 1, 1, 1, 1) for s in edm_scalings(sigma.to(x.dtype), self.cfg.sigma_data))
+        net_in = c_in * x
+        mask = None
+        if cond.cond_latents is not None and cond.cond_frames > 0:
+            # Video2World (Cosmos sec. 5.1): given frames enter clean, at the data scale the
+            # network sees (unit variance), and the output keeps them exactly.
+            mask = frame_mask(x.shape, cond.cond_frames, x.device)
+            net_in = mask * cond.cond_latents / self.cfg.sigma_data + (1 - mask) * net_in
+        if self.cond_mask_channel:
+            m = mask if mask is not None else torch.zeros(1, 1, x.shape[2], 1, 1, device=x.device)
+            net_in = torch.cat([net_in, m.expand(x.shape[0], 1, *x.shape[2:]).to(x.dtype)], dim=1)
+        out = self.backbone(
+            net_in, c_noise.flatten(), cond.text_emb, cond.text_mask, cond.fps,
+            extra_token_cond=cond.extra_token_cond, extra_global_cond=cond.extra_global_cond, num_views=cond.num_views,
+        )
+        denoised = c_skip * x + c_out * out.to(x.dtype)
+        if mask is not None:
+            denoised = mask * cond.cond_latents + (1 - mask) * denoised
+        return denoised
+
+
+def sample_sigma(n: int, cfg: EDMConfig, generator: torch.Generator | None = None) -> torch.Tensor:
+    """ln(sigma) ~ N(P_mean, P_std^2) (EDM Table 1, training), (n,) float32."""
+    return (cfg.p_mean + cfg.p_std * torch.randn(n, generator=generator)).exp()
+
+
+def edm_loss(
+    denoiser: EDMDenoiser, x0: torch.Tensor, cond: Conditioning, sigma: torch.Tensor, noise: torch.Tensor, keep_text: torch.Tensor
+) -> torch.Tensor:
+    """EDM training loss, eq. 2 with Table 1's weighting: mean over samples of
+    ``lambda(sigma) * ||D(x0 + sigma n; sigma) - x0||^2`` averaged over the non-conditioning frames.
+
+    ``x0`` (B, C, T, H, W) clean normalised latents; ``sigma`` (B,), ``noise`` like x0 and ``keep_text``
+    (B,) bool are drawn by the caller (so a run is reproducible per sample, see drivewm.train).
+    """
+    cfg = denoiser.cfg
+    if cfg.cond_frames > 0:
+        cond = dataclasses.replace(cond, cond_latents=x0, cond_frames=cfg.cond_frames)
+    s = sigma.to(x0.device, x0.dtype).view(-1, 1, 1, 1, 1)
+    denoised = denoiser(x0 + s * noise, sigma.to(x0.device, x0.dtype), cond.drop_text(keep_text.to(x0.device)))
+    err = (denoised - x0) ** 2  # (B, C, T, H, W)
+    err = err[:, :, cfg.cond_frames :]  # the loss lives on the generated frames only
+    return (edm_loss_weight(s.flatten(), cfg.sigma_data) * err.mean(dim=(1, 2, 3, 4))).mean()

@@ -1,0 +1,70 @@
+"""The DiT's typed config and its named size presets (``debug`` on a CPU up to ``xl``, about 1B)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+from drivewm.errors import DrivewmError
+
+
+@dataclasses.dataclass
+class DiTConfig:
+    """Shape of the diffusion transformer. Tokens are (latent frame, row, column) patches."""
+
+    in_channels: int = 16
+    """Latent channels c of the tokenizer (the DiT predicts the same number)."""
+    patch_size: int = 2
+    """Spatial patch side in latent pixels: a latent frame of h x w gives (h/p)*(w/p) tokens."""
+    patch_t: int = 1
+    """Temporal patch length in latent frames."""
+    hidden_dim: int = 128
+    """Token width D."""
+    depth: int = 4
+    """Number of blocks."""
+    num_heads: int = 4
+    """Attention heads (head_dim = hidden_dim / num_heads, even, split over t/h/w by 3D RoPE)."""
+    mlp_ratio: float = 4.0
+    """MLP hidden width as a multiple of D."""
+    text_dim: int = 256
+    """Width of the text encoder's token embeddings (projected to D inside the DiT)."""
+    adaln_lora_dim: int = 64
+    """Rank of the per-block AdaLN-LoRA modulation (Cosmos sec. 5.1 uses 256)."""
+    block_layers: list[str] = dataclasses.field(default_factory=lambda: ["self_attn", "cross_attn", "mlp"])
+    """Sub-layers of every block, in order, by registered name (drivewm.diffusion.blocks.SUBLAYERS);
+    the multi-view model inserts e.g. a cross-view attention here."""
+    rope_theta: float = 10000.0
+    """RoPE base wavelength."""
+    rope_base_fps: float = 10.0
+    """Video frame rate at which the temporal RoPE position of latent frame i is exactly i."""
+    cond_mask_channel: bool = False
+    """Video2World: one extra input channel marks clean conditioning latent frames."""
+
+    @property
+    def head_dim(self) -> int:
+        return self.hidden_dim // self.num_heads
+
+    def validate(self) -> None:
+        if self.hidden_dim % self.num_heads or self.head_dim % 2:
+            raise DrivewmError(f"dit: hidden_dim {self.hidden_dim} must split into {self.num_heads} heads of even width")
+        if min(self.patch_size, self.patch_t, self.depth, self.in_channels) < 1:
+            raise DrivewmError("dit: patch_size, patch_t, depth and in_channels must be >= 1")
+        if not self.block_layers or len(set(self.block_layers)) != len(self.block_layers):
+            raise DrivewmError(f"dit: block_layers must be non-empty and unique, got {self.block_layers}")
+
+
+#: Named sizes (DiT-paper style). Parameter counts at text_dim=256, in_channels=16, p=2:
+#: debug ~1.5M, small ~33M, base ~132M, large ~486M, xl ~1.2B.
+DIT_PRESETS: dict[str, dict] = {
+    "debug": dict(hidden_dim=128, depth=4, num_heads=4, adaln_lora_dim=32),
+    "small": dict(hidden_dim=384, depth=12, num_heads=6, adaln_lora_dim=64),
+    "base": dict(hidden_dim=768, depth=12, num_heads=12, adaln_lora_dim=128),
+    "large": dict(hidden_dim=1024, depth=24, num_heads=16, adaln_lora_dim=256),
+    "xl": dict(hidden_dim=1536, depth=28, num_heads=24, adaln_lora_dim=256),
+}
+
+
+def dit_preset(name: str) -> dict:
+    """The preset's fields as a dict (copy); an unknown name raises DrivewmError listing the known ones."""
+    if name not in DIT_PRESETS:
+        raise DrivewmError(f"unknown preset {name!r}; known: {sorted(DIT_PRESETS)}")
+    return dict(DIT_PRESETS[name])

@@ -1,0 +1,50 @@
+"""3D rotary position embeddings over (latent frame, row, column) tokens.
+
+RoPE (Su et al. 2021, "RoFormer", eq. 34) rotates pairs of query/key channels by an angle
+proportional to the token's position. In 3D (as in Cosmos, arXiv 2501.03575 sec. 5.1) the head
+dimension is split into a temporal, a vertical and a horizontal part, each rotated by its own
+coordinate. The temporal coordinate is *time*, not frame index: latent frame ``i`` of a clip at
+``fps`` sits at ``i * base_fps / fps``, so clips recorded at other rates share positions.
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def split_head_dim(head_dim: int) -> tuple[int, int, int]:
+    """Channels given to (t, h, w): h and w get ``head_dim // 6 * 2`` each, t the rest (all even)."""
+    if head_dim % 2:
+        raise ValueError(f"RoPE needs an even head dimension, got {head_dim}")
+    dim_hw = head_dim // 6 * 2
+    return head_dim - 2 * dim_hw, dim_hw, dim_hw
+
+
+def grid_positions(t: int, h: int, w: int, fps: torch.Tensor, base_fps: float) -> torch.Tensor:
+    """Token positions (B, t*h*w, 3) as (time, row, column), row-major over (t, h, w).
+
+    ``fps`` (B,) is the clip's video frame rate; the time coordinate is scaled by ``base_fps / fps``.
+    """
+    tt, hh, ww = torch.meshgrid(torch.arange(t), torch.arange(h), torch.arange(w), indexing="ij")
+    pos = torch.stack([tt, hh, ww], dim=-1).reshape(1, -1, 3).to(torch.float32)  # (1, N, 3)
+    scale = torch.ones(fps.shape[0], 1, 3, dtype=torch.float32, device=fps.device)
+    scale[:, 0, 0] = base_fps / fps.to(torch.float32)
+    return pos.to(fps.device) * scale  # (B, N, 3)
+
+
+def rope_angles(pos: torch.Tensor, head_dim: int, theta: float = 10000.0) -> torch.Tensor:
+    """Rotation angles (B, N, head_dim // 2) for positions ``pos`` (B, N, 3)."""
+    angles = []
+    for axis, dim in enumerate(split_head_dim(head_dim)):
+        freqs = theta ** (-torch.arange(0, dim, 2, dtype=torch.float32, device=pos.device) / dim)  # (dim/2,)
+        angles.append(pos[..., axis : axis + 1] * freqs)  # (B, N, dim/2)
+    return torch.cat(angles, dim=-1)
+
+
+def apply_rope(x: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
+    """Rotate ``x`` (B, heads, N, head_dim) by ``angles`` (B, N, head_dim // 2), pairing adjacent channels."""
+    cos = angles.cos().unsqueeze(1).to(x.dtype)  # (B, 1, N, head_dim/2)
+    sin = angles.sin().unsqueeze(1).to(x.dtype)
+    x_even, x_odd = x[..., 0::2], x[..., 1::2]
+    out = torch.stack([x_even * cos - x_odd * sin, x_even * sin + x_odd * cos], dim=-1)  # (B, heads, N, head_dim/2, 2)
+    return out.flatten(-2)
