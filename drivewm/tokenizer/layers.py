@@ -1,0 +1,109 @@
+"""Building blocks of the causal video autoencoder: factorized convolutions, residual blocks, resamplers.
+
+All layers take (B, C, T, H, W) and an optional :class:`CausalContext`. Spatial layers act on each
+frame alone; temporal layers are causal (Cosmos Tokenizer's factorized design, arXiv 2501.03575
+sec. 3.1: a 1xkxk spatial conv then a kx1x1 causal temporal conv). Normalization is per pixel
+over channels (RMS), never over time or space, so a latent never depends on later frames and a
+spatial tile sees the same statistics as the whole frame.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from einops import rearrange
+from torch import nn
+
+from drivewm.tokenizer.causal import CausalContext, causal_left_context, is_first
+
+
+class ChannelRMSNorm(nn.Module):
+    """RMS normalization over channels at every (t, y, x), with a learned per-channel gain."""
+
+    def __init__(self, channels: int):
+        super().__init__()
+        self.scale = channels**0.5
+        self.gain = nn.Parameter(torch.ones(channels, 1, 1, 1))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return F.normalize(x, dim=1) * self.scale * self.gain
+
+
+class CausalTemporalConv(nn.Module):
+    """kx1x1 convolution over time; output frame t sees input frames t-k+1 .. t only."""
+
+    def __init__(self, cin: int, cout: int, kernel: int):
+        super().__init__()
+        self.pad = kernel - 1
+        self.conv = nn.Conv3d(cin, cout, (kernel, 1, 1))
+
+    def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
+        return self.conv(causal_left_context(self, x, self.pad, ctx))
+
+
+class FactorizedConv(nn.Module):
+    """1x3x3 spatial conv (each frame alone) followed by a causal kx1x1 temporal conv."""
+
+    def __init__(self, cin: int, cout: int, temporal_kernel: int):
+        super().__init__()
+        self.spatial = nn.Conv3d(cin, cout, (1, 3, 3), padding=(0, 1, 1))
+        self.temporal = CausalTemporalConv(cout, cout, temporal_kernel)
+
+    def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
+        return self.temporal(self.spatial(x), ctx)
+
+
+class ResBlock(nn.Module):
+    """Pre-norm residual block of two factorized convolutions."""
+
+    def __init__(self, cin: int, cout: int, temporal_kernel: int):
+        super().__init__()
+        self.norm1 = ChannelRMSNorm(cin)
+        self.conv1 = FactorizedConv(cin, cout, temporal_kernel)
+        self.norm2 = ChannelRMSNorm(cout)
+        self.conv2 = FactorizedConv(cout, cout, temporal_kernel)
+        self.skip = nn.Conv3d(cin, cout, 1) if cin != cout else nn.Identity()
+        nn.init.zeros_(self.conv2.temporal.conv.weight)  # start as identity: stable training from step 0
+
+    def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
+        h = self.conv1(F.silu(self.norm1(x)), ctx)  # (B, Cout, T, H, W)
+        h = self.conv2(F.silu(self.norm2(h)), ctx)
+        return self.skip(x) + h
+
+
+class Downsample(nn.Module):
+    """Halve H and W (strided 3x3 conv), and T when ``temporal`` (causal frame pairing).
+
+    In time, a first chunk keeps frame 0 alone by pairing it with itself (T = 1+2k -> 1+k);
+    a continuation chunk pairs its frames as they come (T = 2k -> k).
+    """
+
+    def __init__(self, channels: int, temporal: bool):
+        super().__init__()
+        self.spatial = nn.Conv3d(channels, channels, (1, 3, 3), stride=(1, 2, 2))
+        self.temporal = nn.Conv3d(2 * channels, channels, 1) if temporal else None
+
+    def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
+        x = self.spatial(F.pad(x, (0, 1, 0, 1)))  # (B, C, T, H/2, W/2)
+        if self.temporal is None:
+            return x
+        if is_first(ctx):
+            x = torch.cat([x[:, :, :1], x], dim=2)
+        return self.temporal(rearrange(x, "b c (t two) h w -> b (two c) t h w", two=2))
+
+
+class Upsample(nn.Module):
+    """Double H and W (nearest + 3x3 conv), and T when ``temporal`` (the mirror of :class:`Downsample`)."""
+
+    def __init__(self, channels: int, temporal: bool):
+        super().__init__()
+        self.spatial = nn.Conv3d(channels, channels, (1, 3, 3), padding=(0, 1, 1))
+        self.temporal = nn.Conv3d(channels, 2 * channels, 1) if temporal else None
+
+    def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
+        if self.temporal is not None:
+            x = rearrange(self.temporal(x), "b (two c) t h w -> b c (t two) h w", two=2)
+            if is_first(ctx):
+                x = x[:, :, 1:]  # latent frame 0 decodes to frame 0 alone
+        x = F.interpolate(x, scale_factor=(1.0, 2.0, 2.0), mode="nearest")
+        return self.spatial(x)
