@@ -1,0 +1,66 @@
+"""``drivewm curate`` and ``drivewm import-video`` (heavy imports inside the handlers)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "datasets" / "curate" / "default.yaml"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("curate", help="drive logs -> synchronized, filtered, captioned multi-view clip shards")
+    p.add_argument("logs", nargs="+", type=Path, help="MCAP drive logs (files, or folders of *.mcap)")
+    p.add_argument("--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png")
+    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="curation recipe (datasets/curate/*.yaml)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field, e.g. filters.dedup_cosine=0.99")
+    p.add_argument("--executor", choices=("local", "ray"), default="local")
+    p.add_argument("--workers", type=int, default=1, help="parallel logs (local processes, or Ray CPUs when starting Ray locally)")
+    p.add_argument("--ray-address", default=None, help="connect to a Ray cluster instead of starting one")
+    p.set_defaults(func=_curate)
+
+    v = sub.add_parser("import-video", help="a folder of mp4 files + a one-camera calibration YAML -> drive logs")
+    v.add_argument("videos", nargs="+", type=Path, help="mp4 files or folders of them")
+    v.add_argument("--calibration", required=True, help="rig YAML with one camera (its size is the stored image size)")
+    v.add_argument("--out", required=True, type=Path, help="folder for the NAME.mcap logs")
+    v.add_argument("--tag", action="append", default=[], metavar="KEY=VALUE", help="scene tag, e.g. weather=rain (default: unknown)")
+    v.set_defaults(func=_import_video)
+
+
+def _expand(paths: list[Path]) -> list[Path]:
+    out: list[Path] = []
+    for p in paths:
+        out += sorted(p.glob("*.mcap")) if p.is_dir() else [p]
+    return out
+
+
+def _curate(args: argparse.Namespace) -> int:
+    import json
+
+    from drivewm.config import to_dict
+    from drivewm.curate import curate, load_curate_config
+
+    cfg = load_curate_config(args.config, args.overrides)
+    print(json.dumps(to_dict(cfg)))
+    report = curate(_expand(args.logs), args.out, cfg, executor=args.executor, workers=args.workers, ray_address=args.ray_address)
+    print(f"kept {report['kept']} clips, dropped {report['dropped']}; logs ok {report['logs_ok']}, failed {report['logs_failed']}")
+    for name, log in report["logs"].items():
+        if log["status"] == "failed":
+            print(f"  {name}: {log['error']}")
+    print(f"report: {args.out / 'report.json'}")
+    return 0 if report["logs_ok"] else 2
+
+
+def _import_video(args: argparse.Namespace) -> int:
+    from drivewm.curate.import_video import import_videos
+    from drivewm.errors import DrivewmError
+
+    tags = {}
+    for t in args.tag:
+        if "=" not in t:
+            raise DrivewmError(f"--tag {t!r}: expected KEY=VALUE")
+        k, val = t.split("=", 1)
+        tags[k] = val
+    for path in import_videos(args.videos, args.calibration, args.out, tags):
+        print(path)
+    return 0

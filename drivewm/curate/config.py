@@ -1,0 +1,128 @@
+"""Curation configuration: typed dataclasses loaded from ``datasets/curate/*.yaml``.
+
+Every field has a default, so a recipe names only what it changes; unknown keys and wrong
+types are refused by :func:`drivewm.config.from_dict` with the key named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from drivewm.config import from_dict, load_yaml
+from drivewm.errors import DrivewmError
+
+
+@dataclasses.dataclass
+class FilterConfig:
+    """Clip filters (drivewm.curate.filters). A threshold of 0 (or a fraction of 1) disables that filter."""
+
+    min_ego_distance_m: float = 1.0
+    """Drop clips whose ego moves less than this (m, path length over the clip): standing still."""
+    min_sharpness: float = 5.0
+    """Drop clips whose blurriest camera has a median variance of Laplacian (grey, 0-255) below this."""
+    dark_luma: float = 15.0
+    """A frame is too dark when its mean luma (0-255) is below this."""
+    bright_fraction: float = 0.5
+    """A frame is blown out when more than this fraction of its pixels is at luma >= 250."""
+    max_bad_exposure_fraction: float = 0.1
+    """Drop clips where more than this fraction of frames (any camera) is too dark or blown out."""
+    frozen_diff: float = 0.5
+    """Two consecutive frames are frozen/duplicated when their mean absolute difference (0-255) is below this."""
+    max_frozen_fraction: float = 0.2
+    """Drop clips where more than this fraction of consecutive frame pairs (any camera) is frozen."""
+    min_camera_motion_px: float = 0.0
+    """Static-camera filter for clips without ego poses: drop when the 75th percentile of the optical-flow
+    magnitude (px at 160 px width, 10 fps) is below this. 0 disables it."""
+    dedup_cosine: float = 0.985
+    """Near-duplicate clips: cosine similarity of clip embeddings at or above this drops the later clip. 1 disables."""
+
+
+@dataclasses.dataclass
+class PrivacyConfig:
+    """Face and licence-plate blurring (drivewm.curate.privacy)."""
+
+    enabled: bool = False
+    """Blur detections before encoding. Needs ``face_model`` (OpenCV 5 bundles no detector weights)."""
+    face_model: str = ""
+    """Path to a YuNet ONNX file (opencv_zoo face_detection_yunet_*.onnx) for cv2.FaceDetectorYN."""
+    face_score: float = 0.7
+    """YuNet score threshold."""
+    plates: bool = True
+    """Also blur licence-plate candidates found by the classical plate detector."""
+    blur_kernel_frac: float = 0.5
+    """Gaussian kernel size as a fraction of the box's shorter side."""
+
+
+@dataclasses.dataclass
+class TrajectoryConfig:
+    """Ego-pose smoothing (drivewm.curate.trajectory): constant-velocity Kalman filter + RTS smoother."""
+
+    position_sigma_m: float = 0.3
+    """Measurement noise of a logged position (m, per axis): GNSS jitter."""
+    yaw_sigma_rad: float = 0.02
+    """Measurement noise of a logged yaw (rad)."""
+    accel_sigma_mps2: float = 3.0
+    """Process noise: white acceleration (m/s^2) of the constant-velocity model."""
+    yaw_accel_sigma_radps2: float = 1.0
+    """Process noise: white yaw acceleration (rad/s^2)."""
+    gate_chi2: float = 25.0
+    """Innovation gate: a measurement whose squared Mahalanobis distance exceeds this is rejected as jitter."""
+
+
+@dataclasses.dataclass
+class CurateConfig:
+    """One curation recipe (``datasets/curate/*.yaml``)."""
+
+    clip_frames: int = 17
+    """Frames per clip (T = 1 + 4k suits the 4x and 8x temporal tokenizers)."""
+    fps: float = 10.0
+    """Clip frame rate; logs at another rate are resampled to it (nearest frame within the tolerance)."""
+    stride_frames: int = 17
+    """Start-to-start distance of consecutive clips, in clip frames."""
+    resolution: list[int] | None = None
+    """Output [W, H] (even numbers); null keeps the log's image size."""
+    cameras: list[str] | None = None
+    """Cameras to keep, in this order; null keeps the log's rig."""
+    sync_tolerance_ms: float = 25.0
+    """A camera frame belongs to a tick when it is within this of the tick (must be < half a clip frame)."""
+    trajectory_waypoints: int = 16
+    """Future ego waypoints per clip (ClipMeta.trajectory_ego), from the 2nd to the last frame."""
+    shot_threshold: float = 27.0
+    """scenedetect ContentDetector threshold for shot boundaries (0 disables shot detection)."""
+    shot_min_frames: int = 5
+    """Minimum shot length in clip frames for the detector."""
+    crf: int = 18
+    """H.264 constant rate factor of the clip videos."""
+    clips_per_shard: int = 32
+    """Clips per tar shard."""
+    filters: FilterConfig = dataclasses.field(default_factory=FilterConfig)
+    privacy: PrivacyConfig = dataclasses.field(default_factory=PrivacyConfig)
+    trajectory: TrajectoryConfig = dataclasses.field(default_factory=TrajectoryConfig)
+    contact_sheet_clips: int = 4
+    """Sample clips shown in contact_sheet.png."""
+
+    def validate(self) -> None:
+        if self.clip_frames < 2 or self.stride_frames < 1 or self.fps <= 0:
+            raise DrivewmError("curate config: need clip_frames >= 2, stride_frames >= 1 and fps > 0")
+        if self.sync_tolerance_ms * 1e-3 >= 0.5 / self.fps:
+            raise DrivewmError(f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame ({500 / self.fps:.1f} ms)")
+        if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
+            raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
+        if self.trajectory_waypoints < 1:
+            raise DrivewmError("curate config: trajectory_waypoints must be >= 1")
+
+    @property
+    def period_ns(self) -> float:
+        """Clip frame period in ns."""
+        return 1e9 / self.fps
+
+
+def load_curate_config(path: str | Path, overrides: list[str] | None = None) -> CurateConfig:
+    """Read a curation recipe (YAML), applying ``KEY=VALUE`` overrides."""
+    from drivewm.config import apply_overrides
+
+    data = load_yaml(path)
+    if overrides:
+        return apply_overrides(CurateConfig, data, overrides, str(path))
+    return from_dict(CurateConfig, data, str(path))

@@ -1,0 +1,46 @@
+"""contact_sheet.png: a few sample clips, every view, first/middle/last frame, with the caption."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from drivewm.atomic import write_bytes
+from drivewm.clips.shards import iter_shard
+
+THUMB_W = 192
+
+
+def _thumb(img: np.ndarray) -> np.ndarray:
+    h = round(img.shape[0] * THUMB_W / img.shape[1])
+    return cv2.resize(img, (THUMB_W, h), interpolation=cv2.INTER_AREA)
+
+
+def clip_block(clip) -> np.ndarray:
+    """One clip: rows = first/middle/last frame, columns = cameras in rig order, a caption bar on top."""
+    videos = clip.videos()  # (V, T, H, W, 3)
+    T = videos.shape[1]
+    rows = [np.concatenate([_thumb(v[t]) for v in videos], axis=1) for t in (0, T // 2, T - 1)]
+    grid = np.concatenate(rows, axis=0)
+    bar = np.full((22, grid.shape[1], 3), 255, dtype=np.uint8)
+    cv2.putText(bar, f"{clip.key}: {clip.meta.caption}"[:160], (4, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.concatenate([bar, grid], axis=0)
+
+
+def write_contact_sheet(out_dir: Path, rows: list[dict], n_clips: int) -> Path | None:
+    """Render up to ``n_clips`` manifest rows (spread over the list) into ``out_dir/contact_sheet.png``."""
+    if not rows or n_clips <= 0:
+        return None
+    picks = [rows[i] for i in sorted(set(np.linspace(0, len(rows) - 1, min(n_clips, len(rows))).round().astype(int)))]
+    blocks = []
+    for row in picks:
+        clip = next(c for c in iter_shard(Path(out_dir) / row["shard"]) if c.key == row["key"])
+        blocks.append(clip_block(clip))
+    width = max(b.shape[1] for b in blocks)
+    sheet = np.concatenate([np.pad(b, ((0, 6), (0, width - b.shape[1]), (0, 0)), constant_values=255) for b in blocks], axis=0)
+    ok, png = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+    path = Path(out_dir) / "contact_sheet.png"
+    write_bytes(path, png.tobytes())
+    return path

@@ -1,0 +1,98 @@
+"""Clip filters: each a small function scoring a clip; :func:`judge` turns scores into a drop reason.
+
+Frames are uint8 RGB (V, T, H, W, 3). Scores go into ``ClipMeta.quality`` under the filter's
+name, so users can re-filter from the manifest with other thresholds. Image statistics are
+computed on grey frames downscaled to 160 px width (cheap and resolution-independent).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from drivewm.curate.config import FilterConfig
+
+ANALYSIS_WIDTH = 160
+
+
+def grey_small(frames: np.ndarray) -> np.ndarray:
+    """(V, T, H, W, 3) uint8 RGB -> (V, T, h, 160) uint8 grey (aspect kept)."""
+    V, T, H, W, _ = frames.shape
+    h = max(2, round(H * ANALYSIS_WIDTH / W))
+    out = np.empty((V, T, h, ANALYSIS_WIDTH), dtype=np.uint8)
+    for v in range(V):
+        for t in range(T):
+            out[v, t] = cv2.resize(cv2.cvtColor(frames[v, t], cv2.COLOR_RGB2GRAY), (ANALYSIS_WIDTH, h), interpolation=cv2.INTER_AREA)
+    return out
+
+
+def sharpness(grey: np.ndarray) -> float:
+    """Blur score: variance of the Laplacian (Pech-Pacheco et al. 2000), median over frames, min over cameras."""
+    per = np.array([[cv2.Laplacian(f, cv2.CV_64F).var() for f in cam] for cam in grey])
+    return float(np.median(per, axis=1).min())
+
+
+def bad_exposure_fraction(grey: np.ndarray, dark_luma: float, bright_fraction: float) -> tuple[float, float]:
+    """Fraction of frames (any camera) too dark or blown out, and the darkest camera's mean luma."""
+    mean = grey.mean(axis=(2, 3))  # (V, T)
+    blown = (grey >= 250).mean(axis=(2, 3))  # (V, T)
+    bad = ((mean < dark_luma) | (blown > bright_fraction)).any(axis=0)  # (T,)
+    return float(bad.mean()), float(mean.mean(axis=1).min())
+
+
+def frozen_fraction(grey: np.ndarray, frozen_diff: float) -> float:
+    """Fraction of consecutive frame pairs (any camera) whose mean absolute difference is below ``frozen_diff``."""
+    diff = np.abs(np.diff(grey.astype(np.int16), axis=1)).mean(axis=(2, 3))  # (V, T-1)
+    return float((diff < frozen_diff).any(axis=0).mean())
+
+
+def camera_motion_px(grey: np.ndarray, pairs: int = 4) -> float:
+    """Static-camera score: 75th percentile of the Farneback flow magnitude (px at 160 px width) of
+    the reference camera, averaged over a few frame pairs. A moving camera moves most of the
+    picture (a dashcam's road and verges: 1-1.5 px at 10 fps); objects passing a fixed camera
+    cover less than a quarter of it, leaving the percentile near 0. (Flat sky and road give no
+    flow either way, which is why the median is not used.)"""
+    cam = grey[0]
+    steps = np.linspace(0, cam.shape[0] - 2, min(pairs, cam.shape[0] - 1)).round().astype(int)
+    mags = []
+    for t in steps:
+        flow = cv2.calcOpticalFlowFarneback(cam[t], cam[t + 1], None, 0.5, 3, 15, 3, 5, 1.2, 0)
+        mags.append(float(np.percentile(np.linalg.norm(flow, axis=-1), 75)))
+    return float(np.mean(mags))
+
+
+def ego_distance_m(positions_world: np.ndarray) -> float:
+    """Path length (m) of the ego positions (T, 3)."""
+    return float(np.linalg.norm(np.diff(positions_world, axis=0), axis=1).sum())
+
+
+def score_clip(frames: np.ndarray, positions_world: np.ndarray | None, cfg: FilterConfig) -> dict[str, float]:
+    """All filter scores of one clip. ``positions_world`` None means the ego motion is unknown."""
+    grey = grey_small(frames)
+    bad, luma = bad_exposure_fraction(grey, cfg.dark_luma, cfg.bright_fraction)
+    scores = {
+        "sharpness": sharpness(grey),
+        "bad_exposure_fraction": bad,
+        "mean_luma": luma,
+        "frozen_fraction": frozen_fraction(grey, cfg.frozen_diff),
+    }
+    if positions_world is not None:
+        scores["ego_distance_m"] = ego_distance_m(positions_world)
+    elif cfg.min_camera_motion_px > 0:
+        scores["camera_motion_px"] = camera_motion_px(grey)
+    return scores
+
+
+def judge(scores: dict[str, float], cfg: FilterConfig) -> str | None:
+    """The first failing filter's reason, or None to keep the clip. Order: cheapest evidence first."""
+    if scores["bad_exposure_fraction"] > cfg.max_bad_exposure_fraction:
+        return "bad_exposure"
+    if scores["frozen_fraction"] > cfg.max_frozen_fraction:
+        return "frozen_frames"
+    if scores["sharpness"] < cfg.min_sharpness:
+        return "blurry"
+    if scores.get("ego_distance_m", np.inf) < cfg.min_ego_distance_m:
+        return "ego_standing_still"
+    if scores.get("camera_motion_px", np.inf) < cfg.min_camera_motion_px:
+        return "static_camera"
+    return None

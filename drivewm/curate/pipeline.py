@@ -1,0 +1,105 @@
+"""``curate``: drive logs -> clip shards, manifest.jsonl, report.json and contact_sheet.png.
+
+The orchestration in one place: name the logs, run the per-log stage on an executor, drop
+near-duplicates across logs (deterministically, in log-name order), then write the manifest,
+the report and the contact sheet atomically. Rerunning after a kill redoes only unfinished logs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from drivewm.atomic import write_json
+from drivewm.clips.shards import write_manifest
+from drivewm.config import to_dict
+from drivewm.curate.config import CurateConfig
+from drivewm.curate.contact_sheet import write_contact_sheet
+from drivewm.curate.dedup import near_duplicates
+from drivewm.curate.stage import log_name
+from drivewm.errors import DrivewmError
+
+EXECUTORS = ("local", "ray")
+
+
+def name_logs(log_paths: list[Path]) -> list[str]:
+    """Unique shard names: the stem, plus a short hash of the folder where two logs share a stem."""
+    stems = [log_name(p) for p in log_paths]
+    return [s if stems.count(s) == 1 else f"{s}_{hashlib.sha1(str(Path(p).resolve().parent).encode()).hexdigest()[:6]}" for s, p in zip(stems, log_paths)]
+
+
+def curate(log_paths: list[Path], out_dir: Path, cfg: CurateConfig, executor: str = "local", workers: int = 1, ray_address: str | None = None, progress: bool = True) -> dict:
+    """Curate ``log_paths`` into ``out_dir``; returns the report (also written to report.json)."""
+    if executor not in EXECUTORS:
+        raise DrivewmError(f"executor {executor!r}: choose one of {list(EXECUTORS)}")
+    if not log_paths:
+        raise DrivewmError("curate: no logs given")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    jobs = [(str(p), n) for p, n in zip(log_paths, name_logs(log_paths))]
+    results = _run(jobs, out_dir, cfg, executor, workers, ray_address, progress)
+    rows, cross = dedup_across_logs(results, cfg.filters.dedup_cosine)
+    write_manifest(out_dir, rows)
+    sheet = write_contact_sheet(out_dir, rows, cfg.contact_sheet_clips)
+    report = build_report(results, rows, cross, cfg, sheet)
+    write_json(out_dir / "report.json", report)
+    return report
+
+
+def _run(jobs, out_dir: Path, cfg: CurateConfig, executor: str, workers: int, ray_address: str | None, progress: bool) -> list[dict]:
+    from tqdm import tqdm
+
+    from drivewm.curate import executors
+
+    bar = tqdm(total=len(jobs), desc=f"curate ({executor}, {workers} worker{'s' * (workers != 1)})", unit="log", disable=not progress)
+    tick = lambda r: (bar.update(1), bar.set_postfix_str(f"{r['name']}: {r['status']}, {r['kept']} clips"))  # noqa: E731
+    try:
+        if executor == "ray":
+            return executors.run_ray(jobs, str(out_dir), cfg, workers, tick, ray_address)
+        return executors.run_local(jobs, str(out_dir), cfg, workers, tick)
+    finally:
+        bar.close()
+
+
+def dedup_across_logs(results: list[dict], threshold: float) -> tuple[list[dict], dict[str, str]]:
+    """Manifest rows (log-name order, then key) without clips that duplicate a clip of an earlier log.
+
+    Returns (rows, {dropped key: key it duplicates}). Within a log the stage already de-duplicated;
+    dropped clips stay in their shard but leave the manifest, the dataset's index.
+    """
+    rows, cross, pool, pool_keys = [], {}, [], []
+    for res in sorted((r for r in results if r["status"] == "ok"), key=lambda r: r["name"]):
+        emb = np.asarray(res.get("embeddings", []), dtype=np.float32)
+        dups = near_duplicates(emb, threshold, np.stack(pool) if pool else None) if threshold < 1 and len(emb) else []
+        dup_of = {i: j for i, j, _ in dups if j < 0}
+        for i, row in enumerate(res["rows"]):
+            if i in dup_of:
+                cross[row["key"]] = pool_keys[-1 - dup_of[i]]
+                continue
+            rows.append(row)
+            pool.append(emb[i])
+            pool_keys.append(row["key"])
+    return rows, cross
+
+
+def build_report(results: list[dict], rows: list[dict], cross: dict[str, str], cfg: CurateConfig, sheet: Path | None) -> dict:
+    """report.json: totals kept/dropped by reason, and per log its status, error, warnings and sync."""
+    dropped: dict[str, int] = {}
+    for res in results:
+        for reason, n in res.get("dropped", {}).items():
+            dropped[reason] = dropped.get(reason, 0) + n
+    if cross:
+        dropped["near_duplicate_across_logs"] = len(cross)
+    logs = {r["name"]: {k: v for k, v in r.items() if k not in ("rows", "embeddings", "name")} for r in results}
+    return {
+        "kept": len(rows),
+        "dropped": dropped,
+        "logs_ok": sum(r["status"] == "ok" for r in results),
+        "logs_failed": sum(r["status"] == "failed" for r in results),
+        "logs": logs,
+        "duplicates_across_logs": cross,
+        "contact_sheet": sheet.name if sheet else None,
+        "config": to_dict(cfg),
+    }

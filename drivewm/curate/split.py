@@ -1,0 +1,43 @@
+"""Splitting synchronized ticks into clips: never across a time gap or a shot boundary.
+
+Shot boundaries come from scenedetect-headless's ContentDetector (HSV + edge change between
+consecutive frames, Castellano's PySceneDetect) run on the reference camera. Clips are windows of
+``clip_frames`` consecutive valid ticks inside one segment, starting every ``stride_frames``.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+import cv2
+import numpy as np
+
+
+def valid_runs(valid: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) index ranges of consecutive True values."""
+    padded = np.concatenate([[False], np.asarray(valid, dtype=bool), [False]])
+    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def shot_boundaries(frames_rgb: Iterable[np.ndarray], fps: float, threshold: float, min_frames: int) -> list[int]:
+    """Indices i where a new shot starts at frame i (i > 0), from uint8 RGB (H, W, 3) frames in order."""
+    from scenedetect import ContentDetector, FrameTimecode
+
+    detector = ContentDetector(threshold=threshold, min_scene_len=min_frames)
+    cuts: list[int] = []
+    for i, frame in enumerate(frames_rgb):
+        for tc in detector.process_frame(FrameTimecode(i, float(fps)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
+            cuts.append(int(tc.frame_num))
+    return sorted(c for c in set(cuts) if c > 0)
+
+
+def split_segment(start: int, end: int, cuts: list[int]) -> list[tuple[int, int]]:
+    """Cut the range [start, end) at the (absolute) boundary indices in ``cuts``."""
+    bounds = [start] + [c for c in sorted(cuts) if start < c < end] + [end]
+    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+
+def clip_windows(segments: list[tuple[int, int]], clip_frames: int, stride_frames: int) -> list[tuple[int, int]]:
+    """[start, start + clip_frames) windows inside each segment, every ``stride_frames``."""
+    return [(s, s + clip_frames) for a, b in segments for s in range(a, b - clip_frames + 1, stride_frames)]

@@ -1,0 +1,68 @@
+"""Synthetic drive logs for the curation tests: a textured world seen by a rig moving along x.
+
+Every camera sees its own crop of a smooth random texture that slides with the ego motion, so
+frames are sharp, well exposed, never frozen, and different logs (seeds) never look alike.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from drivewm.geometry import T_from_xyz_yaw, load_rig
+from drivewm.logs.types import DriveLog, ImageFrame, SceneInfo
+
+T0_NS = 1_700_000_000_000_000_000
+
+
+def texture(seed: int, H: int, W: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 256, (H // 8, W // 8, 3), dtype=np.uint8)
+    tex = cv2.resize(base, (W, H), interpolation=cv2.INTER_CUBIC)
+    return cv2.addWeighted(tex, 0.7, rng.integers(40, 200, (H, W, 3), dtype=np.uint8), 0.3, 0)
+
+
+def make_log(
+    path: str | Path,
+    seed: int = 0,
+    rig: str = "front3",
+    n_frames: int = 40,
+    fps: float = 10.0,
+    speed_mps: float = 8.0,
+    drop: dict[str, list[int]] | None = None,
+    nan_poses: list[int] = (),
+    jitter_ns: int = 0,
+    tags: dict | None = None,
+) -> DriveLog:
+    """A DriveLog (not written). ``drop``: camera -> frame indices missing; ``nan_poses``: pose
+    indices set to NaN; ``jitter_ns``: per-camera constant time offsets up to this."""
+    rig_ = load_rig(rig)
+    W, H = rig_.cameras[0].width, rig_.cameras[0].height
+    tex = texture(seed, H * 2, W * 8)
+    period = int(round(1e9 / fps))
+    images = {}
+    for v, cam in enumerate(rig_.cameras):
+        offset = (v * jitter_ns) // max(1, len(rig_.cameras) - 1)
+        frames = []
+        for i in range(n_frames):
+            if drop and i in drop.get(cam.name, []):
+                continue
+            x = int(v * W + i * speed_mps / fps * 4) % (tex.shape[1] - W)
+            img = np.ascontiguousarray(tex[H // 2 : H // 2 + H, x : x + W])
+            ok, jpg = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 92])
+            frames.append(ImageFrame(T0_NS + i * period + offset, jpg.tobytes(), "jpeg"))
+        images[cam.name] = frames
+    t = T0_NS + np.arange(n_frames, dtype=np.int64) * period
+    poses = np.stack([T_from_xyz_yaw(speed_mps * i / fps, 0.02 * (speed_mps * i / fps) ** 2 / 10, 0.0, 0.004 * i) for i in range(n_frames)])
+    for i in nan_poses:
+        poses[i] = np.nan
+    scene = SceneInfo(tags or {"weather": "clear", "time_of_day": "day", "road_type": "highway", "traffic_density": "low", "source": "synthetic"}, "a synthetic test drive")
+    return DriveLog(str(path), rig_, images, t, poses, scene)
+
+
+def write_synth_log(path: str | Path, **kwargs) -> Path:
+    from drivewm.logs.writer import write_log
+
+    return write_log(make_log(path, **kwargs), path)
