@@ -150,7 +150,7 @@ def _decode_image(schema: str, data: Any) -> tuple[str, int, bytes, str]:
 def _check_topics(path: str | Path, tmap: TopicMap, topics: set[str]) -> None:
     missing = [t for t in tmap.required_topics() if t not in topics]
     if missing:
-        raise DrivewmError(f"{path}: topic map {tmap.name!r} names topic(s) {missing} that the log does not have")
+        raise DrivewmError(f"{path}: topic map {tmap.source} names topic(s) {missing} that the log does not have")
 
 
 # ----------------------------------------------------------------------------- assembly
@@ -163,7 +163,7 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
         raise DrivewmError(f"{path}: images of camera(s) {without} have no calibration")
     order = _camera_order(meta, tmap, col)
     cameras = [_camera(path, name, col, tmap, ego) for name in order]
-    rig = Rig(meta.get("rig") or tmap.name or Path(path).stem, cameras)
+    rig = Rig(meta.get("rig") or tmap.rig_name or Path(path).stem, cameras)
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in order}
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
     agents = sorted(col.agents, key=lambda a: a[0])

@@ -38,8 +38,8 @@ class EgoPoseTopic:
 class TopicMap:
     """Mapping of one family of logs (one vehicle/recorder) onto the drivewm drive-log contract."""
 
-    name: str = ""
-    """Rig name given to the cameras read (default: the file's own, or its stem)."""
+    rig_name: str = ""
+    """Rig name given to the cameras read (default: the file's own record, or the log's stem)."""
     cameras: dict[str, CameraTopics] = dataclasses.field(default_factory=dict)
     """Camera name -> topics, in rig order. Empty: discover cameras by schema, named by frame_id."""
     world_frame: str | None = None
@@ -54,10 +54,12 @@ class TopicMap:
     """Scene tags for logs without a scene channel (e.g. source: fleet); the log's own tags win."""
     description: str = ""
     """Scene description for logs without a scene channel."""
+    source: str = dataclasses.field(default="(in code)", init=False)
+    """Where the map came from (set by :func:`load_topic_map`), for error messages."""
 
     def validate(self) -> None:
         if self.timestamps not in ("header", "log_time"):
-            raise DrivewmError(f"topic map {self.name}: timestamps must be 'header' or 'log_time'")
+            raise DrivewmError(f"topic map {self.source}: timestamps must be 'header' or 'log_time'")
 
     def required_topics(self) -> list[str]:
         """Every topic the map names that must exist in the log."""
@@ -79,6 +81,6 @@ def load_topic_map(name_or_path: str | Path) -> TopicMap:
         if not found:
             raise DrivewmError(f"topic map {name_or_path!r}: no such file or named map in {[str(c.parent) for c in candidates]}")
         path = found[0]
-    data = load_yaml(path)
-    data.setdefault("name", path.stem)
-    return from_dict(TopicMap, data, str(path))
+    tmap = from_dict(TopicMap, load_yaml(path), str(path))
+    tmap.source = str(path)
+    return tmap

@@ -116,7 +116,7 @@ class LogWriter:
             frame_id=cam.name,
             width=cam.width,
             height=cam.height,
-            distortion_model="rational_polynomial" if len(cam.distortion) > 5 else "plumb_bob",
+            distortion_model=distortion_model(cam.distortion),
             D=[float(v) for v in cam.distortion],
             K=[float(v) for v in cam.K.reshape(-1)],
             R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
@@ -210,6 +210,11 @@ class LogWriter:
             self.abort()
 
 
+def distortion_model(distortion: np.ndarray) -> str:
+    """ROS/Foxglove name of OpenCV coefficients: plumb_bob (k1 k2 p1 p2 k3) or rational_polynomial (8)."""
+    return "rational_polynomial" if len(distortion) > 5 else "plumb_bob"
+
+
 def encode_image(image_rgb: np.ndarray, image_format: str = "jpeg", jpeg_quality: int = 92) -> bytes:
     """uint8 RGB H x W x 3 -> JPEG or PNG bytes (OpenCV)."""
     bgr = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)
@@ -220,26 +225,25 @@ def encode_image(image_rgb: np.ndarray, image_format: str = "jpeg", jpeg_quality
     return buf.tobytes()
 
 
-def write_log(log: DriveLog, path: str | Path) -> Path:
-    """Write an in-memory :class:`DriveLog` to ``path``; images are copied as stored (no re-encoding).
+def drive_events(log: DriveLog) -> list[tuple[int, str, tuple]]:
+    """A DriveLog as time-ordered (timestamp_ns, kind, payload) events for a writer:
+    ("pose", (T_world_from_ego,)), ("agents", (boxes,)), ("image", (camera, ImageFrame)); at equal
+    times poses come first, then agents, then images."""
+    rank = {"pose": 0, "agents": 1, "image": 2}
+    events = [(int(ts), "pose", (T,)) for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego)]
+    events += [(int(ts), "agents", (boxes,)) for ts, boxes in log.agents]
+    events += [(int(f.timestamp_ns), "image", (cam, f)) for cam, frames in log.images.items() for f in frames]
+    return sorted(events, key=lambda e: (e[0], rank[e[1]]))
 
-    Messages are written in time order (poses, then agents, then images at equal times).
-    """
-    events: list[tuple[int, int, object]] = []
-    for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
-        events.append((int(ts), 0, ("pose", T)))
-    for ts, boxes in log.agents:
-        events.append((int(ts), 1, ("agents", boxes)))
-    for cam, frames in log.images.items():
-        for f in frames:
-            events.append((int(f.timestamp_ns), 2, ("image", cam, f)))
-    events.sort(key=lambda e: (e[0], e[1]))
+
+def write_log(log: DriveLog, path: str | Path) -> Path:
+    """Write an in-memory :class:`DriveLog` to ``path``; images are copied as stored (no re-encoding)."""
     with LogWriter(path, log.rig, log.scene) as w:
-        for ts, _, ev in events:
-            if ev[0] == "pose":
-                w.write_pose(ts, ev[1])
-            elif ev[0] == "agents":
-                w.write_agents(ts, ev[1])
+        for ts, kind, payload in drive_events(log):
+            if kind == "pose":
+                w.write_pose(ts, payload[0])
+            elif kind == "agents":
+                w.write_agents(ts, payload[0])
             else:
-                w.write_encoded_image(ev[1], ts, ev[2].data, ev[2].format)
+                w.write_encoded_image(payload[0], ts, payload[1].data, payload[1].format)
     return Path(path)
