@@ -1,0 +1,116 @@
+"""The evaluation protocol as one typed config: every constant of eval/protocol.md lives here.
+
+Defaults are the pinned protocol; a suite YAML (eval/suites/*.yaml) may override them, and the
+resolved config is written next to every metrics.json so numbers can be traced to their settings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from drivewm.config import from_dict
+from drivewm.errors import DrivewmError
+
+ALL_METRICS = ("tse", "cse", "pose", "traj", "adherence")
+
+
+@dataclasses.dataclass
+class MatchConfig:
+    """Feature matching between two images."""
+
+    matcher: str = "sift"
+    """'sift' (OpenCV SIFT, default) or 'learned' (a TorchScript matcher from ``learned_weights``)."""
+    learned_weights: str = ""
+    """Local path of a TorchScript matcher for matcher='learned'; nothing is ever downloaded."""
+    max_features: int = 2000
+    """SIFT keypoints kept per image (strongest first)."""
+    ratio: float = 0.8
+    """Lowe's ratio test: keep a match when best/second-best descriptor distance < ratio (Lowe 2004, sec. 7.1)."""
+    mutual: bool = True
+    """Keep only matches that are each other's nearest neighbour in both directions."""
+
+
+@dataclasses.dataclass
+class EpipolarConfig:
+    """Canonical camera and robust fundamental-matrix fitting."""
+
+    canonical_width: int = 960
+    """Width (px) of the canonical pinhole all keypoints are rectified to."""
+    canonical_height: int = 540
+    """Height (px) of the canonical pinhole."""
+    canonical_hfov_deg: float = 120.0
+    """Horizontal field of view of the canonical pinhole (focal = W / (2 tan(hfov/2)) = 277.1 px)."""
+    ransac_threshold_px: float = 0.5
+    """Inlier threshold of cv2.USAC_MAGSAC in canonical pixels."""
+    ransac_confidence: float = 0.999
+    """RANSAC confidence."""
+    ransac_max_iters: int = 10000
+    """RANSAC iteration cap."""
+    min_matches: int = 16
+    """Fewer matches than this in a pair: status 'too_few_matches', error NaN (never 0)."""
+
+
+@dataclasses.dataclass
+class ConsistencyConfig:
+    """TSE (temporal) and CSE (cross-view) Sampson errors."""
+
+    frame_gap: int = 1
+    """TSE compares frame t with frame t + frame_gap of the same camera."""
+    overlap_min_fraction: float = 0.02
+    """Two cameras form a CSE pair when at least this fraction of one frustum's sample points is seen by the other."""
+    overlap_depths_m: list[float] = dataclasses.field(default_factory=lambda: [4.0, 8.0, 16.0, 32.0])
+    """Depths (m) at which frustum sample points are placed for the overlap test."""
+    overlap_grid: int = 24
+    """Sample points per image axis for the overlap test."""
+
+
+@dataclasses.dataclass
+class PoseConfig:
+    """Structure from motion with pycolmap (pose-estimation success and the recovered trajectory)."""
+
+    max_features: int = 4096
+    """SIFT features per image extracted by COLMAP."""
+    sequential_overlap: int = 6
+    """Each frame is matched with the next ``sequential_overlap`` frames of the same camera."""
+    min_model_size: int = 3
+    """COLMAP's smallest model."""
+    seed: int = 0
+    """pycolmap random seed (deterministic RANSAC)."""
+
+
+@dataclasses.dataclass
+class TrajectoryConfig:
+    """Trajectory errors of the camera motion recovered from the video."""
+
+    camera: str = ""
+    """Camera whose recovered motion is the ego trajectory; '' = the camera looking most along ego +x."""
+    rpe_delta_frames: int = 1
+    """RPE compares relative motion over this many frames."""
+
+
+@dataclasses.dataclass
+class EvalConfig:
+    """The whole protocol. ``metrics`` picks what runs."""
+
+    metrics: list[str] = dataclasses.field(default_factory=lambda: list(ALL_METRICS))
+    """Subset of tse, cse, pose, traj, adherence."""
+    match: MatchConfig = dataclasses.field(default_factory=MatchConfig)
+    """Feature matching."""
+    epipolar: EpipolarConfig = dataclasses.field(default_factory=EpipolarConfig)
+    """Canonical camera and F fitting."""
+    consistency: ConsistencyConfig = dataclasses.field(default_factory=ConsistencyConfig)
+    """TSE / CSE."""
+    pose: PoseConfig = dataclasses.field(default_factory=PoseConfig)
+    """SfM."""
+    trajectory: TrajectoryConfig = dataclasses.field(default_factory=TrajectoryConfig)
+    """Trajectory errors."""
+
+    def validate(self) -> None:
+        unknown = sorted(set(self.metrics) - set(ALL_METRICS))
+        if unknown:
+            raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
+
+
+def eval_config_from_dict(data: dict, where: str = "eval config") -> EvalConfig:
+    """Build and validate an :class:`EvalConfig` (unknown keys refused)."""
+    return from_dict(EvalConfig, data, where)

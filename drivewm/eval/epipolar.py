@@ -1,0 +1,131 @@
+"""Epipolar geometry for the benchmark: canonical rectification, robust F / E fits, Sampson error.
+
+All errors are reported in pixels of one canonical pinhole (eval/protocol.md): keypoints are
+undistorted with their camera's K and distortion and re-projected with ``K_canonical`` (960x540,
+120 deg horizontal FOV, the target camera of NVIDIA's public Sampson code), so a 320x192 clip and a
+1920x1080 clip with another lens are scored on the same scale. The Sampson error of one match is
+sqrt of the first-order geometric distance of H&Z eq. 11.9 (``drivewm.geometry.sampson_distance_sq``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from drivewm.eval.config import EpipolarConfig
+from drivewm.eval.matching import Matches
+from drivewm.geometry import Camera, fundamental_from_T, make_T, sampson_distance_sq
+
+#: Outcome of one pair / clip metric; NaN errors always come with a status other than OK.
+OK = "ok"
+TOO_FEW_MATCHES = "too_few_matches"
+FIT_FAILED = "fit_failed"
+
+
+def canonical_K(cfg: EpipolarConfig) -> np.ndarray:
+    """3x3 intrinsics of the canonical pinhole: f = W / (2 tan(hfov / 2)), principal point at the centre."""
+    f = 0.5 * cfg.canonical_width / np.tan(np.radians(cfg.canonical_hfov_deg) / 2)
+    return np.array([[f, 0, cfg.canonical_width / 2], [0, f, cfg.canonical_height / 2], [0, 0, 1.0]])
+
+
+def rectify_points(uv: np.ndarray, camera: Camera, K_canonical: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) of ``camera`` -> pixels (N, 2) of the canonical pinhole looking along the same axes."""
+    if len(uv) == 0:
+        return np.zeros((0, 2))
+    dist = camera.distortion if camera.distortion.size else None
+    out = cv2.undistortPoints(uv.reshape(-1, 1, 2).astype(np.float64), camera.K, dist, P=K_canonical)
+    return out.reshape(-1, 2)
+
+
+def rectify_matches(m: Matches, cam_a: Camera, cam_b: Camera, K_canonical: np.ndarray) -> Matches:
+    """Both sides of a match set rectified to the canonical pinhole."""
+    return Matches(rectify_points(m.uv_a, cam_a, K_canonical), rectify_points(m.uv_b, cam_b, K_canonical))
+
+
+def sampson_px(F: np.ndarray, x_a: np.ndarray, x_b: np.ndarray) -> np.ndarray:
+    """Sampson error (px) per correspondence (N,) under x_b^T F x_a = 0: sqrt of H&Z eq. 11.9."""
+    return np.sqrt(sampson_distance_sq(F, x_a, x_b))
+
+
+def fit_fundamental(m: Matches, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
+    """Robust F (x_b^T F x_a = 0) with cv2.USAC_MAGSAC (Barath et al. 2020); (None, empty) when it fails."""
+    if len(m) < max(cfg.min_matches, 8):
+        return None, np.zeros(len(m), bool)
+    F, mask = cv2.findFundamentalMat(
+        m.uv_a, m.uv_b, cv2.USAC_MAGSAC, cfg.ransac_threshold_px, cfg.ransac_confidence, cfg.ransac_max_iters
+    )
+    if F is None or F.shape != (3, 3):
+        return None, np.zeros(len(m), bool)
+    return F / np.linalg.norm(F), mask.reshape(-1).astype(bool)
+
+
+def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
+    """Robust E from matches in pixels of a camera with intrinsics K (both views), USAC_MAGSAC."""
+    if len(m) < max(cfg.min_matches, 5):
+        return None, np.zeros(len(m), bool)
+    E, mask = cv2.findEssentialMat(
+        m.uv_a, m.uv_b, K, cv2.USAC_MAGSAC, cfg.ransac_confidence, cfg.ransac_threshold_px, maxIters=cfg.ransac_max_iters
+    )
+    if E is None or E.shape != (3, 3):
+        return None, np.zeros(len(m), bool)
+    return E, mask.reshape(-1).astype(bool)
+
+
+def relative_pose(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
+    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) from E + cheirality
+    (cv2.recoverPose); (None, empty mask) when the fit fails."""
+    E, mask = fit_essential(m, K, cfg)
+    if E is None:
+        return None, mask
+    _, R, t, pose_mask = cv2.recoverPose(E, m.uv_a, m.uv_b, K, mask=mask.astype(np.uint8)[:, None].copy())
+    inliers = pose_mask.reshape(-1) > 0
+    T = refine_relative_pose(make_T(R, t.reshape(3)), Matches(m.uv_a[inliers], m.uv_b[inliers]), K, cfg)
+    return T, inliers
+
+
+def refine_relative_pose(T_b_from_a: np.ndarray, m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> np.ndarray:
+    """Gold-standard style refinement of a minimal-solver pose: minimise the Huber-robust Sampson
+    error (px) of the inliers over rotation (axis-angle) and translation direction (H&Z sec. 11.4.3)."""
+    if len(m) < 8:
+        return T_b_from_a
+    r0 = cv2.Rodrigues(T_b_from_a[:3, :3])[0].reshape(3)
+    t0 = T_b_from_a[:3, 3] / np.linalg.norm(T_b_from_a[:3, 3])
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        T = make_T(cv2.Rodrigues(p[:3])[0], p[3:] / np.linalg.norm(p[3:]))
+        return sampson_px(fundamental_from_T(K, K, T), m.uv_a, m.uv_b)
+
+    sol = least_squares(residuals, np.concatenate([r0, t0]), loss="huber", f_scale=cfg.ransac_threshold_px)
+    return make_T(cv2.Rodrigues(sol.x[:3])[0], sol.x[3:] / np.linalg.norm(sol.x[3:]))
+
+
+def calibrated_fundamental(K_canonical: np.ndarray, T_b_from_a: np.ndarray) -> np.ndarray:
+    """F between two canonical views related by the rigid motion T_b_from_a (H&Z eq. 9.12)."""
+    return fundamental_from_T(K_canonical, K_canonical, T_b_from_a)
+
+
+@dataclasses.dataclass
+class SampsonResult:
+    """Sampson errors (px) of one match set under one F; ``median_px`` is NaN unless status is OK."""
+
+    errors_px: np.ndarray
+    median_px: float
+    num_matches: int
+    status: str
+
+    def to_json(self) -> dict:
+        return {"median_px": self.median_px, "num_matches": self.num_matches, "status": self.status}
+
+
+def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
+    """Median Sampson error of all (ratio + mutual checked) matches under F -- the same match set
+    for a fitted and a calibrated F, so outliers count alike (eval/protocol.md, 'Per-pair error')."""
+    if len(m) < cfg.min_matches:
+        return SampsonResult(np.zeros(0), float("nan"), len(m), TOO_FEW_MATCHES)
+    if F is None:
+        return SampsonResult(np.zeros(0), float("nan"), len(m), FIT_FAILED)
+    errors = sampson_px(F, m.uv_a, m.uv_b)
+    return SampsonResult(errors, float(np.median(errors)), len(m), OK)

@@ -1,0 +1,77 @@
+import cv2
+import numpy as np
+import pytest
+
+from drivewm.eval.config import EpipolarConfig, MatchConfig
+from drivewm.eval.epipolar import (
+    OK,
+    TOO_FEW_MATCHES,
+    calibrated_fundamental,
+    canonical_K,
+    fit_fundamental,
+    rectify_matches,
+    relative_pose,
+    sampson_px,
+    score_matches,
+)
+from drivewm.eval.matching import FrameMatcher, Matches
+from drivewm.geometry import rotation_angle_deg
+
+from eval_euroc import load_euroc
+
+
+def test_sampson_equals_opencv_sampson_distance():
+    rng = np.random.default_rng(0)
+    F = rng.normal(size=(3, 3))
+    x_a = rng.uniform(0, 640, (200, 2))
+    x_b = rng.uniform(0, 480, (200, 2))
+    ours_sq = sampson_px(F, x_a, x_b) ** 2
+    ha = np.concatenate([x_a, np.ones((200, 1))], 1)
+    hb = np.concatenate([x_b, np.ones((200, 1))], 1)
+    theirs = np.array([cv2.sampsonDistance(ha[i:i + 1].T, hb[i:i + 1].T, F) for i in range(200)])
+    np.testing.assert_allclose(ours_sq, theirs, rtol=1e-9)
+    assert ours_sq.max() > 1.0  # random points are far from the epipolar lines: the check is not vacuous
+
+
+def test_canonical_K_focal_is_pinned():
+    K = canonical_K(EpipolarConfig())
+    assert K[0, 0] == pytest.approx(277.128, abs=1e-3) and K[0, 2] == 480 and K[1, 2] == 270
+
+
+def test_too_few_matches_is_nan_with_status():
+    cfg = EpipolarConfig()
+    m = Matches(np.zeros((5, 2)), np.ones((5, 2)))
+    F, _ = fit_fundamental(m, cfg)
+    res = score_matches(F, m, cfg)
+    assert F is None and np.isnan(res.median_px) and res.status == TOO_FEW_MATCHES
+
+
+@pytest.fixture(scope="module")
+def euroc_matches(shared_data):
+    cam0, cam1, T_1_from_0, pairs = load_euroc(shared_data / "stereo" / "euroc_v101")
+    matcher = FrameMatcher(MatchConfig())
+    K_c = canonical_K(EpipolarConfig())
+    rect = [rectify_matches(matcher.match(("c0", i), a, ("c1", i), b), cam0, cam1, K_c) for i, (a, b) in enumerate(pairs)]
+    return K_c, T_1_from_0, rect
+
+
+def test_euroc_calibrated_sampson_median_below_0p3px(euroc_matches):
+    K_c, T_1_from_0, rect = euroc_matches
+    F = calibrated_fundamental(K_c, T_1_from_0)
+    medians = [score_matches(F, m, EpipolarConfig()) for m in rect]
+    assert all(r.status == OK for r in medians)
+    values = np.array([r.median_px for r in medians])
+    print("EuRoC calibrated Sampson medians (canonical px):", np.round(values, 3))
+    assert np.all(values < 0.3)
+    assert np.all(values > 0.005)  # real images are never perfect; an exact zero would mean a bug
+
+
+def test_euroc_relative_rotation_within_half_degree(euroc_matches):
+    K_c, T_1_from_0, rect = euroc_matches
+    for m in rect:
+        T_est, inliers = relative_pose(m, K_c, EpipolarConfig())
+        err = rotation_angle_deg(T_est[:3, :3].T @ T_1_from_0[:3, :3])
+        print(f"EuRoC rotation error {err:.3f} deg")
+        assert err < 0.5, err
+        t_dir = T_1_from_0[:3, 3] / np.linalg.norm(T_1_from_0[:3, 3])
+        assert float(T_est[:3, 3] @ t_dir) > 0.97  # baseline direction within ~14 deg (11 cm baseline, scene at metres)
