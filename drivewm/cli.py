@@ -17,7 +17,8 @@ from drivewm.errors import DrivewmError
 
 #: Modules that register sub-commands, in help order.
 COMMAND_MODULES = (
-    "drivewm.sim.commands",  # simulate, view
+    "drivewm.sim.commands",  # simulate
+    "drivewm.logs.commands",  # view
     "drivewm.curate.commands",  # curate, import-video
     "drivewm.tokenizer.commands",  # tokenizer train|encode|decode|eval
     "drivewm.diffusion.commands",  # pretrain, generate
