@@ -74,8 +74,8 @@ class LogWriter:
         foxglove, channels, messages, MCAPCompression, MCAPWriteOptions = _fg()
         self._msg = messages
         self._ctx = foxglove.Context()
-        # zstd without worker threads: the images are already JPEG/PNG, the rest compresses well.
-        options = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_threads=0)
+        # LZ4: the payload is mostly JPEG/PNG, which no codec shrinks; LZ4 costs least (bench_logs.py).
+        options = MCAPWriteOptions(compression=MCAPCompression.Lz4, compression_threads=0)
         self._mcap = foxglove.open_mcap(tmp, context=self._ctx, writer_options=options)
         ctx = self._ctx
         self._image_ch = {c.name: channels.CompressedImageChannel(names.image_topic(c.name), context=ctx) for c in self.rig.cameras}
