@@ -10,6 +10,7 @@ so ``sigma_data = 0.5`` as in Cosmos.
 from __future__ import annotations
 
 import dataclasses
+from typing import Callable
 
 import torch
 from torch import nn
@@ -122,15 +123,21 @@ def sample_sigma(n: int, cfg: EDMConfig, generator: torch.Generator | None = Non
 
 
 def edm_loss(
-    denoiser: EDMDenoiser, x0: torch.Tensor, cond: Conditioning, sigma: torch.Tensor, noise: torch.Tensor, keep_text: torch.Tensor
+    denoiser: Callable[..., torch.Tensor],
+    cfg: EDMConfig,
+    x0: torch.Tensor,
+    cond: Conditioning,
+    sigma: torch.Tensor,
+    noise: torch.Tensor,
+    keep_text: torch.Tensor,
 ) -> torch.Tensor:
     """EDM training loss, eq. 2 with Table 1's weighting: mean over samples of
     ``lambda(sigma) * ||D(x0 + sigma n; sigma) - x0||^2`` averaged over the non-conditioning frames.
 
     ``x0`` (B, C, T, H, W) clean normalised latents; ``sigma`` (B,), ``noise`` like x0 and ``keep_text``
     (B,) bool are drawn by the caller (so a run is reproducible per sample, see drivewm.train).
+    ``denoiser`` is an :class:`EDMDenoiser` or its parallel wrapper (DDP), hence ``cfg`` apart.
     """
-    cfg = denoiser.cfg
     if cfg.cond_frames > 0:
         cond = dataclasses.replace(cond, cond_latents=x0, cond_frames=cfg.cond_frames)
     s = sigma.to(x0.device, x0.dtype).view(-1, 1, 1, 1, 1)

@@ -68,7 +68,7 @@ def test_loss_matches_formula_and_video2world_masks_frames():
     x0, noise = torch.randn(3, 2, 4, 2, 2, generator=g), torch.randn(3, 2, 4, 2, 2, generator=g)
     sigma = torch.tensor([0.1, 1.0, 10.0])
     cond = Conditioning(torch.zeros(3, 1, 8), torch.ones(3, 1, dtype=torch.bool), torch.full((3,), 10.0))
-    loss = edm_loss(den, x0, cond, sigma, noise, torch.ones(3, dtype=torch.bool))
+    loss = edm_loss(den, cfg, x0, cond, sigma, noise, torch.ones(3, dtype=torch.bool))
     s = sigma.view(-1, 1, 1, 1, 1)
     c_skip, c_out, c_in, _ = (c.view(-1, 1, 1, 1, 1) for c in edm_scalings(sigma, 0.5))
     y = x0 + s * noise
@@ -78,7 +78,7 @@ def test_loss_matches_formula_and_video2world_masks_frames():
     v2w = EDMDenoiser(LinearBackbone(0.3), EDMConfig(cond_frames=2))
     out = v2w(y, sigma, Conditioning(cond.text_emb, cond.text_mask, cond.fps, cond_latents=x0, cond_frames=2))
     assert torch.equal(out[:, :, :2], x0[:, :, :2]) and not torch.allclose(out[:, :, 2:], x0[:, :, 2:])
-    loss_v2w = edm_loss(v2w, x0, cond, sigma, noise, torch.ones(3, dtype=torch.bool))
+    loss_v2w = edm_loss(v2w, v2w.cfg, x0, cond, sigma, noise, torch.ones(3, dtype=torch.bool))
     by_hand_v2w = (edm_loss_weight(sigma, 0.5) * ((out - x0)[:, :, 2:] ** 2).mean(dim=(1, 2, 3, 4))).mean()
     assert torch.allclose(loss_v2w, by_hand_v2w, rtol=1e-5)
 

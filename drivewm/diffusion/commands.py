@@ -1,0 +1,81 @@
+"""``drivewm pretrain`` and ``drivewm generate`` (thin: parse, build config, print it, call the library).
+
+``generate`` dispatches on the model folder's ``model_type`` through :data:`GENERATORS`, so the
+multi-view stage plugs its generator in by name (``drivewm.multiview.generate:generate``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from pathlib import Path
+
+#: model_type -> "module:function" taking (args) and returning an exit status or None.
+GENERATORS = {
+    "text2world": "drivewm.diffusion.commands:generate_text2world_command",
+    "multiview": "drivewm.multiview.generate:generate_command",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("pretrain", help="train a Text2World diffusion model on tokenizer latents")
+    p.add_argument("--preset", default="debug", help="size recipe: debug, small, base, large, xl")
+    p.add_argument("--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)")
+    p.add_argument("--tokenizer", type=Path, help="tokenizer model folder that encoded the latents")
+    p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override, e.g. train.steps=100")
+    p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+    p.set_defaults(func=pretrain_command)
+
+    g = sub.add_parser("generate", help="generate clips from a Text2World or multi-view model")
+    g.add_argument("--model", required=True, type=Path, help="model folder (config.json + model.safetensors)")
+    g.add_argument("--prompt", required=True, action="append", help="caption (repeat for several)")
+    g.add_argument("--out", required=True, type=Path, help="output folder: clip shards, mp4s, contact_sheet.png")
+    g.add_argument("--steps", type=int, default=35, help="sampler steps")
+    g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
+    g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
+    g.add_argument("--num-samples", type=int, default=1, help="samples per prompt")
+    g.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    g.add_argument("--rig", help="camera rig (multi-view models)")
+    g.add_argument("--trajectory", help="straight|left|right|stop|FILE (multi-view models)")
+    g.add_argument("--condition-clip", type=Path, help="clip whose first frames condition the sample (Video2World)")
+    g.set_defaults(func=generate_command)
+
+
+def pretrain_command(args: argparse.Namespace) -> int:
+    from drivewm.config import to_dict
+    from drivewm.diffusion.pretrain import pretrain, pretrain_config
+
+    cfg = pretrain_config(args.preset, args.overrides)
+    print(json.dumps(to_dict(cfg), indent=2))
+    if args.dry_run:
+        return 0
+    last = pretrain(cfg, args.data, args.tokenizer, args.out)
+    print(f"wrote {args.out} ({json.dumps(last)})")
+    return 0
+
+
+def generate_command(args: argparse.Namespace) -> int | None:
+    from drivewm.errors import DrivewmError
+
+    cfg_path = args.model / "config.json"
+    if not cfg_path.is_file():
+        raise DrivewmError(f"{args.model}: not a drivewm model folder (no config.json)")
+    model_type = json.loads(cfg_path.read_text()).get("model_type")
+    if model_type not in GENERATORS:
+        raise DrivewmError(f"{args.model}: cannot generate from model_type {model_type!r}; known: {sorted(GENERATORS)}")
+    module, func = GENERATORS[model_type].split(":")
+    return getattr(importlib.import_module(module), func)(args)
+
+
+def generate_text2world_command(args: argparse.Namespace) -> int:
+    from drivewm.diffusion.generate import GenerateOptions, generate_text2world
+    from drivewm.errors import DrivewmError
+
+    if args.rig or args.trajectory or args.condition_clip:
+        raise DrivewmError(f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip (multi-view models do)")
+    options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler)
+    files = generate_text2world(args.model, options, args.out)
+    print(f"wrote {len(files)} files to {args.out}")
+    return 0

@@ -1,0 +1,186 @@
+"""Text2World pretraining: a recipe (preset + overrides) and the training task for drivewm.train.
+
+``pretrain_config(preset, overrides)`` builds the typed :class:`PretrainConfig` (what
+``drivewm pretrain --dry-run`` prints); ``pretrain(cfg, data_dir, tokenizer_dir, out_dir)`` trains
+on the latent cache ``CLIPDIR/latents/NAME`` written by ``drivewm tokenizer encode``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import torch
+
+from drivewm.clips.latents import LatentCache
+from drivewm.config import apply_overrides, to_dict
+from drivewm.diffusion.data import LatentDataset
+from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
+from drivewm.diffusion.dit_config import DiTConfig, dit_preset
+from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+from drivewm.errors import DrivewmError
+from drivewm.text import TextConfig
+from drivewm.train.loop import TrainConfig, train
+
+
+@dataclasses.dataclass
+class DataConfig:
+    """Where the latents come from."""
+
+    latents: str | None = None
+    """Cache name under CLIPDIR/latents/ (default: the tokenizer folder's name)."""
+
+
+@dataclasses.dataclass
+class PretrainConfig:
+    """A resolved pretraining run (saved in train_state.pt and printed by --dry-run)."""
+
+    preset: str = "debug"
+    """The size preset the recipe started from."""
+    model: DiTConfig = dataclasses.field(default_factory=DiTConfig)
+    """DiT shape; in_channels and text_dim are filled from the data and the text encoder."""
+    edm: EDMConfig = dataclasses.field(default_factory=EDMConfig)
+    """EDM preconditioning/loss and CFG dropout."""
+    text: TextConfig = dataclasses.field(default_factory=TextConfig)
+    """Caption encoder."""
+    train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
+    """Optimisation and run settings."""
+    data: DataConfig = dataclasses.field(default_factory=DataConfig)
+    """Latent cache selection."""
+    sample_steps: int = 12
+    """Sampler steps for the sample grids written during training."""
+
+
+#: Per-preset training defaults (copy-and-change of the base TrainConfig).
+TRAIN_PRESETS: dict[str, dict] = {
+    "debug": dict(steps=300, batch_size=8, lr=1e-3, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100),
+    "small": dict(steps=20000, batch_size=32, lr=3e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
+    "base": dict(steps=100000, batch_size=64, lr=2e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000),
+    "large": dict(steps=200000, batch_size=128, lr=1e-4, warmup_steps=2000, checkpoint_every=2000, sample_every=5000,
+                  activation_checkpointing=True, parallel="fsdp"),
+    "xl": dict(steps=300000, batch_size=256, lr=1e-4, warmup_steps=2000, checkpoint_every=2000, sample_every=5000,
+               activation_checkpointing=True, parallel="fsdp"),
+}
+
+
+def pretrain_config(preset: str, overrides: list[str] | None = None) -> PretrainConfig:
+    """The recipe for ``preset`` with ``KEY=VALUE`` overrides (unknown keys/bad values raise DrivewmError)."""
+    base = {"preset": preset, "model": dit_preset(preset), "train": dict(TRAIN_PRESETS[preset])}
+    return apply_overrides(PretrainConfig, base, overrides or [], "pretrain")
+
+
+def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | None) -> Path:
+    """``data_dir`` itself if it is a cache, else ``data_dir/latents/<name or tokenizer folder name>``."""
+    if (data_dir / "index.json").is_file():
+        return data_dir
+    if name is None and tokenizer_dir is None:
+        raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
+    cache = data_dir / "latents" / (name or Path(tokenizer_dir).name)
+    if not (cache / "index.json").is_file():
+        raise DrivewmError(f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first")
+    return cache
+
+
+def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
+    """The cache must have been encoded by ``tokenizer_dir`` (same config and latent statistics)."""
+    cfg_path = tokenizer_dir / "config.json"
+    if not cfg_path.is_file():
+        raise DrivewmError(f"{tokenizer_dir}: not a tokenizer model folder (no config.json)")
+    from drivewm.tokenizer.model import MODEL_TYPE
+
+    info = json.loads(cfg_path.read_text())
+    if info.get("model_type") != MODEL_TYPE:
+        raise DrivewmError(f"{tokenizer_dir}: model_type is {info.get('model_type')!r}, expected {MODEL_TYPE!r}")
+    recorded = cache.tokenizer
+    same_config = "config" not in recorded or info.get("config") == recorded["config"]
+    same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
+    if not same_config or not same_stats:
+        raise DrivewmError(f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}")
+
+
+def _close(a: list[float] | None, b: list[float] | None) -> bool:
+    return a is None or b is None or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-4, atol=1e-6))
+
+
+class Text2WorldTask:
+    """drivewm.train.loop.TrainTask for Text2World pretraining on a latent dataset."""
+
+    def __init__(self, cfg: PretrainConfig, dataset: LatentDataset, latent: LatentInfo):
+        self.cfg = cfg
+        self.dataset = dataset
+        self.bundle = Text2World(Text2WorldConfig(cfg.model, cfg.edm, cfg.text), latent)
+        self.model = self.bundle.denoiser.train()
+
+    def blocks(self) -> list[torch.nn.Module]:
+        return list(self.bundle.dit.blocks)
+
+    def num_samples(self) -> int:
+        return len(self.dataset)
+
+    def tokens_per_sample(self) -> int:
+        c, t, h, w = self.dataset.latent_shape
+        m = self.cfg.model
+        return (t // m.patch_t) * (h // m.patch_size) * (w // m.patch_size)
+
+    def loss(self, forward, indices: list[int], seeds: list[int], device: torch.device) -> torch.Tensor:
+        samples = [self.dataset[i] for i in indices]
+        x0 = torch.stack([s.latents for s in samples]).to(device)  # (B, c, t, h, w)
+        gens = [torch.Generator().manual_seed(s) for s in seeds]
+        sigma = torch.cat([sample_sigma(1, self.cfg.edm, g) for g in gens])  # (B,)
+        noise = torch.stack([torch.randn(x0.shape[1:], generator=g) for g in gens]).to(device)
+        keep = torch.tensor([float(torch.rand(1, generator=g)) >= self.cfg.edm.text_dropout for g in gens])
+        cond = self.bundle.conditioning([s.caption for s in samples])
+        cond = dataclasses.replace(cond, text_emb=cond.text_emb.to(device), text_mask=cond.text_mask.to(device),
+                                   fps=torch.tensor([s.fps for s in samples], device=device))
+        return edm_loss(forward, self.cfg.edm, x0, cond, sigma.to(device), noise, keep.to(device))
+
+    def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> tuple[Text2World, dict[str, torch.Tensor]]:
+        dit_state = {k.removeprefix("backbone."): v for k, v in ema_state.items()}
+        with torch.random.fork_rng():  # building a DiT draws initial weights: keep the run's RNG untouched
+            bundle = Text2World(self.bundle.cfg, self.bundle.latent)
+        bundle.dit.load_state_dict(dit_state)
+        return bundle, dit_state
+
+    def save_model(self, ema_state: dict[str, torch.Tensor], out_dir: Path) -> None:
+        bundle, dit_state = self._ema_bundle(ema_state)
+        bundle.save_pretrained(out_dir, dit_state)
+
+    def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
+        from drivewm.diffusion.generate import decode_latents, write_grid_png
+
+        bundle, _ = self._ema_bundle(ema_state)
+        prompts = self.dataset.captions()[:4]
+        latents = bundle.sample_latents(prompts, list(range(len(prompts))), steps=self.cfg.sample_steps, guidance=3.0)
+        write_grid_png(decode_latents(latents, bundle.latent.tokenizer), path, prompts)
+
+
+def latent_info(dataset: LatentDataset, tokenizer_dir: Path | None) -> LatentInfo:
+    first = dataset.cache[0].meta
+    rig = first.get_rig().subset(first.cameras[:1]).to_dict()
+    return LatentInfo(list(dataset.latent_shape), dataset.cache.latent_mean.tolist(), dataset.cache.latent_std.tolist(),
+                      dataset.fps, str(Path(tokenizer_dir).resolve()) if tokenizer_dir else None, rig)
+
+
+def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainConfig:
+    """Fill the DiT's in_channels from the latents and text_dim from the text encoder."""
+    from drivewm.text import build_text_encoder
+
+    text_dim = cfg.text.dim if cfg.text.kind == "hashed" else build_text_encoder(cfg.text).dim
+    c, t, h, w = dataset.latent_shape
+    if h % cfg.model.patch_size or w % cfg.model.patch_size or t % cfg.model.patch_t:
+        raise DrivewmError(f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}")
+    model = dataclasses.replace(cfg.model, in_channels=c, text_dim=text_dim, cond_mask_channel=cfg.edm.cond_frames > 0)
+    return dataclasses.replace(cfg, model=model)
+
+
+def pretrain(cfg: PretrainConfig, data_dir: str | Path, tokenizer_dir: str | Path | None, out_dir: str | Path, stop_after: int | None = None) -> dict:
+    """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
+    data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
+    dataset = LatentDataset(find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents), cfg.edm.sigma_data)
+    if tokenizer_dir is not None:
+        check_tokenizer(dataset.cache, tokenizer_dir)
+    cfg = resolve_for_data(cfg, dataset)
+    torch.manual_seed(cfg.train.seed)  # the DiT's initial weights
+    task = Text2WorldTask(cfg, dataset, latent_info(dataset, tokenizer_dir))
+    return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)

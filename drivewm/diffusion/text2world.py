@@ -1,0 +1,110 @@
+"""The Text2World model: DiT + EDM denoiser + text encoder + what it needs to turn samples into video.
+
+Model folder (DESIGN.md section 4): ``config.json`` with ``model_type: "text2world"``, the
+:class:`Text2WorldConfig` and the :class:`LatentInfo` (latent shape and statistics, frame rate,
+camera, tokenizer folder), and ``model.safetensors`` with the DiT's (EMA) weights.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import torch
+
+from drivewm.config import from_dict, to_dict
+from drivewm.diffusion.data import denormalize_latents, normalize_latents
+from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
+from drivewm.diffusion.dit import DiT
+from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
+from drivewm.errors import DrivewmError
+from drivewm.text import TextConfig, build_text_encoder
+from drivewm.train.checkpoint import load_model_folder, save_model_folder
+
+MODEL_TYPE = "text2world"
+
+
+@dataclasses.dataclass
+class Text2WorldConfig:
+    """The networks: backbone, EDM settings and text encoder."""
+
+    dit: DiTConfig = dataclasses.field(default_factory=DiTConfig)
+    """The DiT backbone."""
+    edm: EDMConfig = dataclasses.field(default_factory=EDMConfig)
+    """Preconditioning, noise distribution, CFG dropout, Video2World frames."""
+    text: TextConfig = dataclasses.field(default_factory=TextConfig)
+    """Caption encoder (frozen)."""
+
+
+@dataclasses.dataclass
+class LatentInfo:
+    """What the model was trained on, to sample and decode without the data."""
+
+    latent_shape: list[int]
+    """(c, t, h, w) of one sample's latents."""
+    latent_mean: list[float]
+    """Per-channel mean of the tokenizer's latents (c,)."""
+    latent_std: list[float]
+    """Per-channel std of the tokenizer's latents (c,)."""
+    fps: float = 10.0
+    """Video frame rate of the training clips."""
+    tokenizer: str | None = None
+    """Tokenizer model folder that decodes the latents (absolute path)."""
+    rig: dict = dataclasses.field(default_factory=dict)
+    """Single-camera rig (dict form) written into generated clips."""
+
+
+class Text2World:
+    """Inference bundle. ``sample_latents(prompts, seeds) -> raw tokenizer latents (B, c, t, h, w)``."""
+
+    def __init__(self, cfg: Text2WorldConfig, latent: LatentInfo):
+        self.cfg = cfg
+        self.latent = latent
+        self.text_encoder = build_text_encoder(cfg.text)
+        self.dit = DiT(cfg.dit).eval()
+        self.denoiser = EDMDenoiser(self.dit, cfg.edm, cfg.dit.cond_mask_channel)
+
+    def save_pretrained(self, path: str | Path, dit_state: dict[str, torch.Tensor] | None = None) -> None:
+        """Write the model folder (``dit_state`` defaults to the DiT's current weights)."""
+        state = dit_state if dit_state is not None else self.dit.state_dict()
+        save_model_folder(path, MODEL_TYPE, to_dict(self.cfg), state, {"latent": to_dict(self.latent)})
+
+    @classmethod
+    def from_pretrained(cls, path: str | Path) -> "Text2World":
+        info, state = load_model_folder(path, MODEL_TYPE)
+        where = f"{Path(path) / 'config.json'}"
+        model = cls(from_dict(Text2WorldConfig, info["config"], where), from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"))
+        try:
+            model.dit.load_state_dict(state)
+        except RuntimeError as exc:
+            raise DrivewmError(f"{path}: model.safetensors does not match config.json ({str(exc).splitlines()[0]})") from None
+        return model
+
+    def conditioning(self, prompts: list[str], fps: float | None = None) -> Conditioning:
+        emb, mask = self.text_encoder.encode(prompts)
+        return Conditioning(emb, mask, torch.full((len(prompts),), fps or self.latent.fps))
+
+    @torch.no_grad()
+    def sample_latents(
+        self, prompts: list[str], seeds: list[int], steps: int = 35, guidance: float = 7.0, sampler: str = "heun",
+        fps: float | None = None, cond_latents: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Generate raw (denormalised) latents (B, c, t, h, w), one per prompt, sample i from ``seeds[i]``.
+
+        ``cond_latents`` (B, c, t, h, w) raw latents whose first ``edm.cond_frames`` frames are kept
+        (Video2World models only).
+        """
+        if sampler not in SAMPLERS:
+            raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
+        c, t, h, w = self.latent.latent_shape
+        cond = self.conditioning(prompts, fps)
+        if cond_latents is not None:
+            cond = dataclasses.replace(cond, cond_latents=normalize_latents(cond_latents, *self._stats(), self.cfg.edm.sigma_data), cond_frames=self.cfg.edm.cond_frames)
+        sigmas = karras_sigmas(steps)
+        x = seeded_noise((len(prompts), c, t, h, w), seeds) * sigmas[0]
+        x = SAMPLERS[sampler](GuidedDenoiser(self.denoiser, guidance), x, sigmas, extra_args={"cond": cond})
+        return denormalize_latents(x, *self._stats(), self.cfg.edm.sigma_data)
+
+    def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
+        return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)

@@ -1,0 +1,112 @@
+"""DiT backbone: shapes, 3D RoPE with fps scaling, conditioning hooks and extension by config."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import torch
+from torch import nn
+
+from drivewm.diffusion.blocks import SUBLAYERS, register_sublayer
+from drivewm.diffusion.dit import DiT, count_parameters, patchify, unpatchify
+from drivewm.diffusion.dit_config import DIT_PRESETS, DiTConfig, dit_preset
+from drivewm.diffusion.rope import apply_rope, grid_positions, rope_angles
+from drivewm.errors import DrivewmError
+
+CFG = DiTConfig(in_channels=4, hidden_dim=64, depth=2, num_heads=4, text_dim=16, adaln_lora_dim=8)
+
+
+def _randomize(model: nn.Module) -> nn.Module:
+    """Zero-initialised outputs make a fresh DiT return 0; give every weight a value to test wiring."""
+    torch.manual_seed(1)
+    with torch.no_grad():
+        for p in model.parameters():
+            p.copy_(torch.randn_like(p) * 0.2)
+    return model
+
+
+def _inputs(b: int = 2, t: int = 3, fps: float = 10.0):
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(b, 4, t, 4, 6, generator=g)
+    return x, torch.zeros(b), torch.randn(b, 5, 16, generator=g), torch.ones(b, 5, dtype=torch.bool), torch.full((b,), fps)
+
+
+def test_patchify_roundtrip_and_output_shape():
+    x = torch.randn(2, 4, 4, 6, 8)
+    assert torch.equal(unpatchify(patchify(x, 2, 2), (2, 3, 4), 2, 2), x)
+    model = _randomize(DiT(CFG))
+    assert model(*_inputs()).shape == (2, 4, 3, 4, 6)
+
+
+def test_fresh_dit_outputs_zero_so_edm_starts_at_c_skip_x():
+    assert DiT(CFG)(*_inputs()).abs().max() == 0
+
+
+def test_rope_is_relative_and_fps_scaled():
+    # Rotating q and k by their positions makes q.k depend on the offset only.
+    pos = grid_positions(4, 2, 2, torch.tensor([10.0]), base_fps=10.0)
+    ang = rope_angles(pos, 24)
+    q, k = torch.randn(1, 1, 1, 24).expand(1, 1, 16, 24), torch.randn(1, 1, 1, 24).expand(1, 1, 16, 24)
+    dots = (apply_rope(q, ang) * apply_rope(k, ang)).sum(-1)  # same offset (0) for every token
+    assert torch.allclose(dots, dots[..., :1].expand_as(dots), atol=1e-5)
+    # A clip at 5 fps: latent frame i sits where frame 2i of a 10 fps clip sits (same time).
+    slow = grid_positions(4, 2, 2, torch.tensor([5.0]), base_fps=10.0)
+    assert torch.equal(slow[0, 4 * 1 : 4 * 2, 0], pos[0, 4 * 2 : 4 * 3, 0])
+    assert torch.equal(slow[..., 1:], pos[..., 1:])
+
+
+def test_output_depends_on_text_fps_and_extra_conditions_but_not_masked_tokens():
+    model = _randomize(DiT(CFG)).eval()
+    x, noise, text, mask, fps = _inputs()
+    base = model(x, noise, text, mask, fps)
+    masked = mask.clone()
+    masked[:, 3:] = False
+    altered = text.clone()
+    altered[:, 3:] += 5.0
+    assert torch.allclose(model(x, noise, text, masked, fps), model(x, noise, altered, masked, fps), atol=1e-5)
+    assert not torch.allclose(model(x, noise, altered, mask, fps), base, atol=1e-3)
+    assert not torch.allclose(model(x, noise, text, mask, fps * 2), base, atol=1e-3)
+    n_tok = 3 * 2 * 3
+    assert not torch.allclose(model(x, noise, text, mask, fps, extra_token_cond=torch.randn(2, n_tok, 64)), base, atol=1e-3)
+    assert not torch.allclose(model(x, noise, text, mask, fps, extra_global_cond=torch.randn(2, 64)), base, atol=1e-3)
+    # A caption dropped entirely (CFG) still gives finite output through the null token.
+    assert torch.isfinite(model(x, noise, text, torch.zeros_like(mask), fps)).all()
+
+
+class _ScaledCopy(nn.Module):
+    """A toy extra sub-layer (stands in for cross-view attention): zero-initialised output."""
+
+    def __init__(self, cfg: DiTConfig):
+        super().__init__()
+        self.out = nn.Linear(cfg.hidden_dim, cfg.hidden_dim)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, x, ctx):
+        return self.out(x) * ctx.num_views
+
+
+def test_inserting_a_sublayer_by_config_starts_as_the_original_model():
+    register_sublayer("toy_view_attn", _ScaledCopy)
+    try:
+        base = _randomize(DiT(CFG)).eval()
+        extended = DiT(dataclasses.replace(CFG, block_layers=["self_attn", "toy_view_attn", "cross_attn", "mlp"])).eval()
+        missing, unexpected = extended.load_state_dict(base.state_dict(), strict=False)
+        assert not unexpected and all(".toy_view_attn." in k for k in missing)
+        assert torch.allclose(extended(*_inputs(), num_views=3), base(*_inputs()), atol=1e-6)
+    finally:
+        SUBLAYERS.pop("toy_view_attn")
+
+
+def test_presets_span_debug_to_about_1b():
+    counts = {}
+    for name in DIT_PRESETS:
+        with torch.device("meta"):
+            counts[name] = count_parameters(DiT(DiTConfig(**dit_preset(name))))
+    assert 1e6 < counts["debug"] < 5e6 and 0.9e9 < counts["xl"] < 1.5e9
+    assert list(counts.values()) == sorted(counts.values())
+    with pytest.raises(DrivewmError, match="unknown preset 'huge'"):
+        dit_preset("huge")
+    with pytest.raises(DrivewmError, match="heads"):
+        DiT(DiTConfig(hidden_dim=65, num_heads=4))
