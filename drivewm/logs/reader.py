@@ -49,7 +49,6 @@ class _Collected:
     poses: list[tuple[int, np.ndarray]] = dataclasses.field(default_factory=list)
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     scene: dict | None = None
-    topics_seen: set[str] = dataclasses.field(default_factory=set)
 
 
 def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, require_images: bool = True) -> DriveLog:
@@ -62,16 +61,17 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
     """
     tmap = topic_map if isinstance(topic_map, TopicMap) else load_topic_map(topic_map) if topic_map else TopicMap()
     files = log_files(path)
-    channels = [c for f in files for c in list_channels(f)]
-    ros2 = any(c.encoding == "cdr" for c in channels)
-    world = tmap.world_frame or ("map" if ros2 else names.WORLD_FRAME)
-    ego = tmap.ego_frame or ("base_link" if ros2 else names.EGO_FRAME)
+    channels = {c for f in files for c in list_channels(f)}
     col = _Collected()
     route = _router(tmap)
     for f in files:
         for msg in iter_messages(f, lambda info: route(info) is not None):
             _handle(col, route(msg.channel), msg, tmap)
-    _check_topics(path, tmap, {c.topic for c in channels} | col.topics_seen)
+            channels.add(msg.channel)
+    _check_topics(path, tmap, {c.topic for c in channels})
+    ros2 = any(c.encoding == "cdr" for c in channels)  # ROS 2 frame names by default (REP 105)
+    world = tmap.world_frame or ("map" if ros2 else names.WORLD_FRAME)
+    ego = tmap.ego_frame or ("base_link" if ros2 else names.EGO_FRAME)
     log = _assemble(path, files, col, tmap, world, ego)
     if require_images:
         log.validate()
@@ -117,7 +117,6 @@ def _stamp(tmap: TopicMap, stamp_ns: int, msg: Message) -> int:
 
 def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap: TopicMap) -> None:
     kind, camera = routed
-    col.topics_seen.add(msg.channel.topic)
     schema, data = msg.channel.schema_name, msg.data
     if kind == "image":
         frame_id, stamp, payload, fmt = _decode_image(schema, data)

@@ -81,3 +81,21 @@ def test_writer_refuses_bad_images(tmp_path):
         with LogWriter(tmp_path / "c.mcap", rig, SceneInfo({})) as w:
             w.write_images(1, {"CAM_NOPE": np.zeros((48, 64, 3), np.uint8)})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_two_writers_at_once_keep_their_own_channels(tmp_path):
+    """Each writer has a private Foxglove context: interleaved writes never cross files."""
+    from drivewm.geometry import load_rig
+
+    front, back = load_rig("front1").scaled(64, 48), load_rig("front3").scaled(32, 24)
+    a, b = LogWriter(tmp_path / "a.mcap", front, SceneInfo({"n": "a"})), LogWriter(tmp_path / "b.mcap", back, SceneInfo({"n": "b"}))
+    for t in range(3):
+        a.write_pose(t, np.eye(4))
+        b.write_pose(t, np.eye(4))
+        a.write_images(t, {c.name: np.full((48, 64, 3), t, np.uint8) for c in front.cameras})
+        b.write_images(t, {c.name: np.full((24, 32, 3), t, np.uint8) for c in back.cameras})
+    a.close(), b.close()
+    la, lb = read_log(tmp_path / "a.mcap"), read_log(tmp_path / "b.mcap")
+    assert la.rig.names == front.names and lb.rig.names == back.names
+    assert la.scene.tags == {"n": "a"} and lb.scene.tags == {"n": "b"}
+    assert all(len(v) == 3 for v in [*la.images.values(), *lb.images.values()]) and len(la.pose_timestamps_ns) == 3
