@@ -110,15 +110,21 @@ def _schema_of(topic: str) -> str:
             names.AGENTS_TOPIC: "foxglove.SceneUpdate", names.SCENE_TOPIC: names.SCENE_SCHEMA_NAME}[topic]
 
 
-def write_log_json(log: DriveLog, path: str | Path) -> Path:
-    """Write ``log`` to ``path`` (atomic) with JSON-encoded Foxglove messages."""
-    from mcap.writer import Writer
+def write_log_json(log: DriveLog, path: str | Path, indexed: bool = True) -> Path:
+    """Write ``log`` to ``path`` (atomic) with JSON-encoded Foxglove messages.
+
+    ``indexed=False`` writes the bare layout some recorders produce: no chunks, no indexes and
+    no summary section (readers must scan the file).
+    """
+    from mcap.writer import IndexType, Writer
 
     events = drive_events(log)
     t0 = events[0][0] if events else 0
     messages = _static_messages(log, t0) + [(*_event_message(ts, k, p), ts) for ts, k, p in events]
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        writer = Writer(f)
+        bare = dict(use_chunking=False, index_types=IndexType.NONE, repeat_channels=False, repeat_schemas=False,
+                    use_statistics=False, use_summary_offsets=False)
+        writer = Writer(f, **({} if indexed else bare))
         writer.start(profile="", library="drivewm json_writer")
         writer.add_metadata(names.METADATA_NAME, {"rig": log.rig.name, "cameras": ",".join(log.rig.names)})
         schema_ids, channel_ids = {}, {}

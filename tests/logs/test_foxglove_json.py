@@ -29,3 +29,10 @@ def test_json_log_is_strict_json(tmp_path, synthetic_log):
     for data in payloads:
         json.loads(data, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
     assert b"null" in payloads[3]
+
+
+def test_unindexed_log_without_summary_reads_the_same(tmp_path, synthetic_log, assert_same_log):
+    path = write_log_json(synthetic_log, tmp_path / "bare.mcap", indexed=False)
+    with open(path, "rb") as f:
+        assert make_reader(f).get_summary() is None
+    assert_same_log(read_log(path), synthetic_log)
