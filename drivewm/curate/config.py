@@ -88,9 +88,9 @@ class CurateConfig:
     """A camera frame belongs to a tick when it is within this of the tick (must be < half a clip frame)."""
     trajectory_waypoints: int = 16
     """Future ego waypoints per clip (ClipMeta.trajectory_ego), from the 2nd to the last frame."""
-    shot_threshold: float = 27.0
-    """scenedetect ContentDetector threshold for shot boundaries (0 disables shot detection)."""
-    shot_min_frames: int = 5
+    shot_threshold: float = 2.5
+    """scenedetect AdaptiveDetector threshold (frame change / neighbours' average) for shot boundaries; 0 disables."""
+    shot_min_frames: int = 3
     """Minimum shot length in clip frames for the detector."""
     crf: int = 18
     """H.264 constant rate factor of the clip videos."""

@@ -19,13 +19,16 @@ def _thumb(img: np.ndarray) -> np.ndarray:
 
 
 def clip_block(clip) -> np.ndarray:
-    """One clip: rows = first/middle/last frame, columns = cameras in rig order, a caption bar on top."""
+    """One clip: rows = cameras in rig order, columns = first/middle/last frame, caption lines on top."""
     videos = clip.videos()  # (V, T, H, W, 3)
     T = videos.shape[1]
-    rows = [np.concatenate([_thumb(v[t]) for v in videos], axis=1) for t in (0, T // 2, T - 1)]
-    grid = np.concatenate(rows, axis=0)
-    bar = np.full((22, grid.shape[1], 3), 255, dtype=np.uint8)
-    cv2.putText(bar, f"{clip.key}: {clip.meta.caption}"[:160], (4, 15), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    grid = np.concatenate([np.concatenate([_thumb(v[t]) for t in (0, T // 2, T - 1)], axis=1) for v in videos], axis=0)
+    text = f"{clip.key} ({', '.join(clip.meta.cameras)}): {clip.meta.caption}"
+    chars = max(20, grid.shape[1] // 6)
+    lines = [text[i : i + chars] for i in range(0, min(len(text), 3 * chars), chars)]
+    bar = np.full((14 * len(lines) + 6, grid.shape[1], 3), 255, dtype=np.uint8)
+    for i, line in enumerate(lines):
+        cv2.putText(bar, line, (4, 14 * i + 13), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
     return np.concatenate([bar, grid], axis=0)
 
 

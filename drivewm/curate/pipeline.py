@@ -38,6 +38,7 @@ def curate(log_paths: list[Path], out_dir: Path, cfg: CurateConfig, executor: st
         raise DrivewmError("curate: no logs given")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    remove_leftovers(out_dir)
     jobs = [(str(p), n) for p, n in zip(log_paths, name_logs(log_paths))]
     results = _run(jobs, out_dir, cfg, executor, workers, ray_address, progress)
     rows, cross = dedup_across_logs(results, cfg.filters.dedup_cosine)
@@ -46,6 +47,16 @@ def curate(log_paths: list[Path], out_dir: Path, cfg: CurateConfig, executor: st
     report = build_report(results, rows, cross, cfg, sheet)
     write_json(out_dir / "report.json", report)
     return report
+
+
+def remove_leftovers(out_dir: Path) -> None:
+    """Delete temporaries of a killed run (atomic_path's ``.NAME.XXXX.tmp`` folders); finished files stay."""
+    import shutil
+
+    for folder in (out_dir, out_dir / "logs"):
+        for tmp in folder.glob(".*.tmp"):
+            if tmp.is_dir():
+                shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _run(jobs, out_dir: Path, cfg: CurateConfig, executor: str, workers: int, ray_address: str | None, progress: bool) -> list[dict]:

@@ -1,7 +1,9 @@
 """Splitting synchronized ticks into clips: never across a time gap or a shot boundary.
 
-Shot boundaries come from scenedetect-headless's ContentDetector (HSV + edge change between
-consecutive frames, Castellano's PySceneDetect) run on the reference camera. Clips are windows of
+Shot boundaries come from scenedetect-headless's AdaptiveDetector run on the reference camera:
+it scores each frame's HSV + edge change (ContentDetector's score) against the rolling average
+of its neighbours, so steady fast camera motion (driving, where ContentDetector alone fires
+every few frames on textured scenes) is not a cut, while a hard cut still stands out. Clips are windows of
 ``clip_frames`` consecutive valid ticks inside one segment, starting every ``stride_frames``.
 """
 
@@ -21,14 +23,18 @@ def valid_runs(valid: np.ndarray) -> list[tuple[int, int]]:
 
 
 def shot_boundaries(frames_rgb: Iterable[np.ndarray], fps: float, threshold: float, min_frames: int) -> list[int]:
-    """Indices i where a new shot starts at frame i (i > 0), from uint8 RGB (H, W, 3) frames in order."""
-    from scenedetect import ContentDetector, FrameTimecode
+    """Indices i where a new shot starts at frame i (i > 0), from uint8 RGB (H, W, 3) frames in order.
 
-    detector = ContentDetector(threshold=threshold, min_scene_len=min_frames)
+    ``threshold``: AdaptiveDetector's ratio of a frame's change score to its neighbours' average.
+    """
+    from scenedetect import AdaptiveDetector, FrameTimecode
+
+    detector = AdaptiveDetector(adaptive_threshold=threshold, min_scene_len=min_frames)
     cuts: list[int] = []
-    for i, frame in enumerate(frames_rgb):
-        for tc in detector.process_frame(FrameTimecode(i, float(fps)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR)):
-            cuts.append(int(tc.frame_num))
+    n = 0
+    for n, frame in enumerate(frames_rgb):
+        cuts += [int(tc.frame_num) for tc in detector.process_frame(FrameTimecode(n, float(fps)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))]
+    cuts += [int(tc.frame_num) for tc in detector.post_process(FrameTimecode(n + 1, float(fps)))]
     return sorted(c for c in set(cuts) if c > 0)
 
 
