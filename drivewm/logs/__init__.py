@@ -10,6 +10,6 @@
 Heavy modules (the Foxglove SDK, mcap decoders, rerun) load only when used.
 """
 
-from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, SceneInfo
+from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, RoadLine, SceneInfo
 
-__all__ = ["AgentBox", "DriveLog", "ImageFrame", "SceneInfo"]
+__all__ = ["AgentBox", "DriveLog", "ImageFrame", "RoadLine", "SceneInfo"]

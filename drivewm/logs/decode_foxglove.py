@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from drivewm.logs.transforms import join_T, sec_nsec_to_ns, yaw_from_quat_xyzw
-from drivewm.logs.types import AgentBox
+from drivewm.logs.types import AgentBox, RoadLine
 
 IMAGE = "foxglove.CompressedImage"
 CALIBRATION = "foxglove.CameraCalibration"
@@ -96,3 +96,14 @@ def agents(msg: Any) -> tuple[int, list[AgentBox]]:
             )
         )
     return stamp, boxes
+
+
+def road_lines(msg: Any) -> list[RoadLine]:
+    """SceneUpdate of line-strip entities -> road polylines (kind and line type from metadata)."""
+    out = []
+    for ent in field(msg, "entities", []):
+        meta = {field(kv, "key"): field(kv, "value") for kv in field(ent, "metadata", [])}
+        for line in field(ent, "lines", []):
+            points = np.array([vec3(p) for p in field(line, "points", [])], dtype=np.float64).reshape(-1, 3)
+            out.append(RoadLine(meta.get("kind", "line"), points, meta.get("line_type", "")))
+    return out

@@ -18,7 +18,7 @@ import numpy as np
 from drivewm.atomic import atomic_path
 from drivewm.logs import names
 from drivewm.logs.transforms import ns_to_sec_nsec, quat_xyzw_from_yaw, split_T
-from drivewm.logs.types import AgentBox, DriveLog
+from drivewm.logs.types import AgentBox, DriveLog, RoadLine
 from drivewm.logs.writer import SCENE_JSON_SCHEMA, distortion_model, drive_events
 
 _TIME = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
@@ -75,6 +75,14 @@ def _entity(timestamp_ns: int, box: AgentBox) -> dict:
             "metadata": [{"key": "category", "value": box.category}], "cubes": [cube]}
 
 
+def _road_message(lines: list[RoadLine], t0: int) -> dict:
+    entities = [{"timestamp": _time(t0), "frame_id": names.WORLD_FRAME, "id": f"{line.kind}/{i}",
+                 "metadata": [{"key": "kind", "value": line.kind}, {"key": "line_type", "value": line.line_type}],
+                 "lines": [{"type": 0, "thickness": 0.15, "points": [dict(zip("xyz", map(float, p))) for p in line.points_xyz]}]}
+                for i, line in enumerate(lines)]
+    return {"deletions": [], "entities": entities}
+
+
 def _static_messages(log: DriveLog, t0: int) -> list[tuple[str, dict, int]]:
     """(topic, message, t0) for calibrations, tf_static and the scene, all at time t0."""
     out = []
@@ -87,6 +95,8 @@ def _static_messages(log: DriveLog, t0: int) -> list[tuple[str, dict, int]]:
     statics = [_transform(t0, names.EGO_FRAME, c.name, c.T_ego_from_cam) for c in log.rig.cameras]
     out.append((names.TF_STATIC_TOPIC, {"transforms": statics}, t0))
     out.append((names.SCENE_TOPIC, {"tags": dict(log.scene.tags), "description": log.scene.description}, t0))
+    if log.road:
+        out.append((names.ROAD_TOPIC, _road_message(log.road, t0), t0))
     return out
 
 
@@ -107,7 +117,7 @@ def _schema_of(topic: str) -> str:
     if topic.endswith("/calibration"):
         return "foxglove.CameraCalibration"
     return {names.TF_TOPIC: "foxglove.FrameTransforms", names.TF_STATIC_TOPIC: "foxglove.FrameTransforms",
-            names.AGENTS_TOPIC: "foxglove.SceneUpdate", names.SCENE_TOPIC: names.SCENE_SCHEMA_NAME}[topic]
+            names.AGENTS_TOPIC: "foxglove.SceneUpdate", names.ROAD_TOPIC: "foxglove.SceneUpdate", names.SCENE_TOPIC: names.SCENE_SCHEMA_NAME}[topic]
 
 
 def write_log_json(log: DriveLog, path: str | Path, indexed: bool = True) -> Path:

@@ -23,7 +23,7 @@ from drivewm.logs import names
 from drivewm.logs.frames import FrameGraph
 from drivewm.logs.mcap_source import ChannelInfo, Message, iter_messages, list_channels, log_files, read_metadata
 from drivewm.logs.topicmap import TopicMap, load_topic_map
-from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, SceneInfo
+from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, RoadLine, SceneInfo
 
 _IMAGE_SCHEMAS = (fox.IMAGE,) + ros.COMPRESSED_IMAGE + ros.RAW_IMAGE
 _CALIBRATION_SCHEMAS = (fox.CALIBRATION,) + ros.CAMERA_INFO
@@ -48,6 +48,7 @@ class _Collected:
     frames: FrameGraph = dataclasses.field(default_factory=FrameGraph)
     poses: list[tuple[int, np.ndarray]] = dataclasses.field(default_factory=list)
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
+    road: list[RoadLine] = dataclasses.field(default_factory=list)
     scene: dict | None = None
 
 
@@ -105,6 +106,8 @@ def _router(tmap: TopicMap):
             return "scene", None
         if s == fox.SCENE_UPDATE and info.topic == names.AGENTS_TOPIC:
             return "agents", None
+        if s == fox.SCENE_UPDATE and info.topic == names.ROAD_TOPIC:
+            return "road", None
         return None
 
     return route
@@ -136,6 +139,8 @@ def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap:
     elif kind == "agents":
         stamp, boxes = fox.agents(data)
         col.agents.append((_stamp(tmap, stamp, msg), boxes))
+    elif kind == "road":
+        col.road += fox.road_lines(data)
 
 
 def _decode_image(schema: str, data: Any) -> tuple[str, int, bytes, str]:
@@ -166,7 +171,7 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in order}
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
     agents = sorted(col.agents, key=lambda a: a[0])
-    return DriveLog(str(path), rig, images, pose_ts, T_world_from_ego, _scene(col, tmap), agents)
+    return DriveLog(str(path), rig, images, pose_ts, T_world_from_ego, _scene(col, tmap), agents, col.road)
 
 
 def _camera_order(meta: dict, tmap: TopicMap, col: _Collected) -> list[str]:

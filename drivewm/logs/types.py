@@ -54,6 +54,19 @@ class AgentBox:
 
 
 @dataclasses.dataclass
+class RoadLine:
+    """A piece of static road geometry as a polyline in the world frame (optional in logs).
+
+    ``kind``: lane_center | lane_boundary | road_edge; ``line_type``: how it is painted (solid,
+    dashed, none; "" where it does not apply); ``points_xyz`` (N, 3) metres.
+    """
+
+    kind: str
+    points_xyz: np.ndarray
+    line_type: str = ""
+
+
+@dataclasses.dataclass
 class SceneInfo:
     """The scene channel: tags (weather, time_of_day, road_type, traffic_density, source, ...)
     and a free-text description."""
@@ -70,6 +83,7 @@ class DriveLog:
     the log's camera order. ``images``: camera name -> frames sorted by ``timestamp_ns``.
     ``pose_timestamps_ns`` (N,) int64 and ``T_world_from_ego`` (N, 4, 4): the per-tick ego pose.
     ``agents``: optional (timestamp_ns, boxes) per tick, for viewers (simulated logs have them).
+    ``road``: optional static road polylines (lane centres, boundaries, edges), for viewers.
     """
 
     path: str
@@ -79,6 +93,7 @@ class DriveLog:
     T_world_from_ego: np.ndarray
     scene: SceneInfo
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
+    road: list[RoadLine] = dataclasses.field(default_factory=list)
 
     @property
     def camera_names(self) -> list[str]:

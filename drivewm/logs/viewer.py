@@ -8,6 +8,7 @@ Entity tree (world z up; timeline ``drive_time`` = the log's ``timestamp_ns``):
   RDF axes; static) + the camera's images (EncodedImage per frame, stored bytes, not decoded);
 - ``world/ego_trajectory``: the ego path as line strips (static; split at pose gaps);
 - ``world/agents``: the other road users per tick (Boxes3D, labelled category:id);
+- ``world/road/KIND``: the road polylines of each kind, if the log has them (static);
 - ``scene``: the tags and description (static TextDocument).
 """
 
@@ -23,6 +24,7 @@ from drivewm.logs.transforms import quat_xyzw_from_yaw
 
 TIMELINE = "drive_time"  # Rerun reserves "log_time" for its own wall-clock timeline
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
+ROAD_COLORS = {"lane_center": [80, 160, 255], "lane_boundary": [255, 255, 255], "road_edge": [255, 120, 0]}
 
 
 def _set_time(rec, timestamp_ns: int) -> None:
@@ -40,6 +42,9 @@ def log_static(rec, log: DriveLog) -> None:
         pinhole = rr.Pinhole(image_from_camera=cam.K, resolution=[cam.width, cam.height], camera_xyz=rr.ViewCoordinates.RDF)
         rec.log(f"world/ego/{cam.name}", pinhole, static=True)
     rec.log("world/ego_trajectory", rr.LineStrips3D(trajectory_strips(log.T_world_from_ego), colors=[[255, 200, 0]]), static=True)
+    for kind in sorted({line.kind for line in log.road}):
+        strips = [line.points_xyz for line in log.road if line.kind == kind]
+        rec.log(f"world/road/{kind}", rr.LineStrips3D(strips, colors=[ROAD_COLORS.get(kind, [200, 200, 200])]), static=True)
     tags = "\n".join(f"- **{k}**: {v}" for k, v in log.scene.tags.items())
     rec.log("scene", rr.TextDocument(f"{tags}\n\n{log.scene.description}", media_type=rr.MediaType.MARKDOWN), static=True)
 

@@ -3,7 +3,8 @@
 Topics (see :mod:`drivewm.logs.names`): ``/CAMERA/image`` (foxglove.CompressedImage, frame_id =
 camera), ``/CAMERA/calibration`` (foxglove.CameraCalibration), ``/tf_static`` (FrameTransforms
 ego -> CAMERA, i.e. ``T_ego_from_cam``), ``/tf`` (FrameTransforms world -> ego per tick, i.e.
-``T_world_from_ego``), ``/scene`` (JSON tags + description) and ``/agents`` (foxglove.SceneUpdate).
+``T_world_from_ego``), ``/scene`` (JSON tags + description), ``/agents`` (foxglove.SceneUpdate cubes) and, optionally,
+``/road`` (foxglove.SceneUpdate line strips).
 Every message's MCAP log time is its ``timestamp_ns``. Static messages (calibration, tf_static,
 scene) are logged at the first timestamp the writer sees.
 
@@ -25,7 +26,7 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import Camera, Rig
 from drivewm.logs import names
 from drivewm.logs.transforms import ns_to_sec_nsec, quat_xyzw_from_yaw, split_T
-from drivewm.logs.types import AgentBox, DriveLog, SceneInfo
+from drivewm.logs.types import AgentBox, DriveLog, RoadLine, SceneInfo
 
 IMAGE_FORMATS = ("jpeg", "png")
 SCENE_JSON_SCHEMA = {
@@ -85,6 +86,7 @@ class LogWriter:
         self._tf_static_ch = channels.FrameTransformsChannel(names.TF_STATIC_TOPIC, context=ctx)
         self._tf_ch = channels.FrameTransformsChannel(names.TF_TOPIC, context=ctx)
         self._agents_ch = channels.SceneUpdateChannel(names.AGENTS_TOPIC, context=ctx)
+        self._road_ch = channels.SceneUpdateChannel(names.ROAD_TOPIC, context=ctx)
         schema = foxglove.Schema(
             name=names.SCENE_SCHEMA_NAME, encoding="jsonschema", data=json.dumps(SCENE_JSON_SCHEMA).encode()
         )
@@ -145,6 +147,15 @@ class LogWriter:
         meta = [m.KeyValuePair(key="category", value=box.category)]
         return m.SceneEntity(timestamp=self._timestamp(timestamp_ns), frame_id=names.WORLD_FRAME, id=box.track_id, cubes=[cube], metadata=meta)
 
+    def _line_entity(self, timestamp_ns: int, index: int, line: RoadLine):
+        m = self._msg
+        points = [m.Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in line.points_xyz]
+        primitive = m.LinePrimitive(type=m.LinePrimitiveLineType.LineStrip, thickness=0.15, points=points,
+                                    color=m.Color(r=1.0, g=1.0, b=1.0, a=1.0))
+        meta = [m.KeyValuePair(key="kind", value=line.kind), m.KeyValuePair(key="line_type", value=line.line_type)]
+        return m.SceneEntity(timestamp=self._timestamp(timestamp_ns), frame_id=names.WORLD_FRAME,
+                             id=f"{line.kind}/{index}", lines=[primitive], metadata=meta)
+
     # ------------------------------------------------------------------ public API
 
     def write_image(self, camera: str, timestamp_ns: int, image: np.ndarray) -> None:
@@ -183,6 +194,12 @@ class LogWriter:
         deletion = m.SceneEntityDeletion(timestamp=self._timestamp(timestamp_ns), type=m.SceneEntityDeletionType.All)
         update = m.SceneUpdate(deletions=[deletion], entities=[self._cube_entity(timestamp_ns, b) for b in boxes])
         self._agents_ch.log(update, log_time=int(timestamp_ns))
+
+    def write_road(self, timestamp_ns: int, lines: list[RoadLine]) -> None:
+        """Log the static road polylines once (optional; viewers draw them)."""
+        self._ensure_static(timestamp_ns)
+        update = self._msg.SceneUpdate(entities=[self._line_entity(timestamp_ns, i, line) for i, line in enumerate(lines)])
+        self._road_ch.log(update, log_time=int(timestamp_ns))
 
     def close(self) -> Path:
         """Finish the MCAP file and rename it onto ``path``."""
@@ -239,7 +256,10 @@ def drive_events(log: DriveLog) -> list[tuple[int, str, tuple]]:
 def write_log(log: DriveLog, path: str | Path) -> Path:
     """Write an in-memory :class:`DriveLog` to ``path``; images are copied as stored (no re-encoding)."""
     with LogWriter(path, log.rig, log.scene) as w:
-        for ts, kind, payload in drive_events(log):
+        events = drive_events(log)
+        if log.road:
+            w.write_road(events[0][0] if events else 0, log.road)
+        for ts, kind, payload in events:
             if kind == "pose":
                 w.write_pose(ts, payload[0])
             elif kind == "agents":

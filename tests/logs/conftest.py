@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivewm.geometry import T_from_xyz_yaw, euler_to_R, load_rig, make_T
-from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, SceneInfo
+from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, RoadLine, SceneInfo
 from drivewm.logs.writer import encode_image
 
 TICKS = 6
@@ -46,6 +46,19 @@ def synthetic_agents(tick: int) -> list[AgentBox]:
     ]
 
 
+def synthetic_road() -> list[RoadLine]:
+    """Two lanes of a gently curving road: centre lines, a dashed divider, solid edges."""
+    s = np.linspace(0.0, 40.0, 9)
+    curve = 0.002 * s**2
+
+    def line(offset: float) -> np.ndarray:
+        return np.stack([10.0 + s, -3.0 + curve + offset, np.zeros_like(s)], axis=1)
+
+    return [RoadLine("lane_center", line(-1.75)), RoadLine("lane_center", line(1.75)),
+            RoadLine("lane_boundary", line(0.0), "dashed"), RoadLine("road_edge", line(-3.5), "solid"),
+            RoadLine("road_edge", line(3.5), "solid")]
+
+
 def make_synthetic_log(path: str = "synthetic") -> DriveLog:
     rig = synthetic_rig()
     ts = [T0_NS + i * DT_NS for i in range(TICKS)]
@@ -57,7 +70,7 @@ def make_synthetic_log(path: str = "synthetic") -> DriveLog:
     scene = SceneInfo({"weather": "snow", "time_of_day": "dusk", "road_type": "highway", "traffic_density": "low", "source": "test"},
                       "a synthetic snowy drive")
     agents = [(t, synthetic_agents(i)) for i, t in enumerate(ts)]
-    return DriveLog(path, rig, images, np.array(ts, dtype=np.int64), poses, scene, agents)
+    return DriveLog(path, rig, images, np.array(ts, dtype=np.int64), poses, scene, agents, synthetic_road())
 
 
 @pytest.fixture(scope="session")
@@ -73,7 +86,7 @@ def synthetic_mcap(tmp_path_factory, synthetic_log) -> str:
     return str(write_log(synthetic_log, tmp_path_factory.mktemp("logs") / "synthetic.mcap"))
 
 
-def _assert_same_log(got: DriveLog, want: DriveLog, rot_atol: float = 1e-12, agents: bool = True) -> None:
+def _assert_same_log(got: DriveLog, want: DriveLog, rot_atol: float = 1e-12, agents: bool = True, road: bool = True) -> None:
     """Same cameras (K, D, size exact; T_ego_from_cam to ``rot_atol``), same image bytes and
     times, same pose times, translations exact and rotations to ``rot_atol`` (the wire format is
     a quaternion), NaN gaps kept, same tags and description, same agents."""
@@ -92,6 +105,10 @@ def _assert_same_log(got: DriveLog, want: DriveLog, rot_atol: float = 1e-12, age
     np.testing.assert_array_equal(got.T_world_from_ego[:, :3, 3], want.T_world_from_ego[:, :3, 3])  # NaN == NaN here
     np.testing.assert_allclose(got.T_world_from_ego, want.T_world_from_ego, rtol=0, atol=rot_atol)
     assert got.scene == want.scene
+    if road:
+        assert [(r.kind, r.line_type) for r in got.road] == [(r.kind, r.line_type) for r in want.road]
+        for g, w in zip(got.road, want.road):
+            np.testing.assert_array_equal(g.points_xyz, w.points_xyz)
     if agents:
         assert [t for t, _ in got.agents] == [t for t, _ in want.agents]
         for (_, gb), (_, wb) in zip(got.agents, want.agents):

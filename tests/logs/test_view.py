@@ -50,7 +50,7 @@ def test_images_per_tick_are_the_logged_bytes(recording, synthetic_log):
         assert [t.value for t in times] == [f.timestamp_ns for f in frames]  # pandas Timestamp, ns
 
 
-def test_ego_trajectory_and_agents(recording, synthetic_log):
+def test_ego_trajectory_agents_and_road(recording, synthetic_log):
     poses = _rows(recording, "/world/ego", "Transform3D:translation", static=False)
     assert len(poses) == 5  # 6 ticks, the NaN gap skipped
     (strips,) = _rows(recording, "/world/ego_trajectory", "LineStrips3D:strips", static=True)
@@ -60,6 +60,9 @@ def test_ego_trajectory_and_agents(recording, synthetic_log):
     assert labels == [["car:car-1", "truck:truck-7"]] * 6
     half = _rows(recording, "/world/agents", "Boxes3D:half_sizes", static=False)
     np.testing.assert_allclose(half[0][1], [6.0, 1.25, 1.6], rtol=1e-6)
+    (edges,) = _rows(recording, "/world/road/road_edge", "LineStrips3D:strips", static=True)
+    assert len(edges) == 2 and len(edges[0]) == 9
+    np.testing.assert_allclose(edges[1], synthetic_log.road[4].points_xyz, rtol=1e-6)
     (text,) = _rows(recording, "/scene", "TextDocument:text", static=True)
     assert "**weather**: snow" in text[0] and "a synthetic snowy drive" in text[0]
 
