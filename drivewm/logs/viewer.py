@@ -1,6 +1,6 @@
 """A drive log as a Rerun recording (``.rrd``), in the spirit of Rerun's nuScenes example.
 
-Entity tree (world z up; timeline ``drive_time`` = the log's ``timestamp_ns``):
+Entity tree (world z up; timeline ``log_time`` = the log's ``timestamp_ns``):
 
 - ``world``: view coordinates right-hand z-up (static);
 - ``world/ego``: ``T_world_from_ego`` per tick (Transform3D; NaN gaps are skipped);
@@ -22,7 +22,7 @@ from drivewm.atomic import atomic_path
 from drivewm.logs.types import DriveLog
 from drivewm.logs.transforms import quat_xyzw_from_yaw
 
-TIMELINE = "drive_time"  # Rerun reserves "log_time" for its own wall-clock timeline
+TIMELINE = "log_time"  # the MCAP log time; Rerun's own wall-clock "log_time"/"log_tick" are switched off
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
 ROAD_COLORS = {"lane_center": [80, 160, 255], "lane_boundary": [255, 255, 255], "road_edge": [255, 120, 0]}
 
@@ -59,7 +59,7 @@ def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:
 
 
 def log_ticks(rec, log: DriveLog) -> None:
-    """Ego poses, images and agent boxes on the ``drive_time`` timeline."""
+    """Ego poses, images and agent boxes on the ``log_time`` timeline."""
     import rerun as rr
 
     for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
@@ -96,6 +96,8 @@ def write_recording(log: DriveLog, out_path: str | Path) -> Path:
     out_path = Path(out_path)
     with atomic_path(out_path) as tmp:
         rec = rr.RecordingStream("drivewm", recording_id=Path(log.path).stem)
+        rec.set_log_time_enabled(False)  # else Rerun stamps every row with the wall clock under the same name
+        rec.set_log_tick_enabled(False)
         rec.save(tmp)
         log_static(rec, log)
         log_ticks(rec, log)

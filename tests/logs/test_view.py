@@ -44,10 +44,15 @@ def test_cameras_are_pinholes_on_the_ego(recording, synthetic_log):
 def test_images_per_tick_are_the_logged_bytes(recording, synthetic_log):
     for name, frames in synthetic_log.images.items():
         blobs = _rows(recording, f"/world/ego/{name}", "EncodedImage:blob", static=False)
-        times = _rows(recording, f"/world/ego/{name}", "drive_time", static=False)
+        times = _rows(recording, f"/world/ego/{name}", "log_time", static=False)
         assert len(blobs) == len(frames) == 6
         assert [bytes(b[0]) for b in blobs] == [f.data for f in frames]
-        assert [t.value for t in times] == [f.timestamp_ns for f in frames]  # pandas Timestamp, ns
+        assert [t.value for t in times] == [f.timestamp_ns for f in frames]  # the log's time, not the wall clock
+
+
+def test_one_timeline_the_logs_own(recording):
+    timelines = {tuple(ch.timeline_names) for ch in recording if not ch.is_static and ch.entity_path != "/__properties"}
+    assert timelines == {("log_time",)}  # no wall-clock log_time/log_tick from Rerun itself
 
 
 def test_ego_trajectory_agents_and_road(recording, synthetic_log):
