@@ -1,0 +1,94 @@
+"""Session fixtures with simulated data, shared by every stage's tests.
+
+Simulating and curating take tens of seconds, so the results are cached on disk under
+``.pytest_cache/drivewm-data/<hash>``, keyed by the source of the stages that make them
+(sim, logs, curate) and their recipes: any change there rebuilds the data. A file lock makes
+concurrent pytest processes build it once.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import os
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = (REPO / ".." / "shared" / "data").resolve()
+
+#: The drives of the shared simulated dataset: (name, SimConfig fields).
+SIM_DRIVES = {
+    "highway_clear": dict(source="highway", scenario="highway", weather="clear", time_of_day="day", seed=1),
+    "highway_snow": dict(source="highway", scenario="highway", weather="snow", time_of_day="day", seed=2),
+    "roundabout_clear": dict(source="highway", scenario="roundabout", weather="clear", time_of_day="day", seed=3),
+    "sumo_grid_night": dict(source="sumo", scenario="grid", weather="clear", time_of_day="night", seed=4),
+}
+SIM_COMMON = dict(rig="nuscenes6", duration_s=6.0, fps=10.0)
+
+
+def _source_hash(*parts: str) -> str:
+    digest = hashlib.sha256()
+    for part in parts:
+        for path in sorted((REPO / part).rglob("*")):
+            if path.is_file() and path.suffix in {".py", ".yaml", ".yml"}:
+                digest.update(str(path.relative_to(REPO)).encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _cached(name: str, sources: tuple[str, ...], build) -> Path:
+    """Build ``name`` once per source version into the cache (atomically, under a lock)."""
+    root = Path(os.environ.get("DRIVEWM_TEST_CACHE", REPO / ".pytest_cache" / "drivewm-data"))
+    target = root / f"{name}-{_source_hash(*sources)}"
+    root.mkdir(parents=True, exist_ok=True)
+    with open(root / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (target / ".done").is_file():
+            from drivewm.atomic import atomic_path
+
+            with atomic_path(target) as tmp:
+                tmp.mkdir()
+                build(tmp)
+                (tmp / ".done").write_text("ok\n")
+    return target
+
+
+def _build_logs(out: Path) -> None:
+    from drivewm.sim import SimConfig, simulate
+
+    for name, fields in SIM_DRIVES.items():
+        simulate(SimConfig(**SIM_COMMON, **fields), out / f"{name}.mcap")
+
+
+def _build_clips(out: Path, log_dir: Path) -> None:
+    from drivewm.curate import curate, load_curate_config
+
+    cfg = load_curate_config(REPO / "datasets" / "curate" / "test.yaml")
+    curate(sorted(log_dir.glob("*.mcap")), out, cfg, executor="local", workers=1)
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """The real data folder beside the checkout (../shared/data)."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"real test data not found at {SHARED_DATA}")
+    return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def sim_log_dir() -> Path:
+    """Four simulated nuscenes6 drives (320x192, 10 fps, 6 s): highway clear/snow, roundabout, SUMO grid at night."""
+    return _cached("logs", ("drivewm/sim", "drivewm/logs", "datasets/scenarios", "multiview/rigs"), _build_logs)
+
+
+@pytest.fixture(scope="session")
+def sim_clip_dir(sim_log_dir: Path) -> Path:
+    """``sim_log_dir`` curated with datasets/curate/test.yaml (17-frame clips at 10 fps)."""
+    sources = ("drivewm/sim", "drivewm/logs", "drivewm/curate", "drivewm/clips", "datasets", "multiview/rigs")
+    return _cached("clips", sources, lambda out: _build_clips(out, sim_log_dir))
