@@ -1,0 +1,97 @@
+"""simulate / simulate_many: scenario source -> renderer -> MCAP drive log (through LogWriter)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from drivewm.logs.types import SceneInfo
+from drivewm.sim.config import SimConfig
+from drivewm.sim.scene import SceneRecording
+from drivewm.sim.world import build_renderer, sim_rig
+
+
+def record(cfg: SimConfig) -> SceneRecording:
+    """Run the traffic simulator of ``cfg`` and return the scene-state stream (no pixels yet)."""
+    cfg.validate()
+    if cfg.source == "highway":
+        os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")  # highway-env imports pygame
+        from drivewm.sim.source_highway import record_highway
+
+        rec = record_highway(cfg)
+    else:
+        from drivewm.sim.source_sumo import record_sumo
+
+        rec = record_sumo(cfg)
+    rec.tags.update(weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density)
+    rec.description = describe(cfg, rec)
+    return rec
+
+
+def describe(cfg: SimConfig, rec: SceneRecording) -> str:
+    """A one-sentence description of the drive from its configuration and what happened in it."""
+    road = {"highway": "a multi-lane highway", "merge": "a highway with a merging on-ramp", "roundabout": "a roundabout",
+            "intersection": "a four-way intersection", "grid": "a city street grid", "spider": "radial city streets",
+            "random": "irregular city streets"}[cfg.scenario]
+    light = {"day": "during the day", "dusk": "at dusk", "night": "at night"}[cfg.time_of_day]
+    weather = {"clear": "clear weather", "overcast": "overcast weather", "rain": "rain", "snow": "snow", "fog": "fog"}[cfg.weather]
+    speed = np.mean([t.ego_speed_mps for t in rec.ticks]) * 3.6
+    others = int(np.mean([len(t.agents) for t in rec.ticks]))
+    return (f"The ego car drives through {road} in {weather} {light}, at about {speed:.0f} km/h, "
+            f"with {cfg.traffic_density} traffic ({others} other vehicles in the scene).")
+
+
+def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Path:
+    """Simulate one drive and write it as an MCAP drive log at ``out_path`` (atomically)."""
+    from drivewm.logs.writer import LogWriter
+
+    rec = record(cfg)
+    rig = sim_rig(cfg)
+    renderer = build_renderer(cfg, rec, rig)
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    with LogWriter(out_path, rig, SceneInfo(dict(rec.tags), rec.description), "jpeg", cfg.jpeg_quality) as writer:
+        _write_road(writer, rec)
+        for tick in tqdm(rec.ticks, desc=out_path.name, unit="tick", disable=not progress, leave=False):
+            images = renderer.render(tick.T_world_from_ego, tick.agents, tick.timestamp_ns)
+            writer.write_images(tick.timestamp_ns, images)
+            writer.write_pose(tick.timestamp_ns, tick.T_world_from_ego)
+            writer.write_agents(tick.timestamp_ns, tick.agents)
+    return out_path
+
+
+def _write_road(writer, rec: SceneRecording) -> None:
+    """Log the road polylines where the writer supports it (optional /road channel)."""
+    from drivewm.logs import types
+
+    if not hasattr(writer, "write_road") or not hasattr(types, "RoadLine"):
+        return
+    z = lambda p: np.concatenate([p, np.zeros((len(p), 1))], axis=1)  # noqa: E731
+    lines = [types.RoadLine("lane_center", z(c)) for c in rec.road.lane_centers]
+    lines += [types.RoadLine("lane_boundary", z(b.points_xy), b.line_type) for b in rec.road.boundaries]
+    lines += [types.RoadLine("road_edge", z(e)) for e in rec.road.road_edges]
+    writer.write_road(rec.ticks[0].timestamp_ns, lines)
+
+
+def drive_name(cfg: SimConfig) -> str:
+    """File name of a drive: source, scenario, conditions and seed."""
+    return f"{cfg.source}_{cfg.scenario}_{cfg.weather}_{cfg.time_of_day}_s{cfg.seed:04d}.mcap"
+
+
+def simulate_many(cfg: SimConfig, drives: int, out_dir: str | Path, progress: bool = True) -> list[Path]:
+    """``drives`` drives with seeds cfg.seed, cfg.seed + 1, ... into ``out_dir``.
+
+    A drive whose file already exists is kept (runs are deterministic and writes atomic, so a
+    rerun of an interrupted call resumes where it stopped).
+    """
+    out_dir = Path(out_dir)
+    paths = []
+    for i in tqdm(range(drives), desc="drives", unit="drive", disable=not progress):
+        c = dataclasses.replace(cfg, seed=cfg.seed + i)
+        path = out_dir / drive_name(c)
+        paths.append(path if path.is_file() else simulate(c, path, progress))
+    return paths

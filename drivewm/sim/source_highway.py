@@ -1,0 +1,133 @@
+"""highway-env scenario source: highway, merge, roundabout, intersection -> SceneRecording.
+
+highway-env is 2D with its y axis pointing down in its own render (DESIGN.md section 9), so a
+z-up world is X = x, Y = -y, yaw = -heading. Its vehicle position is the box centre; the ego
+origin is on the ground under the rear axle. The ego is an IDM + MOBIL driver (car following and
+lane changes, Treiber 2000 / Kesting 2007), so drives are sensible without a trained policy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from drivewm.geometry import T_from_xyz_yaw
+from drivewm.sim.config import SimConfig
+from drivewm.sim.road_edges import road_edges_from_boundaries, vehicle_look
+from drivewm.sim.scene import LaneBoundary, RoadMap, SceneRecording, SceneTick, box_from_center
+
+#: Distance from the vehicle centre back to the rear axle (m) for a 5 m highway-env car.
+REAR_AXLE_BEHIND_CENTER_M = 1.5
+#: Simulator sub-steps are at most this long (s); highway-env's own default is 1/15 s.
+MAX_SUBSTEP_S = 1.0 / 15.0
+LINE_TYPES = {0: "none", 1: "dashed", 2: "solid", 3: "solid"}
+DENSITY = {"low": (15, 0.7), "medium": (30, 1.0), "high": (50, 1.6)}  # (vehicles_count, vehicles_density)
+
+
+def make_env(scenario: str, traffic_density: str, seed: int):
+    """The unwrapped highway-env environment for ``scenario``, reset with ``seed``."""
+    import highway_env.envs as envs
+
+    count, density = DENSITY[traffic_density]
+    classes = {"highway": envs.HighwayEnv, "merge": envs.MergeEnv, "roundabout": envs.RoundaboutEnv,
+               "intersection": envs.IntersectionEnv}
+    config = {"vehicles_count": count, "vehicles_density": density} if scenario == "highway" else {}
+    if scenario == "intersection":
+        config = {"initial_vehicle_count": count // 3, "spawn_probability": min(0.3 * density, 0.9)}
+    env = classes[scenario](config=config)
+    env.reset(seed=seed)
+    return env
+
+
+def record_highway(cfg: SimConfig) -> SceneRecording:
+    """Run one highway-env drive and return its scene-state stream.
+
+    A drive whose ego crashes is rerun with the next simulator seed (up to 5 tries), since a
+    crashed ego stands still for the rest of the drive.
+    """
+    for attempt in range(5):
+        rec = _run_once(cfg, cfg.seed * 7919 + attempt)
+        if rec is not None:
+            return rec
+    return _run_once(cfg, cfg.seed * 7919 + 5, allow_crash=True)
+
+
+def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> SceneRecording | None:
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    env = make_env(cfg.scenario, cfg.traffic_density, sim_seed)
+    old = env.vehicle
+    ego = IDMVehicle.create_from(old)
+    env.road.vehicles[env.road.vehicles.index(old)] = ego
+    env.controlled_vehicles = [ego]
+    substeps = max(1, math.ceil((1.0 / cfg.fps) / MAX_SUBSTEP_S))
+    dt = 1.0 / cfg.fps / substeps
+    ids: dict[int, str] = {}
+    ticks = []
+    for i in range(cfg.num_ticks):
+        ticks.append(_tick(env, ego, int(round(i * 1e9 / cfg.fps)), ids, cfg.seed))
+        for _ in range(substeps):
+            env.road.act()
+            env.road.step(dt)
+        if cfg.scenario == "intersection":
+            env._clear_vehicles()
+            env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
+        if ego.crashed and not allow_crash:
+            return None
+    env.close()
+    xy = np.array([t.T_world_from_ego[:2, 3] for t in ticks])
+    road = road_map_from_network(env.road.network, xy.min(axis=0) - cfg.max_range_m, xy.max(axis=0) + cfg.max_range_m)
+    tags = {"road_type": cfg.road_type, "source": "highway-env"}
+    return SceneRecording(road, ticks, tags)
+
+
+def _tick(env, ego, timestamp_ns: int, ids: dict[int, str], seed: int) -> SceneTick:
+    yaw = -float(ego.heading)
+    cx, cy = float(ego.position[0]), -float(ego.position[1])
+    rear_x = cx - REAR_AXLE_BEHIND_CENTER_M * math.cos(yaw)
+    rear_y = cy - REAR_AXLE_BEHIND_CENTER_M * math.sin(yaw)
+    agents = []
+    for v in env.road.vehicles:
+        if v is ego:
+            continue
+        track_id = ids.setdefault(id(v), f"veh{len(ids):03d}")
+        category, height, color = vehicle_look(seed, track_id)
+        agents.append(box_from_center(track_id, category, float(v.position[0]), -float(v.position[1]),
+                                      -float(v.heading), (float(v.LENGTH), float(v.WIDTH), height), color))
+    return SceneTick(timestamp_ns, T_from_xyz_yaw(rear_x, rear_y, 0.0, yaw), agents, float(ego.speed))
+
+
+def road_map_from_network(network, lo_xy: np.ndarray, hi_xy: np.ndarray, step_m: float = 1.0) -> RoadMap:
+    """Sample the lanes of a highway-env RoadNetwork inside the world box [lo_xy, hi_xy] into
+    world-frame polylines (z up). (highway-env's straight roads are 10 km long.)"""
+    centers, widths, boundaries, polygons = [], [], [], []
+    for lanes in (ls for d in network.graph.values() for ls in d.values()):
+        for lane in lanes:
+            s = _stations_inside(lane, lo_xy, hi_xy, step_m)
+            if s is None:
+                continue
+            w = np.array([lane.width_at(x) for x in s])
+            sides = []
+            for sign in (-1.0, 0.0, 1.0):
+                pts = np.array([lane.position(x, sign * wi / 2) for x, wi in zip(s, w)])
+                sides.append(pts * np.array([1.0, -1.0]))
+            centers.append(sides[1])
+            widths.append(float(w.mean()))
+            boundaries.append(LaneBoundary(sides[0], LINE_TYPES[int(lane.line_types[0])]))
+            boundaries.append(LaneBoundary(sides[2], LINE_TYPES[int(lane.line_types[1])]))
+            polygons.append(np.concatenate([sides[0], sides[2][::-1]], axis=0))
+    edges = road_edges_from_boundaries(boundaries, polygons)
+    return RoadMap(centers, widths, boundaries, edges, polygons)
+
+
+def _stations_inside(lane, lo_xy: np.ndarray, hi_xy: np.ndarray, step_m: float, coarse_m: float = 10.0):
+    """Arc lengths (every ``step_m``) of the part of ``lane`` inside the world box, or None."""
+    s = np.linspace(0.0, lane.length, max(2, int(math.ceil(lane.length / coarse_m)) + 1))
+    xy = np.array([lane.position(x, 0.0) for x in s]) * np.array([1.0, -1.0])
+    inside = np.all((xy >= lo_xy) & (xy <= hi_xy), axis=1)
+    if not inside.any():
+        return None
+    idx = np.flatnonzero(inside)
+    s0, s1 = s[max(idx[0] - 1, 0)], s[min(idx[-1] + 1, len(s) - 1)]
+    return np.linspace(s0, s1, max(2, int(math.ceil((s1 - s0) / step_m)) + 1))
