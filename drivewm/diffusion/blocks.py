@@ -38,6 +38,8 @@ class BlockContext:
     """Token grid (t, h, w) of one sample: N = t * h * w."""
     num_views: int = 1
     """Camera views folded into the batch as (B V): consecutive samples are one clip's views."""
+    view_neighbors: torch.Tensor | None = None
+    """(V, K) long: the views each view reads in cross-view sub-layers (itself included); None = all."""
 
 
 def _zero(linear: nn.Linear) -> nn.Linear:

@@ -52,6 +52,8 @@ class Conditioning:
     """(B, D) added to the DiT's timestep embedding."""
     num_views: int = 1
     """Views folded into B (multi-view models)."""
+    view_neighbors: torch.Tensor | None = None
+    """(V, K) long: the views each view attends to in cross-view sub-layers (None = all)."""
 
     def drop_text(self, keep: torch.Tensor) -> "Conditioning":
         """A copy where samples with ``keep`` (B,) False have their caption masked out."""
@@ -110,6 +112,7 @@ class EDMDenoiser(nn.Module):
         out = self.backbone(
             net_in, c_noise.flatten(), cond.text_emb, cond.text_mask, cond.fps,
             extra_token_cond=cond.extra_token_cond, extra_global_cond=cond.extra_global_cond, num_views=cond.num_views,
+            view_neighbors=cond.view_neighbors,
         )
         denoised = c_skip * x + c_out * out.to(x.dtype)
         if mask is not None:

@@ -104,6 +104,7 @@ class DiT(nn.Module):
         extra_token_cond: torch.Tensor | None = None,
         extra_global_cond: torch.Tensor | None = None,
         num_views: int = 1,
+        view_neighbors: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Predict (B, C, T, H, W) from latents ``x`` (B, C(+1 mask), T, H, W).
 
@@ -112,6 +113,7 @@ class DiT(nn.Module):
         ``extra_token_cond`` (B, N, D): added to the patch tokens (e.g. camera rays per token).
         ``extra_global_cond`` (B, D): added to the timestep embedding (e.g. an ego trajectory).
         ``num_views``: views folded into B as (B V), read by cross-view sub-layers.
+        ``view_neighbors`` (V, K) long: the views each view attends to across views (None = all).
         """
         cfg = self.cfg
         _, _, t, h, w = x.shape
@@ -123,7 +125,7 @@ class DiT(nn.Module):
         text, mask = self.embed_text(text_emb, text_mask)  # (B, 1+L, D), (B, 1+L)
         pos = grid_positions(*grid, fps=fps, base_fps=cfg.rope_base_fps)  # (B, N, 3)
         pos[..., 0] *= cfg.patch_t
-        ctx = BlockContext(rope_angles(pos, cfg.head_dim, cfg.rope_theta), text, mask, grid, num_views)
+        ctx = BlockContext(rope_angles(pos, cfg.head_dim, cfg.rope_theta), text, mask, grid, num_views, view_neighbors)
         for block in self.blocks:
             tokens = block(tokens, emb, adaln_lora, ctx)  # (B, N, D)
         return unpatchify(self.final(tokens, emb), grid, cfg.patch_size, cfg.patch_t)  # (B, C, T, H, W)
