@@ -80,7 +80,8 @@ def _scene_phrase(tags: dict[str, str]) -> str:
     traffic = tags.get("traffic_density", "")
     when = " ".join(x for x in (weather if weather != "clear" else "clear-weather", time) if x and x != "unknown")
     traffic_part = f" in {traffic} traffic" if traffic and traffic != "unknown" else ""
-    return f"A {when + ' ' if when else ''}drive on a {road if road != 'unknown' else 'road'}{traffic_part}"
+    place = road if road != "unknown" else "road"
+    return f"A {when + ' ' if when else ''}drive on {'an' if place[0] in 'aeiou' else 'a'} {place}{traffic_part}"
 
 
 MANOEUVRE_PHRASES = {

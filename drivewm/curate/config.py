@@ -22,11 +22,13 @@ class FilterConfig:
     min_sharpness: float = 5.0
     """Drop clips whose blurriest camera has a median variance of Laplacian (grey, 0-255) below this."""
     dark_luma: float = 15.0
-    """A frame is too dark when its mean luma (0-255) is below this."""
+    """A tick is too dark when the mean luma (0-255) over all cameras is below this ..."""
+    dark_highlight: float = 100.0
+    """... and its brightest 1 % of pixels stay below this luma (lit night scenes are kept)."""
     bright_fraction: float = 0.5
-    """A frame is blown out when more than this fraction of its pixels is at luma >= 250."""
+    """A tick is blown out when more than this fraction of its pixels (all cameras) is at luma >= 250."""
     max_bad_exposure_fraction: float = 0.1
-    """Drop clips where more than this fraction of frames (any camera) is too dark or blown out."""
+    """Drop clips where more than this fraction of ticks is too dark or blown out."""
     frozen_diff: float = 0.5
     """Two consecutive frames are frozen/duplicated when their mean absolute difference (0-255) is below this."""
     max_frozen_fraction: float = 0.2
@@ -43,13 +45,15 @@ class PrivacyConfig:
     """Face and licence-plate blurring (drivewm.curate.privacy)."""
 
     enabled: bool = False
-    """Blur detections before encoding. Needs ``face_model`` (OpenCV 5 bundles no detector weights)."""
+    """Blur detections before encoding."""
+    faces: bool = True
+    """Blur faces; needs ``face_model`` (OpenCV 5 bundles no face detector weights)."""
     face_model: str = ""
     """Path to a YuNet ONNX file (opencv_zoo face_detection_yunet_*.onnx) for cv2.FaceDetectorYN."""
     face_score: float = 0.7
     """YuNet score threshold."""
     plates: bool = True
-    """Also blur licence-plate candidates found by the classical plate detector."""
+    """Blur licence-plate candidates of the classical plate detector (weak: see drivewm/curate/privacy.py)."""
     blur_kernel_frac: float = 0.5
     """Gaussian kernel size as a fraction of the box's shorter side."""
 
@@ -60,11 +64,11 @@ class TrajectoryConfig:
 
     position_sigma_m: float = 0.3
     """Measurement noise of a logged position (m, per axis): GNSS jitter."""
-    yaw_sigma_rad: float = 0.02
+    yaw_sigma_rad: float = 0.01
     """Measurement noise of a logged yaw (rad)."""
-    accel_sigma_mps2: float = 3.0
+    accel_sigma_mps2: float = 5.0
     """Process noise: white acceleration (m/s^2) of the constant-velocity model."""
-    yaw_accel_sigma_radps2: float = 1.0
+    yaw_accel_sigma_radps2: float = 3.0
     """Process noise: white yaw acceleration (rad/s^2)."""
     gate_chi2: float = 25.0
     """Innovation gate: a measurement whose squared Mahalanobis distance exceeds this is rejected as jitter."""

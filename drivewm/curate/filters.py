@@ -32,12 +32,17 @@ def sharpness(grey: np.ndarray) -> float:
     return float(np.median(per, axis=1).min())
 
 
-def bad_exposure_fraction(grey: np.ndarray, dark_luma: float, bright_fraction: float) -> tuple[float, float]:
-    """Fraction of frames (any camera) too dark or blown out, and the darkest camera's mean luma."""
-    mean = grey.mean(axis=(2, 3))  # (V, T)
-    blown = (grey >= 250).mean(axis=(2, 3))  # (V, T)
-    bad = ((mean < dark_luma) | (blown > bright_fraction)).any(axis=0)  # (T,)
-    return float(bad.mean()), float(mean.mean(axis=1).min())
+def bad_exposure_fraction(grey: np.ndarray, dark_luma: float, dark_highlight: float, bright_fraction: float) -> tuple[float, float]:
+    """Fraction of ticks whose rig-wide picture (all cameras together) is too dark or blown out, and
+    the mean luma. Too dark: mean luma below ``dark_luma`` *and* the brightest 1 % below
+    ``dark_highlight`` (a night street with lamps and headlights is footage; a fade to black is not).
+    One dark camera (a rear camera at night) does not condemn the tick."""
+    V, T = grey.shape[:2]
+    per_tick = np.moveaxis(grey, 1, 0).reshape(T, -1)  # (T, V*h*w)
+    mean = per_tick.mean(axis=1)
+    dark = (mean < dark_luma) & (np.percentile(per_tick, 99, axis=1) < dark_highlight)
+    blown = (per_tick >= 250).mean(axis=1) > bright_fraction
+    return float((dark | blown).mean()), float(mean.mean())
 
 
 def frozen_fraction(grey: np.ndarray, frozen_diff: float) -> float:
@@ -69,7 +74,7 @@ def ego_distance_m(positions_world: np.ndarray) -> float:
 def score_clip(frames: np.ndarray, positions_world: np.ndarray | None, cfg: FilterConfig) -> dict[str, float]:
     """All filter scores of one clip. ``positions_world`` None means the ego motion is unknown."""
     grey = grey_small(frames)
-    bad, luma = bad_exposure_fraction(grey, cfg.dark_luma, cfg.bright_fraction)
+    bad, luma = bad_exposure_fraction(grey, cfg.dark_luma, cfg.dark_highlight, cfg.bright_fraction)
     scores = {
         "sharpness": sharpness(grey),
         "bad_exposure_fraction": bad,
