@@ -1,0 +1,60 @@
+"""Camera conditioning from calibration: per-token Plucker rays in the ego frame -> DiT token offsets.
+
+A token of view v at latent patch (row i, column j) looks along the ray through the centre of its
+image patch. In the ego frame that ray has origin o (the camera centre) and unit direction d, and
+its Plucker coordinates (d, o x d) (Plucker 1865; used for camera conditioning by e.g. Sitzmann et
+al. 2021, "Light Field Networks") identify it independently of where along the ray o sits.
+Computed from each camera's K and T_ego_from_cam alone, so a rig with another number, order or
+placement of cameras needs no embedding table: only its calibration.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from einops import repeat
+from torch import nn
+
+from drivewm.geometry import Camera, Rig, pixel_rays
+
+
+def patch_centres_px(camera: Camera, grid_hw: tuple[int, int]) -> np.ndarray:
+    """(h*w, 2) pixel (u, v) of the centres of an h x w token grid over the camera's image, row-major."""
+    h, w = grid_hw
+    u = (np.arange(w) + 0.5) * camera.width / w - 0.5  # pixel centres are at integer coordinates
+    v = (np.arange(h) + 0.5) * camera.height / h - 0.5
+    uu, vv = np.meshgrid(u, v, indexing="xy")
+    return np.stack([uu.ravel(), vv.ravel()], axis=1)
+
+
+def plucker_rays(rig: Rig, grid_hw: tuple[int, int]) -> torch.Tensor:
+    """(V, h*w, 6) float32 Plucker coordinates (d, o x d) in the ego frame (metres) of each view's
+    token-grid patch centres, in rig order and row-major over (row, column)."""
+    out = []
+    for cam in rig.cameras:
+        d_cam = pixel_rays(cam.K, patch_centres_px(cam, grid_hw))  # (hw, 3) in the camera frame
+        d = d_cam @ cam.T_ego_from_cam[:3, :3].T
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        o = np.broadcast_to(cam.T_ego_from_cam[:3, 3], d.shape)
+        out.append(np.concatenate([d, np.cross(o, d)], axis=1))
+    return torch.from_numpy(np.stack(out)).float()
+
+
+def token_rays(rays_hw: torch.Tensor, num_frames: int) -> torch.Tensor:
+    """(V, h*w, 6) -> (V, t*h*w, 6): the rig is rigid, so every latent frame has the same rays
+    (tokens are row-major over (t, h, w), drivewm.diffusion.dit.patchify)."""
+    return repeat(rays_hw, "v hw c -> v (t hw) c", t=num_frames)
+
+
+class CameraEncoder(nn.Module):
+    """Plucker rays (..., 6) -> token offsets (..., D): Linear -> SiLU -> Linear (the last zero-initialised,
+    so a fresh encoder adds nothing and the model starts as its Text2World parent)."""
+
+    def __init__(self, hidden_dim: int, width: int = 128):
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(6, width), nn.SiLU(), nn.Linear(width, hidden_dim))
+        nn.init.zeros_(self.net[-1].weight)
+        nn.init.zeros_(self.net[-1].bias)
+
+    def forward(self, rays: torch.Tensor) -> torch.Tensor:
+        return self.net(rays)

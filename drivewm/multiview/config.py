@@ -1,0 +1,55 @@
+"""Typed configs of the multi-view model: the Text2World networks plus the multi-view parts."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+from drivewm.diffusion.denoiser import EDMConfig
+from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.errors import DrivewmError
+from drivewm.text import TextConfig
+
+
+@dataclasses.dataclass
+class MultiViewConfig:
+    """What the multi-view model adds to its Text2World parent (all new parameters start at zero effect)."""
+
+    cross_view: Literal["joint", "neighbors"] = "neighbors"
+    """Cross-view attention: every view reads all views (``joint``) or itself and its nearest cameras by
+    viewing direction (``neighbors``: memory and compute grow with V * (neighbors + 1), not V^2)."""
+    neighbors: int = 2
+    """Cameras besides itself that each view attends to in ``neighbors`` mode."""
+    camera_cond: bool = True
+    """Add per-token Plucker-ray embeddings computed from K and T_ego_from_cam."""
+    camera_width: int = 128
+    """Hidden width of the Plucker-ray MLP."""
+    trajectory_waypoints: int = 16
+    """Future ego waypoints (ClipMeta.trajectory_ego) the model is conditioned on; 0 = none."""
+    trajectory_scale_m: float = 20.0
+    """Waypoints are divided by this (m) before the trajectory MLP, so its inputs are O(1)."""
+    trajectory_width: int = 256
+    """Hidden width of the trajectory MLP."""
+    video2world_prob: float = 0.5
+    """Fraction of training steps conditioned on the first ``edm.cond_frames`` clean latent frames
+    (the rest are plain text-to-multi-view steps, so one model does both)."""
+
+    def validate(self) -> None:
+        if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
+            raise DrivewmError(f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, {self.neighbors}")
+        if self.trajectory_waypoints < 0 or self.trajectory_scale_m <= 0 or not 0 <= self.video2world_prob <= 1:
+            raise DrivewmError("multiview: trajectory_waypoints >= 0, trajectory_scale_m > 0 and 0 <= video2world_prob <= 1 required")
+
+
+@dataclasses.dataclass
+class MultiViewModelConfig:
+    """The networks of a multi-view model folder (``model_type: multiview``)."""
+
+    dit: DiTConfig = dataclasses.field(default_factory=DiTConfig)
+    """The shared DiT backbone (its ``block_layers`` include ``cross_view_attn``)."""
+    edm: EDMConfig = dataclasses.field(default_factory=EDMConfig)
+    """Preconditioning, loss and Video2World frames (``cond_frames``)."""
+    text: TextConfig = dataclasses.field(default_factory=TextConfig)
+    """Caption encoder (frozen), the parent's."""
+    multiview: MultiViewConfig = dataclasses.field(default_factory=MultiViewConfig)
+    """Cross-view attention, camera and trajectory conditioning."""

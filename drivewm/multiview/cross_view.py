@@ -1,0 +1,76 @@
+"""Attention across the camera views of a rig, as one more DiT sub-layer (``cross_view_attn``).
+
+The views of a clip share the backbone and are folded into the batch as (B V); the in-view
+self-attention of the pretrained DiT stays as it is. This sub-layer lets every token of view i
+attend to all tokens (every latent frame) of the views ``view_neighbors[i]``: all views
+("joint", as Cosmos' multi-view model's joint attention) or view i and its nearest cameras by
+viewing direction ("neighbors", cost grows with V * K instead of V^2). Its output projection
+starts at zero (drivewm.diffusion.blocks), so inserting it leaves the pretrained model unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from einops import rearrange
+
+from drivewm.diffusion.blocks import BlockContext, SelfAttention, register_sublayer
+from drivewm.diffusion.rope import apply_rope
+from drivewm.geometry import Rig
+
+SUBLAYER_NAME = "cross_view_attn"
+
+
+class CrossViewAttention(SelfAttention):
+    """Tokens (B V, N, D) of each view attend to the tokens of its neighbour views (QK-norm, 3D RoPE).
+    The same projections as in-view self-attention (own weights, zero output projection)."""
+
+    def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
+        v = ctx.num_views
+        q, k, val = rearrange(self.qkv(x), "bv n (three h d) -> three bv h n d", three=3, h=self.num_heads)
+        # Same RoPE angles in every view: a token's (time, row, column) relation holds across views,
+        # and where the views differ is told by the camera (Plucker) conditioning.
+        q = apply_rope(self.q_norm(q), ctx.rope_angles)  # (B V, heads, N, hd)
+        k = apply_rope(self.k_norm(k), ctx.rope_angles)
+        neighbors = ctx.view_neighbors if ctx.view_neighbors is not None else all_views(v, x.device)  # (V, K)
+        k, val = (gather_views(t, neighbors) for t in (k, val))  # (B V, heads, K N, hd)
+        out = F.scaled_dot_product_attention(q, k, val)  # (B V, heads, N, hd)
+        return self.out(rearrange(out, "bv h n d -> bv n (h d)"))
+
+
+def gather_views(t: torch.Tensor, neighbors: torch.Tensor) -> torch.Tensor:
+    """(B V, heads, N, d) per view -> (B V, heads, K N, d): for view i, the tokens of views ``neighbors[i]``."""
+    num_views = neighbors.shape[0]
+    per_clip = rearrange(t, "(b v) h n d -> b v h n d", v=num_views)
+    picked = per_clip[:, neighbors.to(t.device)]  # (B, V, K, heads, N, d)
+    return rearrange(picked, "b v k h n d -> (b v) h (k n) d")
+
+
+def all_views(num_views: int, device: torch.device | str = "cpu") -> torch.Tensor:
+    """(V, V) long: every view reads every view ("joint")."""
+    return torch.arange(num_views, device=device).expand(num_views, num_views).contiguous()
+
+
+def viewing_azimuth_rad(rig: Rig) -> np.ndarray:
+    """(V,) azimuth in the ego x-y plane of each camera's optical axis (OpenCV +z), 0 = ego +x, + = left."""
+    axes = np.stack([c.T_ego_from_cam[:3, 2] for c in rig.cameras])  # (V, 3) camera z axes in ego
+    return np.arctan2(axes[:, 1], axes[:, 0])
+
+
+def view_neighbors(rig: Rig, mode: str, neighbors: int) -> torch.Tensor:
+    """(V, K) long indices of the views each view attends to, itself first.
+
+    ``joint``: all V views. ``neighbors``: itself and the ``neighbors`` cameras whose optical axes
+    are nearest in azimuth (from the rig's extrinsics, so any rig, order or camera count works).
+    """
+    v = len(rig.cameras)
+    if mode == "joint" or neighbors + 1 >= v:
+        return all_views(v)
+    az = viewing_azimuth_rad(rig)
+    gap = np.abs(np.angle(np.exp(1j * (az[:, None] - az[None, :]))))  # (V, V) wrapped angle difference
+    order = np.argsort(gap + np.eye(v) * -1.0, axis=1, kind="stable")  # itself (gap -1) first
+    return torch.from_numpy(order[:, : neighbors + 1].copy()).long()
+
+
+register_sublayer(SUBLAYER_NAME, CrossViewAttention)

@@ -1,0 +1,162 @@
+"""The multi-view model: the Text2World DiT (shared by all views, folded into the batch as (B V))
+plus cross-view attention, camera (Plucker-ray) and ego-trajectory conditioning, and Video2World.
+
+:class:`MultiViewNet` is the trainable module ``forward(x, sigma, cond) -> denoised``: it turns the
+raw conditioning (rays, waypoints) into the DiT's ``extra_token_cond`` / ``extra_global_cond`` and
+calls the EDM denoiser. :class:`MultiView` is the inference bundle and model folder
+(``config.json`` with ``model_type: "multiview"`` + ``model.safetensors``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import torch
+from einops import rearrange, repeat
+from torch import nn
+
+from drivewm.config import from_dict, to_dict
+from drivewm.diffusion.data import denormalize_latents, normalize_latents
+from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
+from drivewm.diffusion.dit import DiT
+from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
+from drivewm.diffusion.text2world import LatentInfo
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig
+from drivewm.multiview import cross_view  # noqa: F401  (registers the cross_view_attn sub-layer)
+from drivewm.multiview.camera import CameraEncoder, plucker_rays, token_rays
+from drivewm.multiview.config import MultiViewModelConfig
+from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
+from drivewm.text import build_text_encoder
+from drivewm.train.checkpoint import load_model_folder, save_model_folder
+
+MODEL_TYPE = "multiview"
+
+
+@dataclasses.dataclass
+class MultiViewConditioning(Conditioning):
+    """:class:`Conditioning` of (B V) folded views plus the raw camera and trajectory inputs."""
+
+    rays: torch.Tensor | None = None
+    """(B V, N, 6) Plucker coordinates (ego frame) of every token's patch centre."""
+    trajectory: torch.Tensor | None = None
+    """(B V, W, 3) future ego waypoints (m) in the first frame's ego frame (repeated per view)."""
+
+
+class MultiViewNet(nn.Module):
+    """EDM denoiser around the shared DiT, with the camera and trajectory encoders.
+
+    ``forward(x (B V, c, t, h, w), sigma (B V,), cond: MultiViewConditioning) -> denoised (B V, c, t, h, w)``.
+    """
+
+    def __init__(self, cfg: MultiViewModelConfig):
+        super().__init__()
+        cfg.multiview.validate()
+        self.cfg = cfg
+        self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
+        mv, dim = cfg.multiview, cfg.dit.hidden_dim
+        self.camera_encoder = CameraEncoder(dim, mv.camera_width) if mv.camera_cond else None
+        self.trajectory_encoder = (
+            TrajectoryEncoder(mv.trajectory_waypoints, dim, mv.trajectory_width, mv.trajectory_scale_m) if mv.trajectory_waypoints else None
+        )
+
+    @property
+    def dit(self) -> DiT:
+        return self.denoiser.backbone
+
+    def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond: MultiViewConditioning) -> torch.Tensor:
+        token_cond = global_cond = None
+        if self.camera_encoder is not None and cond.rays is not None:
+            token_cond = self.camera_encoder(cond.rays.to(x.dtype))  # (B V, N, D)
+        if self.trajectory_encoder is not None and cond.trajectory is not None:
+            global_cond = self.trajectory_encoder(cond.trajectory.to(x.dtype))  # (B V, D)
+        return self.denoiser(x, sigma, dataclasses.replace(cond, extra_token_cond=token_cond, extra_global_cond=global_cond))
+
+
+class MultiView:
+    """Inference bundle: ``sample_latents(rig, view_captions, trajectories, seeds) -> (B, V, c, t, h, w)``."""
+
+    def __init__(self, cfg: MultiViewModelConfig, latent: LatentInfo):
+        self.cfg = cfg
+        self.latent = latent
+        self.text_encoder = build_text_encoder(cfg.text)
+        self.net = MultiViewNet(cfg).eval()
+
+    def save_pretrained(self, path: str | Path, state: dict[str, torch.Tensor] | None = None) -> None:
+        """Write the model folder (``state`` defaults to the network's current weights)."""
+        state = state if state is not None else self.net.state_dict()
+        save_model_folder(path, MODEL_TYPE, to_dict(self.cfg), state, {"latent": to_dict(self.latent)})
+
+    @classmethod
+    def from_pretrained(cls, path: str | Path) -> "MultiView":
+        info, state = load_model_folder(path, MODEL_TYPE)
+        where = f"{Path(path) / 'config.json'}"
+        model = cls(from_dict(MultiViewModelConfig, info["config"], where), from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"))
+        try:
+            model.net.load_state_dict(state)
+        except RuntimeError as exc:
+            raise DrivewmError(f"{path}: model.safetensors does not match config.json ({str(exc).splitlines()[0]})") from None
+        return model
+
+    @property
+    def training_rig(self) -> Rig:
+        from drivewm.geometry import rig_from_dict
+
+        return rig_from_dict(self.latent.rig, "model rig")
+
+    def token_grid(self) -> tuple[int, int, int]:
+        """(t, h, w) token grid of one view's latents."""
+        _, t, h, w = self.latent.latent_shape
+        d = self.cfg.dit
+        return t // d.patch_t, h // d.patch_size, w // d.patch_size
+
+    def conditioning(self, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float | None = None) -> MultiViewConditioning:
+        """Conditioning of B clips of ``rig`` (V views): captions (B, V) strings, waypoints (B, W, 3) m."""
+        return build_conditioning(self, rig, view_captions, trajectories, fps or self.latent.fps)
+
+    @torch.no_grad()
+    def sample_latents(
+        self, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, seeds: list[int], steps: int = 35,
+        guidance: float = 7.0, sampler: str = "heun", cond_latents: torch.Tensor | None = None, fps: float | None = None,
+    ) -> torch.Tensor:
+        """Raw (denormalised) latents (B, V, c, t, h, w) of B clips; clip b's noise from ``seeds[b]``.
+
+        ``cond_latents`` (B, V, c, t, h, w) raw latents whose first ``edm.cond_frames`` latent frames
+        are kept (Video2World); None = generate every frame.
+        """
+        if sampler not in SAMPLERS:
+            raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
+        b, v = len(view_captions), len(rig.cameras)
+        cond = self.conditioning(rig, view_captions, trajectories, fps)
+        mean, std = self._stats()
+        if cond_latents is not None:
+            z = normalize_latents(rearrange(cond_latents, "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data)
+            cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
+        sigmas = karras_sigmas(steps)
+        noise = torch.stack([torch.randn((v, *self.latent.latent_shape), generator=torch.Generator().manual_seed(int(s))) for s in seeds])
+        x = rearrange(noise, "b v c t h w -> (b v) c t h w") * sigmas[0]
+        x = SAMPLERS[sampler](GuidedDenoiser(self.net, guidance), x, sigmas, extra_args={"cond": cond})
+        return rearrange(denormalize_latents(x, mean, std, self.cfg.edm.sigma_data), "(b v) c t h w -> b v c t h w", b=b)
+
+    def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
+        return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)
+
+
+def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float) -> MultiViewConditioning:
+    """Text, rays, waypoints and view neighbours of B clips of ``rig``, folded to (B V)."""
+    from drivewm.multiview.cross_view import view_neighbors
+
+    b, v = len(view_captions), len(rig.cameras)
+    if any(len(caps) != v for caps in view_captions):
+        raise DrivewmError(f"need one caption per camera of rig {rig.name} ({v}) for every clip")
+    t, h, w = model.token_grid()
+    emb, mask = model.text_encoder.encode([c for caps in view_captions for c in caps])  # (B V, L, text_dim)
+    rays = repeat(token_rays(plucker_rays(rig, (h, w)), t), "v n c -> (b v) n c", b=b)
+    traj = None
+    if trajectories is not None:
+        traj = repeat(torch.as_tensor(np.asarray(trajectories), dtype=torch.float32), "b w c -> (b v) w c", v=v)
+    mv = model.cfg.multiview
+    return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v,
+                                 view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors), rays=rays, trajectory=traj)

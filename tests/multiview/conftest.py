@@ -1,0 +1,37 @@
+"""Tiny parent Text2World models for the multi-view tests; one intra-op thread (2 shared cores)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+from drivewm.geometry import load_rig
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def tiny_text2world(seed: int = 0, latent_shape=(4, 3, 4, 6)) -> Text2World:
+    """A random tiny Text2World model whose zero-initialised layers are perturbed too (as after
+    training), so that per-view equality tests compare non-trivial outputs."""
+    torch.manual_seed(seed)
+    c = latent_shape[0]
+    cfg = Text2WorldConfig(DiTConfig(in_channels=c, hidden_dim=48, depth=2, num_heads=4, adaln_lora_dim=8))
+    rig = load_rig("front1").to_dict()
+    model = Text2World(cfg, LatentInfo(list(latent_shape), [0.1] * c, [0.9] * c, 10.0, None, rig))
+    with torch.no_grad():
+        for p in model.dit.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    return model
+
+
+@pytest.fixture
+def parent() -> Text2World:
+    return tiny_text2world()
