@@ -46,6 +46,9 @@ class EpipolarConfig:
     """RANSAC confidence."""
     ransac_max_iters: int = 10000
     """RANSAC iteration cap."""
+    verify_threshold_px: float = 4.0
+    """Matches with a Sampson error above this (canonical px) under the fitted F are outliers and not
+    scored, under either F: the scored set is the video's own geometrically verified matches."""
     min_matches: int = 16
     """Fewer matches than this in a pair: status 'too_few_matches', error NaN (never 0)."""
 
@@ -70,7 +73,7 @@ class PoseConfig:
 
     max_features: int = 4096
     """SIFT features per image extracted by COLMAP."""
-    sequential_overlap: int = 6
+    sequential_overlap: int = 3
     """Each frame is matched with the next ``sequential_overlap`` frames of the same camera."""
     min_model_size: int = 3
     """COLMAP's smallest model."""

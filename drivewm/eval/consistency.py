@@ -1,9 +1,10 @@
 """Temporal and cross-view Sampson errors (TSE, CSE) of a multi-camera clip.
 
 TSE (Cosmos paper, multi-view table; eval/protocol.md): per camera, frames t and t + frame_gap are
-matched, keypoints rectified to the canonical pinhole, and the pair scored by the median Sampson
-error of its matches under (a) an F fitted to those matches and (b), when ego poses are known, the
-F implied by the ego motion and the camera's extrinsics. CSE: for every pair of cameras whose
+matched, keypoints rectified to the canonical pinhole, an F fitted robustly, and the pair scored by
+the median Sampson error of its verified matches (within ``verify_threshold_px`` of the fitted F)
+under (a) that fitted F and (b), when ego poses are known, the F implied by the ego motion and the
+camera's extrinsics. CSE: for every pair of cameras whose
 frusta overlap (from the rig geometry, not names), matches of all frames are pooled and scored
 under one F fitted over all of them and under the calibrated F from the two extrinsics.
 A clip value is the mean of the pair medians whose status is 'ok'; pairs without enough matches
@@ -18,6 +19,7 @@ import numpy as np
 
 from drivewm.eval.config import ConsistencyConfig, EpipolarConfig
 from drivewm.eval.epipolar import (
+    FIT_FAILED,
     OK,
     SampsonResult,
     calibrated_fundamental,
@@ -25,6 +27,7 @@ from drivewm.eval.epipolar import (
     fit_fundamental,
     rectify_matches,
     score_matches,
+    verified_matches,
 )
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import Camera, Rig, invert_T, pixel_rays, project, transform_points
@@ -63,12 +66,16 @@ def _calibrated(T_b_from_a: np.ndarray, K_c: np.ndarray) -> np.ndarray | None:
 def _score_pair(m: Matches, T_b_from_a: np.ndarray | None, K_c: np.ndarray, cfg: EpipolarConfig) -> dict:
     """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated one."""
     F_fit, _ = fit_fundamental(m, cfg)
-    out = {"fitted": score_matches(F_fit, m, cfg)}
+    verified = verified_matches(F_fit, m, cfg)
+    fitted = score_matches(F_fit, verified, cfg)
+    if F_fit is None and len(m) >= cfg.min_matches:
+        fitted.status = FIT_FAILED
+    out = {"fitted": fitted}
     if T_b_from_a is not None:
         F_cal = _calibrated(T_b_from_a, K_c)
-        cal = score_matches(F_cal, m, cfg)
-        if F_cal is None and cal.status != OK:
-            cal.status = NO_BASELINE if len(m) >= cfg.min_matches else cal.status
+        cal = score_matches(F_cal, verified, cfg)
+        if F_cal is None and len(verified) >= cfg.min_matches:
+            cal.status = NO_BASELINE
         out["calibrated"] = cal
     return out
 

@@ -120,9 +120,17 @@ class SampsonResult:
         return {"median_px": self.median_px, "num_matches": self.num_matches, "status": self.status}
 
 
+def verified_matches(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> Matches:
+    """The matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
+    if F_fit is None or len(m) == 0:
+        return Matches.empty()
+    keep = sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+    return Matches(m.uv_a[keep], m.uv_b[keep])
+
+
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
-    """Median Sampson error of all (ratio + mutual checked) matches under F -- the same match set
-    for a fitted and a calibrated F, so outliers count alike (eval/protocol.md, 'Per-pair error')."""
+    """Median Sampson error of the verified matches ``m`` under F -- the same set for the fitted
+    and the calibrated F (eval/protocol.md, 'Per-pair error')."""
     if len(m) < cfg.min_matches:
         return SampsonResult(np.zeros(0), float("nan"), len(m), TOO_FEW_MATCHES)
     if F is None:

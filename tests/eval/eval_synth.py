@@ -15,7 +15,7 @@ from drivewm.clips.format import ClipMeta, clip_from_arrays
 from drivewm.geometry import Rig, T_from_xyz_yaw, invert_T, pixel_rays
 
 HALF_WIDTH, CEILING, END = 9.0, 9.0, 80.0
-TEX_SIZE, TEX_PX_PER_M = 512, 24.0
+TEX_SIZE, TEX_PX_PER_M = 1024, 24.0
 # Planes as (normal n, offset d) with n . X = d, and the two world axes spanning their texture.
 PLANES = [
     (np.array([0, 0, 1.0]), 0.0, (0, 1)),

@@ -1,0 +1,161 @@
+"""What the benchmark reads: clip shards, a folder of per-camera mp4 + a rig, or one grid mp4.
+
+Every input becomes a list of :class:`EvalItem` (one per clip) that a worker process can decode
+on its own: clips keep their encoded mp4 bytes; mp4 folders and grid videos keep file paths.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from drivewm.clips.format import Clip
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig, load_rig
+
+
+@dataclasses.dataclass
+class GridLayout:
+    """A single video holding ``rows`` x ``cols`` views, cells read row by row, named ``cameras``."""
+
+    rows: int
+    cols: int
+    cameras: list[str]
+
+    @staticmethod
+    def parse(text: str, cameras: list[str]) -> "GridLayout":
+        """``"2x3"`` plus the camera order (row-major); cells named '-' are skipped."""
+        try:
+            rows, cols = (int(v) for v in text.lower().split("x"))
+        except ValueError:
+            raise DrivewmError(f"--grid {text!r}: expected ROWSxCOLS, e.g. 2x3") from None
+        if len(cameras) != rows * cols:
+            raise DrivewmError(f"--grid {text}: {rows * cols} cells but {len(cameras)} camera names {cameras}")
+        return GridLayout(rows, cols, cameras)
+
+
+@dataclasses.dataclass
+class EvalItem:
+    """One clip to score. Exactly one of ``clip``, ``mp4_paths`` or ``grid_path`` is set."""
+
+    key: str
+    rig: Rig
+    fps: float
+    T_world_from_ego: np.ndarray | None = None
+    tags: dict = dataclasses.field(default_factory=dict)
+    trajectory_ego: list = dataclasses.field(default_factory=list)
+    trajectory_dt_s: float = 0.0
+    clip: Clip | None = None
+    mp4_paths: dict[str, str] = dataclasses.field(default_factory=dict)
+    grid_path: str = ""
+    grid: GridLayout | None = None
+
+    def videos(self) -> dict[str, np.ndarray]:
+        """uint8 RGB (T, H, W, 3) per camera of ``rig``, all with the same frame count."""
+        if self.clip is not None:
+            return {c: self.clip.video(c) for c in self.rig.names}
+        if self.grid is not None:
+            return split_grid(_decode_file(self.grid_path), self.grid, self.grid_path)
+        videos = {c: _decode_file(p) for c, p in self.mp4_paths.items()}
+        n = min(len(v) for v in videos.values())
+        return {c: v[:n] for c, v in videos.items()}
+
+
+def _decode_file(path: str) -> np.ndarray:
+    from drivewm.clips.video import decode_mp4
+
+    p = Path(path)
+    if not p.is_file():
+        raise DrivewmError(f"{p}: no such video file")
+    return decode_mp4(p.read_bytes(), None, str(p))
+
+
+def split_grid(frames: np.ndarray, grid: GridLayout, where: str) -> dict[str, np.ndarray]:
+    """Cut (T, H, W, 3) frames of a grid video into per-camera (T, H/rows, W/cols, 3) views."""
+    T, H, W, _ = frames.shape
+    if H % grid.rows or W % grid.cols:
+        raise DrivewmError(f"{where}: frame size {W}x{H} does not split into a {grid.rows}x{grid.cols} grid")
+    h, w = H // grid.rows, W // grid.cols
+    out = {}
+    for i, name in enumerate(grid.cameras):
+        if name != "-":
+            r, c = divmod(i, grid.cols)
+            out[name] = np.ascontiguousarray(frames[:, r * h:(r + 1) * h, c * w:(c + 1) * w])
+    return out
+
+
+def _rig_for(rig: Rig, names: list[str], width: int, height: int) -> Rig:
+    return rig.subset(names).scaled(width, height)
+
+
+def _video_size(path: Path) -> tuple[int, int, float]:
+    import av
+
+    try:
+        with av.open(str(path)) as c:
+            s = c.streams.video[0]
+            return s.codec_context.width, s.codec_context.height, float(s.average_rate or 0) or 10.0
+    except (av.error.FFmpegError, IndexError) as exc:
+        raise DrivewmError(f"{path}: cannot read video ({exc.__class__.__name__})") from None
+
+
+def items_from_clips(location: Path, rig: Rig | None) -> list[EvalItem]:
+    """Clip shards (a folder of .tar or one .tar); ``rig`` (optional) overrides the clips' own."""
+    from drivewm.clips.shards import iter_clips
+
+    items = []
+    for clip in iter_clips(location):
+        clip_rig = clip.meta.get_rig()
+        if rig is not None:
+            c0 = clip_rig.cameras[0]
+            clip_rig = _rig_for(rig, [n for n in rig.names if n in clip.meta.cameras], c0.width, c0.height)
+        m = clip.meta
+        items.append(EvalItem(m.key, clip_rig, m.fps, clip.T_world_from_ego, dict(m.tags), list(m.trajectory_ego),
+                              m.trajectory_dt_s, clip=clip))
+    return items
+
+
+def items_from_mp4_folder(location: Path, rig: Rig) -> list[EvalItem]:
+    """A folder of ``CAMERA.mp4`` (one clip), or a folder of such folders (one clip each)."""
+    folders = [location] if any(location.glob("*.mp4")) else sorted(p for p in location.iterdir() if p.is_dir())
+    items = []
+    for folder in folders:
+        paths = {c: folder / f"{c}.mp4" for c in rig.names if (folder / f"{c}.mp4").is_file()}
+        if not paths:
+            raise DrivewmError(f"{folder}: no mp4 named after the rig's cameras {rig.names}")
+        w, h, fps = _video_size(next(iter(paths.values())))
+        items.append(EvalItem(folder.name, _rig_for(rig, list(paths), w, h), fps,
+                              mp4_paths={c: str(p) for c, p in paths.items()}))
+    return items
+
+
+def items_from_grid(path: Path, rig: Rig, grid: GridLayout) -> list[EvalItem]:
+    """One mp4 holding a grid of views."""
+    w, h, fps = _video_size(path)
+    names = [n for n in grid.cameras if n != "-"]
+    return [EvalItem(path.stem, _rig_for(rig, names, w // grid.cols, h // grid.rows), fps, grid_path=str(path), grid=grid)]
+
+
+def load_items(location: str | Path, rig: str | Path | Rig | None = None, grid: str | None = None,
+               cameras: list[str] | None = None) -> list[EvalItem]:
+    """Items of any supported input. ``grid`` ('2x3') and ``cameras`` (row-major order, default the
+    rig's) describe a grid video; mp4 folders and grid videos need ``rig``."""
+    location = Path(location)
+    rig_obj = load_rig(rig) if isinstance(rig, (str, Path)) else rig
+    if not location.exists():
+        raise DrivewmError(f"{location}: no such file or folder")
+    if location.suffix == ".tar" or (location.is_dir() and any(location.glob("*.tar"))):
+        return items_from_clips(location, rig_obj)
+    if rig_obj is None:
+        raise DrivewmError(f"{location}: mp4 inputs need --rig (camera names, intrinsics and extrinsics)")
+    if location.is_file() and location.suffix == ".mp4":
+        if not grid:
+            if len(rig_obj.cameras) != 1:
+                raise DrivewmError(f"{location}: a single mp4 with a {len(rig_obj.cameras)}-camera rig needs --grid ROWSxCOLS")
+            grid = "1x1"
+        return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names))
+    if location.is_dir():
+        return items_from_mp4_folder(location, rig_obj)
+    raise DrivewmError(f"{location}: expected clip shards, a folder of per-camera mp4, or a grid mp4")

@@ -1,0 +1,149 @@
+"""The benchmark's outputs: metrics.json, a Markdown table beside reference values, plots, Rerun.
+
+``metrics.json``: aggregates at the top level (tse, cse, pose_success, ate, rpe_trans, rpe_rot, tfe,
+...), per clip under ``clips``, the resolved protocol under ``config``. ``metrics.md``: one row per
+aggregate with the reference ("real") value beside it when a reference JSON is given (same keys;
+eval/reference/*.json). ``error_distributions.png``: per-pair TSE / CSE medians and per-clip
+trajectory errors. ``eval.rrd``: per clip, the first CSE pair's matches and the recovered vs
+reference trajectory.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from drivewm.atomic import atomic_path, write_json, write_text
+from drivewm.errors import DrivewmError
+
+#: (key, unit, description) rows of the Markdown table, in order.
+TABLE_ROWS = (
+    ("tse", "px", "temporal Sampson error, F fitted per frame pair (lower is better)"),
+    ("tse_calibrated", "px", "temporal Sampson error under the F of the logged ego motion"),
+    ("cse", "px", "cross-view Sampson error, one F fitted per camera pair over all frames"),
+    ("cse_calibrated", "px", "cross-view Sampson error under the rig's calibrated F"),
+    ("pose_success", "rate", "clips whose frames all register in COLMAP (higher is better)"),
+    ("registered_fraction", "rate", "frames registered by COLMAP"),
+    ("ate", "m", "absolute trajectory error after Sim(3) alignment"),
+    ("rpe_trans", "m", "relative pose error, translation per frame step"),
+    ("rpe_rot", "deg", "relative pose error, rotation per frame step"),
+    ("tfe", "m", "trajectory-following error against the conditioned waypoints"),
+    ("adherence_weather", "rate", "clips classified as the prompted weather"),
+    ("adherence_time_of_day", "rate", "clips classified as the prompted time of day"),
+)
+
+
+def load_reference(path: str | Path | None) -> dict:
+    """A reference metrics JSON (a metrics.json, or {"name": ..., "metrics": {key: value}})."""
+    if path is None:
+        return {}
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise DrivewmError(f"{path}: cannot read reference metrics ({exc.__class__.__name__})") from None
+    if not isinstance(data, dict):
+        raise DrivewmError(f"{path}: reference metrics must be a JSON object")
+    return {"name": data.get("name", path.stem), "metrics": data.get("metrics", data)}
+
+
+def _fmt(v) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "n/a"
+    return f"{v:.3f}" if isinstance(v, (int, float)) else str(v)
+
+
+def markdown_table(metrics: dict, reference: dict) -> str:
+    """The aggregate metrics beside the reference values, one row per metric."""
+    ref_name = reference.get("name", "reference")
+    ref = reference.get("metrics", {})
+    lines = [f"# drivewm eval: {metrics.get('location', '')}", "",
+             f"{metrics.get('num_clips', 0)} clips ({metrics.get('num_failed_clips', 0)} unreadable).", "",
+             f"| metric | evaluated | {ref_name} | unit | clips without a value | meaning |", "|---|---|---|---|---|---|"]
+    for key, unit, text in TABLE_ROWS:
+        if key in metrics:
+            nan = metrics.get("nan_clips", {}).get(key, 0)
+            lines.append(f"| {key} | {_fmt(metrics[key])} | {_fmt(ref.get(key))} | {unit} | {nan} | {text} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_distributions(path: Path, metrics: dict) -> None:
+    """Histograms of per-pair TSE / CSE medians and per-clip trajectory errors."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    clips = metrics["clips"].values()
+    panels = [
+        ("TSE pair medians (px)", [v for c in clips for k in ("tse_pair_medians", "tse_calibrated_pair_medians") for v in c.get(k, [])], None),
+        ("CSE pair medians (px)", [v for c in clips for v in c.get("cse_pair_medians", [])], [v for c in clips for v in c.get("cse_calibrated_pair_medians", [])]),
+        ("ATE per clip (m)", [c.get("ate") for c in clips], None),
+        ("TFE per clip (m)", [c.get("tfe") for c in clips], None),
+    ]
+    fig, axes = plt.subplots(1, 4, figsize=(16, 3.4))
+    for ax, (title, values, calibrated) in zip(axes, panels):
+        finite = [v for v in values if v is not None and np.isfinite(v)]
+        ax.hist(finite, bins=20, alpha=0.7, label="fitted F" if calibrated is not None else None)
+        if calibrated:
+            ax.hist([v for v in calibrated if np.isfinite(v)], bins=20, alpha=0.6, label="calibrated F")
+            ax.legend()
+        ax.set_title(f"{title}  (n={len(finite)})")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=90)
+    plt.close(fig)
+
+
+def write_rerun(path: Path, results: list) -> None:
+    """Matches of the first CSE pair (frame 0) and recovered vs reference trajectories per clip."""
+    import rerun as rr
+
+    with atomic_path(path) as tmp:
+        rec = rr.RecordingStream("drivewm_eval", recording_id="eval")
+        rec.save(str(tmp))
+        for r in results:
+            _log_clip(rec, rr, r)
+        rec.flush()
+        rec.disconnect()
+
+
+def _log_clip(rec, rr, result) -> None:
+    base = f"clips/{result.key}"
+    m = result.artifacts.get("cse_matches")
+    if m is not None:
+        img_a, img_b = m["images"]
+        rec.log(f"{base}/matches/image", rr.Image(np.concatenate([img_a, img_b], axis=1)), static=True)
+        shift = np.array([img_a.shape[1], 0.0])
+        strips = [np.stack([a, b + shift]) for a, b in zip(m["uv_a"], m["uv_b"])]
+        rec.log(f"{base}/matches/lines", rr.LineStrips2D(strips, colors=[[0, 255, 120]]), static=True)
+    traj = result.artifacts.get("trajectory")
+    if traj is not None:
+        rec.log(f"{base}/trajectory/reference", rr.LineStrips3D([traj["reference"]], colors=[[255, 200, 0]]), static=True)
+        rec.log(f"{base}/trajectory/recovered", rr.LineStrips3D([traj["recovered"]], colors=[[0, 160, 255]]), static=True)
+
+
+def _json_safe(obj):
+    if isinstance(obj, dict):
+        return {str(k): _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def write_report(out_dir: Path, metrics: dict, results: list, reference: str | Path | None, pictures: bool = True) -> None:
+    """metrics.json (NaN written as null), metrics.md, error_distributions.png and eval.rrd."""
+    ref = load_reference(reference)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json(out_dir / "metrics.json", _json_safe(metrics))
+    write_text(out_dir / "metrics.md", markdown_table(metrics, ref))
+    if pictures:
+        plot_distributions(out_dir / "error_distributions.png", metrics)
+        write_rerun(out_dir / "eval.rrd", results)

@@ -1,0 +1,88 @@
+"""ATE / RPE / TFE against closed-form values (derivations in the comments)."""
+
+import numpy as np
+import pytest
+
+from drivewm.eval.trajectory_errors import ate, rpe, tfe, umeyama
+from drivewm.geometry import euler_to_R, make_T, rot_z
+
+
+def circle(n=16, radius=10.0):
+    """Planar circle with the heading along the tangent: T_world_from_ego (n, 4, 4)."""
+    a = np.linspace(0, 1.5 * np.pi, n)
+    return np.stack([make_T(rot_z(ai + np.pi / 2), [radius * np.cos(ai), radius * np.sin(ai), 0.0]) for ai in a])
+
+
+def similarity(T, s0, R0, t0):
+    out = T.copy()
+    out[:, :3, :3] = R0 @ T[:, :3, :3]
+    out[:, :3, 3] = s0 * T[:, :3, 3] @ R0.T + t0
+    return out
+
+
+def test_umeyama_recovers_exact_similarity():
+    ref = circle()
+    R0 = euler_to_R(0.3, -0.2, 1.1)
+    est = similarity(ref, 0.37, R0, np.array([4.0, -2.0, 7.0]))
+    sim = umeyama(est[:, :3, 3], ref[:, :3, 3])
+    np.testing.assert_allclose(sim.apply_points(est[:, :3, 3]), ref[:, :3, 3], atol=1e-9)
+    assert sim.scale == pytest.approx(1 / 0.37)
+
+
+def test_ate_rpe_with_noise_match_closed_form():
+    ref = circle(n=16)
+    delta = 0.3
+    # Noise along z (off the trajectory's plane), made zero-mean and uncorrelated with the planar positions.
+    pattern = np.tile([1.0, -1.0, -1.0, 1.0], 4) * delta
+    noisy = ref.copy()
+    noisy[:, 2, 3] += pattern
+    pc = ref[:, :3, 3] - ref[:, :3, 3].mean(0)
+    # Make the noise exactly orthogonal to the centred x, y positions and to the constant.
+    basis = np.stack([pc[:, 0], pc[:, 1], np.ones(16)], 1)
+    pattern = pattern - basis @ np.linalg.lstsq(basis, pattern, rcond=None)[0]
+    noisy[:, 2, 3] = pattern
+    R0 = euler_to_R(0.1, 0.4, -2.0)
+    est = similarity(noisy, 2.5, R0, np.array([1.0, 2.0, 3.0]))
+
+    value, sim = ate(est, ref)
+    # Umeyama (est -> ref): R = R0^T, scale = (1/s0) V / (V + d2) with V = mean|p_c|^2, d2 = mean n^2,
+    # so the aligned points are mu + k (p_c + n), k = V / (V + d2), and
+    # ATE^2 = (k-1)^2 V + k^2 d2 = V d2 / (V + d2).
+    V = np.mean(np.sum(pc**2, axis=1))
+    d2 = np.mean(pattern**2)
+    assert value == pytest.approx(np.sqrt(V * d2 / (V + d2)), rel=1e-9)
+    k = V / (V + d2)
+    assert sim.scale == pytest.approx(k / 2.5, rel=1e-9)
+
+    trans, rot = rpe(est, ref, delta=1, scale=sim.scale)
+    # Rotations are only transformed by R0, so relative rotations agree: RPE rot = 0. The relative
+    # translation error of step i is |k (dp_i + dn_i) - dp_i| in the reference ego frame.
+    dp = np.diff(ref[:, :3, 3], axis=0)
+    dn = np.diff(np.stack([np.zeros(16), np.zeros(16), pattern], 1), axis=0)
+    expected = np.sqrt(np.mean(np.sum((k * (dp + dn) - dp) ** 2, axis=1)))
+    assert trans == pytest.approx(expected, rel=1e-9)
+    assert rot == pytest.approx(0.0, abs=1e-6)
+
+
+def test_rpe_rotation_of_one_perturbed_frame():
+    ref = circle(n=11)
+    est = ref.copy()
+    eps_deg = 2.0
+    est[5, :3, :3] = est[5, :3, :3] @ rot_z(np.radians(eps_deg))
+    _, rot = rpe(est, ref, delta=1)
+    # Pairs (4, 5) and (5, 6) are each off by eps; 10 pairs in all.
+    assert rot == pytest.approx(2 * eps_deg / 10, rel=1e-9)
+
+
+def test_tfe_scale_only_alignment():
+    ref = circle(n=11)
+    fps = 10.0
+    T0_inv = np.linalg.inv(ref[0])
+    way = np.stack([(T0_inv @ T)[:3, 3] for T in ref[1:]])
+    est = similarity(ref, 0.5, euler_to_R(0, 0, 0.7), np.array([3.0, 0, 0]))
+    assert tfe(est, fps, way, 1 / fps) == pytest.approx(0.0, abs=1e-9)
+    # Straight drive along x; waypoints 1 m to the left: the least-squares scale is
+    # sum x^2 / sum x^2 = 1, so every waypoint is off by exactly 1 m.
+    straight = np.stack([make_T(np.eye(3), [2.0 * i, 0, 0]) for i in range(11)])
+    way_left = np.array([[2.0 * i, 1.0, 0.0] for i in range(1, 11)])
+    assert tfe(straight, fps, way_left, 1 / fps) == pytest.approx(1.0, rel=1e-12)
