@@ -1,0 +1,64 @@
+"""Sampling time per clip against the number of steps (EDM Heun and Euler with CFG).
+
+One clip is a 17-frame 192x320 video's latents (16, 5, 24, 40) under the 4x8x8 tokenizer, i.e.
+1,200 tokens for a debug DiT at patch 2 (random weights: speed does not depend on them). Each
+step costs 2 network evaluations with guidance (conditional + unconditional), Heun twice that
+but one; the printed ratio is the measured time over (evaluations x one measured forward), so
+1.0 means the sampler adds nothing on top of the network.
+
+    python benchmarks/bench_sampling.py          # debug DiT, steps 5/10/20 (--steps 35 for Cosmos' default)
+    python benchmarks/bench_sampling.py --full   # small preset (33M)
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import torch
+
+from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
+from drivewm.diffusion.dit import DiT
+from drivewm.diffusion.dit_config import DiTConfig, dit_preset
+from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
+
+LATENT = (16, 5, 24, 40)
+
+
+@torch.no_grad()
+def one_forward_s(denoiser: EDMDenoiser, cond: Conditioning, repeats: int = 3) -> float:
+    x = torch.randn(1, *LATENT)
+    denoiser(x, torch.ones(1), cond)  # warm-up
+    tic = time.perf_counter()
+    for _ in range(repeats):
+        denoiser(x, torch.ones(1), cond)
+    return (time.perf_counter() - tic) / repeats
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--full", action="store_true", help="small preset instead of debug")
+    parser.add_argument("--steps", type=int, nargs="+", default=[5, 10, 20])
+    parser.add_argument("--guidance", type=float, default=7.0)
+    args = parser.parse_args()
+    torch.manual_seed(0)
+    dit = DiT(DiTConfig(in_channels=16, **dit_preset("small" if args.full else "debug"))).eval()
+    with torch.no_grad():  # non-zero outputs, so the sampler does real work
+        dit.final.proj.weight.normal_(0, 0.02)
+    denoiser = EDMDenoiser(dit, EDMConfig())
+    cond = Conditioning(torch.randn(1, 32, 256), torch.ones(1, 32, dtype=torch.bool), torch.tensor([10.0]))
+    fwd = one_forward_s(denoiser, cond)
+    print(f"one forward: {fwd * 1e3:.0f} ms for {LATENT[1] * LATENT[2] * LATENT[3] // 4} tokens; guidance {args.guidance}")
+    print(f"{'sampler':8s} {'steps':>5s} {'evals':>5s} {'s/clip':>8s} {'ratio to evals x forward':>25s}")
+    for name, sampler in SAMPLERS.items():
+        for steps in args.steps:
+            evals = (steps if name == "euler" else 2 * steps - 1) * (2 if args.guidance != 1 else 1)
+            x = seeded_noise((1, *LATENT), [0]) * 80.0
+            tic = time.perf_counter()
+            sampler(GuidedDenoiser(denoiser, args.guidance), x, karras_sigmas(steps), extra_args={"cond": cond})
+            elapsed = time.perf_counter() - tic
+            print(f"{name:8s} {steps:5d} {evals:5d} {elapsed:8.2f} {elapsed / (evals * fwd):25.2f}")
+
+
+if __name__ == "__main__":
+    main()
