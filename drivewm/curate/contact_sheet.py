@@ -22,8 +22,13 @@ def clip_block(clip) -> np.ndarray:
     """One clip: rows = cameras in rig order, columns = first/middle/last frame, caption lines on top."""
     videos = clip.videos()  # (V, T, H, W, 3)
     T = videos.shape[1]
-    grid = np.concatenate([np.concatenate([_thumb(v[t]) for t in (0, T // 2, T - 1)], axis=1) for v in videos], axis=0)
-    text = f"{clip.key} ({', '.join(clip.meta.cameras)}): {clip.meta.caption}"
+    rows = []
+    for name, v in zip(clip.meta.cameras, videos):
+        row = np.concatenate([_thumb(v[t]) for t in (0, T // 2, T - 1)], axis=1)
+        cv2.putText(row, name, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1, cv2.LINE_AA)
+        rows.append(row)
+    grid = np.concatenate(rows, axis=0)
+    text = f"{clip.key}: {clip.meta.caption}"
     chars = max(20, grid.shape[1] // 6)
     lines = [text[i : i + chars] for i in range(0, min(len(text), 3 * chars), chars)]
     bar = np.full((14 * len(lines) + 6, grid.shape[1], 3), 255, dtype=np.uint8)

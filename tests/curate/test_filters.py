@@ -1,0 +1,64 @@
+"""Each filter drops what it should, with its reason, on real-looking frames."""
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from drivewm.curate.captions import TemplateCaptioner, ClipInfo, classify_manoeuvre
+from drivewm.curate.config import FilterConfig
+from drivewm.curate.dedup import clip_embedding, near_duplicates
+from drivewm.curate.filters import judge, score_clip
+from drivewm.geometry import load_rig
+
+sys.path.insert(0, str(Path(__file__).parent))
+from synth import texture  # noqa: E402
+
+
+def moving_clip(seed=0, V=2, T=17, H=96, W=160, step=2):
+    tex = texture(seed, H, W * 4)
+    return np.stack([np.stack([tex[:, v * W + t * step : v * W + t * step + W] for t in range(T)]) for v in range(V)])
+
+
+def test_filters_drop_with_reasons():
+    cfg = FilterConfig()
+    moving = np.cumsum(np.full((17, 3), [1.0, 0, 0]), axis=0)
+    good = moving_clip()
+    assert judge(score_clip(good, moving, cfg), cfg) is None
+    assert judge(score_clip(good, np.zeros((17, 3)), cfg), cfg) == "ego_standing_still"
+    blurred = np.stack([[cv2.GaussianBlur(f, (0, 0), 6) for f in cam] for cam in good])
+    assert judge(score_clip(blurred, moving, cfg), cfg) == "blurry"
+    dark = (good // 20).astype(np.uint8)
+    assert judge(score_clip(dark, moving, cfg), cfg) == "bad_exposure"
+    frozen = np.repeat(good[:, :1], 17, axis=1)
+    assert judge(score_clip(frozen, moving, cfg), cfg) == "frozen_frames"
+    static = FilterConfig(min_camera_motion_px=0.5)
+    still = np.repeat(good[:, :1], 17, axis=1)
+    still[:, :, 30:55, 60:100] = good[:, :, 30:55, 60:100]  # something moves before a fixed camera
+    assert judge(score_clip(still, None, static), static) == "static_camera"
+    assert judge(score_clip(good, None, static), static) is None
+
+
+def test_dedup_embedding_separates_copies_from_other_moments():
+    a, b = moving_clip(seed=1), moving_clip(seed=2)
+    brighter = np.clip(a.astype(int) + 20, 0, 255).astype(np.uint8)
+    tex = texture(1, 96, 640)
+    later = np.stack([np.stack([tex[:, 300 + t * 2 : 460 + t * 2] for t in range(17)]) for _ in range(2)])  # same world, elsewhere
+    E = np.stack([clip_embedding(x) for x in (a, brighter, b, later)])
+    dups = near_duplicates(E, 0.985)
+    assert [(i, j) for i, j, _ in dups] == [(1, 0)]  # only the re-exposed copy
+
+
+def test_template_captions_name_conditions_and_directions():
+    rig = load_rig("nuscenes6")
+    info = ClipInfo({"weather": "snow", "time_of_day": "night", "road_type": "urban_grid", "traffic_density": "high"}, "", rig.cameras, "left turn", 8.0)
+    caption, views = TemplateCaptioner().caption(info)
+    assert caption.startswith("A snow night drive on an urban grid in high traffic") and "turning left at 29 km/h" in caption
+    assert views["CAM_BACK"].startswith("The back camera") and views["CAM_FRONT_LEFT"].startswith("The front-left camera")
+    t = np.linspace(0, 1.6, 17)
+    left = np.stack([10 * np.sin(t), 10 * (1 - np.cos(t)), 0 * t], 1)
+    assert classify_manoeuvre(left, t, np.full(17, 10.0)) == "left turn"
+    lane = np.stack([10 * t, 3.0 * t / 1.6, 0 * t], 1)
+    assert classify_manoeuvre(lane, np.zeros(17), np.full(17, 10.0)) == "lane change to the left"
+    assert classify_manoeuvre(lane, np.zeros(17), np.linspace(10, 0.5, 17)) == "stopping"
