@@ -86,6 +86,8 @@ class CurateConfig:
     """Start-to-start distance of consecutive clips, in clip frames."""
     resolution: list[int] | None = None
     """Output [W, H] (even numbers); null keeps the log's image size."""
+    topic_map: str | None = None
+    """Topic map (a name in datasets/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2, other Foxglove layouts)."""
     cameras: list[str] | None = None
     """Cameras to keep, in this order; null keeps the log's rig."""
     sync_tolerance_ms: float = 25.0

@@ -67,9 +67,11 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
     if done is not None:
         return {**done, "resumed": True}
     try:
-        log = read_log(log_path)
+        log = read_log(log_path, cfg.topic_map)
         result = curate_drive_log(log, out, name, cfg)
     except DrivewmError as exc:
+        for shard in _stale_shards(out, name):  # shards flushed before the failure: not part of the dataset
+            shard.unlink()
         return {"log": str(log_path), "name": name, "status": "failed", "error": str(exc), "kept": 0, "dropped": {}, "rows": []}
     write_json(marker_path(out, name), result)
     return result
@@ -140,10 +142,22 @@ def _windows(ctx: _Context) -> list[tuple[int, int]]:
             continue
         cuts: list[int] = []
         if cfg.shot_threshold > 0:
-            ref = (_small(ctx.image(0, t)) for t in range(a, b))
-            cuts = [a + c for c in split.shot_boundaries(ref, cfg.fps, cfg.shot_threshold, cfg.shot_min_frames)]
+            cuts = [a + c for c in split.shot_boundaries(_reference_frames(ctx, a, b), cfg.fps, cfg.shot_threshold, cfg.shot_min_frames)]
         segments += split.split_segment(a, b, cuts)
     return split.clip_windows(segments, cfg.clip_frames, cfg.stride_frames)
+
+
+def _reference_frames(ctx: _Context, a: int, b: int):
+    """Reference-camera frames of ticks [a, b) for shot detection, downscaled; an undecodable frame
+    repeats the previous one (its clip is dropped later as undecodable_frame)."""
+    last = None
+    for t in range(a, b):
+        try:
+            last = _small(ctx.image(0, t))
+        except DrivewmError:
+            cam = ctx.rig.cameras[0]
+            last = last if last is not None else _small(np.zeros((cam.height, cam.width, 3), np.uint8))
+        yield last
 
 
 def _small(img: np.ndarray, width: int = 320) -> np.ndarray:
@@ -154,7 +168,10 @@ def _small(img: np.ndarray, width: int = 320) -> np.ndarray:
 def _make_clip(ctx: _Context, name: str, start: int, end: int, kept_embeddings: list[np.ndarray]):
     """(clip or None, drop reason or None, embedding) for ticks [start, end)."""
     cfg, ticks = ctx.cfg, np.arange(start, end)
-    frames = np.stack([np.stack([ctx.image(v, t) for t in ticks]) for v in range(len(ctx.rig.cameras))])  # (V, T, H, W, 3)
+    try:
+        frames = np.stack([np.stack([ctx.image(v, t) for t in ticks]) for v in range(len(ctx.rig.cameras))])  # (V, T, H, W, 3)
+    except DrivewmError:  # one corrupt JPEG costs its clip, not the log
+        return None, "undecodable_frame", None
     t_ns = ctx.table.tick_ns[ticks]
     poses = ctx.smooth.poses_at(t_ns) if ctx.smooth is not None else np.tile(np.eye(4), (len(ticks), 1, 1))
     scores = filters.score_clip(frames, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)

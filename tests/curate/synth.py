@@ -32,11 +32,12 @@ def make_log(
     speed_mps: float = 8.0,
     drop: dict[str, list[int]] | None = None,
     nan_poses: list[int] = (),
+    corrupt: dict[str, list[int]] | None = None,
     jitter_ns: int = 0,
     tags: dict | None = None,
 ) -> DriveLog:
     """A DriveLog (not written). ``drop``: camera -> frame indices missing; ``nan_poses``: pose
-    indices set to NaN; ``jitter_ns``: per-camera constant time offsets up to this."""
+    indices set to NaN; ``corrupt``: camera -> frame indices whose JPEG bytes are garbage; ``jitter_ns``: per-camera constant time offsets up to this."""
     rig_ = load_rig(rig)
     W, H = rig_.cameras[0].width, rig_.cameras[0].height
     tex = texture(seed, H * 2, W * 8)
@@ -51,7 +52,8 @@ def make_log(
             x = int(v * W + i * speed_mps / fps * 2) % (tex.shape[1] - W)  # ~1.6 px per frame: no false shot cuts
             img = np.ascontiguousarray(tex[H // 2 : H // 2 + H, x : x + W])
             ok, jpg = cv2.imencode(".jpg", cv2.cvtColor(img, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 92])
-            frames.append(ImageFrame(T0_NS + i * period + offset, jpg.tobytes(), "jpeg"))
+            data = b"\xff\xd8 not a jpeg" if corrupt and i in corrupt.get(cam.name, []) else jpg.tobytes()
+            frames.append(ImageFrame(T0_NS + i * period + offset, data, "jpeg"))
         images[cam.name] = frames
     t = T0_NS + np.arange(n_frames, dtype=np.int64) * period
     poses = np.stack([T_from_xyz_yaw(speed_mps * i / fps, 0.02 * (speed_mps * i / fps) ** 2 / 10, 0.0, 0.004 * i) for i in range(n_frames)])

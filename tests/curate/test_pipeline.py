@@ -29,6 +29,7 @@ def make_logs(folder: Path) -> list[Path]:
         write_synth_log(folder / "good_b.mcap", seed=2, n_frames=52, jitter_ns=8_000_000, tags={"weather": "snow", "time_of_day": "day", "road_type": "highway", "traffic_density": "low", "source": "synthetic"}),
         write_synth_log(folder / "cam_drops.mcap", seed=3, n_frames=52, drop={"CAM_FRONT_RIGHT": [20, 21, 22]}),
         write_synth_log(folder / "nan_pose.mcap", seed=4, n_frames=52, nan_poses=[7, 8, 30]),
+        write_synth_log(folder / "corrupt_jpeg.mcap", seed=6, n_frames=52, corrupt={"CAM_FRONT_LEFT": [25]}),
     ]
     trunc = write_synth_log(folder / "truncated.mcap", seed=5, n_frames=52)
     data = trunc.read_bytes()
@@ -52,8 +53,9 @@ def test_bad_logs_reported_and_good_logs_curated(run):
     assert by["truncated"]["status"] == "failed" and "truncat" in by["truncated"]["error"].lower()
     assert by["not_mcap"]["status"] == "failed" and "not_mcap.mcap" in by["not_mcap"]["error"]
     assert "mcap" in by["not_mcap"]["error"].lower()
-    for name in ("good_a", "good_b", "cam_drops", "nan_pose"):
+    for name in ("good_a", "good_b", "cam_drops", "nan_pose", "corrupt_jpeg"):
         assert by[name]["status"] == "ok" and by[name]["kept"] >= 1, (name, by[name])
+    assert by["corrupt_jpeg"]["dropped"] == {"undecodable_frame": 1} and by["corrupt_jpeg"]["kept"] == 2
     assert by["good_a"]["kept"] == 3  # 52 ticks -> 3 clips of 17
     assert any("CAM_FRONT_RIGHT: 3 of" in w for w in by["cam_drops"]["warnings"])
     assert by["cam_drops"]["kept"] == 2  # the gap at ticks 20-22 leaves [0, 20) and [23, 52): one clip each
@@ -66,7 +68,7 @@ def test_clips_complete_synced_and_posed(run):
     root, logs, cfg, report = run
     clips = list(iter_clips(root / "out"))
     assert len(clips) == report["kept"]
-    logged = {Path(p).stem: read_log(p) for p in logs[:4]}
+    logged = {Path(p).stem: read_log(p) for p in logs[:5]}
     for clip in clips:
         meta = clip.meta
         assert meta.cameras == ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
@@ -87,7 +89,7 @@ def test_rerun_skips_done_logs(run):
     root, logs, cfg, report = run
     before = {p.name: p.read_bytes() for p in (root / "out").glob("*.tar")}
     again = curate(logs, root / "out", cfg, progress=False)
-    assert all(again["logs"][n].get("resumed") for n in ("good_a", "good_b", "cam_drops", "nan_pose"))
+    assert all(again["logs"][n].get("resumed") for n in ("good_a", "good_b", "cam_drops", "nan_pose", "corrupt_jpeg"))
     assert {p.name: p.read_bytes() for p in (root / "out").glob("*.tar")} == before
 
 
@@ -116,7 +118,7 @@ def test_sigkill_then_rerun_equals_uninterrupted(run, tmp_path):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not (out / "manifest.jsonl").exists(), "the run finished before it could be killed"
-    assert len(list((out / "logs").glob("*.json"))) < 4
+    assert len(list((out / "logs").glob("*.json"))) < 5
     rerun = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert rerun.returncode == 0, rerun.stderr[-2000:]
     ref = root / "out"
