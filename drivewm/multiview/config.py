@@ -28,6 +28,10 @@ class MultiViewConfig:
     """Future ego waypoints (ClipMeta.trajectory_ego) the model is conditioned on; 0 = none."""
     trajectory_scale_m: float = 20.0
     """Waypoints are divided by this (m) before the trajectory MLP, so its inputs are O(1)."""
+    trajectory_dt_s: float = 0.1
+    """Spacing of the waypoints (s), from the training clips (ClipMeta.trajectory_dt_s)."""
+    speed_mps: float = 15.0
+    """Default speed of the named trajectories (set to the training clips' median initial speed)."""
     trajectory_width: int = 256
     """Hidden width of the trajectory MLP."""
     video2world_prob: float = 0.5
@@ -37,8 +41,8 @@ class MultiViewConfig:
     def validate(self) -> None:
         if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
             raise DrivewmError(f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, {self.neighbors}")
-        if self.trajectory_waypoints < 0 or self.trajectory_scale_m <= 0 or not 0 <= self.video2world_prob <= 1:
-            raise DrivewmError("multiview: trajectory_waypoints >= 0, trajectory_scale_m > 0 and 0 <= video2world_prob <= 1 required")
+        if self.trajectory_waypoints < 0 or min(self.trajectory_scale_m, self.trajectory_dt_s) <= 0 or not 0 <= self.video2world_prob <= 1:
+            raise DrivewmError("multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= video2world_prob <= 1")
 
 
 @dataclasses.dataclass

@@ -102,8 +102,12 @@ def resolve_trajectory(spec: str, num: int, dt_s: float, speed_mps: float = 15.0
     """``straight|left|right|stop`` or a waypoint file -> (num, 3) waypoints (resampled to ``num`` if needed)."""
     if spec in NAMED:
         return waypoints_from_poses(named_poses(spec, num + 1, dt_s, speed_mps), 0, num)
-    data = load_waypoints(spec)
-    if len(data) == num:
-        return data
-    src_t, dst_t = np.linspace(0, 1, len(data)), np.linspace(0, 1, num)
-    return np.stack([np.interp(dst_t, src_t, data[:, k]) for k in range(3)], axis=1)
+    return resample_waypoints(load_waypoints(spec), num)
+
+
+def resample_waypoints(waypoints: np.ndarray, num: int) -> np.ndarray:
+    """(N, 3) -> (num, 3) by linear interpolation over the same time span (unchanged when N == num)."""
+    if len(waypoints) == num:
+        return waypoints
+    src_t, dst_t = np.linspace(0, 1, len(waypoints)), np.linspace(0, 1, num)
+    return np.stack([np.interp(dst_t, src_t, waypoints[:, k]) for k in range(3)], axis=1)

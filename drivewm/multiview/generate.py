@@ -1,0 +1,84 @@
+"""Multi-view generation: a prompt, a rig and a trajectory -> clips of all cameras (clip format),
+grid videos and a contact sheet. ``drivewm generate`` dispatches here for ``model_type: multiview``.
+
+With ``--condition-clip`` the first frames of every view come from a real clip (Video2World) and
+the clip's rig calibration is used; without it, everything is generated.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from drivewm.diffusion.generate import GenerateOptions, decode_latents
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig, load_rig
+from drivewm.multiview.model import MultiView
+from drivewm.multiview.trajectories import resolve_trajectory
+from drivewm.multiview.writer import GeneratedSample, write_samples
+
+
+def view_captions(prompt: str, rig: Rig) -> list[str]:
+    """Per-view captions in the curated clips' form ("The front-left camera view of ..."), unless
+    the prompt already names a camera view."""
+    from drivewm.curate.captions import camera_direction
+
+    if "camera view" in prompt:
+        return [prompt] * len(rig.cameras)
+    scene = prompt.strip().rstrip(".")
+    scene = scene[:1].lower() + scene[1:]
+    return [f"The {camera_direction(c)} camera view of {scene}." for c in rig.cameras]
+
+
+def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tuple[torch.Tensor, Rig, float]:
+    """Raw latents (1, V, c, t, h, w) of a real clip's first frames (Video2World), its rig, its speed."""
+    from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
+    from drivewm.tokenizer import Tokenizer
+
+    if not model.latent.tokenizer:
+        raise DrivewmError(f"{clip_path}: conditioning on a clip needs the model's tokenizer (none recorded in the model folder)")
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer)
+    clip = load_clip(clip_path)
+    rig = clip_rig(model, clip) if rig is None else clip.meta.get_rig().subset(rig.names)
+    c, t, h, w = model.latent.latent_shape
+    sc, tc = tokenizer.config.spatial_compression, tokenizer.config.temporal_compression
+    frames = np.stack([clip.video(n)[: 1 + (t - 1) * tc] for n in rig.names])
+    z = encode_views(tokenizer, frames, (h * sc, w * sc))
+    return z[None], rig, initial_speed_mps(clip)
+
+
+def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec: str | None, trajectory: str | None,
+                       condition_clip: str | Path | None, out_dir: str | Path) -> list[Path]:
+    """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
+    ``trajectory`` (default straight) and write them (drivewm.multiview.writer)."""
+    model = MultiView.from_pretrained(model_dir)
+    mv = model.cfg.multiview
+    rig = load_rig(rig_spec) if rig_spec else None
+    cond, speed = None, mv.speed_mps
+    if condition_clip is not None:
+        cond, rig, clip_speed = condition_latents(model, Path(condition_clip), rig)
+        speed = clip_speed if np.isfinite(clip_speed) else speed
+    rig = rig or model.training_rig
+    waypoints = resolve_trajectory(trajectory or "straight", mv.trajectory_waypoints, mv.trajectory_dt_s, speed)
+    samples = []
+    jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
+    for prompt, seed in tqdm(jobs, desc="generate"):
+        caps = view_captions(prompt, rig)
+        z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, options.guidance, options.sampler, cond_latents=cond)
+        videos = decode_latents(z[0], model.latent.tokenizer)  # (V, T, H, W, 3)
+        extra = {"model": str(Path(model_dir).resolve()), "prompt": prompt, "seed": seed, "steps": options.steps, "guidance": options.guidance,
+                 "trajectory": trajectory or "straight", "speed_mps": float(speed), "condition_clip": str(condition_clip or "")}
+        samples.append(GeneratedSample(videos, rig, prompt, caps, waypoints, mv.trajectory_dt_s, extra))
+    return write_samples(out_dir, samples, model.latent.fps)
+
+
+def generate_command(args: argparse.Namespace) -> int:
+    """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
+    options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler)
+    files = generate_multiview(args.model, options, args.rig, args.trajectory, args.condition_clip, args.out)
+    print(f"wrote {len(files)} files to {args.out}")
+    return 0

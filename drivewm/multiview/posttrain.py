@@ -1,0 +1,150 @@
+"""Multi-view post-training: a recipe (preset + overrides) and the training task for drivewm.train.
+
+``posttrain_config(preset, overrides)`` builds the typed :class:`PosttrainConfig` (printed by
+``drivewm posttrain --dry-run``); ``posttrain(cfg, init_dir, data_dir, out_dir)`` initialises the
+multi-view model from the Text2World folder ``init_dir`` (drivewm.multiview.init) and trains it on
+the clips' latent cache with the shared loop (EMA, resume, activation checkpointing, FSDP2).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import torch
+
+from drivewm.config import apply_overrides, to_dict
+from drivewm.diffusion.denoiser import edm_loss, sample_sigma
+from drivewm.diffusion.pretrain import DataConfig, find_latent_cache
+from drivewm.diffusion.text2world import Text2World
+from drivewm.errors import DrivewmError
+from drivewm.geometry import load_rig
+from drivewm.multiview.config import MultiViewConfig
+from drivewm.multiview.data import MultiViewDataset
+from drivewm.multiview.init import from_text2world
+from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
+from drivewm.train.loop import TrainConfig, train
+
+
+@dataclasses.dataclass
+class PosttrainConfig:
+    """A resolved post-training run (saved in train_state.pt and printed by --dry-run)."""
+
+    preset: str = "debug"
+    """The recipe the run started from (drivewm.multiview.posttrain.POSTTRAIN_PRESETS)."""
+    rig: str = ""
+    """Cameras to train on, by rig name or YAML path (their names, in order, are picked from every
+    clip; the geometry is each clip's own calibration). '' = all cameras of the first clip."""
+    multiview: MultiViewConfig = dataclasses.field(default_factory=MultiViewConfig)
+    """Cross-view attention, camera and trajectory conditioning."""
+    cond_frames: int = 1
+    """Video2World: clean first latent frames of every view given on conditioned steps (0 = never)."""
+    train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
+    """Optimisation and run settings; ``batch_size`` counts clips (each with all V views)."""
+    data: DataConfig = dataclasses.field(default_factory=DataConfig)
+    """Latent cache selection."""
+    sample_steps: int = 12
+    """Sampler steps for the sample grids written during training."""
+
+
+#: Per-preset training defaults. Batches are clips of V views, so they are V times the tokens of
+#: a Text2World batch of the same size; the real-size presets checkpoint activations and shard.
+POSTTRAIN_PRESETS: dict[str, dict] = {
+    "debug": dict(steps=300, batch_size=2, lr=5e-4, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100),
+    "small": dict(steps=10000, batch_size=8, lr=2e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
+    "base": dict(steps=30000, batch_size=16, lr=1e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000, activation_checkpointing=True),
+    "large": dict(steps=50000, batch_size=32, lr=1e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000,
+                  activation_checkpointing=True, parallel="fsdp"),
+    "xl": dict(steps=50000, batch_size=32, lr=5e-5, warmup_steps=1000, checkpoint_every=2000, sample_every=5000,
+               activation_checkpointing=True, parallel="fsdp"),
+}
+
+
+def posttrain_config(preset: str, overrides: list[str] | None = None) -> PosttrainConfig:
+    """The recipe for ``preset`` with ``KEY=VALUE`` overrides (unknown keys/bad values raise DrivewmError)."""
+    if preset not in POSTTRAIN_PRESETS:
+        raise DrivewmError(f"unknown preset {preset!r}; known: {sorted(POSTTRAIN_PRESETS)}")
+    base = {"preset": preset, "train": dict(POSTTRAIN_PRESETS[preset])}
+    return apply_overrides(PosttrainConfig, base, overrides or [], "posttrain")
+
+
+class MultiViewTask:
+    """drivewm.train.loop.TrainTask for multi-view post-training on a :class:`MultiViewDataset`."""
+
+    def __init__(self, cfg: PosttrainConfig, dataset: MultiViewDataset, model: MultiView):
+        self.cfg = cfg
+        self.dataset = dataset
+        self.bundle = model
+        self.model = model.net.train()
+
+    def blocks(self) -> list[torch.nn.Module]:
+        return list(self.bundle.net.dit.blocks)
+
+    def num_samples(self) -> int:
+        return len(self.dataset)
+
+    def tokens_per_sample(self) -> int:
+        t, h, w = self.bundle.token_grid()
+        return len(self.dataset.camera_names) * t * h * w
+
+    def loss(self, forward, indices: list[int], seeds: list[int], device: torch.device) -> torch.Tensor:
+        """EDM loss over B clips x V views: one noise level per clip (its views are denoised together),
+        Video2World on a seeded fraction of steps, caption dropout per view."""
+        samples = [self.dataset[i] for i in indices]
+        v = samples[0].latents.shape[0]
+        x0 = torch.cat([s.latents for s in samples]).to(device)  # (B V, c, t, h, w)
+        gens = [torch.Generator().manual_seed(s) for s in seeds]
+        sigma = torch.cat([sample_sigma(1, self.bundle.cfg.edm, g).expand(v) for g in gens])  # (B V,)
+        noise = torch.cat([torch.randn(s.latents.shape, generator=g) for s, g in zip(samples, gens)]).to(device)
+        keep = torch.cat([torch.rand(v, generator=g) >= self.bundle.cfg.edm.text_dropout for g in gens])
+        video2world = float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0]))) < self.cfg.multiview.video2world_prob
+        edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
+        cond = cat_conditioning([build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples])
+        return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
+
+    def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> MultiView:
+        with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
+            bundle = MultiView(self.bundle.cfg, self.bundle.latent)
+        bundle.net.load_state_dict(ema_state)
+        return bundle
+
+    def save_model(self, ema_state: dict[str, torch.Tensor], out_dir: Path) -> None:
+        self._ema_bundle(ema_state).save_pretrained(out_dir, ema_state)
+
+    def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
+        from drivewm.diffusion.generate import decode_latents, write_grid_png
+
+        bundle, s = self._ema_bundle(ema_state), self.dataset[0]
+        z = bundle.sample_latents(s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0)
+        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer), path, s.rig.names)  # one row per view
+
+
+def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
+    """Concatenate per-clip conditionings (same views) along the folded (B V) batch."""
+    first = conds[0]
+    cat = {f: torch.cat([getattr(c, f) for c in conds]) for f in ("text_emb", "text_mask", "fps", "rays", "trajectory")
+           if getattr(first, f) is not None}
+    return dataclasses.replace(first, **cat)
+
+
+def to_device(cond: MultiViewConditioning, device: torch.device) -> MultiViewConditioning:
+    moved = {f.name: getattr(cond, f.name).to(device) for f in dataclasses.fields(cond) if isinstance(getattr(cond, f.name), torch.Tensor)}
+    return dataclasses.replace(cond, **moved)
+
+
+def posttrain(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, out_dir: str | Path, stop_after: int | None = None) -> dict:
+    """Post-train a multi-view model folder into ``out_dir`` from the Text2World folder ``init_dir``
+    (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
+    parent = Text2World.from_pretrained(init_dir)
+    tokenizer = Path(parent.latent.tokenizer) if parent.latent.tokenizer else None
+    cameras = load_rig(cfg.rig).names if cfg.rig else None
+    dataset = MultiViewDataset(find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents), cameras,
+                               cfg.multiview.trajectory_waypoints, parent.cfg.edm.sigma_data)
+    if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
+        raise DrivewmError(f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}")
+    torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
+    mv = dataclasses.replace(cfg.multiview, trajectory_dt_s=dataset.trajectory_dt_s, speed_mps=round(dataset.median_speed_mps(), 2))
+    model = from_text2world(parent, mv, cfg.cond_frames)
+    model.latent = dataclasses.replace(model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict())
+    record = {**to_dict(cfg), "init": str(Path(init_dir).resolve())}
+    return train(MultiViewTask(cfg, dataset, model), cfg.train, out_dir, config_record=record, stop_after=stop_after)

@@ -1,0 +1,147 @@
+"""World-model rollouts: continue a real clip autoregressively under a chosen ego trajectory.
+
+Video2World (Cosmos, arXiv 2501.03575 sec. 5.1): each window is generated with its first
+``cond_frames`` latent frames given clean. Window 0 is conditioned on the real clip's first
+frames; every later window on the last frames generated so far, decoded to pixels and encoded
+again (with a causal tokenizer the first latent frame of a window encodes one frame alone, so
+re-encoding keeps the conditioning in the distribution the model was trained on). The trajectory
+is laid out once for the whole rollout and handed to each window in that window's first ego frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from einops import rearrange
+from tqdm import tqdm
+
+from drivewm.clips.format import Clip
+from drivewm.clips.shards import iter_clips
+from drivewm.diffusion.generate import video_to_uint8
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig
+from drivewm.multiview.model import MultiView
+from drivewm.multiview.trajectories import NAMED, load_waypoints, named_poses, poses_from_waypoints, waypoints_from_poses
+from drivewm.multiview.writer import GeneratedSample
+
+
+@dataclasses.dataclass
+class RolloutOptions:
+    """Settings of ``drivewm rollout``."""
+
+    trajectory: str = "straight"
+    """straight|left|right|stop or a waypoint file (N, 3) in the clip's first ego frame."""
+    windows: int = 2
+    """Generated windows; each adds (latent frames - cond_frames) * temporal compression frames."""
+    steps: int = 35
+    """Sampler steps per window."""
+    guidance: float = 7.0
+    """Classifier-free guidance scale."""
+    sampler: str = "heun"
+    """``heun`` or ``euler``."""
+    seed: int = 0
+    """Window w uses seed + w."""
+    prompt: str = ""
+    """Caption for every view ('' = the clip's own per-view captions)."""
+    speed_mps: float = 0.0
+    """Speed of a named trajectory (0 = the clip's own initial speed)."""
+
+    def __post_init__(self) -> None:
+        if self.windows < 1 or self.steps < 1:
+            raise DrivewmError("rollout: windows and steps must be >= 1")
+
+
+def load_clip(path: str | Path, key: str | None = None) -> Clip:
+    """The clip ``key`` (or the first one) from a shard ``.tar`` or a clip folder."""
+    path = Path(path)
+    if not path.exists():
+        raise DrivewmError(f"{path}: no such clip shard or folder")
+    for clip in iter_clips(path):
+        if key is None or clip.key == key:
+            return clip
+    raise DrivewmError(f"{path}: no clip with key {key!r}")
+
+
+def frames_to_video(frames: np.ndarray, size_hw: tuple[int, int]) -> torch.Tensor:
+    """uint8 (V, T, H, W, 3) -> float (V, 3, T, h, w) in [-1, 1] at the tokenizer's input size."""
+    h, w = size_hw
+    if frames.shape[2:4] != (h, w):
+        frames = np.stack([[cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in view] for view in frames])
+    return rearrange(torch.from_numpy(frames).float() / 127.5 - 1, "v t h w c -> v c t h w")
+
+
+@torch.no_grad()
+def encode_views(tokenizer, frames: np.ndarray, size_hw: tuple[int, int]) -> torch.Tensor:
+    """uint8 (V, T, H, W, 3) -> raw latents (V, c, t, h, w), one view at a time (memory)."""
+    video = frames_to_video(frames, size_hw)
+    return torch.cat([tokenizer.encode(v[None]) for v in video])
+
+
+@torch.no_grad()
+def decode_views(tokenizer, latents: torch.Tensor) -> np.ndarray:
+    """Raw latents (V, c, t, h, w) -> uint8 (V, T, H, W, 3)."""
+    return np.concatenate([video_to_uint8(tokenizer.decode(z[None])) for z in latents])
+
+
+def initial_speed_mps(clip: Clip) -> float:
+    """Ego speed between the clip's first two frames (NaN when the poses are missing)."""
+    T = clip.T_world_from_ego
+    if len(T) < 2:
+        return float("nan")
+    return float(np.linalg.norm(T[1, :3, 3] - T[0, :3, 3]) * clip.meta.fps)
+
+
+def rollout_poses(spec: str, num: int, dt_s: float, speed_mps: float, horizon_s: float) -> np.ndarray:
+    """(num, 4, 4) T_world_from_ego at ``dt_s`` spacing from frame 0: a named manoeuvre (``stop``
+    comes to rest at ``horizon_s``) or a file."""
+    if spec in NAMED:
+        return named_poses(spec, num, dt_s, speed_mps, horizon_s=horizon_s)
+    return poses_from_waypoints(load_waypoints(spec), num, dt_s, 1.0 / dt_s)
+
+
+def clip_rig(model: MultiView, clip: Clip) -> Rig:
+    """The model's cameras, with the clip's own calibration."""
+    names = model.training_rig.names
+    missing = [n for n in names if n not in clip.meta.cameras]
+    if missing:
+        raise DrivewmError(f"clip {clip.key}: lacks cameras {missing} the model was trained on")
+    return clip.meta.get_rig().subset(names)
+
+
+def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) -> GeneratedSample:
+    """Continue ``clip`` for ``options.windows`` windows; returns the whole video (real conditioning
+    frames first) with the trajectory it was conditioned on."""
+    rig = clip_rig(model, clip)
+    c, t, h, w = model.latent.latent_shape
+    tc, sc = tokenizer.config.temporal_compression, tokenizer.config.spatial_compression
+    k = max(1, model.cfg.edm.cond_frames)
+    n_cond, n_win = 1 + (k - 1) * tc, 1 + (t - 1) * tc
+    if clip.meta.num_frames < n_cond:
+        raise DrivewmError(f"clip {clip.key}: needs at least {n_cond} frames to condition on, has {clip.meta.num_frames}")
+    mv = model.cfg.multiview
+    speed = options.speed_mps or initial_speed_mps(clip)
+    speed = speed if np.isfinite(speed) else mv.speed_mps
+    total = n_cond + options.windows * (n_win - n_cond)
+    steps_per_frame = 1.0 / (clip.meta.fps * mv.trajectory_dt_s)
+    num_poses = int(np.ceil(total * steps_per_frame)) + mv.trajectory_waypoints + 1
+    poses = rollout_poses(options.trajectory, num_poses, mv.trajectory_dt_s, speed, (total - 1) / clip.meta.fps)
+    captions = [options.prompt] * len(rig.cameras) if options.prompt else [clip.meta.view_captions.get(n) or clip.meta.caption for n in rig.names]
+    video = np.stack([clip.video(n)[:n_cond] for n in rig.names])  # (V, n_cond, H, W, 3)
+    size = (h * sc, w * sc)
+    video = rearrange(frames_to_video(video, size), "v c t h w -> v t h w c").add(1).mul(127.5).round().byte().numpy()
+    for window in tqdm(range(options.windows), desc="rollout"):
+        start = video.shape[1] - n_cond  # first frame of this window
+        cond = torch.zeros(len(rig.cameras), c, t, h, w)
+        cond[:, :, :k] = encode_views(tokenizer, video[:, start:], size)[:, :, :k]
+        waypoints = waypoints_from_poses(poses, int(round(start * steps_per_frame)), mv.trajectory_waypoints)
+        z = model.sample_latents(rig, [captions], waypoints[None], [options.seed + window], options.steps, options.guidance,
+                                 options.sampler, cond_latents=cond[None], fps=clip.meta.fps)
+        video = np.concatenate([video, decode_views(tokenizer, z[0])[:, n_cond:]], axis=1)
+    traj = waypoints_from_poses(poses, 0, int(round((video.shape[1] - 1) * steps_per_frame)))
+    extra = {"rollout_of": clip.key, "source_log": clip.meta.source_log, "trajectory": options.trajectory, "windows": options.windows,
+             "speed_mps": speed, "seed": options.seed, "steps": options.steps, "guidance": options.guidance, "cond_video_frames": n_cond}
+    return GeneratedSample(video, rig, captions[0], captions, traj, mv.trajectory_dt_s, extra)
