@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import importlib
 
 import numpy as np
 
+from drivewm.errors import DrivewmError
 from drivewm.geometry import Camera
 
 
@@ -100,3 +102,19 @@ def _motion_phrase(manoeuvre: str, speed_mps: float | None) -> str:
     if manoeuvre == "standing":
         return ", the ego vehicle standing still"
     return f", the ego vehicle {MANOEUVRE_PHRASES[manoeuvre]} at {speed_mps * 3.6:.0f} km/h"
+
+
+def load_captioner(spec: str) -> Captioner:
+    """A captioner from ``"template"`` or an import path ``"package.module:ClassName"`` (constructed
+    without arguments), so a recipe can swap in a vision-language model."""
+    if spec == "template":
+        return TemplateCaptioner()
+    module_name, _, class_name = spec.partition(":")
+    try:
+        cls = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError, ValueError):
+        raise DrivewmError(f"captioner {spec!r}: not 'template' or an importable 'module:Class'") from None
+    captioner = cls()
+    if not isinstance(captioner, Captioner):
+        raise DrivewmError(f"captioner {spec!r}: {class_name} does not subclass drivewm.curate.captions.Captioner")
+    return captioner

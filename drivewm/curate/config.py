@@ -105,6 +105,8 @@ class CurateConfig:
     filters: FilterConfig = dataclasses.field(default_factory=FilterConfig)
     privacy: PrivacyConfig = dataclasses.field(default_factory=PrivacyConfig)
     trajectory: TrajectoryConfig = dataclasses.field(default_factory=TrajectoryConfig)
+    captioner: str = "template"
+    """"template" (scene tags + measured motion) or "package.module:Class", a Captioner subclass."""
     contact_sheet_clips: int = 4
     """Sample clips shown in contact_sheet.png."""
 

@@ -9,10 +9,12 @@ lets a rerun skip the log. A log that fails leaves no marker and no shards of it
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import re
 from pathlib import Path
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -21,10 +23,11 @@ from drivewm.atomic import write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
 from drivewm.curate import dedup, filters, split, sync, trajectory
-from drivewm.curate.captions import ClipInfo, TemplateCaptioner, classify_manoeuvre
+from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
 from drivewm.errors import DrivewmError
-from drivewm.logs.types import DriveLog
+from drivewm.geometry import Rig
+from drivewm.logs.types import DriveLog, ImageFrame
 
 MARKER_DIR = "logs"
 
@@ -80,16 +83,7 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
 def curate_drive_log(log: DriveLog, out: Path, name: str, cfg: CurateConfig) -> dict:
     """Curate an in-memory log into ``out`` (shards only; the caller writes the marker)."""
     log.validate()
-    rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
-    if cfg.resolution:
-        rig = rig.scaled(*cfg.resolution)
-    frames_of = {c: log.images.get(c, []) for c in rig.names}
-    times = {c: np.array([f.timestamp_ns for f in frames_of[c]], dtype=np.int64) for c in rig.names}
-    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6)
-    keep_idx = {c: sync.dedupe_timestamps(times[c])[0] for c in rig.names}
-    frame = lambda cam, v, tick: frames_of[cam][keep_idx[cam][table.frame_index[tick, v]]]  # noqa: E731
-    smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
-    ctx = _Context(log, rig, table, frame, smooth, cfg)
+    ctx = _context(log, cfg)
     for f in _stale_shards(out, name):
         f.unlink()
     kept_rows, embeddings, dropped = [], [], {}
@@ -108,25 +102,44 @@ def curate_drive_log(log: DriveLog, out: Path, name: str, cfg: CurateConfig) -> 
     return _result(log, name, cfg, ctx, kept_rows, embeddings, dropped)
 
 
-class _Context:
-    """What every window of one log needs (kept together to keep signatures short)."""
+@dataclasses.dataclass
+class _LogContext:
+    """What every window of one log needs."""
 
-    def __init__(self, log, rig, table, frame, smooth, cfg):
-        self.log, self.rig, self.table, self.frame, self.smooth, self.cfg = log, rig, table, frame, smooth, cfg
-        self.captioner = TemplateCaptioner()
-        self.anonymizer = None
-        if cfg.privacy.enabled:
-            from drivewm.curate.privacy import Anonymizer
-
-            self.anonymizer = Anonymizer(cfg.privacy)
+    log: DriveLog
+    rig: Rig  # the output cameras, at the output image size
+    table: sync.SyncResult
+    frames: dict[str, list[ImageFrame]]  # per camera, de-duplicated: table.frame_index points here
+    smooth: trajectory.SmoothedTrajectory | None  # None: ego motion unknown
+    cfg: CurateConfig
+    captioner: Captioner
+    anonymizer: Callable[[np.ndarray], np.ndarray] | None
 
     def image(self, v: int, tick: int) -> np.ndarray:
         """Decoded uint8 RGB frame of camera ``v`` at ``tick``, at the output size."""
         cam = self.rig.cameras[v]
-        img = self.frame(cam.name, v, tick).decode()
+        img = self.frames[cam.name][self.table.frame_index[tick, v]].decode()
         if img.shape[:2] != (cam.height, cam.width):
             img = cv2.resize(img, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
         return img
+
+
+def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
+    """Sync the cameras and smooth the poses of one log."""
+    rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
+    if cfg.resolution:
+        rig = rig.scaled(*cfg.resolution)
+    raw = {c: log.images.get(c, []) for c in rig.names}
+    times = {c: np.array([f.timestamp_ns for f in raw[c]], dtype=np.int64) for c in rig.names}
+    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6)
+    frames = {c: [raw[c][i] for i in sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
+    smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
+    anonymizer = None
+    if cfg.privacy.enabled:
+        from drivewm.curate.privacy import Anonymizer
+
+        anonymizer = Anonymizer(cfg.privacy)
+    return _LogContext(log, rig, table, frames, smooth, cfg, load_captioner(cfg.captioner), anonymizer)
 
 
 def _stale_shards(out: Path, name: str) -> list[Path]:
@@ -134,7 +147,7 @@ def _stale_shards(out: Path, name: str) -> list[Path]:
     return [p for p in out.glob(f"{name}-*.tar") if re.fullmatch(rf"{re.escape(name)}-\d{{6}}\.tar", p.name)]
 
 
-def _windows(ctx: _Context) -> list[tuple[int, int]]:
+def _windows(ctx: _LogContext) -> list[tuple[int, int]]:
     """Clip windows (tick ranges) inside valid runs, cut at shot boundaries of the reference camera."""
     cfg, segments = ctx.cfg, []
     for a, b in split.valid_runs(ctx.table.valid):
@@ -147,7 +160,7 @@ def _windows(ctx: _Context) -> list[tuple[int, int]]:
     return split.clip_windows(segments, cfg.clip_frames, cfg.stride_frames)
 
 
-def _reference_frames(ctx: _Context, a: int, b: int):
+def _reference_frames(ctx: _LogContext, a: int, b: int):
     """Reference-camera frames of ticks [a, b) for shot detection, downscaled; an undecodable frame
     repeats the previous one (its clip is dropped later as undecodable_frame)."""
     last = None
@@ -165,7 +178,7 @@ def _small(img: np.ndarray, width: int = 320) -> np.ndarray:
     return cv2.resize(img, (width, h), interpolation=cv2.INTER_AREA) if img.shape[1] > width else img
 
 
-def _make_clip(ctx: _Context, name: str, start: int, end: int, kept_embeddings: list[np.ndarray]):
+def _make_clip(ctx: _LogContext, name: str, start: int, end: int, kept_embeddings: list[np.ndarray]):
     """(clip or None, drop reason or None, embedding) for ticks [start, end)."""
     cfg, ticks = ctx.cfg, np.arange(start, end)
     try:
@@ -189,7 +202,7 @@ def _make_clip(ctx: _Context, name: str, start: int, end: int, kept_embeddings: 
     return clip, None, emb
 
 
-def _meta(ctx: _Context, name: str, start: int, t_ns: np.ndarray, poses: np.ndarray, scores: dict, frames: np.ndarray) -> ClipMeta:
+def _meta(ctx: _LogContext, name: str, start: int, t_ns: np.ndarray, poses: np.ndarray, scores: dict, frames: np.ndarray) -> ClipMeta:
     cfg, known = ctx.cfg, ctx.smooth is not None
     motion = _motion(poses, t_ns) if known else {"manoeuvre": "unknown", "speed_mps": None}
     info = ClipInfo(dict(ctx.log.scene.tags), ctx.log.scene.description, ctx.rig.cameras, motion["manoeuvre"], motion["speed_mps"], frames)
@@ -226,7 +239,7 @@ def _manifest_row(meta: ClipMeta) -> dict:
     }
 
 
-def _result(log: DriveLog, name: str, cfg: CurateConfig, ctx: _Context, rows: list[dict], embeddings: list, dropped: dict) -> dict:
+def _result(log: DriveLog, name: str, cfg: CurateConfig, ctx: _LogContext, rows: list[dict], embeddings: list, dropped: dict) -> dict:
     """The per-log result (also the done-marker's content)."""
     table, smooth = ctx.table, ctx.smooth
     warnings = [f"{c}: {s['missing_ticks']} of {len(table.tick_ns)} ticks without a frame within tolerance" for c, s in table.stats.items() if s["missing_ticks"]]

@@ -6,7 +6,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drivewm.curate.captions import TemplateCaptioner, ClipInfo, classify_manoeuvre
+from drivewm.curate.captions import Captioner, ClipInfo, TemplateCaptioner, classify_manoeuvre, load_captioner
 from drivewm.curate.config import FilterConfig
 from drivewm.curate.dedup import clip_embedding, near_duplicates
 from drivewm.curate.filters import judge, score_clip
@@ -62,3 +62,25 @@ def test_template_captions_name_conditions_and_directions():
     lane = np.stack([10 * t, 3.0 * t / 1.6, 0 * t], 1)
     assert classify_manoeuvre(lane, np.zeros(17), np.full(17, 10.0)) == "lane change to the left"
     assert classify_manoeuvre(lane, np.zeros(17), np.linspace(10, 0.5, 17)) == "stopping"
+
+
+class CountingCaptioner(Captioner):
+    """A stand-in for a vision-language model: describes what it sees."""
+
+    def caption(self, clip_info):
+        views = {c.name: f"{c.name} sees mean luma {clip_info.frames[i].mean():.0f}" for i, c in enumerate(clip_info.cameras)}
+        return f"{len(clip_info.cameras)} views", views
+
+
+def test_captioner_is_swappable_from_a_recipe():
+    import pytest
+
+    from drivewm.errors import DrivewmError
+
+    captioner = load_captioner(f"{__name__}:CountingCaptioner")
+    rig = load_rig("front3")
+    info = ClipInfo({}, "", rig.cameras, "straight", 5.0, moving_clip(V=3))
+    caption, views = captioner.caption(info)
+    assert caption == "3 views" and set(views) == set(rig.names)
+    with pytest.raises(DrivewmError, match="importable"):
+        load_captioner("no.such.module:Nope")
