@@ -69,3 +69,20 @@ def test_bad_text_configs_are_refused(tmp_path):
         build_text_encoder(TextConfig(kind="t5", path=str(tmp_path)))
     with pytest.raises(DrivewmError, match="kind"):
         from_dict(TextConfig, {"kind": "clip"})
+
+
+def test_hf_encoder_folder_like_sentence_transformers_loads(tmp_path):
+    """A sentence-transformers model folder holds a plain HF encoder at its root: kind 'hf' loads it."""
+    from tokenizers import Tokenizer, models, pre_tokenizers
+    from transformers import BertConfig, BertModel, PreTrainedTokenizerFast
+
+    vocab = {w: i for i, w in enumerate(["[PAD]", "[UNK]", "snow", "fog", "night"])}
+    tok = Tokenizer(models.WordLevel(vocab, unk_token="[UNK]"))
+    tok.pre_tokenizer = pre_tokenizers.Whitespace()
+    PreTrainedTokenizerFast(tokenizer_object=tok, pad_token="[PAD]", unk_token="[UNK]").save_pretrained(tmp_path)
+    BertModel(BertConfig(vocab_size=5, hidden_size=24, num_hidden_layers=1, num_attention_heads=2, intermediate_size=32)).save_pretrained(tmp_path)
+    (tmp_path / "modules.json").write_text("[]")  # what marks a sentence-transformers folder; ignored here
+    enc = build_text_encoder(TextConfig(kind="hf", path=str(tmp_path), max_length=4))
+    emb, mask = enc.encode(["snow fog", "night"])
+    assert enc.dim == 24 and emb.shape == (2, 4, 24) and mask.sum(1).tolist() == [2, 1]
+    assert not torch.allclose(emb[0, 0], emb[1, 0])
