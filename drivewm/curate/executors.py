@@ -30,6 +30,13 @@ def _safe_curate(log: str, out_dir: str, cfg: CurateConfig, name: str) -> dict:
         return {"log": log, "name": name, "status": "failed", "error": f"{log}: unexpected error: {detail}", "kept": 0, "dropped": {}, "rows": []}
 
 
+def _one_thread_per_worker() -> None:
+    """Parallelism comes from the pool: keep OpenCV in each worker on one thread (no oversubscription)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
 def run_local(jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, workers: int, progress: Progress) -> list[dict]:
     """``jobs`` (log path, name) -> results in input order, ``workers`` processes (1 = in-process)."""
     if workers <= 1:
@@ -41,7 +48,8 @@ def run_local(jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, work
     import multiprocessing
 
     by_index: dict[int, dict] = {}
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread_per_worker) as pool:
         futures = {pool.submit(_safe_curate, log, out_dir, cfg, name): i for i, (log, name) in enumerate(jobs)}
         for fut in as_completed(futures):
             by_index[futures[fut]] = fut.result()
