@@ -1,0 +1,100 @@
+"""Training and evaluation videos from clip shards: every camera of every clip is an independent video.
+
+Clips stay H.264-compressed in memory and are decoded on use (a few recent videos are kept),
+so a dataset of hours fits. Every random draw of a batch is a function of (seed, step), so a
+resumed run sees exactly the batches an uninterrupted one would.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+import torch
+from einops import rearrange
+
+from drivewm.clips import Clip, iter_clips
+from drivewm.clips.video import decode_mp4
+from drivewm.errors import DrivewmError
+
+
+def is_holdout(key: str, holdout_percent: int) -> bool:
+    """Deterministic split by clip key: the same clips are held out in training and evaluation."""
+    return int(hashlib.sha1(key.encode()).hexdigest(), 16) % 100 < holdout_percent
+
+
+def load_clips(clip_dir: str | Path, split: str = "all", holdout_percent: int = 0) -> list[Clip]:
+    """Clips of a folder/tar: ``split`` is ``all``, ``train`` (not held out) or ``holdout``."""
+    clips = list(iter_clips(clip_dir))
+    if split == "train":
+        clips = [c for c in clips if not is_holdout(c.key, holdout_percent)]
+    elif split == "holdout":
+        clips = [c for c in clips if is_holdout(c.key, holdout_percent)]
+    if not clips:
+        raise DrivewmError(f"{clip_dir}: no clips in split {split!r} (holdout_percent={holdout_percent})")
+    return clips
+
+
+def to_model_range(frames: np.ndarray) -> torch.Tensor:
+    """uint8 (T, H, W, 3) -> float (3, T, H, W) in [-1, 1]."""
+    return rearrange(torch.from_numpy(frames).float() / 127.5 - 1.0, "t h w c -> c t h w")
+
+
+def to_uint8(video: torch.Tensor) -> np.ndarray:
+    """float (3, T, H, W) in [-1, 1] -> uint8 (T, H, W, 3)."""
+    return rearrange(((video.clamp(-1, 1) + 1) * 127.5).round().to(torch.uint8), "c t h w -> t h w c").numpy()
+
+
+class CameraVideos:
+    """Every (clip, camera) video of a list of clips, decoded on use with a small LRU cache."""
+
+    def __init__(self, clips: list[Clip], cache_size: int = 64):
+        self.clips = clips
+        self.items = [(i, cam) for i, clip in enumerate(clips) for cam in clip.meta.cameras]
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
+        self.cache_size = cache_size
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def name(self, i: int) -> str:
+        clip_index, cam = self.items[i]
+        return f"{self.clips[clip_index].key}.{cam}"
+
+    def frames(self, i: int) -> np.ndarray:
+        """uint8 (T, H, W, 3) of video ``i``."""
+        if i in self._cache:
+            self._cache.move_to_end(i)
+            return self._cache[i]
+        clip_index, cam = self.items[i]
+        clip = self.clips[clip_index]
+        frames = decode_mp4(clip.mp4[cam], clip.meta.num_frames, f"clip {clip.key} {cam}")
+        self._cache[i] = frames
+        if len(self._cache) > self.cache_size:
+            self._cache.popitem(last=False)
+        return frames
+
+
+class CropSampler:
+    """Random crops (B, 3, frames, H, W) in [-1, 1] from camera videos, drawn from (seed, step)."""
+
+    def __init__(self, videos: CameraVideos, frames: int, crop_hw: tuple[int, int], seed: int):
+        self.videos, self.frames, self.crop_hw, self.seed = videos, frames, tuple(crop_hw), seed
+        shortest = min(len(c.meta.timestamps_ns) for c in videos.clips)
+        if frames > shortest:
+            raise DrivewmError(f"training wants {frames} frames per sample but the shortest clip has {shortest}")
+
+    def batch(self, step: int, batch_size: int) -> torch.Tensor:
+        rng = np.random.default_rng([self.seed, step])
+        return torch.stack([self._crop(rng) for _ in range(batch_size)])
+
+    def _crop(self, rng: np.random.Generator) -> torch.Tensor:
+        frames = self.videos.frames(int(rng.integers(len(self.videos))))
+        (t_all, h_all, w_all, _), (ch, cw) = frames.shape, self.crop_hw
+        if ch > h_all or cw > w_all:
+            raise DrivewmError(f"crop {ch}x{cw} is larger than the clip frames {h_all}x{w_all}")
+        t0 = int(rng.integers(t_all - self.frames + 1))
+        y0, x0 = int(rng.integers(h_all - ch + 1)), int(rng.integers(w_all - cw + 1))
+        return to_model_range(np.ascontiguousarray(frames[t0 : t0 + self.frames, y0 : y0 + ch, x0 : x0 + cw]))
