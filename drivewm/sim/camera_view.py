@@ -14,6 +14,7 @@ import numpy as np
 
 from drivewm.geometry import Camera, invert_T
 from drivewm.sim.conditions import Condition, fog_weight, to_uint8
+from drivewm.sim.ground import DETAIL_LEVELS, DETAIL_RES_M
 
 EGO_HEADLIGHT_X_M = 3.6  # front bumper ahead of the rear axle
 
@@ -35,6 +36,8 @@ class CameraView:
     level_ego_xy: list[np.ndarray]  # per mip level: their ground hits (N_l, 2) in the ego frame
     level_gain: list[np.ndarray | None]  # per mip level: ego headlight gain (N_l, 1) or None
     far_idx: np.ndarray  # flat indices of ground beyond the drawn range
+    detail_idx: list[np.ndarray]  # per grain level: flat pixel indices that get fine grain
+    detail_ego_xy: list[np.ndarray]  # per grain level: their ground hits (N_l, 2) in the ego frame
     sky: np.ndarray  # (H, W, 3) uint8 background (sky gradient)
     ground_fog: np.ndarray  # (H, W) float32 transmittance of the ground/sky per pixel
     side_planes: np.ndarray  # (4, 3) unit inward normals of the frustum side planes (camera frame)
@@ -57,11 +60,13 @@ class CameraView:
         level = _mip_level(hit, texel_m, levels)
         idx = [np.flatnonzero(near & (level == k)) for k in range(levels)]
         flat_hit = hit.reshape(-1, 2)
+        grain_level = _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1)  # the last level: no grain
+        detail_idx = [np.flatnonzero(near & (grain_level == k)) for k in range(DETAIL_LEVELS)]
         gain = _headlight_gain(flat_hit, cond)
         view = cls(cam.name, K, cam.width, cam.height, invert_T(cam.T_ego_from_cam), xn, yn, ray_norm,
                    t.astype(np.float32), idx, [flat_hit[i] for i in idx],
                    [None if gain is None else gain[i, None].astype(np.float32) for i in idx],
-                   np.flatnonzero(ground & ~near), _sky(rays_ego, cond), np.zeros(0, np.float32), _side_planes(K, cam.width, cam.height),
+                   np.flatnonzero(ground & ~near), detail_idx, [flat_hit[i] for i in detail_idx], _sky(rays_ego, cond), np.zeros(0, np.float32), _side_planes(K, cam.width, cam.height),
                    np.broadcast_to(to_uint8(np.asarray(cond.fog_rgb)), (cam.height, cam.width, 3)).copy())
         # The sky already has the condition's colour: only surfaces (finite depth) are fogged.
         view.ground_fog = np.where(ground, fog_weight(t * ray_norm, cond.visibility_m), 1.0).astype(np.float32)
@@ -74,11 +79,13 @@ class CameraView:
 
 
 def _mip_level(hit: np.ndarray, texel_m: float, levels: int) -> np.ndarray:
-    """Mip level per pixel: log2 of the ground footprint (m between neighbouring pixels' hits) in texels."""
+    """Mip level per pixel: log2 of the ground footprint in texels. The footprint is the geometric
+    mean of the distances to the neighbouring pixels' hits: sharper than their maximum at grazing
+    angles (an anisotropic footprint), at the price of a little aliasing along the view direction."""
     with np.errstate(invalid="ignore"):
         du = np.linalg.norm(np.diff(hit, axis=1, append=hit[:, -1:] * np.nan), axis=-1)
         dv = np.linalg.norm(np.diff(hit, axis=0, prepend=hit[:1] * np.nan), axis=-1)
-        foot = np.fmax(du, dv)
+        foot = np.sqrt(du * dv)
         lv = np.floor(np.log2(np.maximum(foot, 1e-9) / texel_m) + 0.3)
     lv = np.where(np.isfinite(lv), lv, levels - 1)
     return np.clip(lv, 0, levels - 1).astype(np.int32)

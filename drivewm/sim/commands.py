@@ -34,12 +34,15 @@ def run_simulate(args: argparse.Namespace) -> int:
     from drivewm.config import from_dict, to_dict
     from drivewm.sim import SimConfig, simulate_many
     from drivewm.sim.recipe import load_recipe
+    from drivewm.sim.world import sim_rig
 
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
         plan = load_recipe(args.recipe, given)
     else:
         plan = [(from_dict(SimConfig, given, "drivewm simulate"), args.drives)]
+    for cfg, _ in plan:
+        sim_rig(cfg)  # every rig loads before the first drive starts
     paths = []
     for cfg, count in plan:
         print(f"simulate {count} drive(s): {to_dict(cfg)}")

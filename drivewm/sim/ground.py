@@ -31,6 +31,9 @@ KERB_WIDTH_M = 0.35
 SIDEWALK_WIDTH_M = 3.5
 SLAB_M = 1.5  # sidewalk slab size: joints every 1.5 m
 MIP_LEVELS = 5
+DETAIL_RES_M = 0.025  # fine grain texel (m); the grain tile repeats every DETAIL_TEXELS * DETAIL_RES_M = 51 m
+DETAIL_TEXELS = 2048
+DETAIL_LEVELS = 3  # grain drawn where the ground footprint of a pixel is under 2**3 grain texels
 
 
 @dataclasses.dataclass
@@ -62,7 +65,7 @@ def build_ground(road: RoadMap, lo_xy: np.ndarray, hi_xy: np.ndarray, cond: Cond
     raster = _Raster(lo_xy, res, (H, W))
     rng = np.random.default_rng([seed, 101])
     classes = _classes(road, raster, urban)
-    base = _base_colors(classes, cond, raster, road)
+    base = _base_colors(classes, cond, raster, road, rng)
     gain = _luminance_noise(classes, rng, raster, cond)
     if urban and not cond.snow:
         _slab_joints(gain, raster, classes)
@@ -95,11 +98,10 @@ def _classes(road: RoadMap, raster: _Raster, urban: bool) -> np.ndarray:
     road_mask = np.zeros(raster.shape, np.uint8)
     cv2.fillPoly(road_mask, [raster.px(p) for p in road.surface_polygons if len(p) >= 3], 1, cv2.LINE_8, 4)
     classes = np.full(raster.shape, GRASS, np.uint8)
+    dist_m = cv2.distanceTransform(1 - road_mask, cv2.DIST_L2, 3) * raster.res_m  # metres to the paved area
     if urban:
-        k = 2 * raster.width_px(SIDEWALK_WIDTH_M) + 1
-        classes[cv2.dilate(road_mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0] = SIDEWALK
-    k = 2 * raster.width_px(KERB_WIDTH_M) + 1
-    classes[cv2.dilate(road_mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0] = KERB
+        classes[dist_m <= SIDEWALK_WIDTH_M] = SIDEWALK
+    classes[dist_m <= KERB_WIDTH_M] = KERB
     classes[road_mask > 0] = ASPHALT
     return classes
 
@@ -123,7 +125,7 @@ def _luminance_noise(classes: np.ndarray, rng: np.random.Generator, raster: _Ras
     return np.maximum(lum, 0.0, out=lum)
 
 
-def _base_colors(classes: np.ndarray, cond: Condition, raster: _Raster, road: RoadMap) -> np.ndarray:
+def _base_colors(classes: np.ndarray, cond: Condition, raster: _Raster, road: RoadMap, rng: np.random.Generator) -> np.ndarray:
     """(H, W, 3) uint8 albedo under the condition's tint (not its brightness), paint drawn in."""
     lut = np.array([ALBEDO[c][0] for c in (GRASS, SIDEWALK, KERB, ASPHALT)], np.float32)
     if cond.snow:
@@ -132,12 +134,31 @@ def _base_colors(classes: np.ndarray, cond: Condition, raster: _Raster, road: Ro
     if cond.wet:
         lut *= np.array([[0.8], [0.7], [0.7], [0.55]], np.float32)
     unlit = lambda rgb: tuple(float(v) for v in to_uint8(cond.tinted(np.asarray(rgb, np.float32))))  # noqa: E731
-    base = np.stack([unlit(c) for c in lut]).astype(np.uint8)[classes]
+    colors = np.stack([unlit(c) for c in lut]).astype(np.uint8)
+    base = colors[classes]
+    _scatter_spots(base, classes, colors, raster, rng)
     if cond.snow:
         _tyre_tracks(base, road, raster, unlit(np.asarray(SLUSH_ALBEDO) * 0.45))
     paint = np.asarray(PAINT_ALBEDO) * (0.8 if cond.wet else 1.0)
     _markings(base, road, raster, unlit(0.85 * np.asarray(SLUSH_ALBEDO) + 0.15 * paint if cond.snow else paint))
     return base
+
+
+SPOTS_PER_M2 = 0.6  # stones, tar patches and tufts per square metre
+
+
+def _scatter_spots(img: np.ndarray, classes: np.ndarray, colors: np.ndarray, raster: _Raster, rng: np.random.Generator) -> None:
+    """Scatter small darker/lighter blobs (0.05-0.3 m): the stable, blob-like detail SIFT keys on."""
+    H, W = classes.shape
+    n = int(SPOTS_PER_M2 * H * W * raster.res_m**2)
+    cols, rows = rng.uniform(0, W, n), rng.uniform(0, H, n)
+    radii = np.maximum(1, (rng.uniform(0.05, 0.3, n) / raster.res_m)).astype(int)
+    factors = rng.choice([0.55, 0.7, 1.3, 1.5], n)
+    aspect = rng.uniform(0.5, 1.0, n)
+    angles = rng.uniform(0, 180, n)
+    for c, r, rad, f, a, ang in zip(cols.astype(int), rows.astype(int), radii, factors, aspect, angles):
+        color = tuple(float(v) for v in np.minimum(colors[classes[r, c]] * f, 255))
+        cv2.ellipse(img, (int(c), int(r)), (int(rad), max(1, int(rad * a))), float(ang), 0, 360, color, -1, cv2.LINE_AA)
 
 
 def _slab_joints(lum: np.ndarray, raster: _Raster, classes: np.ndarray) -> None:
@@ -189,3 +210,23 @@ def _lamp_pools(raster: _Raster, lamp_xy: np.ndarray, radius_m: float = 9.0) -> 
         cv2.circle(small, (int(round(c[0])), int(round(c[1]))), max(1, int(radius_m / 2 / (raster.res_m * scale))), 1.0, -1)
     small = cv2.GaussianBlur(small, (0, 0), radius_m / 2 / (raster.res_m * scale))
     return cv2.resize(small, (small.shape[1] * scale, small.shape[0] * scale), interpolation=cv2.INTER_LINEAR)[: raster.shape[0], : raster.shape[1]]
+
+
+def build_detail(seed: int) -> list[np.ndarray]:
+    """World-anchored fine grain: a tileable relative-luminance map (uint8, 128 = 1.0) and its mip
+    levels, multiplied onto the near ground where the drive texture is coarser than a pixel."""
+    rng = np.random.default_rng([seed, 111])
+    n = DETAIL_TEXELS
+    grain = rng.standard_normal((n, n)).astype(np.float32)
+    lum = 0.3 * grain + 3.0 * _wrap_blur(grain, 2.5) + 6.0 * _wrap_blur(grain, 6.0)
+    lum = 128.0 * (1.0 + 0.22 * lum / lum.std())
+    levels = [np.clip(lum, 0, 255).astype(np.uint8)]
+    for _ in range(DETAIL_LEVELS - 1):
+        levels.append(cv2.pyrDown(levels[-1]))
+    return levels
+
+
+def _wrap_blur(img: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian blur of a periodic tile (padded by wrapping, so the tile stays seamless)."""
+    pad = int(4 * sigma) + 1
+    return cv2.GaussianBlur(np.pad(img, pad, mode="wrap"), (0, 0), sigma)[pad:-pad, pad:-pad]

@@ -23,7 +23,7 @@ from drivewm.logs.types import AgentBox
 from drivewm.sim.boxes import BoxSet, FaceTextures, draw_boxes
 from drivewm.sim.camera_view import CameraView
 from drivewm.sim.conditions import Condition, fog_weight
-from drivewm.sim.ground import MIP_LEVELS, build_ground
+from drivewm.sim.ground import DETAIL_RES_M, MIP_LEVELS, build_detail, build_ground
 from drivewm.sim.particles import ParticleOverlays
 from drivewm.sim.road_edges import stable_unit
 from drivewm.sim.scene import RoadMap
@@ -38,6 +38,7 @@ class Renderer:
         self.rig, self.cond, self.seed, self.max_range_m = rig, cond, seed, max_range_m
         lamps = np.array([b.center_xyz[:2] for b in road.props if b.category == "lamp"]).reshape(-1, 2)
         self.ground = build_ground(road, lo_xy, hi_xy, cond, seed, urban, lamps)
+        self.detail = build_detail(seed)
         self.views = [CameraView.build(c, self.ground.res_m, MIP_LEVELS, cond, max_range_m) for c in rig.cameras]
         rng = np.random.default_rng([seed, 303])
         textures = [FaceTextures.from_dict(object_textures(b, cond, rng)) for b in road.props]
@@ -81,6 +82,13 @@ class Renderer:
                 vals = np.minimum(vals[:, 0] * gain, 255.0).astype(np.uint8)[:, None]
             flat[idx] = vals[:, 0]
         flat[view.far_idx] = self.ground.border_rgb
+        for level, (idx, ego_xy) in enumerate(zip(view.detail_idx, view.detail_ego_xy)):
+            if len(idx) == 0:
+                continue
+            tex = self.detail[level]
+            tc = (((ego_xy @ R2.T + t2) / (DETAIL_RES_M * 2**level)) % tex.shape[0]).astype(np.float32)
+            gain = cv2.remap(tex, tc[:, :1], tc[:, 1:], cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+            flat[idx] = np.minimum(flat[idx] * (gain.astype(np.float32) * (1.0 / 128.0)), 255.0).astype(np.uint8)
 
     def _fog(self, img: np.ndarray, zbuf: np.ndarray, view: CameraView) -> np.ndarray:
         """Blend towards the fog colour by transmittance exp(-3.912 d / V) of each pixel's distance."""

@@ -49,8 +49,8 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
     """Simulate one drive and write it as an MCAP drive log at ``out_path`` (atomically)."""
     from drivewm.logs.writer import LogWriter
 
+    rig = sim_rig(cfg)  # a bad rig fails before any simulation
     rec = record(cfg)
-    rig = sim_rig(cfg)
     renderer = build_renderer(cfg, rec, rig)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
