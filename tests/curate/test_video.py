@@ -75,3 +75,20 @@ def test_dashcam_kept_as_consecutive_driving_clips(curated):
     starts = np.array([r["start_time_ns"] for r in kept])
     np.testing.assert_allclose(np.diff(starts), 1.7e9, atol=1e6)  # back to back: no cut, no gap inside
     assert all(r["quality"]["camera_motion_px"] > 0.5 for r in kept)
+
+
+def test_import_video_cli_writes_a_log_with_unknown_poses(shared_data, tmp_path):
+    from drivewm.cli import main
+    from drivewm.logs.reader import read_log
+
+    (tmp_path / "cam.yaml").write_text(CALIBRATION)
+    video = shared_data / "video/dashcam_highway/solidWhiteRight.mp4"
+    rc = main(["import-video", str(video), "--calibration", str(tmp_path / "cam.yaml"), "--out", str(tmp_path / "logs"), "--tag", "weather=clear"])
+    assert rc == 0
+    log = read_log(tmp_path / "logs/solidWhiteRight.mcap")
+    assert log.rig.names == ["CAM_FRONT"] and len(log.images["CAM_FRONT"]) == 221
+    assert log.images["CAM_FRONT"][0].decode().shape == (180, 320, 3)
+    assert np.allclose(np.diff([f.timestamp_ns for f in log.images["CAM_FRONT"]]), 40e6, atol=1e3)  # 25 fps
+    assert not np.isfinite(log.T_world_from_ego).any()  # unknown ego motion, not identity
+    assert log.scene.tags["weather"] == "clear" and log.scene.tags["road_type"] == "unknown"
+    assert main(["import-video", str(tmp_path / "missing.mp4"), "--calibration", str(tmp_path / "cam.yaml"), "--out", str(tmp_path / "x")]) == 2
