@@ -3,7 +3,7 @@
 Both models get the same width, depth, heads, text width and token count (LTX takes pre-patchified
 tokens, so it is fed our 2x2 patches as channels); both run one full training step (forward, EDM or
 MSE loss, backward, AdamW). Rounds alternate between the two so the shared machine's noise hits
-both alike. Prints latent tokens/s of each and the ratio (ours / peer); on CUDA also bf16 and MFU.
+both alike, and the fastest step of each counts (the least disturbed by other processes). Prints latent tokens/s of each and the ratio (ours / peer); on CUDA also bf16 and MFU.
 
     python benchmarks/bench_dit.py            # small: D=192, depth 4, 288 tokens (seconds)
     python benchmarks/bench_dit.py --full     # D=384, depth 12, 2,240 tokens (minutes on a CPU)
@@ -12,7 +12,6 @@ both alike. Prints latent tokens/s of each and the ratio (ours / peer); on CUDA 
 from __future__ import annotations
 
 import argparse
-import statistics
 import time
 
 import torch
@@ -78,11 +77,13 @@ def train_flops(params: int, tokens: int, depth: int, dim: int) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="bigger model and sequence")
-    parser.add_argument("--rounds", type=int, default=5, help="timed steps per model")
+    parser.add_argument("--rounds", type=int, default=8, help="timed steps per model")
+    parser.add_argument("--threads", type=int, default=1, help="CPU intra-op threads")
     parser.add_argument("--peak-tflops", type=float, default=989.0, help="GPU peak bf16 TFLOP/s for MFU (H100 SXM: 989)")
     args = parser.parse_args()
     size = SIZES["full" if args.full else "small"]
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    torch.set_num_threads(args.threads)
     bf16 = device.type == "cuda"
     torch.manual_seed(0)
     runs = {name: build(size, device) for name, build in (("drivewm DiT", ours), ("diffusers LTX", peer))}
@@ -99,7 +100,7 @@ def main() -> None:
           f"D={size['hidden_dim']} depth {size['depth']}")
     rate = {}
     for name, (model, _) in runs.items():
-        step_s = statistics.median(times[name])
+        step_s = min(times[name])
         rate[name] = tokens / step_s
         line = f"{name:14s} {count_parameters(model) / 1e6:6.1f}M params  {step_s * 1e3:8.1f} ms/step  {rate[name]:9.0f} tokens/s"
         if device.type == "cuda":
