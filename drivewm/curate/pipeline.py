@@ -8,11 +8,13 @@ the report and the contact sheet atomically. Rerunning after a kill redoes only 
 from __future__ import annotations
 
 import hashlib
+import io
+import tarfile
 from pathlib import Path
 
 import numpy as np
 
-from drivewm.atomic import write_json
+from drivewm.atomic import atomic_path, write_json
 from drivewm.clips.shards import write_manifest
 from drivewm.config import to_dict
 from drivewm.curate.config import CurateConfig
@@ -42,6 +44,7 @@ def curate(log_paths: list[Path], out_dir: Path, cfg: CurateConfig, executor: st
     jobs = [(str(p), n) for p, n in zip(log_paths, name_logs(log_paths))]
     results = _run(jobs, out_dir, cfg, executor, workers, ray_address, progress)
     rows, cross = dedup_across_logs(results, cfg.filters.dedup_cosine)
+    prune_shards(out_dir, results, set(cross))
     write_manifest(out_dir, rows)
     sheet = write_contact_sheet(out_dir, rows, cfg.contact_sheet_clips)
     report = build_report(results, rows, cross, cfg, sheet)
@@ -78,7 +81,7 @@ def dedup_across_logs(results: list[dict], threshold: float) -> tuple[list[dict]
     """Manifest rows (log-name order, then key) without clips that duplicate a clip of an earlier log.
 
     Returns (rows, {dropped key: key it duplicates}). Within a log the stage already de-duplicated;
-    dropped clips stay in their shard but leave the manifest, the dataset's index.
+    across logs the dropped clips are then removed from their shards by :func:`prune_shards`.
     """
     rows, cross, pool, pool_keys = [], {}, [], []
     for res in sorted((r for r in results if r["status"] == "ok"), key=lambda r: r["name"]):
@@ -93,6 +96,27 @@ def dedup_across_logs(results: list[dict], threshold: float) -> tuple[list[dict]
             pool.append(emb[i])
             pool_keys.append(row["key"])
     return rows, cross
+
+
+def prune_shards(out_dir: Path, results: list[dict], drop: set[str]) -> None:
+    """Rewrite (atomically) every shard holding a clip in ``drop`` without it; a shard left empty is
+    deleted. Idempotent, so a run killed half-way converges on the rerun."""
+    shards = sorted({row["shard"] for r in results if r["status"] == "ok" for row in r["rows"] if row["key"] in drop})
+    for name in shards:
+        path = out_dir / name
+        if not path.is_file():
+            continue
+        with tarfile.open(path) as tar:
+            members = [(m, tar.extractfile(m).read()) for m in tar if m.isfile()]
+        kept = [(m, data) for m, data in members if m.name.partition(".")[0] not in drop]
+        if len(kept) == len(members):
+            continue
+        if not kept:
+            path.unlink()
+            continue
+        with atomic_path(path) as tmp, tarfile.open(tmp, "w") as out:
+            for member, data in kept:
+                out.addfile(member, io.BytesIO(data))
 
 
 def build_report(results: list[dict], rows: list[dict], cross: dict[str, str], cfg: CurateConfig, sheet: Path | None) -> dict:

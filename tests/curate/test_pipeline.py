@@ -136,3 +136,18 @@ def test_ray_executor_matches_local(run, tmp_path):
     ray_report = curate(logs, tmp_path / "out", cfg, executor="ray", workers=2, progress=False)
     assert ray_report["logs_failed"] == 2
     assert (tmp_path / "out" / "manifest.jsonl").read_text() == (root / "out" / "manifest.jsonl").read_text()
+
+
+def test_same_drive_twice_is_deduplicated_across_logs(tmp_path):
+    import shutil
+
+    first = write_synth_log(tmp_path / "logs" / "drive_a.mcap", seed=7, n_frames=40)
+    copy = tmp_path / "logs" / "drive_b.mcap"
+    shutil.copy(first, copy)
+    other = write_synth_log(tmp_path / "logs" / "drive_c.mcap", seed=8, n_frames=40)
+    report = curate([copy, first, other], tmp_path / "out", load_curate_config(CONFIG), progress=False)
+    assert report["duplicates_across_logs"] == {"drive_b-000000": "drive_a-000000", "drive_b-000017": "drive_a-000017"}
+    assert report["dropped"] == {"near_duplicate_across_logs": 2}
+    keys = sorted(c.key for c in iter_clips(tmp_path / "out"))
+    assert keys == ["drive_a-000000", "drive_a-000017", "drive_c-000000", "drive_c-000017"]  # pruned from the shards too
+    assert keys == sorted(r["key"] for r in read_manifest(tmp_path / "out"))
