@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=int, default=1, help="samples per prompt")
     g.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    g.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to sample (auto: CUDA when available)")
     g.add_argument("--rig", help="camera rig (multi-view models)")
     g.add_argument("--trajectory", help="straight|left|right|stop|FILE (multi-view models)")
     g.add_argument("--condition-clip", type=Path, help="clip whose first frames condition the sample (Video2World)")
@@ -75,7 +76,7 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     if args.rig or args.trajectory or args.condition_clip:
         raise DrivewmError(f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip (multi-view models do)")
-    options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler)
+    options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device)
     files = generate_text2world(args.model, options, args.out)
     print(f"wrote {len(files)} files to {args.out}")
     return 0

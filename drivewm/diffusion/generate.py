@@ -40,6 +40,8 @@ class GenerateOptions:
     """``heun`` (EDM Alg. 1) or ``euler``."""
     batch_size: int = 4
     """Samples denoised together."""
+    device: str = "auto"
+    """``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
 
     def __post_init__(self) -> None:
         if not self.prompts or self.steps < 1 or self.num_samples < 1 or self.batch_size < 1:
@@ -122,7 +124,7 @@ def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir
     """Sample ``options.num_samples`` clips per prompt from a Text2World folder and write them."""
     from drivewm.diffusion.text2world import Text2World
 
-    model = Text2World.from_pretrained(model_dir)
+    model = Text2World.from_pretrained(model_dir).to(options.device)
     prompts = [p for p in options.prompts for _ in range(options.num_samples)]
     seeds = [options.seed + i for i in range(len(prompts))]
     latents = []

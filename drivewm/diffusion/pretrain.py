@@ -76,7 +76,7 @@ def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | No
         return data_dir
     if name is None and tokenizer_dir is None:
         raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
-    cache = data_dir / "latents" / (name or Path(tokenizer_dir).name)
+    cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
     if not (cache / "index.json").is_file():
         raise DrivewmError(f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first")
     return cache

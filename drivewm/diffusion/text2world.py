@@ -64,6 +64,15 @@ class Text2World:
         self.text_encoder = build_text_encoder(cfg.text)
         self.dit = DiT(cfg.dit).eval()
         self.denoiser = EDMDenoiser(self.dit, cfg.edm, cfg.dit.cond_mask_channel)
+        self.device = torch.device("cpu")
+
+    def to(self, device: str | torch.device) -> "Text2World":
+        """Run sampling on ``device`` (``auto``: CUDA when available); noise stays seeded on the CPU."""
+        if device == "auto":
+            device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.device = torch.device(device)
+        self.dit.to(self.device)
+        return self
 
     def save_pretrained(self, path: str | Path, dit_state: dict[str, torch.Tensor] | None = None) -> None:
         """Write the model folder (``dit_state`` defaults to the DiT's current weights)."""
@@ -82,8 +91,9 @@ class Text2World:
         return model
 
     def conditioning(self, prompts: list[str], fps: float | None = None) -> Conditioning:
+        """Caption embeddings and frame rate for ``prompts``, on the model's device."""
         emb, mask = self.text_encoder.encode(prompts)
-        return Conditioning(emb, mask, torch.full((len(prompts),), fps or self.latent.fps))
+        return Conditioning(emb.to(self.device), mask.to(self.device), torch.full((len(prompts),), fps or self.latent.fps, device=self.device))
 
     @torch.no_grad()
     def sample_latents(
@@ -100,11 +110,13 @@ class Text2World:
         c, t, h, w = self.latent.latent_shape
         cond = self.conditioning(prompts, fps)
         if cond_latents is not None:
-            cond = dataclasses.replace(cond, cond_latents=normalize_latents(cond_latents, *self._stats(), self.cfg.edm.sigma_data), cond_frames=self.cfg.edm.cond_frames)
-        sigmas = karras_sigmas(steps)
-        x = seeded_noise((len(prompts), c, t, h, w), seeds) * sigmas[0]
-        x = SAMPLERS[sampler](GuidedDenoiser(self.denoiser, guidance), x, sigmas, extra_args={"cond": cond})
-        return denormalize_latents(x, *self._stats(), self.cfg.edm.sigma_data)
+            given = normalize_latents(cond_latents.cpu(), *self._stats(), self.cfg.edm.sigma_data).to(self.device)
+            cond = dataclasses.replace(cond, cond_latents=given, cond_frames=self.cfg.edm.cond_frames)
+        sigmas = karras_sigmas(steps).to(self.device)
+        x = seeded_noise((len(prompts), c, t, h, w), seeds).to(self.device) * sigmas[0]
+        with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.device.type == "cuda"):
+            x = SAMPLERS[sampler](GuidedDenoiser(self.denoiser, guidance), x, sigmas, extra_args={"cond": cond})
+        return denormalize_latents(x.float().cpu(), *self._stats(), self.cfg.edm.sigma_data)
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)
