@@ -9,11 +9,14 @@
 - ``white_fraction``: share of bright, unsaturated pixels (snow cover).
 - ``warmth``: mean R - B (dusk light is orange), ``sky_blue``: B - R in the top third (clear sky).
 - ``edge_energy``: mean |Laplacian| (fog and rain soften edges).
+- ``ground_luma``: mean luma of the bottom third (snow cover is bright, wet asphalt dark).
+- ``horizon_contrast``: relative luma spread of the middle third, where distant things are (fog
+  flattens it first).
 - ``flicker``: mean |high-pass(frame t+1) - high-pass(frame t)| (rain and snow particles move
   from frame to frame while the scene barely changes).
 
-``classify_condition(scores)`` is a nearest-centroid classifier in z-scored feature space whose
-centroids and scales were fitted on simulator renders of every weather x time-of-day pair
+``classify_condition(scores)`` is a nearest-centroid classifier in z-scored feature space, one
+centroid per weather x time-of-day pair, with centroids and scales fitted on simulator renders
 (``python -m drivewm.eval.calibrate_adherence``; the numbers live in adherence_calibration.py).
 Probabilities are a softmax over negative squared distances.
 """
@@ -26,7 +29,7 @@ import numpy as np
 from drivewm.errors import DrivewmError
 
 FEATURES = ("luma_mean", "luma_p99", "saturation", "contrast", "dark_channel", "white_fraction",
-            "warmth", "sky_blue", "edge_energy", "flicker")
+            "warmth", "sky_blue", "edge_energy", "ground_luma", "horizon_contrast", "flicker")
 DARK_CHANNEL_PATCH = 15  # He et al. 2009 use 15x15 patches
 MAX_FRAMES = 8  # statistics are averaged over at most this many evenly spaced frames
 
@@ -38,7 +41,8 @@ def _frame_stats(rgb: np.ndarray) -> dict[str, float]:
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV).astype(np.float32)
     sat = hsv[..., 1] / 255.0
     dark = cv2.erode(f.min(axis=2), np.ones((DARK_CHANNEL_PATCH, DARK_CHANNEL_PATCH), np.uint8))
-    top = f[: f.shape[0] // 3]
+    h = f.shape[0]
+    top = f[: h // 3]
     return {
         "luma_mean": float(luma.mean()),
         "luma_p99": float(np.percentile(luma, 99)),
@@ -49,6 +53,8 @@ def _frame_stats(rgb: np.ndarray) -> dict[str, float]:
         "warmth": float(f[..., 0].mean() - f[..., 2].mean()),
         "sky_blue": float(top[..., 2].mean() - top[..., 0].mean()),
         "edge_energy": float(np.abs(cv2.Laplacian(luma, cv2.CV_32F)).mean()),
+        "ground_luma": float(luma[2 * h // 3:].mean()),
+        "horizon_contrast": float(luma[h // 3: 2 * h // 3].std() / (luma[h // 3: 2 * h // 3].mean() + 0.05)),
     }
 
 
@@ -80,29 +86,32 @@ def _view_scores(video: np.ndarray) -> dict[str, float]:
     return out
 
 
-def _classify(x: np.ndarray, table: dict) -> tuple[str, dict[str, float]]:
-    """Nearest centroid in z-scored space; probabilities = softmax(-d^2 / 2)."""
-    mean, std = np.asarray(table["mean"]), np.asarray(table["std"])
-    z = (x - mean) / std
-    names = list(table["centroids"])
-    d2 = np.array([np.sum((z - np.asarray(table["centroids"][n])) ** 2) for n in names])
-    p = np.exp(-(d2 - d2.min()) / 2)
-    p /= p.sum()
-    return names[int(np.argmin(d2))], {n: float(v) for n, v in zip(names, p)}
-
-
 def classify_condition(scores: dict[str, float], calibration: dict | None = None) -> dict:
     """Predicted weather and time of day of a clip from :func:`condition_scores`.
 
+    Nearest centroid over the joint weather x time-of-day classes in z-scored feature space
+    (weather looks different by day and by night, so one centroid per pair), probabilities a
+    softmax over -d^2 / 2, then summed per weather and per time of day.
     Returns ``{"weather": str, "weather_prob": {class: p}, "time_of_day": str, "time_of_day_prob": {...}}``.
     ``calibration`` defaults to the simulator-fitted tables in adherence_calibration.py.
     """
     if calibration is None:
         from drivewm.eval.adherence_calibration import CALIBRATION as calibration
     x = np.array([scores[k] for k in calibration["features"]])
-    weather, p_w = _classify(x, calibration["weather"])
-    tod, p_t = _classify(x, calibration["time_of_day"])
-    return {"weather": weather, "weather_prob": p_w, "time_of_day": tod, "time_of_day_prob": p_t}
+    z = (x - np.asarray(calibration["mean"])) / np.asarray(calibration["std"])
+    names = list(calibration["centroids"])
+    d2 = np.array([np.sum((z - np.asarray(calibration["centroids"][n])) ** 2) for n in names])
+    p = np.exp(-(d2 - d2.min()) / 2)
+    p /= p.sum()
+    out: dict = {}
+    for i, field in enumerate(("weather", "time_of_day")):
+        probs: dict[str, float] = {}
+        for name, pi in zip(names, p):
+            label = name.split("/")[i]
+            probs[label] = probs.get(label, 0.0) + float(pi)
+        out[field] = max(probs, key=probs.get)
+        out[f"{field}_prob"] = probs
+    return out
 
 
 def fit_calibration(samples: list[tuple[dict[str, float], str, str]]) -> dict:
@@ -110,12 +119,9 @@ def fit_calibration(samples: list[tuple[dict[str, float], str, str]]) -> dict:
     X = np.array([[s[k] for k in FEATURES] for s, _, _ in samples])
     mean, std = X.mean(0), X.std(0) + 1e-6
     Z = (X - mean) / std
-    out: dict = {"features": list(FEATURES)}
-    for field, col in (("weather", 1), ("time_of_day", 2)):
-        labels = np.array([s[col] for s in samples])
-        cents = {c: Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
-        out[field] = {"mean": mean.round(8).tolist(), "std": std.round(8).tolist(), "centroids": cents}
-    return out
+    labels = np.array([f"{w}/{t}" for _, w, t in samples])
+    cents = {c: Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
+    return {"features": list(FEATURES), "mean": mean.round(8).tolist(), "std": std.round(8).tolist(), "centroids": cents}
 
 
 def adherence(scores: dict[str, float], prompted: dict[str, str], calibration: dict | None = None) -> dict:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivewm.eval.adherence import classify_condition, condition_scores, fit_calibration
+from drivewm.eval.adherence import FEATURES, classify_condition, condition_scores, fit_calibration
 
 SOURCES = (("highway", "highway"), ("sumo", "grid"))
 
@@ -53,7 +53,10 @@ def main(argv: list[str] | None = None) -> int:
     header = (f'"""Adherence classifier tables fitted by drivewm.eval.calibrate_adherence on {len(samples)} simulator\n'
               f"renders ({args.seeds} seeds x weathers x times of day x sources {SOURCES}, {args.duration} s at 5 fps).\n"
               f'Training accuracy: weather {acc_w:.3f}, time of day {acc_t:.3f}. Regenerate; do not edit by hand."""\n\n')
-    Path(args.out).write_text(header + "CALIBRATION = " + pprint.pformat(table, width=110, sort_dicts=False) + "\n")
+    rows = [[w, t] + [round(s[k], 6) for k in FEATURES] for s, w, t in samples]
+    Path(args.out).write_text(header + "CALIBRATION = " + pprint.pformat(table, width=110, sort_dicts=False) + "\n\n"
+                              + "#: The renders' scores [weather, time_of_day, *FEATURES], kept so the tables can be refitted.\n"
+                              + "SAMPLES = " + pprint.pformat(rows, width=110) + "\n")
     print(f"wrote {args.out}: weather accuracy {acc_w:.3f}, time-of-day accuracy {acc_t:.3f}")
     return 0
 

@@ -54,9 +54,12 @@ def fit_fundamental(m: Matches, cfg: EpipolarConfig) -> tuple[np.ndarray | None,
     """Robust F (x_b^T F x_a = 0) with cv2.USAC_MAGSAC (Barath et al. 2020); (None, empty) when it fails."""
     if len(m) < max(cfg.min_matches, 8):
         return None, np.zeros(len(m), bool)
-    F, mask = cv2.findFundamentalMat(
-        m.uv_a, m.uv_b, cv2.USAC_MAGSAC, cfg.ransac_threshold_px, cfg.ransac_confidence, cfg.ransac_max_iters
-    )
+    try:
+        F, mask = cv2.findFundamentalMat(
+            m.uv_a, m.uv_b, cv2.USAC_MAGSAC, cfg.ransac_threshold_px, cfg.ransac_confidence, cfg.ransac_max_iters
+        )
+    except cv2.error:  # USAC asserts on degenerate samples (e.g. all matches on one plane) instead of failing
+        return None, np.zeros(len(m), bool)
     if F is None or F.shape != (3, 3):
         return None, np.zeros(len(m), bool)
     return F / np.linalg.norm(F), mask.reshape(-1).astype(bool)
@@ -66,9 +69,12 @@ def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.nd
     """Robust E from matches in pixels of a camera with intrinsics K (both views), USAC_MAGSAC."""
     if len(m) < max(cfg.min_matches, 5):
         return None, np.zeros(len(m), bool)
-    E, mask = cv2.findEssentialMat(
-        m.uv_a, m.uv_b, K, cv2.USAC_MAGSAC, cfg.ransac_confidence, cfg.ransac_threshold_px, maxIters=cfg.ransac_max_iters
-    )
+    try:
+        E, mask = cv2.findEssentialMat(
+            m.uv_a, m.uv_b, K, cv2.USAC_MAGSAC, cfg.ransac_confidence, cfg.ransac_threshold_px, maxIters=cfg.ransac_max_iters
+        )
+    except cv2.error:
+        return None, np.zeros(len(m), bool)
     if E is None or E.shape != (3, 3):
         return None, np.zeros(len(m), bool)
     return E, mask.reshape(-1).astype(bool)
