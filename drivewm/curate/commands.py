@@ -10,7 +10,7 @@ DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "datasets" / "curate" / "
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("curate", help="drive logs -> synchronized, filtered, captioned multi-view clip shards")
-    p.add_argument("logs", nargs="+", type=Path, help="MCAP drive logs (files, or folders of *.mcap)")
+    p.add_argument("logs", nargs="+", type=Path, help="MCAP drive logs: files, folders of *.mcap, or split ROS 2 bag folders")
     p.add_argument("--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png")
     p.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="curation recipe (datasets/curate/*.yaml)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field, e.g. filters.dedup_cosine=0.99")
@@ -28,9 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _expand(paths: list[Path]) -> list[Path]:
+    """Logs from the arguments: files as given; a folder is a split ROS 2 bag (one log) when it has
+    rosbag2's metadata.yaml, else a folder of logs (its *.mcap files)."""
     out: list[Path] = []
     for p in paths:
-        out += sorted(p.glob("*.mcap")) if p.is_dir() else [p]
+        out += sorted(p.glob("*.mcap")) if p.is_dir() and not (p / "metadata.yaml").is_file() else [p]
     return out
 
 
