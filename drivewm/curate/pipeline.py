@@ -133,6 +133,7 @@ def build_report(results: list[dict], rows: list[dict], cross: dict[str, str], c
         "dropped": dropped,
         "logs_ok": sum(r["status"] == "ok" for r in results),
         "logs_failed": sum(r["status"] == "failed" for r in results),
+        "worst_sync_skew_ns": max((r["sync"]["worst_skew_ns"] for r in results if r["status"] == "ok"), default=0),
         "logs": logs,
         "duplicates_across_logs": cross,
         "contact_sheet": sheet.name if sheet else None,

@@ -60,6 +60,7 @@ def test_bad_logs_reported_and_good_logs_curated(run):
     assert any("CAM_FRONT_RIGHT: 3 of" in w for w in by["cam_drops"]["warnings"])
     assert by["cam_drops"]["kept"] == 2  # the gap at ticks 20-22 leaves [0, 20) and [23, 52): one clip each
     assert any("3 NaN/missing bridged" in w for w in by["nan_pose"]["warnings"])
+    assert report["worst_sync_skew_ns"] == 8_000_000  # good_b's jittered rig
     assert report["logs_failed"] == 2 and report["kept"] == len(read_manifest(root / "out"))
     assert (root / "out" / "contact_sheet.png").stat().st_size > 10_000
 
