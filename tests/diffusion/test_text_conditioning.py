@@ -4,8 +4,9 @@ generates, for each prompt, clips that a simple statistic assigns to the prompte
 Latents: to fit the test budget the clips are coded by a fixed, lossy stand-in for the tokenizer
 (every 8th video frame, 32x32 average pooling of RGB in [-1, 1]: (3, 3, 6, 10) per view), written as
 a real latent cache; "decoding" upsamples them (drivewm.diffusion.generate.latents_preview). The
-statistic is the mean brightness of the lower half of the decoded frames (the road: white in snow),
-with the decision threshold calibrated on the training clips themselves.
+statistic is the eval stage's ``ground_luma`` (drivewm.eval.adherence.condition_scores: mean luma of
+the bottom third, where snow cover is bright), with the decision threshold half-way between the two
+conditions' means on the training clips themselves.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from drivewm.clips.latents import write_latent_clip, write_latent_index
 from drivewm.diffusion.generate import latents_preview
 from drivewm.diffusion.pretrain import pretrain, pretrain_config
 from drivewm.diffusion.text2world import Text2World
+from drivewm.eval.adherence import condition_scores
 
 DRIVES = {"clear": "highway_clear", "snow": "highway_snow"}
 
@@ -34,9 +36,9 @@ def pooled_latents(videos: np.ndarray) -> torch.Tensor:
     return rearrange(F.avg_pool2d(x, 32), "(v t) c h w -> v c t h w", v=videos.shape[0])
 
 
-def lower_half_brightness(video: np.ndarray) -> float:
-    """Mean of a uint8 (T, H, W, 3) video's lower half, 0..255."""
-    return float(video[:, video.shape[1] // 2 :].mean())
+def ground_luma(video: np.ndarray) -> float:
+    """The eval stage's snow-cover statistic of a uint8 (T, H, W, 3) video, 0..1."""
+    return condition_scores(video)["ground_luma"]
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +53,7 @@ def condition_cache(sim_clip_dir: Path, tmp_path_factory) -> tuple[Path, dict[st
         z = pooled_latents(clip.videos())
         rows.append(write_latent_clip(out, clip.meta, z, clip.T_world_from_ego))
         captions[cond] += [clip.meta.view_captions.get(c, clip.meta.caption) for c in clip.meta.cameras]
-        stats[cond] += [lower_half_brightness(v) for v in latents_preview(z)]
+        stats[cond] += [ground_luma(v) for v in latents_preview(z)]
     assert all(captions.values()), f"need clear and snow highway clips in {sim_clip_dir}"
     write_latent_index(out, {"path": None, "latent_mean": [0.0] * 3, "latent_std": [0.5] * 3}, rows)
     return out, captions, stats
@@ -73,7 +75,7 @@ def _classify(model: Text2World, captions: dict[str, list[str]], threshold: floa
     for i, (cond, caps) in enumerate(captions.items()):
         prompts = sorted(set(caps))
         videos = latents_preview(model.sample_latents(prompts, [100 * i + j for j in range(len(prompts))], steps=12, guidance=guidance))
-        values = np.array([lower_half_brightness(v) for v in videos])
+        values = np.array([ground_luma(v) for v in videos])
         means[cond] = values.mean()
         is_snow = values > threshold if snow_brighter else values < threshold
         correct += list(is_snow if cond == "snow" else ~is_snow)
@@ -83,10 +85,10 @@ def _classify(model: Text2World, captions: dict[str, list[str]], threshold: floa
 def test_generated_clips_follow_the_prompted_condition_and_guidance_strengthens_it(condition_cache, trained):
     _, captions, stats = condition_cache
     clear, snow = np.mean(stats["clear"]), np.mean(stats["snow"])
-    assert abs(snow - clear) > 10, f"the statistic must separate the data first: clear {clear:.1f}, snow {snow:.1f}"
+    assert abs(snow - clear) > 0.05, f"the statistic must separate the data first: clear {clear:.3f}, snow {snow:.3f}"
     threshold = (clear + snow) / 2
     acc_guided, gap_guided = _classify(trained, captions, threshold, snow > clear, guidance=4.0)
     acc_plain, gap_plain = _classify(trained, captions, threshold, snow > clear, guidance=1.0)
-    print(f"clear {clear:.1f} snow {snow:.1f}; accuracy guided {acc_guided:.2f} (gap {gap_guided:.1f}), plain {acc_plain:.2f} (gap {gap_plain:.1f})")
+    print(f"clear {clear:.3f} snow {snow:.3f}; accuracy guided {acc_guided:.2f} (gap {gap_guided:.3f}), plain {acc_plain:.2f} (gap {gap_plain:.3f})")
     assert acc_guided >= 0.9, "chance is 0.5"
     assert gap_guided > gap_plain
