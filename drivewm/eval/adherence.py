@@ -120,7 +120,7 @@ def fit_calibration(samples: list[tuple[dict[str, float], str, str]]) -> dict:
     mean, std = X.mean(0), X.std(0) + 1e-6
     Z = (X - mean) / std
     labels = np.array([f"{w}/{t}" for _, w, t in samples])
-    cents = {c: Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
+    cents = {str(c): Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
     return {"features": list(FEATURES), "mean": mean.round(8).tolist(), "std": std.round(8).tolist(), "centroids": cents}
 
 

@@ -43,6 +43,7 @@ def run_sfm(videos: dict[str, np.ndarray], rig: Rig, cfg: PoseConfig, rig_aware:
     import pycolmap
 
     pycolmap.set_random_seed(cfg.seed)
+    pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 2)  # COLMAP's INFO lines would drown the progress bar
     with tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"

@@ -91,3 +91,13 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
     assert main(["eval", str(tmp_path / "x.mp4"), "--rig", "front1", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "x.mp4" in err and err.count("\n") == 1
+
+
+def test_default_suite_yaml_pins_the_config_defaults():
+    from pathlib import Path
+
+    from drivewm.config import load_yaml, to_dict
+    from drivewm.eval.config import eval_config_from_dict
+
+    suite = Path(__file__).resolve().parents[2] / "eval" / "suites" / "default.yaml"
+    assert to_dict(eval_config_from_dict(load_yaml(suite))) == to_dict(EvalConfig())
