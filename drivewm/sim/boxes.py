@@ -108,14 +108,32 @@ def draw_boxes(img: np.ndarray, zbuf: np.ndarray, view, T_cam_from_world: np.nda
     in_front = (quads[..., 2] >= NEAR_M).all(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         uv_all = quads[..., :2] / quads[..., 2:3] @ view.K[:2, :2].T + view.K[:2, 2]  # (F, 4, 2)
-        lo, hi = np.floor(uv_all.min(axis=1)), np.ceil(uv_all.max(axis=1))
-        on_screen = ~in_front | ((hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] < view.width) & (lo[:, 1] < view.height))
-        for k in np.flatnonzero(on_screen):
-            box, f = keep[mi[k]], fi[k]
-            uv = uv_all[k] if in_front[k] else _project_clipped(view.K, quads[k])
-            if len(uv):
-                tex = boxes.textures[box]
-                draw_face(img, zbuf, view, uv, normals[k], depth_d[k], H[k], tex.images[f], boxes.shade[box, f])
+    rects = _pixel_rects(uv_all, view.width, view.height)  # (F, 4) x0, y0, x1, y1
+    with np.errstate(divide="ignore", invalid="ignore"):  # rays parallel to a face plane: z = inf, never drawn
+        _draw_faces(img, zbuf, view, boxes, keep, mi, fi, quads, normals, depth_d, H, in_front, rects)
+
+
+def _draw_faces(img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, depth_d, H, in_front, rects) -> None:
+    for k in np.flatnonzero(~in_front | (rects[:, 2] > rects[:, 0]) & (rects[:, 3] > rects[:, 1])):
+        box, f = keep[mi[k]], fi[k]
+        if in_front[k]:
+            rect = rects[k]
+        else:
+            uv = _project_clipped(view.K, quads[k])
+            if len(uv) == 0:
+                continue
+            rect = _pixel_rects(uv[None], view.width, view.height)[0]
+            if rect[2] <= rect[0] or rect[3] <= rect[1]:
+                continue
+        draw_face(img, zbuf, view, rect, normals[k], depth_d[k], H[k], boxes.textures[box].images[f], boxes.shade[box, f])
+
+
+def _pixel_rects(uv: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Pixel rectangles [x0, x1) x [y0, y1) (F, 4) holding polygons (F, M, 2), clipped to the image."""
+    lo = np.floor(np.nan_to_num(uv.min(axis=1), nan=-1e9, posinf=1e9, neginf=-1e9).clip(-1e6, 1e6))
+    hi = np.ceil(np.nan_to_num(uv.max(axis=1), nan=1e9, posinf=1e9, neginf=-1e9).clip(-1e6, 1e6)) + 1
+    return np.stack([lo[:, 0].clip(0, width), lo[:, 1].clip(0, height), hi[:, 0].clip(0, width), hi[:, 1].clip(0, height)],
+                    axis=1).astype(int)
 
 
 def _homographies(K: np.ndarray, quads: np.ndarray, sizes: np.ndarray) -> np.ndarray:
@@ -146,19 +164,15 @@ def _project_clipped(K: np.ndarray, quad_cam: np.ndarray) -> np.ndarray:
     return poly[:, :2] / poly[:, 2:3] @ K[:2, :2].T + K[:2, 2]
 
 
-def draw_face(img: np.ndarray, zbuf: np.ndarray, view, uv: np.ndarray, normal_cam: np.ndarray, plane_d: float,
+def draw_face(img: np.ndarray, zbuf: np.ndarray, view, rect: np.ndarray, normal_cam: np.ndarray, plane_d: float,
               H: np.ndarray, tex_rgba: np.ndarray, shade: float) -> None:
-    """Fill one planar face (projected polygon ``uv`` (M, 2) for the bounding box, plane n . X = d
-    in the camera frame, padded-texel -> pixel homography ``H``) where it is nearer than the z-buffer."""
-    x0, y0 = np.floor(uv.min(axis=0)).astype(int)
-    x1, y1 = np.ceil(uv.max(axis=0)).astype(int) + 1
-    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, view.width), min(y1, view.height)
-    if x1 <= x0 or y1 <= y0:
-        return
+    """Fill one planar face inside the pixel rectangle ``rect`` (x0, y0, x1, y1) where it is nearer
+    than the z-buffer: plane n . X = d in the camera frame, padded-texel -> pixel homography ``H``."""
+    x0, y0, x1, y1 = rect
     M = H.copy()
     M[0] -= x0 * H[2]
     M[1] -= y0 * H[2]
-    warped = cv2.warpPerspective(tex_rgba, M, (x1 - x0, y1 - y0), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    warped = cv2.warpPerspective(tex_rgba, M, (int(x1 - x0), int(y1 - y0)), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
     z = plane_d / (normal_cam[0] * view.xn[None, x0:x1] + normal_cam[1] * view.yn[y0:y1, None] + normal_cam[2])
     zroi = zbuf[y0:y1, x0:x1]
     win = (warped[..., 3] > 127) & (z < zroi) & (z > 0)

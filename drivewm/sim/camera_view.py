@@ -32,12 +32,12 @@ class CameraView:
     yn: np.ndarray  # (H,) float32
     ray_norm: np.ndarray  # (H, W) float32 length of (xn, yn, 1): camera depth z -> distance
     ground_z: np.ndarray  # (H, W) float32 camera depth of the ground hit, inf for sky
-    level_idx: list[np.ndarray]  # per mip level: flat pixel indices whose ground hit uses that level
-    level_ego_xy: list[np.ndarray]  # per mip level: their ground hits (N_l, 2) in the ego frame
-    level_gain: list[np.ndarray | None]  # per mip level: ego headlight gain (N_l, 1) or None
+    ground_idx: np.ndarray  # flat indices of the drawn ground pixels, grouped by mip level
+    level_slices: list[slice]  # per mip level: its part of ground_idx
+    ground_ego_xy: np.ndarray  # (N, 1, 2) float32 ground hits of ground_idx in the ego frame
+    headlight_gain: np.ndarray | None  # (N, 1) float32 ego low-beam gain per ground pixel, or None
     far_idx: np.ndarray  # flat indices of ground beyond the drawn range
-    detail_idx: list[np.ndarray]  # per grain level: flat pixel indices that get fine grain
-    detail_ego_xy: list[np.ndarray]  # per grain level: their ground hits (N_l, 2) in the ego frame
+    detail_runs: list[tuple[slice, int]]  # (part of ground_idx, grain level) runs that get fine grain
     sky: np.ndarray  # (H, W, 3) uint8 background (sky gradient)
     ground_fog: np.ndarray  # (H, W) float32 transmittance of the ground/sky per pixel
     side_planes: np.ndarray  # (4, 3) unit inward normals of the frustum side planes (camera frame)
@@ -53,20 +53,28 @@ class CameraView:
         rays_ego = rays_cam @ R.T
         with np.errstate(divide="ignore", invalid="ignore"):
             t = np.where(rays_ego[..., 2] < -1e-6, -c[2] / rays_ego[..., 2], np.inf)
-        hit = c[:2] + t[..., None] * rays_ego[..., :2]  # (H, W, 2) ego frame; inf for sky
+        with np.errstate(invalid="ignore"):
+            hit = c[:2] + t[..., None] * rays_ego[..., :2]  # (H, W, 2) ego frame; inf/nan for sky
         ray_norm = np.linalg.norm(rays_cam, axis=-1).astype(np.float32)
         ground = np.isfinite(t)
         near = ground & (np.linalg.norm(hit - c[:2], axis=-1) <= max_range_m)
         level = _mip_level(hit, texel_m, levels)
-        idx = [np.flatnonzero(near & (level == k)) for k in range(levels)]
-        flat_hit = hit.reshape(-1, 2)
-        grain_level = _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1)  # the last level: no grain
-        detail_idx = [np.flatnonzero(near & (grain_level == k)) for k in range(DETAIL_LEVELS)]
+        grain = _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1)  # the last level: no grain
+        # Ground pixels sorted by (mip level, grain level): every group is one contiguous run.
+        ground_idx = np.flatnonzero(near)
+        key = (level * (DETAIL_LEVELS + 1) + grain).reshape(-1)[ground_idx]
+        order = np.argsort(key, kind="stable")
+        ground_idx, key = ground_idx[order], key[order]
+        starts = np.searchsorted(key, np.arange(levels * (DETAIL_LEVELS + 1) + 1))
+        runs = [(slice(starts[i], starts[i + 1]), i % (DETAIL_LEVELS + 1)) for i in range(levels * (DETAIL_LEVELS + 1))]
+        bounds = starts[:: DETAIL_LEVELS + 1]
+        flat_hit = hit.reshape(-1, 2)[ground_idx]
         gain = _headlight_gain(flat_hit, cond)
         view = cls(cam.name, K, cam.width, cam.height, invert_T(cam.T_ego_from_cam), xn, yn, ray_norm,
-                   t.astype(np.float32), idx, [flat_hit[i] for i in idx],
-                   [None if gain is None else gain[i, None].astype(np.float32) for i in idx],
-                   np.flatnonzero(ground & ~near), detail_idx, [flat_hit[i] for i in detail_idx], _sky(rays_ego, cond), np.zeros(0, np.float32), _side_planes(K, cam.width, cam.height),
+                   t.astype(np.float32), ground_idx, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])],
+                   flat_hit.astype(np.float32)[:, None, :], None if gain is None else gain[:, None].astype(np.float32),
+                   np.flatnonzero(ground & ~near), [(r, k) for r, k in runs if k < DETAIL_LEVELS and r.stop > r.start],
+                   _sky(rays_ego, cond), np.zeros(0, np.float32), _side_planes(K, cam.width, cam.height),
                    np.broadcast_to(to_uint8(np.asarray(cond.fog_rgb)), (cam.height, cam.width, 3)).copy())
         # The sky already has the condition's colour: only surfaces (finite depth) are fogged.
         view.ground_fog = np.where(ground, fog_weight(t * ray_norm, cond.visibility_m), 1.0).astype(np.float32)

@@ -33,9 +33,14 @@ class Condition:
     sky_horizon: tuple[float, float, float]
     visibility_m: float  # Koschmieder visibility: contrast falls to 2% (fog), inf = no haze
     fog_rgb: tuple[float, float, float]
-    lights_on: bool  # vehicle lights, street lamps and windows glow
+    lights_on: bool  # vehicle head and tail lights glow (dusk, night, fog, rain)
     snow: bool  # snow cover on the ground and roofs, flakes in the air
     wet: bool  # dark wet asphalt, rain streaks
+
+    @property
+    def lamps_on(self) -> bool:
+        """Street lamps and windows glow (dusk and night only)."""
+        return self.time_of_day != "day"
 
     def tinted(self, albedo: np.ndarray) -> np.ndarray:
         """Albedo (..., 3) in [0, 1] under this light's colour and saturation, before its brightness."""

@@ -51,6 +51,13 @@ class GroundTexture:
         # pyrDown keeps texel k of level l+1 centred on texel 2k of level l.
         return (world_xy - self.origin_xy) / (self.res_m * 2**level)
 
+    def texel_from_ego(self, T_world_from_ego: np.ndarray, level: int) -> np.ndarray:
+        """2x3 affine taking ego-frame ground points (x, y) to texel coordinates of ``levels[level]``."""
+        A = np.empty((2, 3))
+        A[:, :2] = T_world_from_ego[:2, :2] / (self.res_m * 2**level)
+        A[:, 2] = self.texel_coords(T_world_from_ego[:2, 3], level)
+        return A
+
 
 def build_ground(road: RoadMap, lo_xy: np.ndarray, hi_xy: np.ndarray, cond: Condition, seed: int, urban: bool,
                  lamp_xy: np.ndarray, max_texels: int = 8_000_000, min_res_m: float = 0.06) -> GroundTexture:
@@ -70,7 +77,7 @@ def build_ground(road: RoadMap, lo_xy: np.ndarray, hi_xy: np.ndarray, cond: Cond
     if urban and not cond.snow:
         _slab_joints(gain, raster, classes)
     gain *= np.float32(cond.ambient)
-    if cond.lights_on and len(lamp_xy):
+    if cond.lamps_on and len(lamp_xy):
         gain *= 1.0 + _lamp_pools(raster, lamp_xy) / max(cond.ambient, 0.05) * 0.5
     lit = cv2.merge([cv2.multiply(ch, gain, dtype=cv2.CV_8U) for ch in cv2.split(base)])
     levels = [lit]
@@ -138,7 +145,7 @@ def _base_colors(classes: np.ndarray, cond: Condition, raster: _Raster, road: Ro
     base = colors[classes]
     _scatter_spots(base, classes, colors, raster, rng)
     if cond.snow:
-        _tyre_tracks(base, road, raster, unlit(np.asarray(SLUSH_ALBEDO) * 0.45))
+        _tyre_tracks(base, road, raster, unlit(np.asarray(SLUSH_ALBEDO) * 0.6))
     paint = np.asarray(PAINT_ALBEDO) * (0.8 if cond.wet else 1.0)
     _markings(base, road, raster, unlit(0.85 * np.asarray(SLUSH_ALBEDO) + 0.15 * paint if cond.snow else paint))
     return base

@@ -69,26 +69,25 @@ class Renderer:
         return img
 
     def _draw_ground(self, img: np.ndarray, view: CameraView, T_world_from_ego: np.ndarray) -> None:
-        """Look up the ground texture at each ground pixel's world hit (2D rigid motion of the ego hits)."""
-        flat = img.reshape(-1, 3)
-        R2, t2 = T_world_from_ego[:2, :2], T_world_from_ego[:2, 3]
-        for level, (idx, ego_xy, gain) in enumerate(zip(view.level_idx, view.level_ego_xy, view.level_gain)):
-            if len(idx) == 0:
-                continue
-            tc = self.ground.texel_coords(ego_xy @ R2.T + t2, level).astype(np.float32)
-            vals = cv2.remap(self.ground.levels[level], tc[:, :1], tc[:, 1:], cv2.INTER_LINEAR,
-                             borderMode=cv2.BORDER_CONSTANT, borderValue=self.ground.border_rgb)
-            if gain is not None:
-                vals = np.minimum(vals[:, 0] * gain, 255.0).astype(np.uint8)[:, None]
-            flat[idx] = vals[:, 0]
-        flat[view.far_idx] = self.ground.border_rgb
-        for level, (idx, ego_xy) in enumerate(zip(view.detail_idx, view.detail_ego_xy)):
-            if len(idx) == 0:
-                continue
+        """Look up the ground texture at each ground pixel's world hit (a 2D rigid motion of the
+        fixed ego-frame hits), multiply in the fine grain and the ego's headlights, scatter once."""
+        colors = np.empty((len(view.ground_idx), 3), np.uint8)
+        for level, part in enumerate(view.level_slices):
+            if part.stop > part.start:
+                texel_from_ego = self.ground.texel_from_ego(T_world_from_ego, level)
+                tc = cv2.transform(view.ground_ego_xy[part], texel_from_ego)[:, 0]
+                colors[part] = sample_points(self.ground.levels[level], tc, cv2.BORDER_CONSTANT, self.ground.border_rgb)
+        for part, level in view.detail_runs:
             tex = self.detail[level]
-            tc = (((ego_xy @ R2.T + t2) / (DETAIL_RES_M * 2**level)) % tex.shape[0]).astype(np.float32)
-            gain = cv2.remap(tex, tc[:, :1], tc[:, 1:], cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-            flat[idx] = np.minimum(flat[idx] * (gain.astype(np.float32) * (1.0 / 128.0)), 255.0).astype(np.uint8)
+            grain_from_ego = _affine_from_ego(T_world_from_ego, np.zeros(2), DETAIL_RES_M * 2**level)
+            tc = cv2.transform(view.ground_ego_xy[part], grain_from_ego)[:, 0] % tex.shape[0]
+            gain = sample_points(tex, tc, cv2.BORDER_WRAP)
+            colors[part] = cv2.multiply(colors[part], cv2.merge([gain, gain, gain]), scale=1.0 / 128.0)
+        if view.headlight_gain is not None:
+            colors = np.minimum(colors * view.headlight_gain, 255.0).astype(np.uint8)
+        flat = img.reshape(-1, 3)
+        flat[view.ground_idx] = colors
+        flat[view.far_idx] = self.ground.border_rgb
 
     def _fog(self, img: np.ndarray, zbuf: np.ndarray, view: CameraView) -> np.ndarray:
         """Blend towards the fog colour by transmittance exp(-3.912 d / V) of each pixel's distance."""
@@ -97,3 +96,26 @@ class Renderer:
         w[boxes] = fog_weight(zbuf[boxes] * view.ray_norm[boxes], self.cond.visibility_m)
         return cv2.blendLinear(img, view.fog_image, w, 1.0 - w)
 
+
+
+REMAP_ROW = 4096  # cv2.remap wants maps under 32767 rows/cols: points are laid out in rows of this many
+
+
+def sample_points(tex: np.ndarray, coords: np.ndarray, border: int, border_value=0) -> np.ndarray:
+    """Bilinear samples of ``tex`` at float texel coordinates (N, 2) (col, row) -> (N, C) or (N,)."""
+    n = len(coords)
+    rows = -(-n // REMAP_ROW)
+    grid = np.zeros((rows * REMAP_ROW, 2), np.float32)
+    grid[:n] = coords
+    grid = grid.reshape(rows, REMAP_ROW, 2)
+    out = cv2.remap(tex, grid, None, cv2.INTER_LINEAR, borderMode=border, borderValue=border_value)
+    return out.reshape(rows * REMAP_ROW, *tex.shape[2:])[:n]
+
+
+def _affine_from_ego(T_world_from_ego: np.ndarray, origin_xy: np.ndarray, texel_m: float) -> np.ndarray:
+    """2x3 affine (cv2.transform) from ego-frame ground xy to texel (col, row) of a map with texel
+    centre 0 at world ``origin_xy`` and ``texel_m`` metres per texel."""
+    A = np.empty((2, 3))
+    A[:, :2] = T_world_from_ego[:2, :2] / texel_m
+    A[:, 2] = (T_world_from_ego[:2, 3] - origin_xy) / texel_m
+    return A

@@ -68,6 +68,7 @@ class SceneRecording:
     ticks: list[SceneTick]
     tags: dict[str, str]
     description: str = ""
+    step_cpu_s: float = 0.0  # CPU seconds the simulator spent stepping (for benchmarks)
 
     def ego_xy(self) -> np.ndarray:
         """Ego positions (N, 2) over the drive, world metres."""

@@ -9,6 +9,7 @@ lane changes, Treiber 2000 / Kesting 2007), so drives are sensible without a tra
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -65,21 +66,24 @@ def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> Scene
     dt = 1.0 / cfg.fps / substeps
     ids: dict[int, str] = {}
     ticks = []
+    step_cpu_s = 0.0
     for i in range(cfg.num_ticks):
         ticks.append(_tick(env, ego, int(round(i * 1e9 / cfg.fps)), ids, cfg.seed))
+        t0 = time.process_time()
         for _ in range(substeps):
             env.road.act()
             env.road.step(dt)
         if cfg.scenario == "intersection":
             env._clear_vehicles()
             env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
+        step_cpu_s += time.process_time() - t0
         if ego.crashed and not allow_crash:
             return None
     env.close()
     xy = np.array([t.T_world_from_ego[:2, 3] for t in ticks])
     road = road_map_from_network(env.road.network, xy.min(axis=0) - cfg.max_range_m, xy.max(axis=0) + cfg.max_range_m)
     tags = {"road_type": cfg.road_type, "source": "highway-env"}
-    return SceneRecording(road, ticks, tags)
+    return SceneRecording(road, ticks, tags, step_cpu_s=step_cpu_s)
 
 
 def _tick(env, ego, timestamp_ns: int, ids: dict[int, str], seed: int) -> SceneTick:

@@ -13,6 +13,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -74,24 +75,27 @@ def record_sumo(cfg: SimConfig) -> SceneRecording:
         libsumo.start(["sumo", "-n", str(net_path), "-r", str(routes), "--step-length", f"{dt}", "--seed", str(cfg.seed),
                        "--no-step-log", "true", "--no-warnings", "true", "--collision.action", "none"])
         try:
-            ticks = _drive(libsumo, cfg, dt)
+            ticks, step_cpu_s = _drive(libsumo, cfg, dt)
         finally:
             libsumo.close()
         xy = np.array([t.T_world_from_ego[:2, 3] for t in ticks])
         road = road_map_from_net(net_path, xy.min(axis=0) - cfg.max_range_m, xy.max(axis=0) + cfg.max_range_m)
-    return SceneRecording(road, ticks, {"road_type": cfg.road_type, "source": "sumo"})
+    return SceneRecording(road, ticks, {"road_type": cfg.road_type, "source": "sumo"}, step_cpu_s=step_cpu_s)
 
 
-def _drive(traci, cfg: SimConfig, dt: float) -> list[SceneTick]:
+def _drive(traci, cfg: SimConfig, dt: float) -> tuple[list[SceneTick], float]:
+    """Warm up, insert the ego, then log one tick per step: (ticks, CPU seconds in simulationStep)."""
     for _ in range(int(WARMUP_S / dt)):
         traci.simulationStep()
     _add_ego(traci, cfg.seed)
-    ticks = []
+    ticks, step_cpu_s = [], 0.0
     for i in range(cfg.num_ticks):
         _extend_route(traci, cfg.seed, i)
         ticks.append(_tick(traci, int(round(i * 1e9 / cfg.fps)), cfg.seed))
+        t0 = time.process_time()
         traci.simulationStep()
-    return ticks
+        step_cpu_s += time.process_time() - t0
+    return ticks, step_cpu_s
 
 
 def _drivable_edges(traci) -> list[str]:

@@ -21,13 +21,16 @@ HEADLIGHT_DAY, HEADLIGHT_GLOW = (0.85, 0.86, 0.82), (1.0, 0.97, 0.85)
 TAIL_DAY, TAIL_GLOW = (0.55, 0.05, 0.05), (1.0, 0.15, 0.10)
 WINDOW_GLOW = (1.0, 0.82, 0.50)
 LAMP_GLOW = (1.0, 0.92, 0.72)
+BLINDS = ((0.85, 0.82, 0.72), (0.70, 0.70, 0.68), (0.55, 0.35, 0.25), (0.90, 0.90, 0.88), (0.40, 0.45, 0.55))
 
 
 class _Canvas:
-    """A face texture under construction: albedo (h, w, 3) float and emissive colour/mask."""
+    """A face texture under construction: albedo (h, w, 3) float and emissive colour/mask.
+    ``lamp`` marks emission of street lamps and windows (dusk and night only) as opposed to
+    vehicle lights (also on in fog and rain)."""
 
-    def __init__(self, width_m: float, height_m: float, px_per_m: float, rgb):
-        self.s = px_per_m
+    def __init__(self, width_m: float, height_m: float, px_per_m: float, rgb, lamp: bool = False):
+        self.s, self.lamp = px_per_m, lamp
         self.w, self.h = max(2, int(round(width_m * px_per_m))), max(2, int(round(height_m * px_per_m)))
         self.albedo = np.empty((self.h, self.w, 3), np.float32)
         self.albedo[:] = rgb
@@ -51,7 +54,7 @@ class _Canvas:
 
     def lit(self, cond: Condition) -> np.ndarray:
         out = cond.light(np.clip(self.albedo, 0, 1))
-        if cond.lights_on:
+        if cond.lamps_on if self.lamp else cond.lights_on:
             out[self.glow] = self.emissive[self.glow]
         return to_uint8(out)
 
@@ -126,7 +129,7 @@ def _plain(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str
 
 def _lamp(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str, np.ndarray]:
     tex = _plain(box, cond, rng)
-    c = _Canvas(*face_size_m("bottom", box.size_lwh), 16, (0.85, 0.85, 0.80))
+    c = _Canvas(*face_size_m("bottom", box.size_lwh), 16, (0.85, 0.85, 0.80), lamp=True)
     c.rect(0.05, 0.2, box.size_lwh[1] - 0.05, box.size_lwh[0] - 0.1, (0.9, 0.9, 0.85), LAMP_GLOW)
     tex["bottom"] = c.lit(cond)
     return tex
@@ -163,7 +166,7 @@ def _building(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[
 
 def _facade(width: float, height: float, wall_rgb, cond: Condition, rng: np.random.Generator) -> np.ndarray:
     """A wall with floors of windows (3.2 m apart) and a ground-floor door; some windows lit at night."""
-    c = _Canvas(width, height, 10, wall_rgb)
+    c = _Canvas(width, height, 10, wall_rgb, lamp=True)
     c.albedo *= (1.0 + 0.08 * cv2.resize(rng.standard_normal((max(2, c.h // 8), max(2, c.w // 8))).astype(np.float32),
                                           (c.w, c.h), interpolation=cv2.INTER_CUBIC))[..., None]
     c.grain(rng, 0.06)
@@ -176,6 +179,9 @@ def _facade(width: float, height: float, wall_rgb, cond: Condition, rng: np.rand
             glass = np.asarray(GLASS) * (0.8 + 0.9 * rng.uniform())
             lit = WINDOW_GLOW if rng.uniform() < 0.35 else None
             c.rect(a0, floor_top + 0.82, a0 + 1.2, floor_top + 2.3, glass, lit)
+            if rng.uniform() < 0.6:  # a blind or curtain, lowered by a random amount: no two windows alike
+                blind = np.asarray(BLINDS[int(rng.integers(len(BLINDS)))]) * rng.uniform(0.8, 1.1)
+                c.rect(a0, floor_top + 0.82, a0 + 1.2, floor_top + 0.82 + rng.uniform(0.15, 1.3), blind)
     door = margin + 0.8 + 2.8 * int(rng.integers(n_cols))
     c.rect(door, height - 2.3, door + 1.3, height, (0.25, 0.18, 0.12))
     return c.lit(cond)
