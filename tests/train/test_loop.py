@@ -68,14 +68,20 @@ def test_activation_checkpointing_trains_the_same_weights(latents, single_proces
     assert max((single_process_run[k] - ckpt[k]).abs().max().item() for k in ckpt) < 1e-6
 
 
-@pytest.mark.parametrize("parallel", [["train.parallel=ddp"], ["train.parallel=fsdp", "train.activation_checkpointing=true"]], ids=["ddp", "fsdp2"])
-def test_torchrun_two_cpu_processes_match_one_process(latents, single_process_run, tmp_path, parallel):
-    overrides = TINY + ["train.steps=3", "train.device=cpu"] + parallel
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m", "drivewm.cli", "pretrain",
-           "--data", str(latents), "--out", str(tmp_path / "dist")] + [a for o in overrides for a in ("--set", o)]
+@pytest.mark.parametrize(
+    "parallel, runs",
+    [(["train.parallel=ddp"], [3]), (["train.parallel=fsdp", "train.activation_checkpointing=true"], [2, 3])],
+    ids=["ddp", "fsdp2-resumed"],
+)
+def test_torchrun_two_cpu_processes_match_one_process(latents, single_process_run, tmp_path, parallel, runs):
+    """DDP in one go; FSDP2 stopped after 2 steps and resumed to 3 (sharded EMA/optimizer reload)."""
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    for steps in runs:
+        overrides = TINY + [f"train.steps={steps}", "train.device=cpu"] + parallel
+        cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m", "drivewm.cli", "pretrain",
+               "--data", str(latents), "--out", str(tmp_path / "dist")] + [a for o in overrides for a in ("--set", o)]
+        proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr[-3000:]
     single, dist = single_process_run, torch.load(tmp_path / "dist" / "train_state.pt", weights_only=True)["model"]
     assert single.keys() == dist.keys()
     worst = max((single[k] - dist[k]).abs().max().item() for k in single)
