@@ -14,7 +14,7 @@ import numpy as np
 
 from drivewm.eval.config import PoseConfig
 from drivewm.eval.sfm import SfmResult, run_sfm
-from drivewm.geometry import Rig, invert_T
+from drivewm.geometry import Camera, Rig, invert_T
 
 
 @dataclasses.dataclass
@@ -40,13 +40,18 @@ def ego_from_sfm(sfm: SfmResult, rig: Rig, camera: str = "") -> EgoTrajectory:
     return EgoTrajectory(T, sfm.registered[camera].copy(), camera)
 
 
-def estimate_ego_trajectory(clip_or_videos, rig: Rig | None = None, camera: str = "",
+def estimate_ego_trajectory(clip_or_videos, rig: Rig | Camera | None = None, camera: str = "",
                             cfg: PoseConfig | None = None) -> EgoTrajectory:
     """Camera motion recovered from a clip's frames, as ego poses up to a similarity.
 
-    ``clip_or_videos``: a :class:`drivewm.clips.Clip` (its rig is used when ``rig`` is None) or a
-    dict of uint8 RGB (T, H, W, 3) per camera name (then ``rig`` is required; one camera is enough).
+    ``clip_or_videos``: a :class:`drivewm.clips.Clip` (its rig is used when ``rig`` is None), a
+    dict of uint8 RGB (T, H, W, 3) per camera name (then ``rig`` is required; one camera is
+    enough), or one camera's frames (T, H, W, 3) with ``rig`` that :class:`Camera`.
     """
+    if isinstance(rig, Camera):
+        rig = Rig(rig.name, [rig])
+        if isinstance(clip_or_videos, np.ndarray):
+            clip_or_videos = {rig.cameras[0].name: clip_or_videos}
     if isinstance(clip_or_videos, dict):
         videos = clip_or_videos
         if rig is None:
