@@ -20,6 +20,7 @@ def register(subparsers) -> None:
     p.add_argument("--height", type=int, default=None, help="image height (default: the rig's)")
     p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
     p.add_argument("--drives", type=int, default=1, help="number of drives (seeds seed, seed+1, ...)")
+    p.add_argument("--workers", type=int, default=1, help="drives simulated in parallel processes (default 1)")
     p.add_argument("--recipe", default=None, help="dataset recipe YAML (datasets/scenarios/); flags given override it")
     p.add_argument("--out", required=True, help="output folder for the .mcap logs")
     p.set_defaults(func=run_simulate)
@@ -46,7 +47,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     paths = []
     for cfg, count in plan:
         print(f"simulate {count} drive(s): {to_dict(cfg)}")
-        paths += simulate_many(cfg, count, args.out)
+        paths += simulate_many(cfg, count, args.out, workers=args.workers)
     for p in paths:
         print(p)
     return 0

@@ -8,9 +8,10 @@ Per pixel, the nearest of two kinds of surface wins (z-buffer on camera depth):
 Then the condition's per-frame effects: depth fog (Koschmieder), ego headlights, snow flakes
 or rain streaks. Same seed, same pixels: every random choice comes from the drive seed.
 
-Speed (measured by benchmarks/bench_render.py, see datasets/README.md): on one CPU core of
-the development machine, about 150-250 camera-frames/s at 320x192 and 50-80 at 640x360 for
-the nuscenes6 rig in busy scenes, i.e. well under highway-env's own step time.
+Speed (benchmarks/bench_render.py, see datasets/README.md), CPU time of one core on the busy
+2-core development machine, nuscenes6 rig: 150-250 camera-frames/s at 320x192 and 70-110 at
+640x360. A 6-camera tick at 320x192 (24-40 ms) costs 2-2.5x a highway-env step with 30 vehicles
+and far more than a SUMO step: the renderer, not the traffic, sets the pace of a drive.
 """
 
 from __future__ import annotations

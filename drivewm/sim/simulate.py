@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
 import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from drivewm.logs.types import SceneInfo
+from drivewm.logs.types import RoadLine, SceneInfo
 from drivewm.sim.config import SimConfig
 from drivewm.sim.scene import SceneRecording
 from drivewm.sim.world import build_renderer, sim_rig
@@ -65,15 +67,11 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
 
 
 def _write_road(writer, rec: SceneRecording) -> None:
-    """Log the road polylines where the writer supports it (optional /road channel)."""
-    from drivewm.logs import types
-
-    if not hasattr(writer, "write_road") or not hasattr(types, "RoadLine"):
-        return
-    z = lambda p: np.concatenate([p, np.zeros((len(p), 1))], axis=1)  # noqa: E731
-    lines = [types.RoadLine("lane_center", z(c)) for c in rec.road.lane_centers]
-    lines += [types.RoadLine("lane_boundary", z(b.points_xy), b.line_type) for b in rec.road.boundaries]
-    lines += [types.RoadLine("road_edge", z(e)) for e in rec.road.road_edges]
+    """Log the road polylines once (the optional /road channel; viewers draw them)."""
+    z = lambda p: np.concatenate([p, np.zeros((len(p), 1))], axis=1)  # noqa: E731  (x, y) -> (x, y, 0)
+    lines = [RoadLine("lane_center", z(c)) for c in rec.road.lane_centers]
+    lines += [RoadLine("lane_boundary", z(b.points_xy), b.line_type) for b in rec.road.boundaries]
+    lines += [RoadLine("road_edge", z(e)) for e in rec.road.road_edges]
     writer.write_road(rec.ticks[0].timestamp_ns, lines)
 
 
@@ -82,16 +80,33 @@ def drive_name(cfg: SimConfig) -> str:
     return f"{cfg.source}_{cfg.scenario}_{cfg.weather}_{cfg.time_of_day}_s{cfg.seed:04d}.mcap"
 
 
-def simulate_many(cfg: SimConfig, drives: int, out_dir: str | Path, progress: bool = True) -> list[Path]:
-    """``drives`` drives with seeds cfg.seed, cfg.seed + 1, ... into ``out_dir``.
+def simulate_many(cfg: SimConfig, drives: int, out_dir: str | Path, progress: bool = True, workers: int = 1) -> list[Path]:
+    """``drives`` drives with seeds cfg.seed, cfg.seed + 1, ... into ``out_dir``; returns their paths.
 
     A drive whose file already exists is kept (runs are deterministic and writes atomic, so a
-    rerun of an interrupted call resumes where it stopped).
+    rerun of an interrupted call resumes where it stopped). ``workers`` > 1 simulates drives in
+    that many processes (each simulator and renderer is single-threaded; libsumo is one
+    simulation per process).
     """
     out_dir = Path(out_dir)
-    paths = []
-    for i in tqdm(range(drives), desc="drives", unit="drive", disable=not progress):
-        c = dataclasses.replace(cfg, seed=cfg.seed + i)
-        path = out_dir / drive_name(c)
-        paths.append(path if path.is_file() else simulate(c, path, progress))
+    todo = [dataclasses.replace(cfg, seed=cfg.seed + i) for i in range(drives)]
+    paths = [out_dir / drive_name(c) for c in todo]
+    missing = [(c, p) for c, p in zip(todo, paths) if not p.is_file()]
+    bar = tqdm(total=drives, initial=drives - len(missing), desc="drives", unit="drive", disable=not progress)
+    if workers <= 1:
+        for c, p in missing:
+            simulate(c, p, progress)
+            bar.update()
+    else:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init) as pool:
+            for future in as_completed([pool.submit(simulate, c, p, False) for c, p in missing]):
+                future.result()
+                bar.update()
+    bar.close()
     return paths
+
+
+def _worker_init() -> None:
+    import cv2
+
+    cv2.setNumThreads(1)  # one process per core

@@ -18,7 +18,8 @@ RECIPES = Path(__file__).resolve().parents[2] / "datasets" / "scenarios"
 
 def test_simulate_command_writes_logs(tmp_path) -> None:
     rc = main(["simulate", "--source", "highway", "--scenario", "merge", "--weather", "fog", "--time-of-day", "dusk",
-               "--duration", "0.3", "--width", "160", "--height", "96", "--seed", "4", "--drives", "2", "--out", str(tmp_path)])
+               "--duration", "0.3", "--width", "160", "--height", "96", "--seed", "4", "--drives", "2", "--workers", "2",
+               "--out", str(tmp_path)])
     assert rc == 0
     paths = sorted(tmp_path.glob("*.mcap"))
     assert [p.name for p in paths] == ["highway_merge_fog_dusk_s0004.mcap", "highway_merge_fog_dusk_s0005.mcap"]

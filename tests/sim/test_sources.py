@@ -75,3 +75,6 @@ def test_shared_logs_read_back_with_tags_and_calibration(sim_log_dir) -> None:
         assert log.rig.names == ["CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_BACK_RIGHT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_FRONT_LEFT"]
         assert all(len(log.images[c]) == 60 for c in log.rig.names) and len(log.pose_timestamps_ns) == 60
         assert log.images["CAM_FRONT"][0].decode().shape == (192, 320, 3)
+        kinds = {(line.kind, line.line_type) for line in log.road}
+        assert {("lane_center", ""), ("lane_boundary", "solid"), ("road_edge", "")} <= kinds
+        assert len(log.agents) == 60 and all(boxes for _, boxes in log.agents)
