@@ -53,6 +53,11 @@ class FaceTextures:
         sizes = np.array([[textures[f].shape[1], textures[f].shape[0]] for f in FACE_NAMES], np.float64)
         return cls(images, sizes)
 
+    def shaded(self, shades: np.ndarray) -> "FaceTextures":
+        """The same textures with each face's colour scaled by ``shades`` (6,) (baked lighting)."""
+        images = [np.dstack([cv2.convertScaleAbs(img[..., :3], alpha=float(k)), img[..., 3]]) for img, k in zip(self.images, shades)]
+        return FaceTextures(images, self.sizes)
+
 
 @dataclasses.dataclass
 class BoxSet:
@@ -67,8 +72,9 @@ class BoxSet:
     shade: np.ndarray
 
     @classmethod
-    def from_boxes(cls, boxes: list[AgentBox], textures: list[FaceTextures], shade_fn) -> "BoxSet":
-        """``shade_fn(normal_world (3,)) -> float`` gives each face's brightness."""
+    def from_boxes(cls, boxes: list[AgentBox], textures: list[FaceTextures], shade_fn, bake: bool = False) -> "BoxSet":
+        """``shade_fn(normal_world (3,)) -> float`` gives each face's brightness; ``bake``: multiply it
+        into the textures once (static boxes) instead of per drawn face."""
         if not boxes:
             return cls(np.zeros((0, 6, 4, 3)), np.zeros((0, 6, 3)), np.zeros((0, 3)), np.zeros(0), [], np.zeros((0, 6)))
         centers = np.array([b.center_xyz for b in boxes], np.float64)
@@ -81,6 +87,9 @@ class BoxSet:
         corners = np.einsum("nij,nfkj->nfki", R, local) + centers[:, None, None, :]
         normals = np.einsum("nij,fj->nfi", R, _NORMALS_LOCAL)
         shade = np.array([[shade_fn(n) for n in box_normals] for box_normals in normals])
+        if bake:
+            textures = [t.shaded(k) for t, k in zip(textures, shade)]
+            shade = np.ones_like(shade)
         return cls(corners, normals, centers, np.linalg.norm(half, axis=1), textures, shade)
 
 
@@ -173,7 +182,8 @@ def draw_face(img: np.ndarray, zbuf: np.ndarray, view, rect: np.ndarray, normal_
     M[0] -= x0 * H[2]
     M[1] -= y0 * H[2]
     warped = cv2.warpPerspective(tex_rgba, M, (int(x1 - x0), int(y1 - y0)), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-    z = plane_d / (normal_cam[0] * view.xn[None, x0:x1] + normal_cam[1] * view.yn[y0:y1, None] + normal_cam[2])
+    nx, ny, nz = (float(v) for v in normal_cam)  # Python floats keep the per-pixel maths in float32
+    z = float(plane_d) / (nx * view.xn[None, x0:x1] + ny * view.yn[y0:y1, None] + nz)
     zroi = zbuf[y0:y1, x0:x1]
     win = (warped[..., 3] > 127) & (z < zroi) & (z > 0)
     if not win.any():

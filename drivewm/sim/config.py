@@ -6,6 +6,7 @@ import dataclasses
 from typing import Literal
 
 from drivewm.errors import DrivewmError
+from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
 
 HIGHWAY_SCENARIOS = ("highway", "merge", "roundabout", "intersection")
 SUMO_SCENARIOS = ("grid", "spider", "random")
@@ -54,6 +55,10 @@ class SimConfig:
             raise DrivewmError(f"sim config: source {self.source!r} is not one of ['highway', 'sumo']")
         if self.scenario not in known:
             raise DrivewmError(f"sim config: scenario {self.scenario!r} is not one of {list(known)} for source {self.source}")
+        for name, value, allowed in (("weather", self.weather, WEATHERS), ("time_of_day", self.time_of_day, TIMES_OF_DAY),
+                                     ("traffic_density", self.traffic_density, ("low", "medium", "high"))):
+            if value not in allowed:
+                raise DrivewmError(f"sim config: {name} {value!r} is not one of {list(allowed)}")
         if self.duration_s <= 0 or self.fps <= 0:
             raise DrivewmError(f"sim config: duration_s ({self.duration_s}) and fps ({self.fps}) must be positive")
         if (self.width is None) != (self.height is None) or (self.width is not None and min(self.width, self.height) < 16):

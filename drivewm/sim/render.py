@@ -43,7 +43,7 @@ class Renderer:
         self.views = [CameraView.build(c, self.ground.res_m, MIP_LEVELS, cond, max_range_m) for c in rig.cameras]
         rng = np.random.default_rng([seed, 303])
         textures = [FaceTextures.from_dict(object_textures(b, cond, rng)) for b in road.props]
-        self.static = BoxSet.from_boxes(road.props, textures, cond.face_shade)
+        self.static = BoxSet.from_boxes(road.props, textures, cond.face_shade, bake=True)
         self.particles = ParticleOverlays(rig, cond, seed)
         self._agent_tex: dict[str, FaceTextures] = {}
 

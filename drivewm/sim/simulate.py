@@ -51,6 +51,7 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
     """Simulate one drive and write it as an MCAP drive log at ``out_path`` (atomically)."""
     from drivewm.logs.writer import LogWriter
 
+    cfg.validate()
     rig = sim_rig(cfg)  # a bad rig fails before any simulation
     rec = record(cfg)
     renderer = build_renderer(cfg, rec, rig)
