@@ -45,45 +45,55 @@ class CameraView:
 
     @classmethod
     def build(cls, cam: Camera, texel_m: float, levels: int, cond: Condition, max_range_m: float) -> "CameraView":
-        K = cam.K
-        xn = ((np.arange(cam.width) - K[0, 2]) / K[0, 0]).astype(np.float32)
-        yn = ((np.arange(cam.height) - K[1, 2]) / K[1, 1]).astype(np.float32)
+        """Precompute ``cam``'s rays, ground hits (texture mip level ``levels`` - 1 at most for
+        ``texel_m`` texels) and condition-dependent backgrounds."""
+        xn = ((np.arange(cam.width) - cam.K[0, 2]) / cam.K[0, 0]).astype(np.float32)
+        yn = ((np.arange(cam.height) - cam.K[1, 2]) / cam.K[1, 1]).astype(np.float32)
         rays_cam = np.stack(np.broadcast_arrays(xn[None, :], yn[:, None], np.float32(1.0)), axis=-1)  # (H, W, 3)
-        R, c = cam.T_ego_from_cam[:3, :3], cam.T_ego_from_cam[:3, 3]
-        rays_ego = rays_cam @ R.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(rays_ego[..., 2] < -1e-6, -c[2] / rays_ego[..., 2], np.inf)
-        with np.errstate(invalid="ignore"):
-            hit = c[:2] + t[..., None] * rays_ego[..., :2]  # (H, W, 2) ego frame; inf/nan for sky
+        rays_ego = rays_cam @ cam.T_ego_from_cam[:3, :3].T
+        t, hit = _ground_hits(rays_ego, cam.T_ego_from_cam[:3, 3])
         ray_norm = np.linalg.norm(rays_cam, axis=-1).astype(np.float32)
         ground = np.isfinite(t)
-        near = ground & (np.linalg.norm(hit - c[:2], axis=-1) <= max_range_m)
-        level = _mip_level(hit, texel_m, levels)
-        grain = _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1)  # the last level: no grain
-        # Ground pixels sorted by (mip level, grain level): every group is one contiguous run.
-        ground_idx = np.flatnonzero(near)
-        key = (level * (DETAIL_LEVELS + 1) + grain).reshape(-1)[ground_idx]
-        order = np.argsort(key, kind="stable")
-        ground_idx, key = ground_idx[order], key[order]
-        starts = np.searchsorted(key, np.arange(levels * (DETAIL_LEVELS + 1) + 1))
-        runs = [(slice(starts[i], starts[i + 1]), i % (DETAIL_LEVELS + 1)) for i in range(levels * (DETAIL_LEVELS + 1))]
-        bounds = starts[:: DETAIL_LEVELS + 1]
-        flat_hit = hit.reshape(-1, 2)[ground_idx]
-        gain = _headlight_gain(flat_hit, cond)
-        view = cls(cam.name, K, cam.width, cam.height, invert_T(cam.T_ego_from_cam), xn, yn, ray_norm,
-                   t.astype(np.float32), ground_idx, [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])],
-                   flat_hit.astype(np.float32)[:, None, :], None if gain is None else gain[:, None].astype(np.float32),
-                   np.flatnonzero(ground & ~near), [(r, k) for r, k in runs if k < DETAIL_LEVELS and r.stop > r.start],
-                   _sky(rays_ego, cond), np.zeros(0, np.float32), _side_planes(K, cam.width, cam.height),
-                   np.broadcast_to(to_uint8(np.asarray(cond.fog_rgb)), (cam.height, cam.width, 3)).copy())
+        near = ground & (np.linalg.norm(hit - cam.T_ego_from_cam[:2, 3], axis=-1) <= max_range_m)
+        ground_idx, level_slices, detail_runs = _ground_runs(near, _mip_level(hit, texel_m, levels),
+                                                            _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1), levels)
+        ground_xy = hit.reshape(-1, 2)[ground_idx]
+        gain = _headlight_gain(ground_xy, cond)
         # The sky already has the condition's colour: only surfaces (finite depth) are fogged.
-        view.ground_fog = np.where(ground, fog_weight(t * ray_norm, cond.visibility_m), 1.0).astype(np.float32)
-        return view
+        fog = np.where(ground, fog_weight(t * ray_norm, cond.visibility_m), 1.0).astype(np.float32)
+        return cls(cam.name, cam.K, cam.width, cam.height, invert_T(cam.T_ego_from_cam), xn, yn, ray_norm,
+                   t.astype(np.float32), ground_idx, level_slices, ground_xy.astype(np.float32)[:, None, :],
+                   None if gain is None else gain[:, None].astype(np.float32), np.flatnonzero(ground & ~near), detail_runs,
+                   _sky(rays_ego, cond), fog, _side_planes(cam.K, cam.width, cam.height),
+                   np.broadcast_to(to_uint8(np.asarray(cond.fog_rgb)), (cam.height, cam.width, 3)).copy())
 
     def sphere_visible(self, centers_cam: np.ndarray, radii: np.ndarray, max_range_m: float) -> np.ndarray:
         """Which bounding spheres (N, 3 camera frame; N radii) touch the frustum within range."""
         inside = (centers_cam @ self.side_planes.T >= -radii[:, None]).all(axis=1)
         return inside & (centers_cam[:, 2] > -radii) & (np.linalg.norm(centers_cam, axis=1) - radii < max_range_m)
+
+
+def _ground_hits(rays_ego: np.ndarray, center_ego: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Camera depth t (H, W) where each ray (H, W, 3 ego frame, camera z = 1) meets z = 0, inf if
+    never, and the hit points (H, W, 2) in the ego frame."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(rays_ego[..., 2] < -1e-6, -center_ego[2] / rays_ego[..., 2], np.inf)
+        hit = center_ego[:2] + t[..., None] * rays_ego[..., :2]  # inf/nan for sky
+    return t, hit
+
+
+def _ground_runs(near: np.ndarray, level: np.ndarray, grain: np.ndarray, levels: int):
+    """Drawn ground pixels sorted by (mip level, grain level), so every group is one contiguous run:
+    (flat indices, slice per mip level, [(slice, grain level)] of the runs that get grain)."""
+    n_grain = DETAIL_LEVELS + 1  # the last grain level means no grain
+    ground_idx = np.flatnonzero(near)
+    key = (level * n_grain + grain).reshape(-1)[ground_idx]
+    order = np.argsort(key, kind="stable")
+    ground_idx, key = ground_idx[order], key[order]
+    starts = np.searchsorted(key, np.arange(levels * n_grain + 1))
+    level_slices = [slice(starts[k * n_grain], starts[(k + 1) * n_grain]) for k in range(levels)]
+    runs = [(slice(starts[i], starts[i + 1]), i % n_grain) for i in range(levels * n_grain)]
+    return ground_idx, level_slices, [(r, g) for r, g in runs if g < DETAIL_LEVELS and r.stop > r.start]
 
 
 def _mip_level(hit: np.ndarray, texel_m: float, levels: int) -> np.ndarray:
