@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from einops import repeat
+from einops import rearrange, repeat
 from torch import nn
 
 from drivewm.geometry import Camera, Rig, pixel_rays
@@ -46,15 +46,28 @@ def token_rays(rays_hw: torch.Tensor, num_frames: int) -> torch.Tensor:
     return repeat(rays_hw, "v hw c -> v (t hw) c", t=num_frames)
 
 
-class CameraEncoder(nn.Module):
-    """Plucker rays (..., 6) -> token offsets (..., D): Linear -> SiLU -> Linear (the last zero-initialised,
-    so a fresh encoder adds nothing and the model starts as its Text2World parent)."""
+def moving_token_rays(rays_hw: torch.Tensor, T_ego0_from_ego: torch.Tensor) -> torch.Tensor:
+    """Rays of a moving rig: (V, h*w, 6) in the ego frame and the ego pose of every latent frame
+    (t, 4, 4) in the first frame's ego frame -> (V, t*h*w, 6) in that first ego frame.
 
-    def __init__(self, hidden_dim: int, width: int = 128):
+    A Plucker line (d, m) moves with a rigid motion (R, p) as d' = R d, m' = R m + p x d'."""
+    R, p = T_ego0_from_ego[:, :3, :3].to(rays_hw), T_ego0_from_ego[:, :3, 3].to(rays_hw)  # (t, 3, 3), (t, 3)
+    d = torch.einsum("tij,vnj->vtni", R, rays_hw[..., :3])  # (V, t, hw, 3)
+    m = torch.einsum("tij,vnj->vtni", R, rays_hw[..., 3:]) + torch.cross(p[None, :, None].expand_as(d), d, dim=-1)
+    return rearrange(torch.cat([d, m], dim=-1), "v t n c -> v (t n) c")
+
+
+class CameraEncoder(nn.Module):
+    """Plucker rays (..., 6) -> token offsets (..., D): moments scaled to O(1), then Linear -> SiLU ->
+    Linear (the last zero-initialised, so a fresh encoder adds nothing and the model starts as its
+    Text2World parent)."""
+
+    def __init__(self, hidden_dim: int, width: int = 128, moment_scale_m: float = 10.0):
         super().__init__()
+        self.moment_scale_m = moment_scale_m  # o x d grows with the distance of the camera from the origin
         self.net = nn.Sequential(nn.Linear(6, width), nn.SiLU(), nn.Linear(width, hidden_dim))
         nn.init.zeros_(self.net[-1].weight)
         nn.init.zeros_(self.net[-1].bias)
 
     def forward(self, rays: torch.Tensor) -> torch.Tensor:
-        return self.net(rays)
+        return self.net(torch.cat([rays[..., :3], rays[..., 3:] / self.moment_scale_m], dim=-1))

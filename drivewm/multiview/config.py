@@ -24,6 +24,14 @@ class MultiViewConfig:
     """Add per-token Plucker-ray embeddings computed from K and T_ego_from_cam."""
     camera_width: int = 128
     """Hidden width of the Plucker-ray MLP."""
+    moving_camera_rays: bool = True
+    """With a trajectory, each latent frame's rays are those of the cameras at the ego pose of that
+    frame, in the first frame's ego frame (per-frame Plucker camera control as in CameraCtrl, He et al.
+    2024), so the trajectory also conditions every token locally, not only through the global MLP."""
+    ray_scale_m: float = 10.0
+    """Ray moments (o x d, metres) are divided by this before the ray MLP."""
+    temporal_compression: int = 4
+    """Video frames per latent frame after the first (the tokenizer's): latent frame i shows frame i * this."""
     trajectory_waypoints: int = 16
     """Future ego waypoints (ClipMeta.trajectory_ego) the model is conditioned on; 0 = none."""
     trajectory_scale_m: float = 20.0
@@ -41,7 +49,7 @@ class MultiViewConfig:
     def validate(self) -> None:
         if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
             raise DrivewmError(f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, {self.neighbors}")
-        if self.trajectory_waypoints < 0 or min(self.trajectory_scale_m, self.trajectory_dt_s) <= 0 or not 0 <= self.video2world_prob <= 1:
+        if self.trajectory_waypoints < 0 or min(self.trajectory_scale_m, self.trajectory_dt_s, self.ray_scale_m, self.temporal_compression) <= 0 or not 0 <= self.video2world_prob <= 1:
             raise DrivewmError("multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= video2world_prob <= 1")
 
 

@@ -45,6 +45,8 @@ class MultiViewDataset:
         self.fps = float(first.meta.fps)
         self.rig = self[0].rig
         self.trajectory_dt_s = float(first.meta.trajectory_dt_s or 1.0 / self.fps)
+        t = self.latent_shape[1]
+        self.temporal_compression = max(1, (first.meta.num_frames - 1) // (t - 1)) if t > 1 else 1
 
     def median_speed_mps(self) -> float:
         """Median speed over the first waypoint step of every clip (the named trajectories' default)."""

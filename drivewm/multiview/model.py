@@ -26,8 +26,9 @@ from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.multiview import cross_view  # noqa: F401  (registers the cross_view_attn sub-layer)
-from drivewm.multiview.camera import CameraEncoder, plucker_rays, token_rays
+from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
 from drivewm.multiview.config import MultiViewModelConfig
+from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, save_model_folder
@@ -57,7 +58,7 @@ class MultiViewNet(nn.Module):
         self.cfg = cfg
         self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
-        self.camera_encoder = CameraEncoder(dim, mv.camera_width) if mv.camera_cond else None
+        self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
         self.trajectory_encoder = (
             TrajectoryEncoder(mv.trajectory_waypoints, dim, mv.trajectory_width, mv.trajectory_scale_m) if mv.trajectory_waypoints else None
         )
@@ -152,11 +153,16 @@ def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]
     if any(len(caps) != v for caps in view_captions):
         raise DrivewmError(f"need one caption per camera of rig {rig.name} ({v}) for every clip")
     t, h, w = model.token_grid()
+    mv = model.cfg.multiview
     emb, mask = model.text_encoder.encode([c for caps in view_captions for c in caps])  # (B V, L, text_dim)
-    rays = repeat(token_rays(plucker_rays(rig, (h, w)), t), "v n c -> (b v) n c", b=b)
+    rays_hw = plucker_rays(rig, (h, w))  # (V, h*w, 6) in the ego frame
+    rays = repeat(token_rays(rays_hw, t), "v n c -> (b v) n c", b=b)
     traj = None
     if trajectories is not None:
         traj = repeat(torch.as_tensor(np.asarray(trajectories), dtype=torch.float32), "b w c -> (b v) w c", v=v)
-    mv = model.cfg.multiview
+        if mv.moving_camera_rays:
+            latent_fps = fps / (mv.temporal_compression * model.cfg.dit.patch_t)  # one token frame per latent patch
+            poses = [torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, latent_fps)) for wp in np.asarray(trajectories)]
+            rays = torch.cat([moving_token_rays(rays_hw, T).float() for T in poses])  # (B V, N, 6)
     return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v,
                                  view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors), rays=rays, trajectory=traj)

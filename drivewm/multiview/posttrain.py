@@ -143,7 +143,8 @@ def posttrain(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, 
     if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
         raise DrivewmError(f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}")
     torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
-    mv = dataclasses.replace(cfg.multiview, trajectory_dt_s=dataset.trajectory_dt_s, speed_mps=round(dataset.median_speed_mps(), 2))
+    mv = dataclasses.replace(cfg.multiview, trajectory_dt_s=dataset.trajectory_dt_s, speed_mps=round(dataset.median_speed_mps(), 2),
+                             temporal_compression=dataset.temporal_compression)
     model = from_text2world(parent, mv, cfg.cond_frames)
     model.latent = dataclasses.replace(model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict())
     record = {**to_dict(cfg), "init": str(Path(init_dir).resolve())}

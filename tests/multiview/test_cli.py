@@ -86,3 +86,13 @@ def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
     assert "nonexistent_rig" in capsys.readouterr().err
     assert main(["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
     assert "model_type" in capsys.readouterr().err
+
+
+def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(trained_mv):
+    root, _ = trained_mv
+    model = MultiView.from_pretrained(root / "mv")
+    assert model.net.trajectory_encoder.net[-1].weight.abs().sum() > 0  # left zero-init behind
+    rig = model.training_rig
+    caps = [["a highway"] * 3]
+    z = [model.sample_latents(rig, caps, resolve_trajectory(name, 16, 0.1, 20.0)[None], [7], steps=4, guidance=1.0) for name in ("left", "right")]
+    assert (z[0] - z[1]).abs().mean() > 1e-3  # same seed, other trajectory: another sample
