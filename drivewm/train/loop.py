@@ -15,6 +15,7 @@ and torchrun with W processes trains what one process trains with the same globa
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import time
@@ -26,9 +27,10 @@ import torch.distributed as dist
 from torch import nn
 from tqdm import tqdm
 
+from drivewm.atomic import write_text
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import load_train_state, save_train_state
-from drivewm.train.distributed import DistInfo, barrier, init_distributed
+from drivewm.train.distributed import DistInfo, barrier, init_distributed, shutdown_distributed
 from drivewm.train.ema import EMA
 from drivewm.train.parallelize import Parallel, parallelize
 
@@ -115,12 +117,13 @@ def mix_seed(*parts: int) -> int:
 
 def global_batch(step: int, batch_size: int, num_samples: int, seed: int) -> list[int]:
     """Dataset indices of the global batch at ``step``: epochs are seeded permutations."""
-    out = []
-    for pos in range(step * batch_size, (step + 1) * batch_size):
-        epoch, offset = divmod(pos, num_samples)
-        perm = torch.randperm(num_samples, generator=torch.Generator().manual_seed(mix_seed(seed, epoch)))
-        out.append(int(perm[offset]))
-    return out
+    positions = range(step * batch_size, (step + 1) * batch_size)
+    return [int(_epoch_permutation(seed, pos // num_samples, num_samples)[pos % num_samples]) for pos in positions]
+
+
+@functools.lru_cache(maxsize=4)
+def _epoch_permutation(seed: int, epoch: int, num_samples: int) -> torch.Tensor:
+    return torch.randperm(num_samples, generator=torch.Generator().manual_seed(mix_seed(seed, epoch)))
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -187,7 +190,7 @@ def _metrics_file(out_dir: Path, start_step: int):
     out_dir.mkdir(parents=True, exist_ok=True)
     if path.is_file():
         rows = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] <= start_step]
-        path.write_text("".join(r + "\n" for r in rows))
+        write_text(path, "".join(r + "\n" for r in rows))
     return path.open("a")
 
 
@@ -250,4 +253,5 @@ def train(task: TrainTask, cfg: TrainConfig, out_dir: str | Path, config_record:
                 task.sample_grid(ema_sd, out_dir / "samples" / f"step_{run.step:07d}.png")
     if metrics:
         metrics.close()
+    shutdown_distributed()
     return last
