@@ -19,7 +19,7 @@ def register(subparsers) -> None:
     p.add_argument("--width", type=int, default=None, help="image width (default: the rig's)")
     p.add_argument("--height", type=int, default=None, help="image height (default: the rig's)")
     p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
-    p.add_argument("--drives", type=int, default=1, help="number of drives (seeds seed, seed+1, ...)")
+    p.add_argument("--drives", type=int, default=1, help="number of drives (seeds seed, seed+1, ...); recipes give their own counts")
     p.add_argument("--workers", type=int, default=1, help="drives simulated in parallel processes (default 1)")
     p.add_argument("--recipe", default=None, help="dataset recipe YAML (datasets/scenarios/); flags given override it")
     p.add_argument("--out", required=True, help="output folder for the .mcap logs")
