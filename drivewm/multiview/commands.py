@@ -10,10 +10,11 @@ from pathlib import Path
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model")
-    p.add_argument("--preset", default="debug", help="recipe: debug, small, base, large, xl")
+    p.add_argument("--preset", help="size preset: debug, small, base, large, xl (default: the recipe's, else debug)")
+    p.add_argument("--recipe", type=Path, help="YAML with preset, rig and overrides (multiview/recipes/*.yaml)")
     p.add_argument("--init", required=True, type=Path, help="Text2World model folder to start from")
     p.add_argument("--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)")
-    p.add_argument("--rig", default="", help="cameras to train on: rig name or YAML (default: all cameras of the clips)")
+    p.add_argument("--rig", help="cameras to train on: rig name or YAML (default: the recipe's, else all cameras of the clips)")
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override, e.g. multiview.cross_view=joint or train.steps=100")
@@ -40,7 +41,12 @@ def posttrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
     from drivewm.multiview.posttrain import posttrain, posttrain_config
 
-    cfg = posttrain_config(args.preset, [f"rig={args.rig}", *args.overrides] if args.rig else args.overrides)
+    from drivewm.multiview.posttrain import load_recipe
+
+    recipe = load_recipe(args.recipe) if args.recipe else {}
+    rig = args.rig if args.rig is not None else recipe.get("rig", "")
+    overrides = [*recipe.get("overrides", []), *([f"rig={rig}"] if rig else []), *args.overrides]
+    cfg = posttrain_config(args.preset or recipe.get("preset", "debug"), overrides)
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0

@@ -68,6 +68,19 @@ def posttrain_config(preset: str, overrides: list[str] | None = None) -> Posttra
     return apply_overrides(PosttrainConfig, base, overrides or [], "posttrain")
 
 
+def load_recipe(path: str | Path) -> dict:
+    """A run recipe YAML: ``preset`` (str), ``rig`` (str) and ``overrides`` (list of KEY=VALUE), all optional."""
+    from drivewm.config import load_yaml
+
+    recipe = load_yaml(path)
+    unknown = set(recipe) - {"preset", "rig", "overrides"}
+    if unknown:
+        raise DrivewmError(f"{path}: unknown recipe keys {sorted(unknown)} (known: preset, rig, overrides)")
+    if not isinstance(recipe.get("overrides", []), list) or not all(isinstance(o, str) for o in recipe.get("overrides", [])):
+        raise DrivewmError(f"{path}: 'overrides' must be a list of KEY=VALUE strings")
+    return recipe
+
+
 class MultiViewTask:
     """drivewm.train.loop.TrainTask for multi-view post-training on a :class:`MultiViewDataset`."""
 
