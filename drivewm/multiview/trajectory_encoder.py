@@ -9,6 +9,8 @@ import torch
 from einops import rearrange
 from torch import nn
 
+from drivewm.errors import DrivewmError
+
 
 class TrajectoryEncoder(nn.Module):
     """(B, W, 3) waypoints (m) -> (B, D): scale to O(1), flatten, Linear -> SiLU -> Linear (last one
@@ -24,5 +26,5 @@ class TrajectoryEncoder(nn.Module):
 
     def forward(self, waypoints_m: torch.Tensor) -> torch.Tensor:
         if waypoints_m.shape[-2:] != (self.num_waypoints, 3):
-            raise ValueError(f"trajectory: expected (B, {self.num_waypoints}, 3) waypoints, got {tuple(waypoints_m.shape)}")
+            raise DrivewmError(f"trajectory: expected (B, {self.num_waypoints}, 3) waypoints, got {tuple(waypoints_m.shape)}")
         return self.net(rearrange(waypoints_m / self.scale_m, "b w c -> b (w c)"))

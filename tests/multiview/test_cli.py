@@ -96,3 +96,40 @@ def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(
     caps = [["a highway"] * 3]
     z = [model.sample_latents(rig, caps, resolve_trajectory(name, 16, 0.1, 20.0)[None], [7], steps=4, guidance=1.0) for name in ("left", "right")]
     assert (z[0] - z[1]).abs().mean() > 1e-3  # same seed, other trajectory: another sample
+
+
+@pytest.fixture(scope="module")
+def mv_with_tokenizer(tmp_path_factory) -> Path:
+    """An (untrained) multi-view model whose folder records a real debug tokenizer (4x8x8), front camera only."""
+    import dataclasses
+
+    from drivewm.geometry import load_rig
+    from drivewm.multiview.init import from_text2world
+    from drivewm.tokenizer import Tokenizer, preset
+
+    root = tmp_path_factory.mktemp("mv_tok")
+    torch.manual_seed(0)
+    tok = Tokenizer(preset("debug"))
+    tok.save_pretrained(root / "tok")
+    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
+                        LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}))
+    mv = from_text2world(parent)
+    mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
+    mv.save_pretrained(root / "mv")
+    return root / "mv"
+
+
+def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_tokenizer, sim_clip_dir, tmp_path):
+    first = load_clip(sim_clip_dir)
+    assert main(["rollout", "--model", str(mv_with_tokenizer), "--clip", str(sim_clip_dir), "--key", first.key, "--trajectory", "right",
+                 "--windows", "1", "--steps", "1", "--out", str(tmp_path / "roll")]) == 0
+    (clip,) = list(iter_clips(tmp_path / "roll"))
+    assert clip.meta.cameras == ["CAM_FRONT"] and clip.meta.num_frames == 17 and clip.meta.extra["rollout_of"] == first.key
+    real, kept = first.video("CAM_FRONT")[0].astype(float), clip.video("CAM_FRONT")[0].astype(float)
+    assert np.abs(real - kept).mean() < 4.0  # the conditioning frame is the real one (through H.264 at crf 18)
+    assert clip.meta.trajectory_ego[-1][1] < -0.05  # turning right: the ego ends to the right (y < 0)
+
+    assert main(["generate", "--model", str(mv_with_tokenizer), "--prompt", "night", "--condition-clip", str(sim_clip_dir),
+                 "--steps", "1", "--out", str(tmp_path / "gen")]) == 0
+    (gen,) = list(iter_clips(tmp_path / "gen"))
+    assert gen.meta.num_frames == 17 and gen.meta.extra["condition_clip"] == str(sim_clip_dir)
