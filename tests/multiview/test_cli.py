@@ -62,6 +62,10 @@ def test_generate_writes_clips_for_any_rig(trained_mv, rig, views):
     assert clips[0].videos().shape[:2] == (views, 5) and clips[0].T_world_from_ego.shape == (5, 4, 4)  # preview: latent frames
     assert "front-left camera view of a snowy highway" in meta.view_captions["CAM_FRONT_LEFT"]
     assert (out / "sample_000.mp4").stat().st_size > 0 and (out / "contact_sheet.png").is_file()
+    from drivewm.eval.inputs import load_items
+
+    (item,) = load_items(out)  # what `drivewm eval GENDIR` scores: the rig and the conditioned trajectory
+    assert item.rig.names == meta.cameras and item.trajectory_ego == meta.trajectory_ego and item.trajectory_dt_s == 0.1
 
 
 def test_rollout_continues_a_real_clip_and_keeps_its_frames(trained_mv, sim_clip_dir):
