@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import pytest
 import torch
 
 from drivewm.diffusion.dit_config import DiTConfig
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.geometry import load_rig
+
+sys.path.insert(0, str(Path(__file__).parent))  # mv_standin
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -35,3 +40,22 @@ def tiny_text2world(seed: int = 0, latent_shape=(4, 3, 4, 6)) -> Text2World:
 @pytest.fixture
 def parent() -> Text2World:
     return tiny_text2world()
+
+
+@pytest.fixture(scope="session")
+def mv_latents(sim_clip_dir, tmp_path_factory):
+    """The simulated clips coded by the pooling stand-in tokenizer (32x): latents (3, 5, 6, 10) per view."""
+    from mv_standin import PoolTokenizer, write_pooled_cache
+
+    return write_pooled_cache(sim_clip_dir, tmp_path_factory.mktemp("mv_latents"), PoolTokenizer(32))
+
+
+@pytest.fixture(scope="session")
+def mv_parent_dir(tmp_path_factory):
+    """A tiny random Text2World model folder for those latents (the post-training init)."""
+    torch.manual_seed(0)
+    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=48, depth=2, num_heads=4, adaln_lora_dim=8)),
+                        LatentInfo([3, 5, 6, 10], [0.0] * 3, [0.5] * 3, 10.0, None, {}))
+    out = tmp_path_factory.mktemp("mv_parent")
+    parent.save_pretrained(out)
+    return out

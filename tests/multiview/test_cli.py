@@ -18,20 +18,16 @@ from drivewm.multiview.model import MultiView
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
 
-from mv_standin import PoolTokenizer, write_pooled_cache
+from mv_standin import PoolTokenizer
 
 FRONT3 = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
 
 
 @pytest.fixture(scope="module")
-def trained_mv(sim_clip_dir: Path, tmp_path_factory) -> tuple[Path, Path]:
-    """A tiny Text2World parent and a multi-view model post-trained from it on front3 (30 steps)."""
-    root = tmp_path_factory.mktemp("mv_cli")
-    cache = write_pooled_cache(sim_clip_dir, root / "latents", PoolTokenizer(32))
-    torch.manual_seed(0)
-    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=48, depth=2, num_heads=4, adaln_lora_dim=8)),
-                        LatentInfo([3, 5, 6, 10], [0.0] * 3, [0.5] * 3, 10.0, None, {}))
-    parent.save_pretrained(root / "t2w")
+def trained_mv(mv_latents: Path, mv_parent_dir: Path, tmp_path_factory) -> tuple[Path, Path]:
+    """A multi-view model post-trained on front3 (30 steps) from the tiny Text2World parent."""
+    root, cache = tmp_path_factory.mktemp("mv_cli"), mv_latents
+    (root / "t2w").symlink_to(mv_parent_dir)
     args = ["posttrain", "--init", str(root / "t2w"), "--data", str(cache), "--rig", "front3", "--out", str(root / "mv"),
             "--set", "train.steps=30", "--set", "train.checkpoint_every=1000", "--set", "sample_steps=2"]
     assert main(args) == 0
