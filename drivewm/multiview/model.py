@@ -152,17 +152,23 @@ def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]
     b, v = len(view_captions), len(rig.cameras)
     if any(len(caps) != v for caps in view_captions):
         raise DrivewmError(f"need one caption per camera of rig {rig.name} ({v}) for every clip")
-    t, h, w = model.token_grid()
     mv = model.cfg.multiview
     emb, mask = model.text_encoder.encode([c for caps in view_captions for c in caps])  # (B V, L, text_dim)
-    rays_hw = plucker_rays(rig, (h, w))  # (V, h*w, 6) in the ego frame
-    rays = repeat(token_rays(rays_hw, t), "v n c -> (b v) n c", b=b)
     traj = None
     if trajectories is not None:
         traj = repeat(torch.as_tensor(np.asarray(trajectories), dtype=torch.float32), "b w c -> (b v) w c", v=v)
-        if mv.moving_camera_rays:
-            latent_fps = fps / (mv.temporal_compression * model.cfg.dit.patch_t)  # one token frame per latent patch
-            poses = [torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, latent_fps)) for wp in np.asarray(trajectories)]
-            rays = torch.cat([moving_token_rays(rays_hw, T).float() for T in poses])  # (B V, N, 6)
-    return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v,
-                                 view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors), rays=rays, trajectory=traj)
+    return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v, view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors),
+                                 rays=clip_rays(model, rig, b, trajectories, fps), trajectory=traj)
+
+
+def clip_rays(model: MultiView, rig: Rig, b: int, trajectories: np.ndarray | None, fps: float) -> torch.Tensor:
+    """(B V, N, 6) Plucker rays of every token: the static rig's, or with a trajectory (and
+    ``moving_camera_rays``) the rig's at each token frame's ego pose, in the first frame's ego frame."""
+    t, h, w = model.token_grid()
+    mv = model.cfg.multiview
+    rays_hw = plucker_rays(rig, (h, w))  # (V, h*w, 6) in the ego frame
+    if trajectories is None or not mv.moving_camera_rays:
+        return repeat(token_rays(rays_hw, t), "v n c -> (b v) n c", b=b)
+    token_fps = fps / (mv.temporal_compression * model.cfg.dit.patch_t)  # token frame i shows video frame i * tc * patch_t
+    poses = [torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, token_fps)) for wp in np.asarray(trajectories)]
+    return torch.cat([moving_token_rays(rays_hw, T).float() for T in poses])

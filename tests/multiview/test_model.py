@@ -110,3 +110,24 @@ def test_video2world_keeps_the_conditioning_frames(parent):
     z = mv.sample_latents(rig, [CAPTIONS[:3]], resolve_trajectory("right", 16, 0.1)[None], [5], steps=3, guidance=1.0, cond_latents=cond_latents)
     torch.testing.assert_close(z[:, :, :, :1], cond_latents[:, :, :, :1], rtol=1e-5, atol=1e-5)
     assert (z[:, :, :, 1:] - cond_latents[:, :, :, 1:]).abs().mean() > 0.1
+
+
+def test_plucker_rays_are_the_camera_rays_and_move_with_the_ego():
+    import dataclasses as dc
+
+    from drivewm.geometry import T_from_xyz_yaw, transform_points
+    from drivewm.multiview.camera import moving_token_rays, plucker_rays
+
+    rig = load_rig("front3")
+    rays = plucker_rays(rig, (6, 10)).double()  # (V, 60, 6)
+    cam = rig.cameras[0]
+    # A point at depth 7 m along the ray of a patch centre lies on the Plucker line: m = p x d.
+    d, m = rays[0, 13, :3].numpy(), rays[0, 13, 3:].numpy()
+    p = transform_points(cam.T_ego_from_cam, 7.0 * np.linalg.solve(cam.K, [(3 + 0.5) * 32 - 0.5, (1 + 0.5) * 32 - 0.5, 1.0]))
+    np.testing.assert_allclose(np.cross(p, d), m, atol=1e-9)
+    # Moving the ego by T equals the rig mounted at T @ T_ego_from_cam.
+    T = T_from_xyz_yaw(4.0, -1.5, 0.0, 0.3)
+    moved = moving_token_rays(rays, torch.from_numpy(np.stack([np.eye(4), T])))  # (V, 2*60, 6)
+    rig_at_T = dc.replace(rig, cameras=[dc.replace(c, T_ego_from_cam=T @ c.T_ego_from_cam) for c in rig.cameras])
+    torch.testing.assert_close(moved[:, 60:], plucker_rays(rig_at_T, (6, 10)).double(), atol=1e-6, rtol=1e-6)
+    torch.testing.assert_close(moved[:, :60], rays)
