@@ -112,36 +112,54 @@ def clip_rig(model: MultiView, clip: Clip) -> Rig:
     return clip.meta.get_rig().subset(names)
 
 
+@dataclasses.dataclass
+class _Windows:
+    """Frame bookkeeping of a rollout: ``k`` latent conditioning frames are ``n_cond`` video frames,
+    a window of ``t`` latent frames is ``n_win`` video frames, ``steps_per_frame`` waypoint steps per frame."""
+
+    k: int
+    n_cond: int
+    n_win: int
+    steps_per_frame: float
+
+
 def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) -> GeneratedSample:
     """Continue ``clip`` for ``options.windows`` windows; returns the whole video (real conditioning
     frames first) with the trajectory it was conditioned on."""
-    rig = clip_rig(model, clip)
+    rig, mv = clip_rig(model, clip), model.cfg.multiview
     c, t, h, w = model.latent.latent_shape
     tc, sc = tokenizer.config.temporal_compression, tokenizer.config.spatial_compression
     k = max(1, model.cfg.edm.cond_frames)
-    n_cond, n_win = 1 + (k - 1) * tc, 1 + (t - 1) * tc
-    if clip.meta.num_frames < n_cond:
-        raise DrivewmError(f"clip {clip.key}: needs at least {n_cond} frames to condition on, has {clip.meta.num_frames}")
-    mv = model.cfg.multiview
+    win = _Windows(k, 1 + (k - 1) * tc, 1 + (t - 1) * tc, 1.0 / (clip.meta.fps * mv.trajectory_dt_s))
+    if clip.meta.num_frames < win.n_cond:
+        raise DrivewmError(f"clip {clip.key}: needs at least {win.n_cond} frames to condition on, has {clip.meta.num_frames}")
     speed = options.speed_mps or initial_speed_mps(clip)
     speed = speed if np.isfinite(speed) else mv.speed_mps
-    total = n_cond + options.windows * (n_win - n_cond)
-    steps_per_frame = 1.0 / (clip.meta.fps * mv.trajectory_dt_s)
-    num_poses = int(np.ceil(total * steps_per_frame)) + mv.trajectory_waypoints + 1
+    total = win.n_cond + options.windows * (win.n_win - win.n_cond)
+    num_poses = int(np.ceil(total * win.steps_per_frame)) + mv.trajectory_waypoints + 1
     poses = rollout_poses(options.trajectory, num_poses, mv.trajectory_dt_s, speed, (total - 1) / clip.meta.fps)
     captions = [options.prompt] * len(rig.cameras) if options.prompt else [clip.meta.view_captions.get(n) or clip.meta.caption for n in rig.names]
-    video = np.stack([clip.video(n)[:n_cond] for n in rig.names])  # (V, n_cond, H, W, 3)
     size = (h * sc, w * sc)
-    video = rearrange(frames_to_video(video, size), "v c t h w -> v t h w c").add(1).mul(127.5).round().byte().numpy()
+    first = frames_to_video(np.stack([clip.video(n)[: win.n_cond] for n in rig.names]), size)  # (V, 3, n_cond, h*sc, w*sc)
+    video = rearrange(first, "v c t h w -> v t h w c").add(1).mul(127.5).round().byte().numpy()
     for window in tqdm(range(options.windows), desc="rollout"):
-        start = video.shape[1] - n_cond  # first frame of this window
-        cond = torch.zeros(len(rig.cameras), c, t, h, w)
-        cond[:, :, :k] = encode_views(tokenizer, video[:, start:], size)[:, :, :k]
-        waypoints = waypoints_from_poses(poses, int(round(start * steps_per_frame)), mv.trajectory_waypoints)
-        z = model.sample_latents(rig, [captions], waypoints[None], [options.seed + window], options.steps, options.guidance,
-                                 options.sampler, cond_latents=cond[None], fps=clip.meta.fps)
-        video = np.concatenate([video, decode_views(tokenizer, z[0])[:, n_cond:]], axis=1)
-    traj = waypoints_from_poses(poses, 0, int(round((video.shape[1] - 1) * steps_per_frame)))
+        new = _next_window(model, tokenizer, rig, captions, video, poses, win, size, options, window, clip.meta.fps)
+        video = np.concatenate([video, new], axis=1)
+    traj = waypoints_from_poses(poses, 0, int(round((video.shape[1] - 1) * win.steps_per_frame)))
     extra = {"rollout_of": clip.key, "source_log": clip.meta.source_log, "trajectory": options.trajectory, "windows": options.windows,
-             "speed_mps": speed, "seed": options.seed, "steps": options.steps, "guidance": options.guidance, "cond_video_frames": n_cond}
+             "speed_mps": speed, "seed": options.seed, "steps": options.steps, "guidance": options.guidance, "cond_video_frames": win.n_cond}
     return GeneratedSample(video, rig, captions[0], captions, traj, mv.trajectory_dt_s, extra)
+
+
+def _next_window(model: MultiView, tokenizer, rig: Rig, captions: list[str], video: np.ndarray, poses: np.ndarray, win: _Windows,
+                 size: tuple[int, int], options: RolloutOptions, window: int, fps: float) -> np.ndarray:
+    """The frames a window adds after its conditioning frames (the last ``n_cond`` of ``video``),
+    uint8 (V, n_win - n_cond, H, W, 3)."""
+    c, t, h, w = model.latent.latent_shape
+    start = video.shape[1] - win.n_cond  # the window's first frame in the rollout
+    cond = torch.zeros(len(rig.cameras), c, t, h, w)
+    cond[:, :, : win.k] = encode_views(tokenizer, video[:, start:], size)[:, :, : win.k]
+    waypoints = waypoints_from_poses(poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints)
+    z = model.sample_latents(rig, [captions], waypoints[None], [options.seed + window], options.steps, options.guidance,
+                             options.sampler, cond_latents=cond[None], fps=fps)
+    return decode_views(tokenizer, z[0])[:, win.n_cond :]
