@@ -77,6 +77,14 @@ class PoseConfig:
     """Each frame is matched with the next ``sequential_overlap`` frames of the same camera."""
     min_model_size: int = 3
     """COLMAP's smallest model."""
+    abs_pose_min_num_inliers: int = 15
+    """COLMAP mapper: inliers needed to register a frame (COLMAP default 30; low-texture snow and
+    night renders at 320x192 need fewer)."""
+    abs_pose_min_inlier_ratio: float = 0.15
+    """COLMAP mapper: inlier ratio needed to register a frame (COLMAP default 0.25)."""
+    init_min_tri_angle_deg: float = 4.0
+    """COLMAP mapper: triangulation angle of the initial pair (COLMAP default 16; forward driving
+    at 10 fps rarely reaches it between nearby frames)."""
     seed: int = 0
     """pycolmap random seed (deterministic RANSAC)."""
 

@@ -77,21 +77,26 @@ def plot_distributions(path: Path, metrics: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    clips = metrics["clips"].values()
-    panels = [
-        ("TSE pair medians (px)", [v for c in clips for k in ("tse_pair_medians", "tse_calibrated_pair_medians") for v in c.get(k, [])], None),
-        ("CSE pair medians (px)", [v for c in clips for v in c.get("cse_pair_medians", [])], [v for c in clips for v in c.get("cse_calibrated_pair_medians", [])]),
-        ("ATE per clip (m)", [c.get("ate") for c in clips], None),
-        ("TFE per clip (m)", [c.get("tfe") for c in clips], None),
-    ]
+    clips = list(metrics["clips"].values())
+
+    def values(key: str) -> list[float]:
+        out = []
+        for c in clips:
+            v = c.get(key)
+            out += v if isinstance(v, list) else [v]
+        return [x for x in out if x is not None and np.isfinite(x)]
+
+    panels = [("TSE pair medians (px)", "tse_pair_medians", "tse_calibrated_pair_medians"),
+              ("CSE pair medians (px)", "cse_pair_medians", "cse_calibrated_pair_medians"),
+              ("ATE per clip (m)", "ate", None), ("TFE per clip (m)", "tfe", None)]
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.4))
-    for ax, (title, values, calibrated) in zip(axes, panels):
-        finite = [v for v in values if v is not None and np.isfinite(v)]
-        ax.hist(finite, bins=20, alpha=0.7, label="fitted F" if calibrated is not None else None)
-        if calibrated:
-            ax.hist([v for v in calibrated if np.isfinite(v)], bins=20, alpha=0.6, label="calibrated F")
+    for ax, (title, key, cal_key) in zip(axes, panels):
+        fitted = values(key)
+        ax.hist(fitted, bins=20, alpha=0.7, label="fitted F" if cal_key else None)
+        if cal_key and values(cal_key):
+            ax.hist(values(cal_key), bins=20, alpha=0.6, label="calibrated F")
             ax.legend()
-        ax.set_title(f"{title}  (n={len(finite)})")
+        ax.set_title(f"{title}  (n={len(fitted)})")
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=90)

@@ -106,6 +106,11 @@ def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> l
         ba_refine_focal_length=False, ba_refine_principal_point=False, ba_refine_extra_params=False,
         ba_refine_sensor_from_rig=False,
     )
+    # Assign a whole new mapper-options object: mutating options.mapper in place is not reliable in pycolmap 4.2.
+    options.mapper = pycolmap.IncrementalMapperOptions(
+        abs_pose_min_num_inliers=cfg.abs_pose_min_num_inliers, abs_pose_min_inlier_ratio=cfg.abs_pose_min_inlier_ratio,
+        init_min_tri_angle=cfg.init_min_tri_angle_deg,
+    )
     return list(pycolmap.incremental_mapping(db_path, images, out, options).values())
 
 
