@@ -73,8 +73,8 @@ class BoxSet:
 
     @classmethod
     def from_boxes(cls, boxes: list[AgentBox], textures: list[FaceTextures], shade_fn, bake: bool = False) -> "BoxSet":
-        """``shade_fn(normal_world (3,)) -> float`` gives each face's brightness; ``bake``: multiply it
-        into the textures once (static boxes) instead of per drawn face."""
+        """``shade_fn(normals_world (N, 6, 3)) -> (N, 6)`` gives each face's brightness; ``bake``:
+        multiply it into the textures once (static boxes) instead of per drawn face."""
         if not boxes:
             return cls(np.zeros((0, 6, 4, 3)), np.zeros((0, 6, 3)), np.zeros((0, 3)), np.zeros(0), [], np.zeros((0, 6)))
         centers = np.array([b.center_xyz for b in boxes], np.float64)
@@ -86,7 +86,7 @@ class BoxSet:
         local = _SIGNS[None] * half[:, None, None, :]  # (N, 6, 4, 3)
         corners = np.einsum("nij,nfkj->nfki", R, local) + centers[:, None, None, :]
         normals = np.einsum("nij,fj->nfi", R, _NORMALS_LOCAL)
-        shade = np.array([[shade_fn(n) for n in box_normals] for box_normals in normals])
+        shade = shade_fn(normals)
         if bake:
             textures = [t.shaded(k) for t, k in zip(textures, shade)]
             shade = np.ones_like(shade)
@@ -191,5 +191,6 @@ def draw_face(img: np.ndarray, zbuf: np.ndarray, view, rect: np.ndarray, normal_
     rgb = warped[..., :3]
     if shade != 1.0:
         rgb = cv2.convertScaleAbs(rgb, alpha=float(shade))
-    np.copyto(img[y0:y1, x0:x1], rgb, where=win[..., None])
-    np.copyto(zroi, z, where=win)
+    mask = win.view(np.uint8)
+    cv2.copyTo(rgb, mask, img[y0:y1, x0:x1])  # writes into the views in place (10-30x np.copyto with where)
+    cv2.copyTo(z, mask, zroi)

@@ -51,9 +51,10 @@ class Condition:
         """Light albedo (..., 3) float in [0, 1] -> lit colour float in [0, 1]."""
         return np.clip(self.tinted(albedo) * self.ambient, 0.0, 1.0)
 
-    def face_shade(self, normal_world: np.ndarray) -> float:
-        """Brightness factor of a face with outward unit normal (3,) under this sky."""
-        lambert = max(0.0, float(normal_world @ SUN_DIR_WORLD))
+    def face_shade(self, normals_world: np.ndarray) -> np.ndarray:
+        """Brightness factors (...) of faces with outward unit normals (..., 3) under this sky:
+        ambient sky light plus Lambert's cosine law for the sun (weight ``directional``)."""
+        lambert = np.maximum(0.0, normals_world @ SUN_DIR_WORLD)
         return (1.0 - self.directional) * 0.85 + self.directional * (0.55 + 0.5 * lambert)
 
 
