@@ -1,0 +1,122 @@
+"""Camera motion from dense optical flow: the fallback when structure from motion registers too few frames.
+
+COLMAP needs repeatable SIFT features; blurry low-resolution generated frames (a debug tokenizer's
+output, or a real one at 64 px) give it none, so it registers nothing there. Dense optical flow
+(Farneback 2003) still finds where the image moved. Each consecutive frame pair gives
+correspondences on a regular grid, from which the essential matrix (Nister's 5-point solver in
+RANSAC, cv2.findEssentialMat) with the calibrated K yields the relative rotation and the direction
+of translation (Hartley & Zisserman, sec. 9.6). The pairs are chained into camera poses.
+
+Scale: monocular motion has none; every step whose median flow exceeds ``min_flow_px`` gets a
+translation of unit length (constant speed), steps without motion (a repeated frame, a stopped
+car) get none. :func:`drivewm.eval.trajectory_errors.tfe` and ATE fit the scale anyway.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from drivewm.errors import DrivewmError
+from drivewm.geometry import Camera, invert_T, make_T
+
+
+@dataclasses.dataclass
+class FlowMotionConfig:
+    """Dense-flow relative poses between consecutive frames."""
+
+    max_side_px: int = 160
+    """Frames are resized so their longer side is at most this (flow is computed at that size, K scaled)."""
+    blur_sigma_px: float = 1.0
+    """Gaussian blur (at the working size) before the flow: removes blocky upsampling edges."""
+    pyramid_levels: int = 4
+    """Farneback pyramid levels (each halves the size): motions up to ~window * 2^levels / 2 px are found."""
+    window_px: int = 15
+    """Farneback averaging window (working px); larger is steadier on blurry frames."""
+    grid_step_px: int = 4
+    """Correspondences are taken on a grid with this spacing (working size)."""
+    border_px: int = 4
+    """Grid points this close to the image border are left out (flow is unreliable there)."""
+    min_flow_px: float = 0.05
+    """Median flow magnitude (working px) below which a frame pair counts as no motion (identity)."""
+    ransac_threshold_px: float = 0.5
+    """Epipolar inlier threshold of the essential-matrix RANSAC (working px)."""
+    textured_fraction: float = 0.3
+    """Only this fraction of grid points, the most textured (Shi-Tomasi min eigenvalue), is kept:
+    flow in flat sky or road is ~0, and zero-flow points fit the identity rotation with any translation."""
+
+
+def working_frames(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Grey float32 frames (T, h, w) at the working size and the camera matrix K (3, 3) there."""
+    _, h, w, _ = frames.shape
+    scale = min(1.0, cfg.max_side_px / max(h, w))
+    size = (max(8, round(w * scale)), max(8, round(h * scale)))
+    grey = [cv2.cvtColor(np.ascontiguousarray(f), cv2.COLOR_RGB2GRAY) for f in frames]
+    out = []
+    for g in grey:
+        g = cv2.resize(g, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        out.append(cv2.GaussianBlur(g, (0, 0), cfg.blur_sigma_px) if cfg.blur_sigma_px > 0 else g)
+    K = camera.scaled(size[0], size[1]).K.astype(np.float64)
+    return np.stack(out), K
+
+
+def pair_correspondences(a: np.ndarray, b: np.ndarray, cfg: FlowMotionConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Grid points (N, 2) in frame ``a`` and where the dense flow a -> b puts them in ``b`` (px, x right, y down)."""
+    flow = cv2.calcOpticalFlowFarneback(a, b, None, pyr_scale=0.5, levels=cfg.pyramid_levels, winsize=cfg.window_px, iterations=5,
+                                        poly_n=7, poly_sigma=1.5, flags=0)
+    h, w = a.shape
+    ys, xs = np.mgrid[cfg.border_px : h - cfg.border_px : cfg.grid_step_px, cfg.border_px : w - cfg.border_px : cfg.grid_step_px]
+    ys, xs = ys.ravel(), xs.ravel()
+    texture = cv2.cornerMinEigenVal(a, 5)[ys, xs]
+    keep = texture >= np.quantile(texture, 1 - cfg.textured_fraction)
+    keep &= texture > 0
+    p0 = np.stack([xs[keep], ys[keep]], 1).astype(np.float64)
+    return p0, p0 + flow[ys[keep], xs[keep]].astype(np.float64)
+
+
+def relative_pose(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: FlowMotionConfig) -> np.ndarray | None:
+    """T_cam1_from_cam0 (4, 4) with unit translation, identity when nothing moved, None when the
+    essential matrix cannot be fitted."""
+    if len(p0) < 8:
+        return None
+    if np.median(np.linalg.norm(p1 - p0, axis=1)) < cfg.min_flow_px:
+        return np.eye(4)
+    E, inliers = cv2.findEssentialMat(p0, p1, K, method=cv2.RANSAC, prob=0.999, threshold=cfg.ransac_threshold_px)
+    if E is None or E.shape != (3, 3):
+        return None
+    _, R, t, _ = cv2.recoverPose(E, p0, p1, K, mask=inliers)
+    return make_T(R, t.ravel() / max(np.linalg.norm(t), 1e-12))
+
+
+def flow_camera_poses(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``T_world_from_cam`` (T, 4, 4) with world = the first camera frame, and ``registered`` (T,) bool,
+    from uint8 RGB frames (T, H, W, 3) of one calibrated camera. A pair that cannot be fitted ends
+    the chain (later frames stay unregistered, NaN), as an SfM model would break there."""
+    cfg = cfg or FlowMotionConfig()
+    frames = np.asarray(frames)
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8 or len(frames) < 2:
+        raise DrivewmError(f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} {frames.shape}")
+    grey, K = working_frames(frames, camera, cfg)
+    poses = np.full((len(grey), 4, 4), np.nan)
+    registered = np.zeros(len(grey), dtype=bool)
+    poses[0], registered[0] = np.eye(4), True
+    for i in range(1, len(grey)):
+        if np.array_equal(frames[i], frames[i - 1]):  # a repeated frame (a 4x causal decoder's layout): no motion
+            poses[i], registered[i] = poses[i - 1], True
+            continue
+        T_cam1_from_cam0 = relative_pose(*pair_correspondences(grey[i - 1], grey[i], cfg), K, cfg)
+        if T_cam1_from_cam0 is None:
+            break
+        poses[i], registered[i] = poses[i - 1] @ invert_T(T_cam1_from_cam0), True
+    return poses, registered
+
+
+def flow_ego_trajectory(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig | None = None):
+    """:class:`drivewm.eval.trajectory.EgoTrajectory` of one camera's frames from dense flow:
+    ``T_world_from_ego = T_world_from_cam @ T_ego_from_cam^-1`` (world = the first camera frame)."""
+    from drivewm.eval.trajectory import EgoTrajectory
+
+    T_world_from_cam, registered = flow_camera_poses(frames, camera, cfg)
+    return EgoTrajectory(T_world_from_cam @ invert_T(camera.T_ego_from_cam), registered, camera.name)
