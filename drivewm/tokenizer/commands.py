@@ -43,7 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--split", choices=("all", "holdout", "train"), default="all",
                    help="which clips: all, or those held out (or not) from training by key hash")
     v.add_argument("--holdout-percent", type=int, default=10, help="the training run's holdout_percent")
-    v.add_argument("--max-clips", type=int, default=None)
+    v.add_argument("--max-clips", type=int, default=None, help="score only the first N clips")
+    v.add_argument("--max-views", type=int, default=None, help="score only the first N cameras of each clip")
     _threads(v)
     v.set_defaults(func=_eval)
 
@@ -119,7 +120,8 @@ def _eval(args: argparse.Namespace) -> int:
     from drivewm.tokenizer.evaluate import evaluate_tokenizer
 
     _set_threads(args)
-    metrics = evaluate_tokenizer(args.model, args.data, args.out, args.split, args.holdout_percent, args.max_clips)
+    metrics = evaluate_tokenizer(args.model, args.data, args.out, args.split, args.holdout_percent, args.max_clips,
+                                 args.max_views)
     print(json.dumps({k: v for k, v in metrics.items() if k != "clips"}))
     print(f"metrics: {args.out / 'metrics.json'}")
     return 0

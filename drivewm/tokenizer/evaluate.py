@@ -50,15 +50,17 @@ def video_metrics(recon: torch.Tensor, video: torch.Tensor) -> dict[str, float]:
 
 
 def evaluate_tokenizer(model_dir: str | Path, clip_dir: str | Path, out_dir: str | Path, split: str = "all",
-                       holdout_percent: int = 10, max_clips: int | None = None, progress: bool = True) -> dict:
-    """Score the tokenizer in ``model_dir`` on the clips of ``clip_dir``; writes metrics.json and side_by_side.png."""
+                       holdout_percent: int = 10, max_clips: int | None = None, max_views: int | None = None,
+                       progress: bool = True) -> dict:
+    """Score the tokenizer in ``model_dir`` on the clips of ``clip_dir`` (the first ``max_clips``
+    clips, the first ``max_views`` cameras of each); writes metrics.json and side_by_side.png."""
     tok = Tokenizer.from_pretrained(model_dir)
     clips = load_clips(clip_dir, split, holdout_percent)[:max_clips]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     per_clip, codes, first = {}, [], None
     for clip in tqdm(clips, desc="tokenizer eval", disable=not progress):
-        video = clip_video(clip)  # (V, 3, T, H, W)
+        video = clip_video(clip)[:max_views]  # (V, 3, T, H, W)
         recon, latents = reconstruct(tok, video)
         per_clip[clip.key] = video_metrics(recon, video)
         if tok.quantizer is not None:

@@ -45,12 +45,21 @@ class CausalTemporalConv(nn.Module):
 
 
 class FactorizedConv(nn.Module):
-    """1x3x3 spatial conv (each frame alone) followed by a causal kx1x1 temporal conv."""
+    """1x3x3 spatial conv (each frame alone) followed by a causal kx1x1 temporal conv.
 
-    def __init__(self, cin: int, cout: int, temporal_kernel: int):
+    ``identity=True`` starts it as the identity on the first min(cin, cout) channels (the others
+    zero): with the zero-initialized residual branches and the averaging shortcuts of the
+    resamplers, the untrained autoencoder is then a block-average codec rather than noise, which
+    is what lets the CPU ``debug`` preset reach a useful PSNR in a few hundred steps.
+    """
+
+    def __init__(self, cin: int, cout: int, temporal_kernel: int, identity: bool = False):
         super().__init__()
         self.spatial = nn.Conv3d(cin, cout, (1, 3, 3), padding=(0, 1, 1))
         self.temporal = CausalTemporalConv(cout, cout, temporal_kernel)
+        if identity:
+            _identity_init(self.spatial, tap=(0, 1, 1))
+            _identity_init(self.temporal.conv, tap=(temporal_kernel - 1, 0, 0))  # the current frame: causal
 
     def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         return self.temporal(self.spatial(x), ctx)
@@ -66,12 +75,30 @@ class ResBlock(nn.Module):
         self.norm2 = ChannelRMSNorm(cout)
         self.conv2 = FactorizedConv(cout, cout, temporal_kernel)
         self.skip = nn.Conv3d(cin, cout, 1) if cin != cout else nn.Identity()
+        if cin != cout:
+            _identity_init(self.skip, tap=(0, 0, 0))
         nn.init.zeros_(self.conv2.temporal.conv.weight)  # start as identity: stable training from step 0
 
     def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         h = self.conv1(F.silu(self.norm1(x)), ctx)  # (B, Cout, T, H, W)
         h = self.conv2(F.silu(self.norm2(h)), ctx)
         return self.skip(x) + h
+
+
+class OutputHead(nn.Module):
+    """norm -> SiLU -> factorized conv to ``cout`` channels, plus an identity-initialized 1x1
+    skip, so the head starts by passing its first ``cout`` input channels through."""
+
+    def __init__(self, cin: int, cout: int, temporal_kernel: int):
+        super().__init__()
+        self.norm = ChannelRMSNorm(cin)
+        self.conv = FactorizedConv(cin, cout, temporal_kernel)
+        self.skip = nn.Conv3d(cin, cout, 1)
+        nn.init.zeros_(self.conv.temporal.conv.weight)
+        _identity_init(self.skip, tap=(0, 0, 0))
+
+    def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
+        return self.skip(x) + self.conv(F.silu(self.norm(x)), ctx)
 
 
 class Downsample(nn.Module):
@@ -120,21 +147,17 @@ class Upsample(nn.Module):
         return self.spatial(x) + x
 
 
-class ChannelAverage(nn.Module):
-    """Parameter-free channel shortcut (DC-AE): average groups of channels, or repeat each channel."""
-
-    def __init__(self, cin: int, cout: int):
-        super().__init__()
-        self.cin, self.cout = cin, cout
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if self.cin >= self.cout:
-            return rearrange(x, "b (c g) t h w -> b c g t h w", c=self.cout).mean(2)
-        return x.repeat_interleave(self.cout // self.cin, dim=1)
-
-
 def _zero_init(*convs: nn.Conv3d | None) -> None:
     for conv in convs:
         if conv is not None:
             nn.init.zeros_(conv.weight)
             nn.init.zeros_(conv.bias)
+
+
+@torch.no_grad()
+def _identity_init(conv: nn.Conv3d, tap: tuple[int, int, int]) -> None:
+    """Weights that copy input channel i to output channel i at kernel position ``tap``."""
+    conv.weight.zero_()
+    conv.bias.zero_()
+    for i in range(min(conv.in_channels, conv.out_channels)):
+        conv.weight[i, i, tap[0], tap[1], tap[2]] = 1.0

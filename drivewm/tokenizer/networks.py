@@ -8,26 +8,16 @@ resblock -> norm/act -> conv_out to the latent channels. Time is downsampled at 
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 from torch import nn
 
 from drivewm.tokenizer.causal import CausalContext
 from drivewm.tokenizer.config import TokenizerConfig
-from drivewm.tokenizer.layers import ChannelAverage, ChannelRMSNorm, Downsample, FactorizedConv, ResBlock, Upsample
+from drivewm.tokenizer.layers import OutputHead, Downsample, FactorizedConv, ResBlock, Upsample
 
 
 def patch_channels(cfg: TokenizerConfig) -> int:
     """Channels after the Haar patch: 3 colours x 4 spatial subbands x (2 temporal subbands)."""
     return 3 * 4 * cfg.haar_time
-
-
-def channel_shortcut(cin: int, cout: int) -> ChannelAverage | None:
-    """DC-AE's parameter-free shortcut around a channel-changing layer, where the widths divide."""
-    return ChannelAverage(cin, cout) if max(cin, cout) % min(cin, cout) == 0 else None
-
-
-def with_shortcut(y: torch.Tensor, shortcut: ChannelAverage | None, x: torch.Tensor) -> torch.Tensor:
-    return y if shortcut is None else y + shortcut(x)
 
 
 class Encoder(nn.Module):
@@ -37,8 +27,7 @@ class Encoder(nn.Module):
         super().__init__()
         widths = [cfg.base_channels * m for m in cfg.channel_multipliers]
         kt = cfg.temporal_kernel
-        self.conv_in = FactorizedConv(patch_channels(cfg), widths[0], kt)
-        self.shortcut_in = channel_shortcut(patch_channels(cfg), widths[0])
+        self.conv_in = FactorizedConv(patch_channels(cfg), widths[0], kt, identity=True)
         self.blocks = nn.ModuleList()
         cin = widths[0]
         for i, width in enumerate(widths):
@@ -48,16 +37,14 @@ class Encoder(nn.Module):
             if i < cfg.spatial_downs:
                 self.blocks.append(Downsample(width, temporal=i < cfg.temporal_downs))
         self.mid = ResBlock(cin, cin, kt)
-        self.norm_out = ChannelRMSNorm(cin)
-        self.conv_out = FactorizedConv(cin, cfg.code_channels, kt)
-        self.shortcut_out = channel_shortcut(cin, cfg.code_channels)
+        self.head = OutputHead(cin, cfg.code_channels, kt)
 
     def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
-        h = with_shortcut(self.conv_in(x, ctx), self.shortcut_in, x)  # (B, C0, T', H', W')
+        h = self.conv_in(x, ctx)  # (B, C0, T', H', W')
         for block in self.blocks:
             h = block(h, ctx)  # resolution halves at each Downsample
         h = self.mid(h, ctx)  # (B, C_last, t, h, w)
-        return with_shortcut(self.conv_out(F.silu(self.norm_out(h)), ctx), self.shortcut_out, h)  # (B, c, t, h, w)
+        return self.head(h, ctx)  # (B, c, t, h, w)
 
 
 class Decoder(nn.Module):
@@ -67,8 +54,7 @@ class Decoder(nn.Module):
         super().__init__()
         widths = [cfg.base_channels * m for m in cfg.channel_multipliers]
         kt = cfg.temporal_kernel
-        self.conv_in = FactorizedConv(cfg.code_channels, widths[-1], kt)
-        self.shortcut_in = channel_shortcut(cfg.code_channels, widths[-1])
+        self.conv_in = FactorizedConv(cfg.code_channels, widths[-1], kt, identity=True)
         self.mid = ResBlock(widths[-1], widths[-1], kt)
         self.blocks = nn.ModuleList()
         cin = widths[-1]
@@ -78,12 +64,10 @@ class Decoder(nn.Module):
                 cin = widths[i]
             if i > 0:
                 self.blocks.append(Upsample(cin, temporal=i - 1 < cfg.temporal_downs))
-        self.norm_out = ChannelRMSNorm(cin)
-        self.conv_out = FactorizedConv(cin, patch_channels(cfg), kt)
-        self.shortcut_out = channel_shortcut(cin, patch_channels(cfg))
+        self.head = OutputHead(cin, patch_channels(cfg), kt)
 
     def forward(self, z: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
-        h = self.mid(with_shortcut(self.conv_in(z, ctx), self.shortcut_in, z), ctx)  # (B, C_last, t, h, w)
+        h = self.mid(self.conv_in(z, ctx), ctx)  # (B, C_last, t, h, w)
         for block in self.blocks:
             h = block(h, ctx)  # resolution doubles at each Upsample
-        return with_shortcut(self.conv_out(F.silu(self.norm_out(h)), ctx), self.shortcut_out, h)  # (B, patch_channels, T', H', W')
+        return self.head(h, ctx)  # (B, patch_channels, T', H', W')

@@ -45,7 +45,7 @@ class TokenizerTrainConfig:
     """Frames per training video, 1 + k * temporal_compression."""
     crop: list[int] = dataclasses.field(default_factory=lambda: [64, 96])
     """Random crop [height, width] in pixels, multiples of the spatial compression."""
-    lr: float = 2e-3
+    lr: float = 1e-3
     """AdamW peak learning rate (constant after warm-up, so extending a run changes nothing before)."""
     warmup_steps: int = 20
     """Linear warm-up steps."""
