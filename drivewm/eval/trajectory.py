@@ -41,12 +41,16 @@ def ego_from_sfm(sfm: SfmResult, rig: Rig, camera: str = "") -> EgoTrajectory:
 
 
 def estimate_ego_trajectory(clip_or_videos, rig: Rig | Camera | None = None, camera: str = "",
-                            cfg: PoseConfig | None = None) -> EgoTrajectory:
+                            cfg: PoseConfig | None = None, method: str = "sfm") -> EgoTrajectory:
     """Camera motion recovered from a clip's frames, as ego poses up to a similarity.
 
     ``clip_or_videos``: a :class:`drivewm.clips.Clip` (its rig is used when ``rig`` is None), a
     dict of uint8 RGB (T, H, W, 3) per camera name (then ``rig`` is required; one camera is
     enough), or one camera's frames (T, H, W, 3) with ``rig`` that :class:`Camera`.
+    ``method``: ``sfm`` (pycolmap), ``flow`` (dense optical flow of the one camera,
+    drivewm.eval.flow_motion, for low-resolution generated frames SfM cannot register) or
+    ``auto`` (SfM, and flow when SfM leaves frames unregistered: a trajectory with gaps
+    cannot be compared over the clip).
     """
     if isinstance(rig, Camera):
         rig = Rig(rig.name, [rig])
@@ -62,5 +66,21 @@ def estimate_ego_trajectory(clip_or_videos, rig: Rig | Camera | None = None, cam
     else:
         rig = rig or clip_or_videos.meta.get_rig()
         videos = {c: clip_or_videos.video(c) for c in rig.names}
-    sfm = run_sfm(videos, rig, cfg or PoseConfig())
-    return ego_from_sfm(sfm, rig, camera)
+    if method not in ("sfm", "flow", "auto"):
+        from drivewm.errors import DrivewmError
+
+        raise DrivewmError(f"estimate_ego_trajectory: method {method!r} is not sfm, flow or auto")
+    if method != "flow":
+        est = ego_from_sfm(run_sfm(videos, rig, cfg or PoseConfig()), rig, camera)
+        if method == "sfm" or est.registered.all():
+            return est
+    return flow_fallback(videos, rig, camera)
+
+
+def flow_fallback(videos: dict[str, np.ndarray], rig: Rig, camera: str = "") -> EgoTrajectory:
+    """Ego poses from dense optical flow of one camera ('' = :func:`forward_camera`): the fallback
+    for frames structure from motion cannot register (drivewm.eval.flow_motion)."""
+    from drivewm.eval.flow_motion import flow_ego_trajectory
+
+    camera = camera or forward_camera(rig)
+    return flow_ego_trajectory(videos[camera], rig.camera(camera))

@@ -56,3 +56,21 @@ def test_flow_motion_refuses_bad_frames(sim_clip_dir):
         flow_ego_trajectory(np.zeros((1, 8, 8, 3), np.uint8), camera)
     with pytest.raises(DrivewmError, match="uint8"):
         flow_ego_trajectory(np.zeros((3, 8, 8, 3), np.float32), camera)
+
+
+def test_estimate_ego_trajectory_falls_back_to_flow(sim_clip_dir):
+    """8x-pooled frames: COLMAP leaves some of them unregistered, ``method="auto"`` returns the dense-flow
+    motion (the same as ``method="flow"``), which still gets the roundabout turn right."""
+    from drivewm.eval.trajectory import estimate_ego_trajectory
+
+    clip = next(c for c in iter_clips(sim_clip_dir) if c.key.startswith("roundabout") and c.key.endswith("17"))
+    camera = clip.meta.get_rig().camera("CAM_FRONT")
+    frames = pooled(clip.video("CAM_FRONT"), 8)
+    assert not estimate_ego_trajectory(frames, camera, method="sfm").registered.all()
+    auto = estimate_ego_trajectory(frames, camera, method="auto")
+    flow = estimate_ego_trajectory(frames, camera, method="flow")
+    assert auto.registered.all() and np.array_equal(auto.T_world_from_ego, flow.T_world_from_ego)
+    rel = invert_T(auto.T_world_from_ego[0]) @ auto.T_world_from_ego[-1]
+    assert yaw_of(rel) < -0.2  # logged: -0.68 rad
+    with pytest.raises(DrivewmError, match="method"):
+        estimate_ego_trajectory(frames, camera, method="orb")
