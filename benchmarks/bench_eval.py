@@ -51,8 +51,9 @@ def main() -> None:
     for name, secs in per_metric.items():
         print(f"  {name:10s} {secs:7.2f} s/clip   real-time factor {secs / clip_s:6.1f}x")
     print(f"  {'total':10s} {sum(per_metric.values()):7.2f} s/clip")
+    ideal = n / -(-n // 2)  # n clips in ceil(n / 2) rounds of 2 workers
     print(f"wall: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s -> speed-up {walls[1] / walls[2]:.2f}x "
-          f"(ideal 2.00x on 2 free cores; {os.cpu_count()} cores here, shared)")
+          f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load {os.getloadavg()[0]:.1f})")
 
 
 if __name__ == "__main__":

@@ -81,9 +81,9 @@ def _score_pair(m: Matches, T_b_from_a: np.ndarray | None, K_c: np.ndarray, cfg:
 
 
 def temporal_sampson(videos: dict[str, np.ndarray], rig: Rig, T_world_from_ego: np.ndarray | None,
-                     eval_cfg: EpipolarConfig, cfg: ConsistencyConfig, matcher: FrameMatcher) -> dict:
+                     epi_cfg: EpipolarConfig, cfg: ConsistencyConfig, matcher: FrameMatcher) -> dict:
     """TSE of a clip. ``videos``: uint8 (T, H, W, 3) per camera of ``rig``; ``T_world_from_ego`` (T, 4, 4) or None."""
-    K_c = canonical_K(eval_cfg)
+    K_c = canonical_K(epi_cfg)
     per_camera = {}
     for cam in rig.cameras:
         frames = videos[cam.name]
@@ -95,16 +95,16 @@ def temporal_sampson(videos: dict[str, np.ndarray], rig: Rig, T_world_from_ego: 
             if T_world_from_ego is not None:
                 T_wc = T_world_from_ego @ cam.T_ego_from_cam
                 T_rel = invert_T(T_wc[u]) @ T_wc[t]
-            pairs.append(_score_pair(m, T_rel, K_c, eval_cfg))
+            pairs.append(_score_pair(m, T_rel, K_c, epi_cfg))
         per_camera[cam.name] = pairs
     return summarize(per_camera)
 
 
 def cross_sampson(videos: dict[str, np.ndarray], rig: Rig, pairs: list[tuple[str, str]],
-                  eval_cfg: EpipolarConfig, matcher: FrameMatcher, matches_out: dict | None = None) -> dict:
+                  epi_cfg: EpipolarConfig, matcher: FrameMatcher, matches_out: dict | None = None) -> dict:
     """CSE of a clip over camera ``pairs``: one fitted F per pair over the matches of all frames.
     ``matches_out`` (optional) receives the pooled canonical matches per pair, for visualisation."""
-    K_c = canonical_K(eval_cfg)
+    K_c = canonical_K(epi_cfg)
     per_pair = {}
     for name_a, name_b in pairs:
         cam_a, cam_b = rig.camera(name_a), rig.camera(name_b)
@@ -113,7 +113,7 @@ def cross_sampson(videos: dict[str, np.ndarray], rig: Rig, pairs: list[tuple[str
             m = matcher.match((name_a, t), videos[name_a][t], (name_b, t), videos[name_b][t])
             pooled = pooled.concat(rectify_matches(m, cam_a, cam_b, K_c))
         T_b_from_a = invert_T(cam_b.T_ego_from_cam) @ cam_a.T_ego_from_cam
-        per_pair[f"{name_a}~{name_b}"] = [_score_pair(pooled, T_b_from_a, K_c, eval_cfg)]
+        per_pair[f"{name_a}~{name_b}"] = [_score_pair(pooled, T_b_from_a, K_c, epi_cfg)]
         if matches_out is not None:
             matches_out[(name_a, name_b)] = pooled
     return summarize(per_pair)
