@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from drivewm.clips.format import Clip
+from drivewm.clips.shards import iter_shard, list_shards
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
 
@@ -51,9 +52,13 @@ class EvalItem:
     mp4_paths: dict[str, str] = dataclasses.field(default_factory=dict)
     grid_path: str = ""
     grid: GridLayout | None = None
+    error: str = ""
+    """Set when the input could not be read (e.g. a corrupt shard): the item is reported, not scored."""
 
     def videos(self) -> dict[str, np.ndarray]:
         """uint8 RGB (T, H, W, 3) per camera of ``rig``, all with the same frame count."""
+        if self.error:
+            raise DrivewmError(self.error)
         if self.clip is not None:
             return {c: self.clip.video(c) for c in self.rig.names}
         if self.grid is not None:
@@ -102,11 +107,20 @@ def _video_size(path: Path) -> tuple[int, int, float]:
 
 
 def items_from_clips(location: Path, rig: Rig | None) -> list[EvalItem]:
-    """Clip shards (a folder of .tar or one .tar); ``rig`` (optional) overrides the clips' own."""
-    from drivewm.clips.shards import iter_clips
-
+    """Clip shards (a folder of .tar or one .tar); ``rig`` (optional) overrides the clips' own.
+    A shard that cannot be read becomes one failed item named after it; the others are kept."""
     items = []
-    for clip in iter_clips(location):
+    for shard in list_shards(location):
+        try:
+            items += _shard_items(shard, rig)
+        except DrivewmError as exc:
+            items.append(EvalItem(shard.stem, rig or Rig("unknown", []), 0.0, error=str(exc)))
+    return items
+
+
+def _shard_items(shard: Path, rig: Rig | None) -> list[EvalItem]:
+    items = []
+    for clip in iter_shard(shard):
         clip_rig = clip.meta.get_rig()
         if rig is not None:
             c0 = clip_rig.cameras[0]

@@ -101,3 +101,16 @@ def test_default_suite_yaml_pins_the_config_defaults():
 
     suite = Path(__file__).resolve().parents[2] / "eval" / "suites" / "default.yaml"
     assert to_dict(eval_config_from_dict(load_yaml(suite))) == to_dict(EvalConfig())
+
+
+def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
+    import shutil
+
+    folder = tmp_path / "mixed"
+    shutil.copytree(shard_dir, folder)
+    good = next(folder.glob("*.tar"))
+    (folder / "broken-000000.tar").write_bytes(good.read_bytes()[:5000])  # truncated mid-member
+    metrics = evaluate(folder, cfg=EvalConfig(metrics=["cse"]), progress=False)
+    assert metrics["num_clips"] == 3 and metrics["num_failed_clips"] == 1
+    assert "broken-000000.tar" in metrics["clips"]["broken-000000"]["error"]
+    assert metrics["clips"]["corridor"]["cse"] < 0.5
