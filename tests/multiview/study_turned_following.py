@@ -1,0 +1,128 @@
+"""Does a debug multi-view model post-trained on simulated clips follow the trajectory it is
+conditioned on, judged by the eval stage's estimator? A study (prints numbers), not a pytest test:
+measured at debug scale on CPU the answer is "no better than chance" (see the numbers at the end).
+
+    python tests/multiview/study_turned_following.py CLIPDIR [--steps 300] [--lr 1e-3] [--batch-size 4]
+
+Set-up, and why each part is there:
+
+- Data: the front camera of the simulated clips, each as copies turned left and right by an extra
+  yaw rate and an unturned one (yaw_augment.py: trajectory rebuilt, frames re-rendered by the
+  rotation homography). All copies of a clip share frame 0.
+- Training: ``drivewm posttrain``'s task from a random tiny Text2World parent with Video2World on
+  every step (``multiview.video2world_prob=1``, ``cond_frames=1``): frame 0 says where the car is,
+  only the trajectory (per-latent-frame Plucker rays + the waypoint MLP) says where it turns, so a
+  model that ignores it cannot tell the copies apart.
+- Latents: the pooling stand-in tokenizer (mv_standin.py) at 8x, decoded bilinearly. The eval
+  estimator (dense-flow method; SfM leaves such frames unregistered) is checked on the same decode
+  of the real turned frames in test_turned_clips.py: it ranks the left copy above the right one
+  for 12 of 12 clips, so it can judge samples at this resolution.
+- Measure: each clip sampled under its left- and its right-turned trajectory with one seed; a pair
+  agrees when the recovered yaws fit their own trajectories better than the swapped ones
+  (yaw_augment.paired_agreement). A model that ignores the trajectory scores 0 (identical samples),
+  one that responds at random 1/2; one-sided binomial p against 1/2. Also the conditional EDM
+  loss with each clip's own vs its swapped trajectory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+from yaw_augment import decode_bilinear, paired_agreement, recovered_yaw, trajectory_yaw, write_turned_cache  # noqa: E402
+
+from drivewm.diffusion.denoiser import edm_loss  # noqa: E402
+from drivewm.diffusion.dit_config import DiTConfig  # noqa: E402
+from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig  # noqa: E402
+from drivewm.multiview.data import MultiViewDataset  # noqa: E402
+from drivewm.multiview.model import MultiView, build_conditioning  # noqa: E402
+from drivewm.multiview.posttrain import posttrain, posttrain_config  # noqa: E402
+
+
+def train_model(latent_dir: Path, root: Path, steps: int, lr: float, batch_size: int) -> MultiView:
+    """A tiny random Text2World parent (patch 4 on the (3, 5, 24, 40) latents) post-trained with
+    Video2World on every step."""
+    torch.manual_seed(0)
+    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=3, patch_size=4, hidden_dim=64, depth=3, num_heads=4, adaln_lora_dim=16)),
+                        LatentInfo([3, 5, 24, 40], [0.0] * 3, [0.5] * 3, 10.0, None, {}))
+    parent.save_pretrained(root / "t2w")
+    cfg = posttrain_config("debug", [f"train.steps={steps}", f"train.batch_size={batch_size}", f"train.lr={lr}", "train.warmup_steps=20",
+                                     "train.checkpoint_every=100000", "train.log_every=100", "sample_steps=2",
+                                     "multiview.video2world_prob=1.0", "cond_frames=1"])
+    posttrain(cfg, root / "t2w", latent_dir, root / "mv")
+    return MultiView.from_pretrained(root / "mv")
+
+
+def turned_pairs(ds: MultiViewDataset, rate: float) -> list[tuple[int, int]]:
+    """(index of the +rate copy, index of the -rate copy) of every clip."""
+    by_key = {ds.cache.rows[i]["key"]: i for i in range(len(ds))}
+    return [(i, by_key[k.replace(f"@{rate:+.2f}", f"@{-rate:+.2f}")]) for k, i in sorted(by_key.items()) if k.endswith(f"@{rate:+.2f}")]
+
+
+def sampled_pairs(model: MultiView, ds: MultiViewDataset, rate: float, steps: int) -> list[tuple[float, float, float, float]]:
+    """Per clip: (conditioned yaw left, right, recovered yaw left, right); both samples from seed n
+    and the clip's own frame 0 (Video2World)."""
+    out = []
+    for n, pair in enumerate(turned_pairs(ds, rate)):
+        s = ds[pair[0]]
+        rec = []
+        for i in pair:
+            z = model.sample_latents(s.rig, [s.view_captions], ds[i].trajectory[None], [n], steps=steps, guidance=0.0,
+                                     cond_latents=ds.cache[i].latents[None])[0, 0]
+            rec.append(recovered_yaw(decode_bilinear(z), s.rig.cameras[0]))
+        out.append((trajectory_yaw(ds[pair[0]].trajectory), trajectory_yaw(ds[pair[1]].trajectory), *rec))
+        print("%-28s conditioned yaw %+.2f / %+.2f  recovered %+.2f / %+.2f" % (ds.cache.rows[pair[0]]["key"], *out[-1]))
+    return out
+
+
+def conditional_losses(model: MultiView, ds: MultiViewDataset, rate: float, sigma: float) -> np.ndarray:
+    """(N, 2) Video2World EDM loss of every turned copy with its own and with its swapped trajectory."""
+    rows = []
+    for pair in turned_pairs(ds, rate):
+        for a, b in (pair, pair[::-1]):
+            s, row = ds[a], []
+            for traj in (ds[a].trajectory, ds[b].trajectory):
+                cond = build_conditioning(model, s.rig, [s.view_captions] * 4, np.stack([traj] * 4), s.fps)
+                noise = torch.randn((4, *s.latents.shape[1:]), generator=torch.Generator().manual_seed(a))
+                with torch.no_grad():
+                    row.append(float(edm_loss(model.net, model.cfg.edm, s.latents.repeat(4, 1, 1, 1, 1), cond, torch.full((4,), sigma),
+                                              noise, torch.ones(4, dtype=torch.bool))))
+            rows.append(row)
+    return np.array(rows)
+
+
+def main() -> None:
+    from scipy.stats import binomtest
+
+    p = argparse.ArgumentParser()
+    p.add_argument("clip_dir", type=Path)
+    p.add_argument("--steps", type=int, default=300)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--rate", type=float, default=0.25, help="extra yaw rate (rad/s) of the turned copies")
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    root = Path(tempfile.mkdtemp(prefix="mv_turned_"))
+    latents = write_turned_cache(args.clip_dir, root / "latents", (-args.rate, 0.0, args.rate))
+    model = train_model(latents, root, args.steps, args.lr, args.batch_size)
+    ds = MultiViewDataset(latents, None, model.cfg.multiview.trajectory_waypoints, model.cfg.edm.sigma_data)
+    pairs = sampled_pairs(model, ds, args.rate, steps=8)
+    hits = paired_agreement(pairs)
+    print(f"pairs whose recovered yaws fit their own trajectories better than the swapped ones: {hits} of {len(pairs)} "
+          f"(random response 1/2; one-sided binomial p = {binomtest(hits, len(pairs), 0.5, alternative='greater').pvalue:.3f})")
+    for sigma in (0.2, 1.0, 5.0):
+        losses = conditional_losses(model, ds, args.rate, sigma)
+        print(f"sigma {sigma}: Video2World EDM loss own {losses[:, 0].mean():.4f} swapped {losses[:, 1].mean():.4f}; "
+              f"own < swapped for {np.mean(losses[:, 0] < losses[:, 1]):.2f} of {len(losses)}")
+    shutil.rmtree(root, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
