@@ -31,6 +31,12 @@ class LossConfig:
     """VGG16 feature distance; > 0 needs ``perceptual_weights``."""
     perceptual_weights: str = ""
     """Local VGG16 state dict (.safetensors, or a .pth read with weights_only=True), torchvision key names."""
+    adversarial: float = 0.0
+    """Weight of the hinge-GAN generator term (a PatchGAN discriminator trains alongside; 0 = off)."""
+    adversarial_start: int = 0
+    """Step from which the adversarial terms run (after the reconstruction has settled)."""
+    discriminator_weights: str = ""
+    """Optional local discriminator state dict (.safetensors) to start from; empty = from scratch."""
 
     def validate(self) -> None:
         if self.perceptual > 0 and not self.perceptual_weights:

@@ -21,6 +21,7 @@ from tqdm import tqdm
 from drivewm.atomic import write_json
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
+from drivewm.tokenizer.adversarial import Adversary
 from drivewm.tokenizer.config import TokenizerConfig, preset
 from drivewm.tokenizer.data import CameraVideos, CropSampler, load_clips
 from drivewm.tokenizer.losses import LossConfig, TokenizerLoss
@@ -104,17 +105,19 @@ def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, 
     ema = EmaWeights(model, cfg.ema_decay)
     loss_fn = TokenizerLoss(cfg.loss)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, betas=(0.9, 0.99), weight_decay=cfg.weight_decay)
-    start = _resume(out_dir, cfg, model, ema, opt)
+    adversary = Adversary(cfg.lr, cfg.loss.discriminator_weights) if cfg.loss.adversarial > 0 else None
+    start = _resume(out_dir, cfg, model, ema, opt, adversary)
     write_json(out_dir / "train_config.json", to_dict(cfg))
     t0, terms = time.perf_counter(), {}
     for step in tqdm(range(start, cfg.steps), desc="tokenizer train", initial=start, total=cfg.steps, disable=not progress):
-        terms = _train_step(model, loss_fn, opt, sampler.batch(step, cfg.batch_size), learning_rate(cfg, step), cfg.grad_clip)
+        adv = adversary if adversary is not None and step >= cfg.loss.adversarial_start else None
+        terms = _train_step(model, loss_fn, opt, sampler.batch(step, cfg.batch_size), learning_rate(cfg, step), cfg, adv)
         ema.update(model, step)
         if (step + 1) % cfg.log_every == 0 or step + 1 == cfg.steps:
             _log(out_dir, {"step": step + 1, "lr": learning_rate(cfg, step), **terms})
         if (step + 1) % cfg.checkpoint_every == 0:
-            _save_state(out_dir, cfg, model, ema, opt, step + 1)
-    _save_state(out_dir, cfg, model, ema, opt, max(start, cfg.steps))
+            _save_state(out_dir, cfg, model, ema, opt, adversary, step + 1)
+    _save_state(out_dir, cfg, model, ema, opt, adversary, max(start, cfg.steps))
     set_latent_stats(ema.model, CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed + 1), cfg.stats_batches, cfg.batch_size)
     ema.model.save_pretrained(out_dir, {"trained_steps": max(start, cfg.steps)})
     return {"steps": max(start, cfg.steps), "resumed_from": start, "seconds": time.perf_counter() - t0,
@@ -122,16 +125,21 @@ def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, 
 
 
 def _train_step(model: Tokenizer, loss_fn: TokenizerLoss, opt: torch.optim.Optimizer, video: torch.Tensor,
-                lr: float, grad_clip: float) -> dict[str, float]:
+                lr: float, cfg: TokenizerTrainConfig, adversary: Adversary | None) -> dict[str, float]:
     for group in opt.param_groups:
         group["lr"] = lr
     recon, _ = model(video)  # (B, 3, T, H, W)
     total, terms = loss_fn(recon, video)
+    if adversary is not None:
+        adv = adversary.generator_loss(recon)
+        total, terms["adversarial"] = total + cfg.loss.adversarial * adv, adv.item()
     opt.zero_grad(set_to_none=True)
     total.backward()
-    if grad_clip > 0:
-        torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    if cfg.grad_clip > 0:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
     opt.step()
+    if adversary is not None:
+        terms["discriminator"] = adversary.discriminator_step(recon, video)
     return {"loss": total.item(), **terms, "psnr": psnr(recon.detach(), video)}
 
 
@@ -143,12 +151,15 @@ def set_latent_stats(model: Tokenizer, sampler: CropSampler, batches: int, batch
     model.latent_std.copy_(latents.std(1).clamp_min(1e-6))
 
 
-def _save_state(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, opt, step: int) -> None:
-    save_train_state(out_dir, {"step": step, "config": json.dumps(to_dict(cfg)), "model": model.state_dict(),
-                               "ema": ema.model.state_dict(), "optimizer": opt.state_dict()})
+def _save_state(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, opt, adversary, step: int) -> None:
+    state = {"step": step, "config": json.dumps(to_dict(cfg)), "model": model.state_dict(),
+             "ema": ema.model.state_dict(), "optimizer": opt.state_dict()}
+    if adversary is not None:
+        state["adversary"] = adversary.state_dict()
+    save_train_state(out_dir, state)
 
 
-def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, opt) -> int:
+def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, opt, adversary) -> int:
     """Load the training state in ``out_dir`` if any; returns the step to start from."""
     state = load_train_state(out_dir)
     if state is None:
@@ -159,6 +170,8 @@ def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, op
     model.load_state_dict(state["model"])
     ema.model.load_state_dict(state["ema"])
     opt.load_state_dict(state["optimizer"])
+    if adversary is not None and "adversary" in state:
+        adversary.load_state_dict(state["adversary"])
     return int(state["step"])
 
 

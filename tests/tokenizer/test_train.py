@@ -86,7 +86,9 @@ def test_fsq_variant_uses_its_codebook(sim_clip_dir, tmp_path):
 
 
 def test_resume_continues_exactly(sim_clip_dir, tmp_path):
-    small = dict(batch_size=2, frames=5, crop=[32, 48], checkpoint_every=2, stats_batches=1)
+    # with the adversarial term on from step 1, so the discriminator and its optimizer resume too
+    loss = LossConfig(adversarial=0.1, adversarial_start=1)
+    small = dict(batch_size=2, frames=5, crop=[32, 48], checkpoint_every=2, stats_batches=1, loss=loss)
     train(sim_clip_dir, tmp_path / "straight", run_config("debug-4x8x8", 4, **small), progress=False)
     train(sim_clip_dir, tmp_path / "resumed", run_config("debug-4x8x8", 2, **small), progress=False)  # "killed" at 2
     summary = train(sim_clip_dir, tmp_path / "resumed", run_config("debug-4x8x8", 4, **small), progress=False)
@@ -96,6 +98,10 @@ def test_resume_continues_exactly(sim_clip_dir, tmp_path):
     for part in ("model", "ema"):
         for key in a[part]:
             assert torch.equal(a[part][key], b[part][key]), (part, key)
+    for key in a["adversary"]["disc"]:
+        assert torch.equal(a["adversary"]["disc"][key], b["adversary"]["disc"][key]), key
+    rows = [json.loads(line) for line in (tmp_path / "straight" / "metrics.jsonl").read_text().splitlines()]
+    assert "adversarial" in rows[-1] and "discriminator" in rows[-1]
     with pytest.raises(DrivewmError, match="different model config"):
         train(sim_clip_dir, tmp_path / "resumed", run_config("debug-8x8x8", 6, **{**small, "frames": 9}), progress=False)
 
@@ -137,6 +143,10 @@ def test_cli_train_overrides_and_bad_config(sim_clip_dir, tmp_path, capsys):
 
 
 def test_perceptual_term_needs_local_weights(tmp_path):
+    from drivewm.tokenizer.adversarial import Adversary
+
+    with pytest.raises(DrivewmError, match="discriminator weights not found"):
+        Adversary(1e-4, str(tmp_path / "disc.safetensors"))
     with pytest.raises(DrivewmError, match="never downloads"):
         TokenizerLoss(LossConfig(perceptual=0.1))
     with pytest.raises(DrivewmError, match="not found"):
