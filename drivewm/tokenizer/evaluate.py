@@ -58,18 +58,25 @@ def evaluate_tokenizer(model_dir: str | Path, clip_dir: str | Path, out_dir: str
     clips = load_clips(clip_dir, split, holdout_percent)[:max_clips]
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    per_clip, codes, first = {}, [], None
+    per_clip, codes, first, skipped = {}, [], None, {}
     for clip in tqdm(clips, desc="tokenizer eval", disable=not progress):
-        video = clip_video(clip)[:max_views]  # (V, 3, T, H, W)
-        recon, latents = reconstruct(tok, video)
+        try:
+            video = clip_video(clip)[:max_views]  # (V, 3, T, H, W)
+            recon, latents = reconstruct(tok, video)
+        except DrivewmError as exc:  # a clip the tokenizer cannot take is reported, the rest scored
+            skipped[clip.key] = str(exc)
+            continue
         per_clip[clip.key] = video_metrics(recon, video)
         if tok.quantizer is not None:
             codes.append(tok.indices(latents).flatten())
         if first is None:
             first = (video[:, :, : recon.shape[2]], recon, latents)
+    if not per_clip:
+        raise DrivewmError(f"{clip_dir}: no clip could be scored ({next(iter(skipped.values()))})")
     metrics = {k: float(np.mean([m[k] for m in per_clip.values()])) for k in next(iter(per_clip.values()))}
     metrics.update(_compression(tok, first[0], first[2], codes))
-    metrics.update({"clips_scored": len(per_clip), "split": split, "model": str(model_dir), "clips": per_clip})
+    metrics.update({"clips_scored": len(per_clip), "split": split, "model": str(model_dir), "skipped": skipped,
+                    "clips": per_clip})
     write_json(out_dir / "metrics.json", metrics)
     save_side_by_side(first[0], first[1], out_dir / "side_by_side.png")
     return metrics

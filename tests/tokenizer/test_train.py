@@ -27,6 +27,8 @@ from drivewm.tokenizer.metrics import psnr
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
 from drivewm.tokenizer.train import TokenizerTrainConfig, train
 
+from tokenizer_synthetic import write_synthetic_clips
+
 HOLDOUT = 25  # percent of clips held out by key hash: 3 of the 12 simulated clips
 VIEWS = 2  # cameras scored per held-out clip (evaluation at 192x320 dominates the test time)
 
@@ -111,8 +113,11 @@ def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
     clips.mkdir()
     for shard in sorted(sim_clip_dir.glob("*.tar"))[:1]:
         (clips / shard.name).symlink_to(shard)
+    write_synthetic_clips(clips, clips=1, T=17, H=100, W=160)  # a clip whose height is no multiple of 8
     assert main(["tokenizer", "encode", "--model", str(trained), "--data", str(clips), "--name", "dbg"]) == 0
+    assert "skipped syn000: video is 100x160" in capsys.readouterr().out  # reported, the others kept
     cache = LatentCache(clips / "latents" / "dbg")
+    assert len(cache) == 3
     item = cache[0]
     tok = Tokenizer.from_pretrained(trained)
     clip = next(c for c in load_clips(clips) if c.key == item.meta.key)
@@ -126,7 +131,8 @@ def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
                  "--key", item.meta.key, "--out", str(out)]) == 0
     assert sorted(p.name for p in out.iterdir()) == sorted(f"{item.meta.key}.{c}.mp4" for c in item.meta.cameras)
     assert main(["tokenizer", "eval", "--model", str(trained), "--data", str(clips), "--out", str(tmp_path / "ev"), "--max-views", "1"]) == 0
-    assert json.loads((tmp_path / "ev" / "metrics.json").read_text())["psnr"] > 18.0
+    scored = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert scored["psnr"] > 18.0 and list(scored["skipped"]) == ["syn000"] and scored["clips_scored"] == 3
 
     assert main(["tokenizer", "encode", "--model", str(tmp_path / "nope"), "--data", str(clips)]) == 2
     assert "not a drivewm model folder" in capsys.readouterr().err
