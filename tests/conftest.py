@@ -73,6 +73,18 @@ def _build_clips(out: Path, log_dir: Path) -> None:
     curate(sorted(log_dir.glob("*.mcap")), out, cfg, executor="local", workers=1)
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _one_torch_thread():
+    """One intra-op thread per test process: CI's 2 cores also run the torchrun and process-pool
+    workers some tests start, and oversubscribed torch threads run many times slower."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     """The real data folder beside the checkout (../shared/data)."""

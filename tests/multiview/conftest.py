@@ -1,4 +1,4 @@
-"""Tiny parent Text2World models for the multi-view tests; one intra-op thread (2 shared cores)."""
+"""Tiny parent Text2World models for the multi-view tests."""
 
 from __future__ import annotations
 
@@ -13,14 +13,6 @@ from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfi
 from drivewm.geometry import load_rig
 
 sys.path.insert(0, str(Path(__file__).parent))  # mv_standin
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def tiny_text2world(seed: int = 0, latent_shape=(4, 3, 4, 6)) -> Text2World:
