@@ -64,8 +64,17 @@ def load_profile(name: str, recipe: Path = RECIPE) -> Profile:
     return from_dict(Profile, profiles[name], f"{recipe}:{name}")
 
 
+def _recipe_path(arg: str) -> str:
+    """A profile argument naming a recipe file of the checkout (``datasets/...``), made absolute so
+    quickstart runs from any working directory; other arguments are returned unchanged."""
+    path = REPO / arg
+    return str(path) if not Path(arg).is_absolute() and "/" in arg and path.is_file() else arg
+
+
 def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     """The pipeline as (stage name, drivewm argv) in order."""
+    p = dataclasses.replace(p, **{f: [_recipe_path(a) for a in getattr(p, f)] for f in
+                                  ("simulate", "curate", "tokenizer_train", "pretrain", "posttrain", "generate", "eval")})
     logs, clips, tok, t2w, mv, gen = (out / n for n in ("logs", "clips", "tokenizer", "text2world", "multiview", "generated"))
     stages = [
         ("simulate", ["simulate", *p.simulate, "--rig", p.rig, "--out", str(logs)]),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import html
 import json
+from collections import Counter
 from pathlib import Path
 
 import matplotlib
@@ -82,11 +83,35 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
     }
 
 
+#: The per-clip status entry that says why a metric has no value (eval's metrics.json).
+STATUS_OF = {"tse": "tse", "cse": "cse", "ate": "traj", "rpe_trans": "traj", "rpe_rot": "traj", "tfe": "traj"}
+
+
+def _missing_reason(metrics: dict, key: str) -> str:
+    """Why ``key`` has no aggregate: the most common per-clip status, e.g. 'too_few_matches'."""
+    reasons: Counter = Counter()
+    for clip in (metrics.get("clips") or {}).values():
+        status = (clip.get("status") or {}).get(STATUS_OF.get(key, key))
+        if isinstance(status, dict):
+            reasons.update(status)
+        elif status:
+            reasons[status] += 1
+    return reasons.most_common(1)[0][0] if reasons else "not measured"
+
+
+def _cell(metrics: dict, key: str) -> str:
+    """A table cell: the value, or 'n/a (reason)' naming why eval could not measure it."""
+    if metrics.get(key) is not None:
+        return _fmt(metrics[key])
+    return f"n/a ({_missing_reason(metrics, key)})" if metrics else "n/a"
+
+
 def _eval_table(facts: dict) -> tuple[list[str], list[list[str]]]:
     """Header (metric, meaning, one column per evaluated set) and rows for the metrics present."""
     sets = facts["eval"]
-    header = ["metric", "meaning", *[("real clips" if n == "real" else f"generated: {n}") for n in sets]]
-    rows = [[k, EVAL_ROWS[k], *[_fmt(m.get(k)) for m in sets.values()]] for k in EVAL_ROWS if any(k in m for m in sets.values())]
+    header = ["metric", "meaning", *[(f"real clips ({m.get('num_clips', 0)})" if n == "real" else f"generated: {n} ({m.get('num_clips', 0)})")
+                                     for n, m in sets.items()]]
+    rows = [[k, EVAL_ROWS[k], *[_cell(m, k) for m in sets.values()]] for k in EVAL_ROWS if any(k in m for m in sets.values())]
     return header, rows
 
 
