@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -161,7 +162,9 @@ def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress
             results[i] = evaluate_item(item, cfg)
             bar.update()
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        # spawn, not fork: a caller that already ran torch or OpenCV (quickstart runs every stage in
+        # one process) holds thread-pool locks a forked child inherits locked, and the child hangs.
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(evaluate_item, item, cfg): i for i, item in enumerate(items)}
             for fut in as_completed(futures):
                 results[futures[fut]] = fut.result()
