@@ -93,8 +93,8 @@ def _missing_reason(metrics: dict, key: str) -> str:
     for clip in (metrics.get("clips") or {}).values():
         status = (clip.get("status") or {}).get(STATUS_OF.get(key, key))
         if isinstance(status, dict):
-            reasons.update(status)
-        elif status:
+            reasons.update({r: n for r, n in status.items() if r != "ok"})
+        elif status and status != "ok":
             reasons[status] += 1
     return reasons.most_common(1)[0][0] if reasons else "not measured"
 
