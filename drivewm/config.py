@@ -8,6 +8,7 @@ silently with a default.
 from __future__ import annotations
 
 import dataclasses
+import re
 import types
 import typing
 from pathlib import Path
@@ -18,6 +19,7 @@ import yaml
 from drivewm.errors import DrivewmError
 
 C = TypeVar("C")
+_SCIENTIFIC = re.compile(r"[-+]?\d+(\.\d*)?[eE][-+]?\d+")
 
 
 def load_yaml(path: str | Path) -> dict:
@@ -118,7 +120,10 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     key, raw = text.split("=", 1)
     if not key:
         raise DrivewmError(f"override {text!r}: empty key")
-    return key.split("."), yaml.safe_load(raw)
+    value = yaml.safe_load(raw)
+    if isinstance(value, str) and _SCIENTIFIC.fullmatch(value.strip()):
+        value = float(value)  # YAML 1.1 reads 1e-3 (no dot) as a string; users mean the number
+    return key.split("."), value
 
 
 def apply_overrides(cls: type[C], base: dict, overrides: list[str], where: str = "config") -> C:
