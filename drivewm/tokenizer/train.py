@@ -28,6 +28,7 @@ from drivewm.tokenizer.losses import LossConfig, TokenizerLoss
 from drivewm.tokenizer.metrics import psnr
 from drivewm.tokenizer.model import Tokenizer
 from drivewm.train.checkpoint import load_train_state, save_train_state
+from drivewm.train.ema import EMA
 
 
 @dataclasses.dataclass
@@ -75,18 +76,11 @@ class TokenizerTrainConfig:
             raise DrivewmError(f"train config: crop {self.crop} must be [height, width], multiples of {s}")
 
 
-class EmaWeights:
-    """A frozen copy of the model whose parameters follow ``ema <- d*ema + (1-d)*p``."""
-
-    def __init__(self, model: Tokenizer, decay: float):
-        self.model = copy.deepcopy(model).requires_grad_(False).eval()
-        self.decay = decay
-
-    @torch.no_grad()
-    def update(self, model: Tokenizer, step: int) -> None:
-        decay = min(self.decay, (1 + step) / (10 + step))
-        for p_ema, p in zip(self.model.parameters(), model.parameters()):
-            p_ema.lerp_(p.detach(), 1 - decay)
+def ema_model(model: Tokenizer, ema: EMA) -> Tokenizer:
+    """A frozen copy of ``model`` carrying the EMA weights (the weights the model folder ships)."""
+    shipped = copy.deepcopy(model).requires_grad_(False).eval()
+    shipped.load_state_dict(ema.state_dict(), strict=False)  # the EMA holds parameters; buffers are the model's
+    return shipped
 
 
 def learning_rate(cfg: TokenizerTrainConfig, step: int) -> float:
@@ -102,7 +96,7 @@ def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, 
     sampler = CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed)
     torch.manual_seed(cfg.seed)
     model = Tokenizer(cfg.model).train()
-    ema = EmaWeights(model, cfg.ema_decay)
+    ema = EMA(model, cfg.ema_decay)
     loss_fn = TokenizerLoss(cfg.loss)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, betas=(0.9, 0.99), weight_decay=cfg.weight_decay)
     adversary = Adversary(cfg.lr, cfg.loss.discriminator_weights) if cfg.loss.adversarial > 0 else None
@@ -118,8 +112,9 @@ def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, 
         if (step + 1) % cfg.checkpoint_every == 0:
             _save_state(out_dir, cfg, model, ema, opt, adversary, step + 1)
     _save_state(out_dir, cfg, model, ema, opt, adversary, max(start, cfg.steps))
-    set_latent_stats(ema.model, CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed + 1), cfg.stats_batches, cfg.batch_size)
-    ema.model.save_pretrained(out_dir, {"trained_steps": max(start, cfg.steps)})
+    shipped = ema_model(model, ema)
+    set_latent_stats(shipped, CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed + 1), cfg.stats_batches, cfg.batch_size)
+    shipped.save_pretrained(out_dir, {"trained_steps": max(start, cfg.steps)})
     return {"steps": max(start, cfg.steps), "resumed_from": start, "seconds": time.perf_counter() - t0,
             "train_videos": len(videos), **terms}
 
@@ -151,15 +146,15 @@ def set_latent_stats(model: Tokenizer, sampler: CropSampler, batches: int, batch
     model.latent_std.copy_(latents.std(1).clamp_min(1e-6))
 
 
-def _save_state(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, opt, adversary, step: int) -> None:
+def _save_state(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EMA, opt, adversary, step: int) -> None:
     state = {"step": step, "config": json.dumps(to_dict(cfg)), "model": model.state_dict(),
-             "ema": ema.model.state_dict(), "optimizer": opt.state_dict()}
+             "ema": ema.state_dict(), "optimizer": opt.state_dict()}
     if adversary is not None:
         state["adversary"] = adversary.state_dict()
     save_train_state(out_dir, state)
 
 
-def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, opt, adversary) -> int:
+def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EMA, opt, adversary) -> int:
     """Load the training state in ``out_dir`` if any; returns the step to start from."""
     state = load_train_state(out_dir)
     if state is None:
@@ -168,7 +163,7 @@ def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EmaWeights, op
     if saved["model"] != to_dict(cfg.model):
         raise DrivewmError(f"{out_dir}: holds a training run of a different model config; use a new --out or the same preset")
     model.load_state_dict(state["model"])
-    ema.model.load_state_dict(state["ema"])
+    ema.load_state_dict(state["ema"])
     opt.load_state_dict(state["optimizer"])
     if adversary is not None and "adversary" in state:
         adversary.load_state_dict(state["adversary"])
