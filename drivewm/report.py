@@ -67,7 +67,7 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
     """Every number and figure the report shows, from the stage outputs in ``out``."""
     curate = _read_json(out / "clips" / "report.json")
     figures = {"Simulated clips (curated, all views)": out / "clips" / "contact_sheet.png"}
-    figures.update({f"Tokenizer reconstruction (input | output)": p for p in sorted((out / "tokenizer_eval").glob("*.png"))[:1]})
+    figures.update({"Tokenizer reconstruction (input | output)": p for p in sorted((out / "tokenizer_eval").glob("*.png"))[:1]})
     curves = training_curves(out, out / "training_curves.png")
     if curves:
         figures["Training curves"] = curves

@@ -20,7 +20,7 @@ from drivewm.diffusion.dit_config import DiTConfig
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
 from drivewm.errors import DrivewmError
 from drivewm.text import TextConfig, build_text_encoder
-from drivewm.train.checkpoint import load_model_folder, save_model_folder
+from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
 MODEL_TYPE = "text2world"
 
@@ -84,10 +84,7 @@ class Text2World:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
         model = cls(from_dict(Text2WorldConfig, info["config"], where), from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"))
-        try:
-            model.dit.load_state_dict(state)
-        except RuntimeError as exc:
-            raise DrivewmError(f"{path}: model.safetensors does not match config.json ({str(exc).splitlines()[0]})") from None
+        load_weights(model.dit, state, path)
         return model
 
     def conditioning(self, prompts: list[str], fps: float | None = None) -> Conditioning:

@@ -31,7 +31,7 @@ from drivewm.multiview.config import MultiViewModelConfig
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.text import build_text_encoder
-from drivewm.train.checkpoint import load_model_folder, save_model_folder
+from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
 MODEL_TYPE = "multiview"
 
@@ -95,10 +95,7 @@ class MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
         model = cls(from_dict(MultiViewModelConfig, info["config"], where), from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"))
-        try:
-            model.net.load_state_dict(state)
-        except RuntimeError as exc:
-            raise DrivewmError(f"{path}: model.safetensors does not match config.json ({str(exc).splitlines()[0]})") from None
+        load_weights(model.net, state, path)
         return model
 
     @property

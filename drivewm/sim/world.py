@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 
 from drivewm.geometry import Rig, load_rig
 from drivewm.sim.conditions import condition_for

@@ -19,7 +19,7 @@ from drivewm.tokenizer.config import TokenizerConfig
 from drivewm.tokenizer.fsq import FSQ
 from drivewm.tokenizer.networks import Decoder, Encoder
 from drivewm.tokenizer.wavelet import haar_space, haar_time, inverse_haar_space, inverse_haar_time
-from drivewm.train.checkpoint import load_model_folder, save_model_folder
+from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
 MODEL_TYPE = "drivewm-tokenizer"
 
@@ -106,12 +106,5 @@ class Tokenizer(nn.Module):
         info, state = load_model_folder(path, MODEL_TYPE)
         config = from_dict(TokenizerConfig, info["config"], f"{Path(path) / 'config.json'} config")
         model = cls(config)
-        expected = model.state_dict()
-        missing = sorted(set(expected) - set(state))
-        unexpected = sorted(set(state) - set(expected))
-        wrong = sorted(k for k in set(expected) & set(state) if expected[k].shape != state[k].shape)
-        if missing or unexpected or wrong:
-            detail = f"missing {missing[:3]}, unexpected {unexpected[:3]}, wrong shape {wrong[:3]}"
-            raise DrivewmError(f"{path}: model.safetensors does not match config.json ({detail})")
-        model.load_state_dict(state)
+        load_weights(model, state, path)
         return model.eval()

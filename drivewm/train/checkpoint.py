@@ -57,6 +57,19 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
     return info, state
 
 
+def load_weights(module: torch.nn.Module, state: dict[str, torch.Tensor], path: str | Path) -> None:
+    """Strictly load ``state`` into ``module``; weights that do not fit the network built from
+    ``config.json`` raise DrivewmError naming the folder and the first offending keys."""
+    expected = module.state_dict()
+    missing = sorted(set(expected) - set(state))
+    unexpected = sorted(set(state) - set(expected))
+    wrong = sorted(k for k in set(expected) & set(state) if expected[k].shape != state[k].shape)
+    if missing or unexpected or wrong:
+        detail = f"missing {missing[:3]}, unexpected {unexpected[:3]}, wrong shape {wrong[:3]}"
+        raise DrivewmError(f"{path}: {WEIGHTS_NAME} does not match {CONFIG_NAME} ({detail})")
+    module.load_state_dict(state)
+
+
 def save_train_state(path: str | Path, state: dict) -> None:
     """Atomically write the training state (tensors, numbers, strings, lists and dicts only)."""
     with atomic_path(Path(path) / TRAIN_STATE_NAME) as tmp:

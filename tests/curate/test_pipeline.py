@@ -1,6 +1,5 @@
 """One curation run over good and bad synthetic MCAP logs; resume after SIGKILL; Ray == local."""
 
-import json
 import os
 import signal
 import subprocess

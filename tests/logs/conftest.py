@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivewm.geometry import T_from_xyz_yaw, euler_to_R, load_rig, make_T
+from drivewm.geometry import euler_to_R, load_rig, make_T
 from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, RoadLine, SceneInfo
 from drivewm.logs.writer import encode_image
 
