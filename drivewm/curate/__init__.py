@@ -5,8 +5,21 @@ the per-log stage (:mod:`drivewm.curate.stage`) on an executor and writes shards
 report.json and contact_sheet.png (see ``datasets/curate/README.md``).
 """
 
-from drivewm.curate.config import CurateConfig, load_curate_config
-from drivewm.curate.manifest import balanced_sample
-from drivewm.curate.pipeline import curate
+_EXPORTS = {
+    "CurateConfig": "drivewm.curate.config",
+    "load_curate_config": "drivewm.curate.config",
+    "balanced_sample": "drivewm.curate.manifest",
+    "curate": "drivewm.curate.pipeline",
+}
 
 __all__ = ["CurateConfig", "balanced_sample", "curate", "load_curate_config"]
+
+
+def __getattr__(name: str):
+    """Import the public names on first use: ``drivewm --help`` imports this package for its
+    commands and must not pay for filterpy, scipy and OpenCV (PEP 562)."""
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

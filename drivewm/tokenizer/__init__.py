@@ -5,7 +5,21 @@
 videos in causal chunks and blended tiles; ``train.py`` trains on clip shards.
 """
 
-from drivewm.tokenizer.config import PRESETS, TokenizerConfig, preset
-from drivewm.tokenizer.model import Tokenizer
+_EXPORTS = {
+    "PRESETS": "drivewm.tokenizer.config",
+    "TokenizerConfig": "drivewm.tokenizer.config",
+    "preset": "drivewm.tokenizer.config",
+    "Tokenizer": "drivewm.tokenizer.model",
+}
 
 __all__ = ["PRESETS", "Tokenizer", "TokenizerConfig", "preset"]
+
+
+def __getattr__(name: str):
+    """Import the public names on first use: ``drivewm --help`` imports this package for its
+    commands and must not pay for PyTorch (PEP 562)."""
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
