@@ -41,6 +41,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--rig", help="camera rig (multi-view models)")
     g.add_argument("--trajectory", help="straight|left|right|stop|FILE (multi-view models)")
     g.add_argument("--condition-clip", type=Path, help="clip whose first frames condition the sample (Video2World)")
+    g.add_argument("--trajectory-guidance", type=float, default=1.0,
+                   help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)")
     g.set_defaults(func=generate_command)
 
 
@@ -74,8 +76,8 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.generate import GenerateOptions, generate_text2world
     from drivewm.errors import DrivewmError
 
-    if args.rig or args.trajectory or args.condition_clip:
-        raise DrivewmError(f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip (multi-view models do)")
+    if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
+        raise DrivewmError(f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)")
     options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device)
     files = generate_text2world(args.model, options, args.out)
     print(f"wrote {len(files)} files to {args.out}")

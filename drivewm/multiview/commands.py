@@ -32,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--speed", type=float, default=0.0, help="speed of a named trajectory in m/s (default: the clip's)")
     r.add_argument("--steps", type=int, default=35, help="sampler steps per window")
     r.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
+    r.add_argument("--trajectory-guidance", type=float, default=1.0, help="weigh the trajectory's effect this many times (1 = plain)")
     r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
     r.add_argument("--sampler", default="heun", choices=["heun", "euler"])
     r.set_defaults(func=rollout_command)
@@ -62,7 +63,8 @@ def rollout_command(args: argparse.Namespace) -> int:
     from drivewm.multiview.writer import write_samples
     from drivewm.tokenizer import Tokenizer
 
-    options = RolloutOptions(args.trajectory, args.windows, args.steps, args.guidance, args.sampler, args.seed, args.prompt, args.speed)
+    options = RolloutOptions(args.trajectory, args.windows, args.steps, args.guidance, args.trajectory_guidance, args.sampler, args.seed,
+                             args.prompt, args.speed)
     model = MultiView.from_pretrained(args.model)
     if not model.latent.tokenizer:
         raise DrivewmError(f"{args.model}: no tokenizer recorded in the model folder; a rollout needs one to encode the clip")

@@ -28,6 +28,15 @@ class MultiViewConfig:
     """With a trajectory, each latent frame's rays are those of the cameras at the ego pose of that
     frame, in the first frame's ego frame (per-frame Plucker camera control as in CameraCtrl, He et al.
     2024), so the trajectory also conditions every token locally, not only through the global MLP."""
+    warp_condition: bool = False
+    """Video2World: also give every later latent frame the first frame of the rig warped into its
+    cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity
+    reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
+    it predicts the simulated clips' later frames no better than copying the first frame (see
+    tests/multiview/study_turned_following.py)."""
+    warp_ground_m: float = 100.0
+    """The warp follows rays that meet the road within this distance (m) to the road plane and all
+    others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""
     ray_scale_m: float = 10.0
     """Ray moments (o x d, metres) are divided by this before the ray MLP."""
     temporal_compression: int = 4
@@ -42,6 +51,9 @@ class MultiViewConfig:
     """Default speed of the named trajectories (set to the training clips' median initial speed)."""
     trajectory_width: int = 256
     """Hidden width of the trajectory MLP."""
+    trajectory_dropout: float = 0.1
+    """Fraction of training clips whose trajectory is dropped (static-rig rays, no waypoint embedding),
+    so the model also learns the trajectory-free prediction that trajectory guidance contrasts with."""
     video2world_prob: float = 0.5
     """Fraction of training steps conditioned on the first ``edm.cond_frames`` clean latent frames
     (the rest are plain text-to-multi-view steps, so one model does both)."""
@@ -49,8 +61,9 @@ class MultiViewConfig:
     def validate(self) -> None:
         if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
             raise DrivewmError(f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, {self.neighbors}")
-        if self.trajectory_waypoints < 0 or min(self.trajectory_scale_m, self.trajectory_dt_s, self.ray_scale_m, self.temporal_compression) <= 0 or not 0 <= self.video2world_prob <= 1:
-            raise DrivewmError("multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= video2world_prob <= 1")
+        if self.trajectory_waypoints < 0 or min(self.trajectory_scale_m, self.trajectory_dt_s, self.ray_scale_m, self.temporal_compression) <= 0 or not 0 <= self.video2world_prob <= 1 \
+                or not 0 <= self.trajectory_dropout < 1 or self.warp_ground_m < 0:
+            raise DrivewmError("multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= video2world_prob <= 1, 0 <= trajectory_dropout < 1, warp_ground_m >= 0")
 
 
 @dataclasses.dataclass

@@ -52,7 +52,7 @@ def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tup
 
 
 def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec: str | None, trajectory: str | None,
-                       condition_clip: str | Path | None, out_dir: str | Path) -> list[Path]:
+                       condition_clip: str | Path | None, out_dir: str | Path, trajectory_guidance: float = 1.0) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer)."""
     model = MultiView.from_pretrained(model_dir)
@@ -68,10 +68,11 @@ def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
     for prompt, seed in tqdm(jobs, desc="generate"):
         caps = view_captions(prompt, rig)
-        z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, options.guidance, options.sampler, cond_latents=cond)
+        z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, options.guidance, options.sampler, cond_latents=cond,
+                                 trajectory_guidance=trajectory_guidance)
         videos = decode_latents(z[0], model.latent.tokenizer)  # (V, T, H, W, 3)
         extra = {"model": str(Path(model_dir).resolve()), "prompt": prompt, "seed": seed, "steps": options.steps, "guidance": options.guidance,
-                 "trajectory": trajectory or "straight", "speed_mps": float(speed), "condition_clip": str(condition_clip or "")}
+                 "trajectory_guidance": trajectory_guidance, "trajectory": trajectory or "straight", "speed_mps": float(speed), "condition_clip": str(condition_clip or "")}
         samples.append(GeneratedSample(videos, rig, prompt, caps, waypoints, mv.trajectory_dt_s, extra))
     return write_samples(out_dir, samples, model.latent.fps)
 
@@ -79,6 +80,6 @@ def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec
 def generate_command(args: argparse.Namespace) -> int:
     """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
     options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler)
-    files = generate_multiview(args.model, options, args.rig, args.trajectory, args.condition_clip, args.out)
+    files = generate_multiview(args.model, options, args.rig, args.trajectory, args.condition_clip, args.out, args.trajectory_guidance)
     print(f"wrote {len(files)} files to {args.out}")
     return 0

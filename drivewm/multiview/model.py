@@ -24,12 +24,13 @@ from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import DrivewmError
-from drivewm.geometry import Rig
+from drivewm.geometry import Rig, invert_T
 from drivewm.multiview import cross_view  # noqa: F401  (registers the cross_view_attn sub-layer)
 from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
 from drivewm.multiview.config import MultiViewModelConfig
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
+from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
@@ -42,8 +43,28 @@ class MultiViewConditioning(Conditioning):
 
     rays: torch.Tensor | None = None
     """(B V, N, 6) Plucker coordinates (ego frame) of every token's patch centre."""
+    static_rays: torch.Tensor | None = None
+    """(B V, N, 6) the rays of the rig standing still (= ``rays`` without a moving-camera trajectory):
+    what a view is conditioned on when its trajectory is dropped."""
     trajectory: torch.Tensor | None = None
     """(B V, W, 3) future ego waypoints (m) in the first frame's ego frame (repeated per view)."""
+    warp_grid: torch.Tensor | None = None
+    """(B V, T, h, w, 2) where every latent pixel's ray lies in the rig's first latent frame
+    (drivewm.multiview.warp.warp_grid); None = no reprojected conditioning."""
+    warp_valid: torch.Tensor | None = None
+    """(B V, T, h, w) bool: some view's first frame sees that ray."""
+    trajectory_keep: torch.Tensor | None = None
+    """(B V,) bool: False = this view's trajectory is dropped (training dropout, or the trajectory-free
+    branch of trajectory guidance); None = every trajectory kept."""
+
+    def drop_trajectory(self, keep: torch.Tensor) -> "MultiViewConditioning":
+        """A copy where views with ``keep`` (B V,) False see no trajectory."""
+        old = self.trajectory_keep if self.trajectory_keep is not None else torch.ones_like(keep)
+        return dataclasses.replace(self, trajectory_keep=old & keep)
+
+    def without_trajectory(self) -> "MultiViewConditioning":
+        """The same conditioning with every trajectory dropped (trajectory guidance's other branch)."""
+        return self.drop_trajectory(torch.zeros(self.fps.shape[0], dtype=torch.bool, device=self.fps.device))
 
 
 class MultiViewNet(nn.Module):
@@ -59,6 +80,7 @@ class MultiViewNet(nn.Module):
         self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
         self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
+        self.warp_encoder = WarpEncoder(cfg.dit.in_channels, dim, cfg.dit.patch_size, cfg.dit.patch_t) if mv.warp_condition else None
         self.trajectory_encoder = (
             TrajectoryEncoder(mv.trajectory_waypoints, dim, mv.trajectory_width, mv.trajectory_scale_m) if mv.trajectory_waypoints else None
         )
@@ -69,11 +91,41 @@ class MultiViewNet(nn.Module):
 
     def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond: MultiViewConditioning) -> torch.Tensor:
         token_cond = global_cond = None
+        keep = cond.trajectory_keep
         if self.camera_encoder is not None and cond.rays is not None:
-            token_cond = self.camera_encoder(cond.rays.to(x.dtype))  # (B V, N, D)
+            rays = cond.rays
+            if keep is not None and cond.static_rays is not None:
+                rays = torch.where(keep[:, None, None], rays, cond.static_rays)
+            token_cond = self.camera_encoder(rays.to(x.dtype))  # (B V, N, D)
+        if self.warp_encoder is not None and cond.warp_grid is not None and cond.cond_latents is not None and cond.cond_frames > 0:
+            valid = cond.warp_valid if keep is None else cond.warp_valid & keep[:, None, None, None]  # dropped trajectory: no warp
+            warped = warp_first_frame(cond.cond_latents.to(x.dtype) / self.cfg.edm.sigma_data, cond.warp_grid, valid, cond.num_views)
+            warp_cond = self.warp_encoder(warped)
+            token_cond = warp_cond if token_cond is None else token_cond + warp_cond
         if self.trajectory_encoder is not None and cond.trajectory is not None:
             global_cond = self.trajectory_encoder(cond.trajectory.to(x.dtype))  # (B V, D)
+            if keep is not None:
+                global_cond = global_cond * keep[:, None].to(global_cond.dtype)
         return self.denoiser(x, sigma, dataclasses.replace(cond, extra_token_cond=token_cond, extra_global_cond=global_cond))
+
+
+class TrajectoryGuidedDenoiser(nn.Module):
+    """Guidance on the trajectory (classifier-free guidance, Ho & Salimans 2022, applied to the ego
+    motion as Vista and GEM guide on their action conditions): D = D_free + w (D_traj - D_free), where
+    D_traj is the (text-guided) prediction under the trajectory and D_free the one with it dropped.
+    w = 1 is the plain trajectory-conditioned model; w > 1 exaggerates what the trajectory changes."""
+
+    def __init__(self, denoiser: nn.Module, guidance: float):
+        super().__init__()
+        self.denoiser = denoiser  # a (text-)guided D(x; sigma, cond)
+        self.guidance = guidance
+
+    def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond: MultiViewConditioning) -> torch.Tensor:
+        out = self.denoiser(x, sigma, cond)
+        if self.guidance == 1.0:
+            return out
+        free = self.denoiser(x, sigma, cond.without_trajectory())
+        return free + self.guidance * (out - free)
 
 
 class MultiView:
@@ -118,11 +170,13 @@ class MultiView:
     def sample_latents(
         self, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, seeds: list[int], steps: int = 35,
         guidance: float = 7.0, sampler: str = "heun", cond_latents: torch.Tensor | None = None, fps: float | None = None,
+        trajectory_guidance: float = 1.0,
     ) -> torch.Tensor:
         """Raw (denormalised) latents (B, V, c, t, h, w) of B clips; clip b's noise from ``seeds[b]``.
 
         ``cond_latents`` (B, V, c, t, h, w) raw latents whose first ``edm.cond_frames`` latent frames
-        are kept (Video2World); None = generate every frame.
+        are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
+        trajectory's effect w times (:class:`TrajectoryGuidedDenoiser`; twice the network evaluations).
         """
         if sampler not in SAMPLERS:
             raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
@@ -133,9 +187,12 @@ class MultiView:
             z = normalize_latents(rearrange(cond_latents, "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data)
             cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
         sigmas = karras_sigmas(steps)
+        denoiser = GuidedDenoiser(self.net, guidance)
+        if trajectories is not None and trajectory_guidance != 1.0:
+            denoiser = TrajectoryGuidedDenoiser(denoiser, trajectory_guidance)
         noise = torch.stack([torch.randn((v, *self.latent.latent_shape), generator=torch.Generator().manual_seed(int(s))) for s in seeds])
         x = rearrange(noise, "b v c t h w -> (b v) c t h w") * sigmas[0]
-        x = SAMPLERS[sampler](GuidedDenoiser(self.net, guidance), x, sigmas, extra_args={"cond": cond})
+        x = SAMPLERS[sampler](denoiser, x, sigmas, extra_args={"cond": cond})
         return rearrange(denormalize_latents(x, mean, std, self.cfg.edm.sigma_data), "(b v) c t h w -> b v c t h w", b=b)
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
@@ -154,8 +211,24 @@ def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]
     traj = None
     if trajectories is not None:
         traj = repeat(torch.as_tensor(np.asarray(trajectories), dtype=torch.float32), "b w c -> (b v) w c", v=v)
+    grid = valid = None
+    if mv.warp_condition and trajectories is not None:
+        grid, valid = clip_warp_grids(model, rig, trajectories, fps)
     return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v, view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors),
-                                 rays=clip_rays(model, rig, b, trajectories, fps), trajectory=traj)
+                                 rays=clip_rays(model, rig, b, trajectories, fps), static_rays=clip_rays(model, rig, b, None, fps), trajectory=traj,
+                                 warp_grid=grid, warp_valid=valid)
+
+
+def clip_warp_grids(model: MultiView, rig: Rig, trajectories: np.ndarray, fps: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """(B V, T, h, w, 2) warp grids and (B V, T, h, w) validity of B clips: latent frame i at the
+    ego pose of video frame i * temporal_compression along each clip's waypoints."""
+    _, t, h, w = model.latent.latent_shape
+    mv = model.cfg.multiview
+    grids = []
+    for wp in np.asarray(trajectories):
+        poses = poses_from_waypoints(wp, t, mv.trajectory_dt_s, fps / mv.temporal_compression)
+        grids.append(warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m))  # frame 0 is the ego frame itself
+    return torch.cat([g for g, _ in grids]), torch.cat([m for _, m in grids])
 
 
 def clip_rays(model: MultiView, rig: Rig, b: int, trajectories: np.ndarray | None, fps: float) -> torch.Tensor:

@@ -102,7 +102,7 @@ class MultiViewTask:
 
     def loss(self, forward, indices: list[int], seeds: list[int], device: torch.device) -> torch.Tensor:
         """EDM loss over B clips x V views: one noise level per clip (its views are denoised together),
-        caption dropout per view, and Video2World on a seeded fraction of steps. The Video2World draw
+        caption dropout per view, trajectory dropout per clip, and Video2World on a seeded fraction of steps. The Video2World draw
         uses this rank's first sample seed, so with 0 < video2world_prob < 1 a run is exactly
         reproducible (and resumable) at a given world size, but not identical across world sizes."""
         samples = [self.dataset[i] for i in indices]
@@ -113,8 +113,10 @@ class MultiViewTask:
         noise = torch.cat([torch.randn(s.latents.shape, generator=g) for s, g in zip(samples, gens)]).to(device)
         keep = torch.cat([torch.rand(v, generator=g) >= self.bundle.cfg.edm.text_dropout for g in gens])
         video2world = float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0]))) < self.cfg.multiview.video2world_prob
+        keep_traj = torch.cat([(torch.rand(1, generator=g) >= self.cfg.multiview.trajectory_dropout).expand(v) for g in gens])
         edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
         cond = cat_conditioning([build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples])
+        cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
         return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> MultiView:
@@ -137,7 +139,7 @@ class MultiViewTask:
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
     """Concatenate per-clip conditionings (same views) along the folded (B V) batch."""
     first = conds[0]
-    cat = {f: torch.cat([getattr(c, f) for c in conds]) for f in ("text_emb", "text_mask", "fps", "rays", "trajectory")
+    cat = {f: torch.cat([getattr(c, f) for c in conds]) for f in ("text_emb", "text_mask", "fps", "rays", "static_rays", "trajectory", "warp_grid", "warp_valid", "trajectory_keep")
            if getattr(first, f) is not None}
     return dataclasses.replace(first, **cat)
 

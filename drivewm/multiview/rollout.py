@@ -41,6 +41,8 @@ class RolloutOptions:
     """Sampler steps per window."""
     guidance: float = 7.0
     """Classifier-free guidance scale."""
+    trajectory_guidance: float = 1.0
+    """Guidance on the trajectory (drivewm.multiview.model.TrajectoryGuidedDenoiser; 1 = none)."""
     sampler: str = "heun"
     """``heun`` or ``euler``."""
     seed: int = 0
@@ -161,5 +163,5 @@ def _next_window(model: MultiView, tokenizer, rig: Rig, captions: list[str], vid
     cond[:, :, : win.k] = encode_views(tokenizer, video[:, start:], size)[:, :, : win.k]
     waypoints = waypoints_from_poses(poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints)
     z = model.sample_latents(rig, [captions], waypoints[None], [options.seed + window], options.steps, options.guidance,
-                             options.sampler, cond_latents=cond[None], fps=fps)
+                             options.sampler, cond_latents=cond[None], fps=fps, trajectory_guidance=options.trajectory_guidance)
     return decode_views(tokenizer, z[0])[:, win.n_cond :]

@@ -100,7 +100,8 @@ def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(
 
 @pytest.fixture(scope="module")
 def mv_with_tokenizer(tmp_path_factory) -> Path:
-    """An (untrained) multi-view model whose folder records a real debug tokenizer (4x8x8), front camera only."""
+    """An (untrained) multi-view model whose folder records a real debug tokenizer (4x8x8), front camera
+    only, with the reprojected first frame (multiview.warp_condition) on."""
     import dataclasses
 
     from drivewm.geometry import load_rig
@@ -113,7 +114,9 @@ def mv_with_tokenizer(tmp_path_factory) -> Path:
     tok.save_pretrained(root / "tok")
     parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
                         LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}))
-    mv = from_text2world(parent)
+    from drivewm.multiview.config import MultiViewConfig
+
+    mv = from_text2world(parent, MultiViewConfig(warp_condition=True))
     mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
     mv.save_pretrained(root / "mv")
     return root / "mv"
@@ -122,7 +125,7 @@ def mv_with_tokenizer(tmp_path_factory) -> Path:
 def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_tokenizer, sim_clip_dir, tmp_path):
     first = load_clip(sim_clip_dir)
     assert main(["rollout", "--model", str(mv_with_tokenizer), "--clip", str(sim_clip_dir), "--key", first.key, "--trajectory", "right",
-                 "--windows", "1", "--steps", "1", "--out", str(tmp_path / "roll")]) == 0
+                 "--windows", "1", "--steps", "1", "--trajectory-guidance", "2", "--out", str(tmp_path / "roll")]) == 0
     (clip,) = list(iter_clips(tmp_path / "roll"))
     assert clip.meta.cameras == ["CAM_FRONT"] and clip.meta.num_frames == 17 and clip.meta.extra["rollout_of"] == first.key
     real, kept = first.video("CAM_FRONT")[0].astype(float), clip.video("CAM_FRONT")[0].astype(float)
@@ -130,6 +133,7 @@ def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_token
     assert clip.meta.trajectory_ego[-1][1] < -0.05  # turning right: the ego ends to the right (y < 0)
 
     assert main(["generate", "--model", str(mv_with_tokenizer), "--prompt", "night", "--condition-clip", str(sim_clip_dir),
-                 "--steps", "1", "--out", str(tmp_path / "gen")]) == 0
+                 "--steps", "1", "--trajectory-guidance", "3", "--out", str(tmp_path / "gen")]) == 0
     (gen,) = list(iter_clips(tmp_path / "gen"))
     assert gen.meta.num_frames == 17 and gen.meta.extra["condition_clip"] == str(sim_clip_dir)
+    assert gen.meta.extra["trajectory_guidance"] == 3.0

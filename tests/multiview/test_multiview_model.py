@@ -77,6 +77,29 @@ def test_trajectory_and_camera_conditioning_change_the_output(parent):
     assert (other_cams - base).abs().mean() > 1e-3 * base.abs().mean()
 
 
+def test_dropped_trajectory_is_no_trajectory_and_guidance_interpolates(parent):
+    """A dropped trajectory (training dropout, guidance's free branch) is exactly the model given
+    none: static rays, no waypoint embedding. Trajectory guidance w is D_free + w (D_traj - D_free)."""
+    from drivewm.multiview.model import TrajectoryGuidedDenoiser
+
+    mv = from_text2world(parent)
+    rig = load_rig("front3")
+    caps, _, cond, x, sigma = _inputs(mv, rig)
+    _perturb(mv.net.trajectory_encoder, 1)
+    _perturb(mv.net.camera_encoder, 2)
+    none = mv.conditioning(rig, caps, None)
+    with torch.no_grad():
+        with_traj, free = mv.net(x, sigma, cond), mv.net(x, sigma, cond.without_trajectory())
+        torch.testing.assert_close(free, mv.net(x, sigma, none))
+        assert (with_traj - free).abs().mean() > 1e-3 * free.abs().mean()
+        keep = torch.tensor([True, True, True, False, False, False])  # clip 0 keeps it, clip 1 drops it
+        mixed = mv.net(x, sigma, cond.drop_trajectory(keep))
+        torch.testing.assert_close(mixed[:3], with_traj[:3])
+        torch.testing.assert_close(mixed[3:], free[3:])
+        guided = TrajectoryGuidedDenoiser(mv.net, 3.0)(x, sigma, cond)
+        torch.testing.assert_close(guided, free + 3.0 * (with_traj - free))
+
+
 def test_cross_view_attention_mixes_views_after_training_like_perturbation(parent):
     mv = from_text2world(parent, MultiViewConfig(cross_view="neighbors", neighbors=2))
     _perturb(mv.net.dit.blocks[-1].layers["cross_view_attn"].layer.out, 3)  # one hop of mixing only

@@ -1,0 +1,103 @@
+"""Reprojected Video2World conditioning: the given first latent frame of every view, warped into
+every later latent frame's cameras along the conditioned ego trajectory, as extra token input.
+
+A later frame of a camera sees (mostly) what some camera saw in the first frame, moved across the
+image by the ego's turn and travel. The warp renders that for every latent pixel: its ray from
+the camera's pose at that frame (rig calibration + trajectory) is followed to the road, a plane
+at the ego frame's z = 0, or, above the horizon or beyond ``max_ground_m``, to infinity; that
+point is looked up in whichever view's first frame sees it (the same view first, then the others,
+so a left turn fetches content from the front-left camera). Road and distant scenery are exact;
+anything standing on the road (cars, buildings) is wrong by its parallax, which the network has to
+correct. It is GEN3C's idea (Ren et al. 2025: render a 3D cache into the target cameras as
+conditioning) with a flat-world depth (inverse perspective mapping's road plane plus the plane at
+infinity) in place of a depth map, so it needs nothing but K, T_ego_from_cam and the waypoints:
+any rig works.
+
+The network sees the warp through a zero-initialised patch projection added to its tokens
+(:class:`WarpEncoder`), so a fresh multi-view model is still its Text2World parent; it learns how
+much to trust the warp. Invalid pixels (no view saw that direction) are zero with mask 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from einops import rearrange
+from torch import nn
+
+from drivewm.diffusion.dit import patchify
+from drivewm.geometry import Rig, pixel_rays
+
+
+def warp_grid(rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray, max_ground_m: float = 100.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sampling positions of every view's latent pixels in the first frame of the rig.
+
+    ``T_ego0_from_ego`` (T, 4, 4): the ego pose of every latent frame in the first frame's ego frame.
+    A ray that meets the ground (z = 0 of the ego frame, which sits on the road) within
+    ``max_ground_m`` is followed to that point; any other ray is a direction at infinity.
+    Returns ``grid`` (V, T, h, w, 2) in :func:`torch.nn.functional.grid_sample` coordinates
+    (align_corners=False) over the views' first latent frames laid side by side (V*w wide, rig
+    order) and ``valid`` (V, T, h, w) bool.
+    """
+    h, w = latent_hw
+    v_count = len(rig.cameras)
+    jj, ii = np.meshgrid(np.arange(w), np.arange(h), indexing="xy")
+    grid = np.zeros((v_count, len(T_ego0_from_ego), h, w, 2))
+    valid = np.zeros((v_count, len(T_ego0_from_ego), h, w), dtype=bool)
+    for v, cam in enumerate(rig.cameras):
+        uv = np.stack([(jj.ravel() + 0.5) * cam.width / w - 0.5, (ii.ravel() + 0.5) * cam.height / h - 0.5], axis=1)
+        d_cam = pixel_rays(cam.K, uv)  # (h*w, 3)
+        for t, T in enumerate(T_ego0_from_ego):
+            T_cam = T @ cam.T_ego_from_cam  # this camera at frame t, in the first ego frame
+            d = d_cam @ T_cam[:3, :3].T
+            o = T_cam[:3, 3]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                depth = np.where(d[:, 2] < 0, -o[2] / d[:, 2], np.inf)  # along d to the road
+            ground = depth < max_ground_m
+            point = o + np.where(ground, depth, 0.0)[:, None] * d  # ground points; other rows unused
+            found = np.zeros(len(d), dtype=bool)
+            for s in [v, *[k for k in range(v_count) if k != v]]:  # own view first
+                src = rig.cameras[s]
+                R_s, c_s = src.T_ego_from_cam[:3, :3], src.T_ego_from_cam[:3, 3]  # first frame: ego0 = ego
+                ds = np.where(ground[:, None], point - c_s, d) @ R_s  # into source camera s
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    px = ds[:, :2] / ds[:, 2:3] @ src.K[:2, :2].T + src.K[:2, 2]
+                x = (px[:, 0] + 0.5) * w / src.width - 0.5  # latent pixel coordinates of the source
+                y = (px[:, 1] + 0.5) * h / src.height - 0.5
+                eps = 1e-6  # a pixel's own centre maps back onto itself up to rounding
+                ok = ~found & (ds[:, 2] > 1e-6) & (x >= -eps) & (x <= w - 1 + eps) & (y >= -eps) & (y <= h - 1 + eps)
+                x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
+                gx = (s * w + x + 0.5) / (v_count * w) * 2 - 1  # within strip s: no bleed into neighbours
+                gy = (y + 0.5) / h * 2 - 1
+                grid[v, t].reshape(-1, 2)[ok] = np.stack([gx[ok], gy[ok]], axis=1)
+                found |= ok
+            valid[v, t] = found.reshape(h, w)
+    return torch.from_numpy(grid).float(), torch.from_numpy(valid)
+
+
+def warp_first_frame(cond_latents: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor, num_views: int) -> torch.Tensor:
+    """(B V, c, T, h, w) clean latents (first frame used) -> (B V, c + 1, T, h, w): the first frames
+    warped by ``grid`` (B V, T, h, w, 2) where ``valid`` (B V, T, h, w), zero elsewhere, plus the mask."""
+    first = rearrange(cond_latents[:, :, 0], "(b v) c h w -> b c h (v w)", v=num_views)
+    g = rearrange(grid.to(first), "(b v) t h w k -> b (v t h) w k", v=num_views)
+    warped = F.grid_sample(first, g, mode="bilinear", padding_mode="zeros", align_corners=False)  # (B, c, V*T*h, w)
+    t, h = grid.shape[1], grid.shape[2]
+    warped = rearrange(warped, "b c (v t h) w -> (b v) c t h w", v=num_views, t=t, h=h)
+    mask = valid.to(warped)[:, None]
+    return torch.cat([warped * mask, mask], dim=1)
+
+
+class WarpEncoder(nn.Module):
+    """Warped first frames + mask (B V, c + 1, T, h, w) -> token offsets (B V, N, D): patchified like
+    the DiT's input and projected by one zero-initialised linear layer (a fresh model ignores it)."""
+
+    def __init__(self, latent_channels: int, hidden_dim: int, patch_size: int, patch_t: int):
+        super().__init__()
+        self.patch_size, self.patch_t = patch_size, patch_t
+        self.proj = nn.Linear((latent_channels + 1) * patch_t * patch_size**2, hidden_dim)
+        nn.init.zeros_(self.proj.weight)
+        nn.init.zeros_(self.proj.bias)
+
+    def forward(self, warped: torch.Tensor) -> torch.Tensor:
+        return self.proj(patchify(warped, self.patch_size, self.patch_t))
