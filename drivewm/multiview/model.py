@@ -214,9 +214,10 @@ def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]
     grid = valid = None
     if mv.warp_condition and trajectories is not None:
         grid, valid = clip_warp_grids(model, rig, trajectories, fps)
+    static_rays = clip_rays(model, rig, b, None, fps)
+    rays = static_rays if trajectories is None or not mv.moving_camera_rays else clip_rays(model, rig, b, trajectories, fps)
     return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v, view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors),
-                                 rays=clip_rays(model, rig, b, trajectories, fps), static_rays=clip_rays(model, rig, b, None, fps), trajectory=traj,
-                                 warp_grid=grid, warp_valid=valid)
+                                 rays=rays, static_rays=static_rays, trajectory=traj, warp_grid=grid, warp_valid=valid)
 
 
 def clip_warp_grids(model: MultiView, rig: Rig, trajectories: np.ndarray, fps: float) -> tuple[torch.Tensor, torch.Tensor]:

@@ -102,9 +102,10 @@ class MultiViewTask:
 
     def loss(self, forward, indices: list[int], seeds: list[int], device: torch.device) -> torch.Tensor:
         """EDM loss over B clips x V views: one noise level per clip (its views are denoised together),
-        caption dropout per view, trajectory dropout per clip, and Video2World on a seeded fraction of steps. The Video2World draw
-        uses this rank's first sample seed, so with 0 < video2world_prob < 1 a run is exactly
-        reproducible (and resumable) at a given world size, but not identical across world sizes."""
+        caption dropout per view, trajectory dropout per clip, and Video2World on a seeded fraction of
+        steps. The Video2World draw uses this rank's first sample seed, so with 0 < video2world_prob < 1
+        a run is exactly reproducible (and resumable) at a given world size, but not identical across
+        world sizes."""
         samples = [self.dataset[i] for i in indices]
         v = samples[0].latents.shape[0]
         x0 = torch.cat([s.latents for s in samples]).to(device)  # (B V, c, t, h, w)

@@ -27,7 +27,8 @@ from einops import rearrange
 from torch import nn
 
 from drivewm.diffusion.dit import patchify
-from drivewm.geometry import Rig, pixel_rays
+from drivewm.geometry import Rig, pixel_rays, project
+from drivewm.multiview.camera import patch_centres_px
 
 
 def warp_grid(rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray, max_ground_m: float = 100.0) -> tuple[torch.Tensor, torch.Tensor]:
@@ -42,12 +43,10 @@ def warp_grid(rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray,
     """
     h, w = latent_hw
     v_count = len(rig.cameras)
-    jj, ii = np.meshgrid(np.arange(w), np.arange(h), indexing="xy")
     grid = np.zeros((v_count, len(T_ego0_from_ego), h, w, 2))
     valid = np.zeros((v_count, len(T_ego0_from_ego), h, w), dtype=bool)
     for v, cam in enumerate(rig.cameras):
-        uv = np.stack([(jj.ravel() + 0.5) * cam.width / w - 0.5, (ii.ravel() + 0.5) * cam.height / h - 0.5], axis=1)
-        d_cam = pixel_rays(cam.K, uv)  # (h*w, 3)
+        d_cam = pixel_rays(cam.K, patch_centres_px(cam, latent_hw))  # (h*w, 3), one ray per latent pixel
         for t, T in enumerate(T_ego0_from_ego):
             T_cam = T @ cam.T_ego_from_cam  # this camera at frame t, in the first ego frame
             d = d_cam @ T_cam[:3, :3].T
@@ -60,13 +59,11 @@ def warp_grid(rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray,
             for s in [v, *[k for k in range(v_count) if k != v]]:  # own view first
                 src = rig.cameras[s]
                 R_s, c_s = src.T_ego_from_cam[:3, :3], src.T_ego_from_cam[:3, 3]  # first frame: ego0 = ego
-                ds = np.where(ground[:, None], point - c_s, d) @ R_s  # into source camera s
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    px = ds[:, :2] / ds[:, 2:3] @ src.K[:2, :2].T + src.K[:2, 2]
+                px, _ = project(src.K, np.where(ground[:, None], point - c_s, d) @ R_s)  # NaN behind source camera s
                 x = (px[:, 0] + 0.5) * w / src.width - 0.5  # latent pixel coordinates of the source
                 y = (px[:, 1] + 0.5) * h / src.height - 0.5
                 eps = 1e-6  # a pixel's own centre maps back onto itself up to rounding
-                ok = ~found & (ds[:, 2] > 1e-6) & (x >= -eps) & (x <= w - 1 + eps) & (y >= -eps) & (y <= h - 1 + eps)
+                ok = ~found & (x >= -eps) & (x <= w - 1 + eps) & (y >= -eps) & (y <= h - 1 + eps)
                 x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
                 gx = (s * w + x + 0.5) / (v_count * w) * 2 - 1  # within strip s: no bleed into neighbours
                 gy = (y + 0.5) / h * 2 - 1
