@@ -25,7 +25,13 @@ def simulate_logs(out: Path, drives: int, duration_s: float) -> list[Path]:
     from drivewm.sim import SimConfig, simulate
 
     scenarios = ["highway", "roundabout", "merge", "intersection"]
-    return [simulate(SimConfig(source="highway", scenario=scenarios[i % 4], rig="nuscenes6", duration_s=duration_s, seed=i), out / f"drive{i}.mcap") for i in range(drives)]
+    return [
+        simulate(
+            SimConfig(source="highway", scenario=scenarios[i % 4], rig="nuscenes6", duration_s=duration_s, seed=i),
+            out / f"drive{i}.mcap",
+        )
+        for i in range(drives)
+    ]
 
 
 def decode_rate(logs: list[Path]) -> tuple[int, float, float]:
@@ -80,8 +86,12 @@ def main() -> None:
         print(f"input: {len(logs)} logs, {frames} camera frames; kept {kept} clips")
         print(f"raw decode (read_log + JPEG decode): {frames / t_decode:8.1f} camera-frames/s")
         print(f"H.264 encode only (encode_mp4):     {frames / t_encode:8.1f} camera-frames/s  (the other fixed cost)")
-        print(f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw decode")
-        print(f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw decode")
+        print(
+            f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw decode"
+        )
+        print(
+            f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw decode"
+        )
         print(f"speed-up 1 -> 2 workers: {t1 / t2:.2f} x (on {os.cpu_count()} CPUs)")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -28,12 +28,21 @@ TEXT_DIM, TEXT_LEN = 256, 32
 
 
 def ours(size: dict, device: torch.device):
-    cfg = DiTConfig(in_channels=16, hidden_dim=size["hidden_dim"], depth=size["depth"], num_heads=size["num_heads"], text_dim=TEXT_DIM)
+    cfg = DiTConfig(
+        in_channels=16,
+        hidden_dim=size["hidden_dim"],
+        depth=size["depth"],
+        num_heads=size["num_heads"],
+        text_dim=TEXT_DIM,
+    )
     model = EDMDenoiser(DiT(cfg), EDMConfig()).to(device)
     b, (c, t, h, w) = size["batch"], size["latent"]
     x0, noise = torch.randn(b, c, t, h, w, device=device), torch.randn(b, c, t, h, w, device=device)
-    cond = Conditioning(torch.randn(b, TEXT_LEN, TEXT_DIM, device=device), torch.ones(b, TEXT_LEN, dtype=torch.bool, device=device),
-                        torch.full((b,), 10.0, device=device))
+    cond = Conditioning(
+        torch.randn(b, TEXT_LEN, TEXT_DIM, device=device),
+        torch.ones(b, TEXT_LEN, dtype=torch.bool, device=device),
+        torch.full((b,), 10.0, device=device),
+    )
     sigma, keep = torch.full((b,), 1.0, device=device), torch.ones(b, dtype=torch.bool, device=device)
     return model, lambda: edm_loss(model, model.cfg, x0, cond, sigma, noise, keep)
 
@@ -42,8 +51,15 @@ def peer(size: dict, device: torch.device):
     from diffusers import LTXVideoTransformer3DModel
 
     d, heads = size["hidden_dim"], size["num_heads"]
-    model = LTXVideoTransformer3DModel(in_channels=64, out_channels=64, num_attention_heads=heads, attention_head_dim=d // heads,
-                                       cross_attention_dim=d, num_layers=size["depth"], caption_channels=TEXT_DIM).to(device)
+    model = LTXVideoTransformer3DModel(
+        in_channels=64,
+        out_channels=64,
+        num_attention_heads=heads,
+        attention_head_dim=d // heads,
+        cross_attention_dim=d,
+        num_layers=size["depth"],
+        caption_channels=TEXT_DIM,
+    ).to(device)
     b, (c, t, h, w) = size["batch"], size["latent"]
     tokens = patchify(torch.randn(b, c, t, h, w), 2, 1).to(device)  # (B, N, 64): our patches as LTX voxels
     text = torch.randn(b, TEXT_LEN, TEXT_DIM, device=device)
@@ -79,7 +95,9 @@ def main() -> None:
     parser.add_argument("--full", action="store_true", help="bigger model and sequence")
     parser.add_argument("--rounds", type=int, default=8, help="timed steps per model")
     parser.add_argument("--threads", type=int, default=1, help="CPU intra-op threads")
-    parser.add_argument("--peak-tflops", type=float, default=989.0, help="GPU peak bf16 TFLOP/s for MFU (H100 SXM: 989)")
+    parser.add_argument(
+        "--peak-tflops", type=float, default=989.0, help="GPU peak bf16 TFLOP/s for MFU (H100 SXM: 989)"
+    )
     args = parser.parse_args()
     size = SIZES["full" if args.full else "small"]
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -96,15 +114,21 @@ def main() -> None:
                 times[name].append(dt)
     c, t, h, w = size["latent"]
     tokens = size["batch"] * t * (h // 2) * (w // 2)
-    print(f"device {device}, {'bf16 autocast' if bf16 else 'fp32'}, batch {size['batch']} x {tokens // size['batch']} tokens, "
-          f"D={size['hidden_dim']} depth {size['depth']}")
+    print(
+        f"device {device}, {'bf16 autocast' if bf16 else 'fp32'}, batch {size['batch']} x {tokens // size['batch']} tokens, "
+        f"D={size['hidden_dim']} depth {size['depth']}"
+    )
     rate = {}
     for name, (model, _) in runs.items():
         step_s = min(times[name])
         rate[name] = tokens / step_s
         line = f"{name:14s} {count_parameters(model) / 1e6:6.1f}M params  {step_s * 1e3:8.1f} ms/step  {rate[name]:9.0f} tokens/s"
         if device.type == "cuda":
-            mfu = train_flops(count_parameters(model), tokens, size["depth"], size["hidden_dim"]) / step_s / (args.peak_tflops * 1e12)
+            mfu = (
+                train_flops(count_parameters(model), tokens, size["depth"], size["hidden_dim"])
+                / step_s
+                / (args.peak_tflops * 1e12)
+            )
             line += f"  MFU {mfu:.1%}"
         print(line)
     print(f"ratio drivewm/LTX tokens/s: {rate['drivewm DiT'] / rate['diffusers LTX']:.2f}")

@@ -25,8 +25,17 @@ def make_clips(out: Path, clips: int) -> Path:
     from drivewm.curate import curate, load_curate_config
     from drivewm.sim import SimConfig, simulate
 
-    log = simulate(SimConfig(source="highway", scenario="highway", duration_s=1.7 * clips + 2.0, fps=10.0, seed=7), out / "drive.mcap")
-    curate([log], out / "clips", load_curate_config(REPO / "datasets" / "curate" / "test.yaml"), executor="local", workers=1)
+    log = simulate(
+        SimConfig(source="highway", scenario="highway", duration_s=1.7 * clips + 2.0, fps=10.0, seed=7),
+        out / "drive.mcap",
+    )
+    curate(
+        [log],
+        out / "clips",
+        load_curate_config(REPO / "datasets" / "curate" / "test.yaml"),
+        executor="local",
+        workers=1,
+    )
     return out / "clips"
 
 
@@ -52,8 +61,10 @@ def main() -> None:
         print(f"  {name:10s} {secs:7.2f} s/clip   real-time factor {secs / clip_s:6.1f}x")
     print(f"  {'total':10s} {sum(per_metric.values()):7.2f} s/clip")
     ideal = n / -(-n // 2)  # n clips in ceil(n / 2) rounds of 2 workers
-    print(f"wall: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s -> speed-up {walls[1] / walls[2]:.2f}x "
-          f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load {os.getloadavg()[0]:.1f})")
+    print(
+        f"wall: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s -> speed-up {walls[1] / walls[2]:.2f}x "
+        f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load {os.getloadavg()[0]:.1f})"
+    )
 
 
 if __name__ == "__main__":

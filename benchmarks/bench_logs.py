@@ -83,11 +83,17 @@ def main() -> None:
     t_raw, t_read = _timed(raw_iterate), _timed(lambda: read_log(path))
     size_mb = path.stat().st_size / 1e6
     print(f"nuscenes6 {width}x{height}, {ticks} ticks, {n_images} images, file {size_mb:.1f} MB")
-    print(f"write: LogWriter {n_images / t_write:8.1f} images/s | JPEG encode alone {n_images / t_encode:8.1f} images/s"
-          f" | ratio writer/encode time {t_write / t_encode:.2f}")
-    print(f"read:  read_log  {n_images / t_read:8.1f} images/s | raw mcap iteration {n_images / t_raw:8.1f} images/s"
-          f" | ratio read_log/raw time {t_read / t_raw:.2f}")
-    print(f"real-time factor at 10 fps x 6 cameras: write {n_images / t_write / 60:.1f}x, read {n_images / t_read / 60:.1f}x")
+    print(
+        f"write: LogWriter {n_images / t_write:8.1f} images/s | JPEG encode alone {n_images / t_encode:8.1f} images/s"
+        f" | ratio writer/encode time {t_write / t_encode:.2f}"
+    )
+    print(
+        f"read:  read_log  {n_images / t_read:8.1f} images/s | raw mcap iteration {n_images / t_raw:8.1f} images/s"
+        f" | ratio read_log/raw time {t_read / t_raw:.2f}"
+    )
+    print(
+        f"real-time factor at 10 fps x 6 cameras: write {n_images / t_write / 60:.1f}x, read {n_images / t_read / 60:.1f}x"
+    )
 
 
 if __name__ == "__main__":

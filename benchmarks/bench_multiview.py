@@ -39,7 +39,10 @@ def build(latent_shape: list[int], cross_view: str):
 
     torch.manual_seed(0)
     c = latent_shape[0]
-    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=c, **dit_preset("debug"))), LatentInfo(latent_shape, [0.0] * c, [1.0] * c))
+    parent = Text2World(
+        Text2WorldConfig(DiTConfig(in_channels=c, **dit_preset("debug"))),
+        LatentInfo(latent_shape, [0.0] * c, [1.0] * c),
+    )
     return parent, from_text2world(parent, MultiViewConfig(cross_view=cross_view), cond_frames=1)
 
 
@@ -75,8 +78,15 @@ def child(args: argparse.Namespace) -> dict:
     times = []
     for step in range(args.steps + 1):
         tic = time.perf_counter()
-        loss = edm_loss(net, mv.cfg.edm if args.what == "mv" else parent.cfg.edm, x0, cond, torch.full((args.views,), 1.0),
-                        torch.randn_like(x0), torch.ones(args.views, dtype=torch.bool))
+        loss = edm_loss(
+            net,
+            mv.cfg.edm if args.what == "mv" else parent.cfg.edm,
+            x0,
+            cond,
+            torch.full((args.views,), 1.0),
+            torch.randn_like(x0),
+            torch.ones(args.views, dtype=torch.bool),
+        )
         loss.backward()
         opt.step()
         opt.zero_grad(set_to_none=True)
@@ -86,9 +96,32 @@ def child(args: argparse.Namespace) -> dict:
     return {"tokens_per_s": tokens / float(np.median(times[1:])), "peak_mb": peak_mb() - base, "tokens": tokens}
 
 
-def run(what: str, mode: str, views: int, latent: list[int], steps: int, cross_view: str = "neighbors", checkpointing: bool = False) -> dict:
-    cmd = [sys.executable, __file__, "--child", "--what", what, "--mode", mode, "--views", str(views), "--steps", str(steps),
-           "--cross-view", cross_view, "--latent", *map(str, latent)] + (["--checkpointing"] if checkpointing else [])
+def run(
+    what: str,
+    mode: str,
+    views: int,
+    latent: list[int],
+    steps: int,
+    cross_view: str = "neighbors",
+    checkpointing: bool = False,
+) -> dict:
+    cmd = [
+        sys.executable,
+        __file__,
+        "--child",
+        "--what",
+        what,
+        "--mode",
+        mode,
+        "--views",
+        str(views),
+        "--steps",
+        str(steps),
+        "--cross-view",
+        cross_view,
+        "--latent",
+        *map(str, latent),
+    ] + (["--checkpointing"] if checkpointing else [])
     out = subprocess.run(cmd, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -112,18 +145,30 @@ def main() -> None:
     latent = [16, 5, 24, 40] if args.full else [16, 3, 12, 20]
     steps = 3
     print(f"debug DiT, latents {latent} per view, 1 thread, median of {steps} training steps (batch = 1 clip)")
-    print(f"{'views':>5} {'mode':>16} {'tokens':>6} {'tok/s':>8} {'t2w tok/s':>9} {'ratio':>6} {'peak MB':>8} {'t2w MB':>7} {'ratio':>6}")
-    for views, cross_view, ckpt in [(1, "neighbors", False), (3, "neighbors", False), (6, "neighbors", False), (6, "joint", False), (6, "neighbors", True)]:
+    print(
+        f"{'views':>5} {'mode':>16} {'tokens':>6} {'tok/s':>8} {'t2w tok/s':>9} {'ratio':>6} {'peak MB':>8} {'t2w MB':>7} {'ratio':>6}"
+    )
+    for views, cross_view, ckpt in [
+        (1, "neighbors", False),
+        (3, "neighbors", False),
+        (6, "neighbors", False),
+        (6, "joint", False),
+        (6, "neighbors", True),
+    ]:
         mv = run("mv", "train", views, latent, steps, cross_view, ckpt)
         t2w = run("t2w", "train", views, latent, steps, checkpointing=ckpt)
         label = cross_view + ("+ckpt" if ckpt else "")
-        print(f"{views:>5} {label:>16} {mv['tokens']:>6} {mv['tokens_per_s']:>8.0f} {t2w['tokens_per_s']:>9.0f} {mv['tokens_per_s'] / t2w['tokens_per_s']:>6.2f} "
-              f"{mv['peak_mb']:>8.0f} {t2w['peak_mb']:>7.0f} {mv['peak_mb'] / max(t2w['peak_mb'], 1):>6.2f}")
+        print(
+            f"{views:>5} {label:>16} {mv['tokens']:>6} {mv['tokens_per_s']:>8.0f} {t2w['tokens_per_s']:>9.0f} {mv['tokens_per_s'] / t2w['tokens_per_s']:>6.2f} "
+            f"{mv['peak_mb']:>8.0f} {t2w['peak_mb']:>7.0f} {mv['peak_mb'] / max(t2w['peak_mb'], 1):>6.2f}"
+        )
     gen_steps = 10
     mv = run("mv", "generate", 6, latent, gen_steps)
     t2w = run("t2w", "generate", 6, latent, gen_steps)
-    print(f"generation, one 6-view clip, {gen_steps} Euler steps: {mv['seconds']:.2f} s (Text2World, the same 6 views independently: "
-          f"{t2w['seconds']:.2f} s; ratio {mv['seconds'] / t2w['seconds']:.2f})")
+    print(
+        f"generation, one 6-view clip, {gen_steps} Euler steps: {mv['seconds']:.2f} s (Text2World, the same 6 views independently: "
+        f"{t2w['seconds']:.2f} s; ratio {mv['seconds'] / t2w['seconds']:.2f})"
+    )
 
 
 if __name__ == "__main__":

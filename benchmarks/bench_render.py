@@ -31,8 +31,16 @@ from drivewm.sim.simulate import record  # noqa: E402
 from drivewm.sim.world import TEXTURE_MARGIN_M, build_renderer, sim_rig  # noqa: E402
 
 SHEET_ORDER = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_BACK_LEFT", "CAM_BACK", "CAM_BACK_RIGHT"]
-CONDITIONS = [("clear", "day"), ("overcast", "day"), ("rain", "day"), ("snow", "day"), ("fog", "day"), ("clear", "dusk"),
-              ("clear", "night"), ("snow", "night")]
+CONDITIONS = [
+    ("clear", "day"),
+    ("overcast", "day"),
+    ("rain", "day"),
+    ("snow", "day"),
+    ("fog", "day"),
+    ("clear", "dusk"),
+    ("clear", "night"),
+    ("snow", "night"),
+]
 
 
 def render_cpu_s_per_tick(renderer, rec, ticks: int) -> float:
@@ -64,7 +72,9 @@ def contact_sheet(cfg: SimConfig, rec, out: Path) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--full", action="store_true", help="10 s drives and 1280x720 too")
-    ap.add_argument("--sheet", default="/tmp/drivewm_render_contact_sheet", help="contact sheet path prefix (.png per source)")
+    ap.add_argument(
+        "--sheet", default="/tmp/drivewm_render_contact_sheet", help="contact sheet path prefix (.png per source)"
+    )
     args = ap.parse_args()
     cv2.setNumThreads(1)
     duration = 10.0 if args.full else 4.0
@@ -74,14 +84,18 @@ def main() -> None:
         rec = record(base)
         step_s = rec.step_cpu_s / len(rec.ticks)
         agents = np.mean([len(t.agents) for t in rec.ticks])
-        print(f"{source}/{scenario}: simulator {1 / step_s:8.1f} ticks/s ({step_s * 1e3:.2f} ms/tick, {agents:.0f} vehicles)")
+        print(
+            f"{source}/{scenario}: simulator {1 / step_s:8.1f} ticks/s ({step_s * 1e3:.2f} ms/tick, {agents:.0f} vehicles)"
+        )
         for w, h in sizes:
             cfg = dataclasses.replace(base, width=w, height=h)
             renderer = build_renderer(cfg, rec, sim_rig(cfg))
             per_tick = render_cpu_s_per_tick(renderer, rec, min(len(rec.ticks), 20))
             cams = len(renderer.views)
-            print(f"  render {w}x{h}: {cams / per_tick:7.1f} camera-frames/s ({per_tick * 1e3:6.1f} ms per {cams}-camera tick); "
-                  f"render/sim step time ratio {per_tick / step_s:6.2f}")
+            print(
+                f"  render {w}x{h}: {cams / per_tick:7.1f} camera-frames/s ({per_tick * 1e3:6.1f} ms per {cams}-camera tick); "
+                f"render/sim step time ratio {per_tick / step_s:6.2f}"
+            )
         sheet = Path(f"{args.sheet}_{source}.png")
         contact_sheet(base, rec, sheet)
         print(f"  contact sheet: {sheet}")

@@ -52,7 +52,9 @@ def main() -> None:
     denoiser = EDMDenoiser(dit, EDMConfig())
     cond = Conditioning(torch.randn(1, 32, 256), torch.ones(1, 32, dtype=torch.bool), torch.tensor([10.0]))
     fwd = one_forward_s(denoiser, cond)
-    print(f"one forward: {fwd * 1e3:.0f} ms for {LATENT[1] * LATENT[2] * LATENT[3] // 4} tokens; guidance {args.guidance}")
+    print(
+        f"one forward: {fwd * 1e3:.0f} ms for {LATENT[1] * LATENT[2] * LATENT[3] // 4} tokens; guidance {args.guidance}"
+    )
     print(f"{'sampler':8s} {'steps':>5s} {'evals':>5s} {'s/clip':>8s} {'ratio to evals x forward':>25s}")
     for name, sampler in SAMPLERS.items():
         for steps in args.steps:

@@ -53,9 +53,15 @@ def peer(kind: str) -> torch.nn.Module:
     if kind == "cogvideox":  # 4x8x8, 16 channels
         return AutoencoderKLCogVideoX(block_out_channels=(32, 64, 64, 128), layers_per_block=2, latent_channels=16)
     boc = (32, 64, 128, 128)  # LTX-Video with patch size 1 and three 2x2x2 stages: 8x8x8, 16 channels
-    return AutoencoderKLLTXVideo(latent_channels=16, block_out_channels=boc, decoder_block_out_channels=boc,
-                                 layers_per_block=(1, 1, 1, 1, 1), decoder_layers_per_block=(1, 1, 1, 1, 1),
-                                 patch_size=1, patch_size_t=1)
+    return AutoencoderKLLTXVideo(
+        latent_channels=16,
+        block_out_channels=boc,
+        decoder_block_out_channels=boc,
+        layers_per_block=(1, 1, 1, 1, 1),
+        decoder_layers_per_block=(1, 1, 1, 1, 1),
+        patch_size=1,
+        patch_size_t=1,
+    )
 
 
 @torch.no_grad()
@@ -69,8 +75,10 @@ def throughput(frames: int, height: int, width: int, repeats: int) -> None:
         t_dec, _ = timed(lambda: ours.decode(z), repeats)
         p_enc, pz = timed(lambda: other.encode(video).latent_dist.mode(), repeats)
         p_dec, _ = timed(lambda: other.decode(pz).sample, repeats)
-        print(f"{ours_name} ({params_m(ours):.1f}M, latents {tuple(z.shape)}) vs {peer_name} ({params_m(other):.1f}M, "
-              f"latents {tuple(pz.shape)})")
+        print(
+            f"{ours_name} ({params_m(ours):.1f}M, latents {tuple(z.shape)}) vs {peer_name} ({params_m(other):.1f}M, "
+            f"latents {tuple(pz.shape)})"
+        )
         print(f"  encode frames/s: ours {frames / t_enc:7.2f}  peer {frames / p_enc:7.2f}  ratio {p_enc / t_enc:5.2f}x")
         print(f"  decode frames/s: ours {frames / t_dec:7.2f}  peer {frames / p_dec:7.2f}  ratio {p_dec / t_dec:5.2f}x")
 
@@ -88,7 +96,9 @@ def dashcam_video(frames: int, stride: int, size_hw: tuple[int, int]) -> torch.T
     raw = decode_mp4(DASHCAM.read_bytes(), None, str(DASHCAM))[: frames * stride : stride]
     video = to_model_range(raw).unsqueeze(0)  # (1, 3, T, 540, 960)
     h, w = size_hw
-    scaled = F.interpolate(video.transpose(1, 2).flatten(0, 1), size=(h * 2, int(round(h * 2 * 960 / 540))), mode="area")
+    scaled = F.interpolate(
+        video.transpose(1, 2).flatten(0, 1), size=(h * 2, int(round(h * 2 * 960 / 540))), mode="area"
+    )
     top, left = (scaled.shape[-2] - h) // 2, (scaled.shape[-1] - w) // 2
     return scaled[..., top : top + h, left : left + w].unsqueeze(0).transpose(1, 2).clamp(-1, 1)
 
@@ -98,9 +108,11 @@ def score(name: str, tok: Tokenizer, video: torch.Tensor) -> None:
     ours = video_metrics(recon, video)
     base = video_metrics(block_mean_codec(video[:, :, : recon.shape[2]]), video)
     ratio = video[0, :, : recon.shape[2]].numel() / latents[0].numel()
-    print(f"  {name:22s} PSNR {ours['psnr']:6.2f} dB  SSIM {ours['ssim']:.3f}  temporal_l1 {ours['temporal_l1']:5.2f}  | "
-          f"block-mean codec PSNR {base['psnr']:6.2f} SSIM {base['ssim']:.3f}  (ours - it: {ours['psnr'] - base['psnr']:+.2f} dB)"
-          f"  | compression {ratio:.1f}x")
+    print(
+        f"  {name:22s} PSNR {ours['psnr']:6.2f} dB  SSIM {ours['ssim']:.3f}  temporal_l1 {ours['temporal_l1']:5.2f}  | "
+        f"block-mean codec PSNR {base['psnr']:6.2f} SSIM {base['ssim']:.3f}  (ours - it: {ours['psnr'] - base['psnr']:+.2f} dB)"
+        f"  | compression {ratio:.1f}x"
+    )
 
 
 def reconstruction(data: Path, steps: int, crop: list[int], work: Path, holdout: int) -> None:
@@ -119,7 +131,9 @@ def reconstruction(data: Path, steps: int, crop: list[int], work: Path, holdout:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, help="simulated clip folder (e.g. curated sim drives); omit to skip part 2")
+    parser.add_argument(
+        "--data", type=Path, help="simulated clip folder (e.g. curated sim drives); omit to skip part 2"
+    )
     parser.add_argument("--full", action="store_true", help="bigger input and longer training")
     parser.add_argument("--steps", type=int, default=None, help="training steps per preset (default 150, --full 2000)")
     parser.add_argument("--holdout-percent", type=int, default=25)

@@ -203,7 +203,7 @@ class Camera:
     T_ego_from_cam: np.ndarray
     distortion: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
-    def scaled(self, width: int, height: int) -> "Camera":
+    def scaled(self, width: int, height: int) -> Camera:
         """The same camera at another image size (intrinsics scaled per axis)."""
         sx, sy = width / self.width, height / self.height
         K = self.K.copy()
@@ -240,11 +240,11 @@ class Rig:
                 return c
         raise DrivewmError(f"rig {self.name}: no camera named {name!r} (has {self.names})")
 
-    def scaled(self, width: int, height: int) -> "Rig":
+    def scaled(self, width: int, height: int) -> Rig:
         """Every camera at a new image size."""
         return Rig(self.name, [c.scaled(width, height) for c in self.cameras])
 
-    def subset(self, names: list[str]) -> "Rig":
+    def subset(self, names: list[str]) -> Rig:
         """The cameras named, in that order."""
         return Rig(self.name, [self.camera(n) for n in names])
 
@@ -269,7 +269,9 @@ def load_rig(name_or_path: str | Path) -> Rig:
                 path = d / f"{name_or_path}.yaml"
                 break
         else:
-            raise DrivewmError(f"rig {name_or_path!r}: no such file or named rig in {[str(d) for d in rig_search_dirs()]}")
+            raise DrivewmError(
+                f"rig {name_or_path!r}: no such file or named rig in {[str(d) for d in rig_search_dirs()]}"
+            )
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError:
@@ -307,7 +309,9 @@ def _camera_from_dict(d: dict, where: str) -> Camera:
     if "T_ego_from_cam" in d:
         T = np.asarray(d["T_ego_from_cam"], dtype=np.float64)
     elif "xyz" in d:
-        R_ego_from_body = euler_to_R(*np.radians([d.get("roll_deg", 0.0), d.get("pitch_deg", 0.0), d.get("yaw_deg", 0.0)]))
+        R_ego_from_body = euler_to_R(
+            *np.radians([d.get("roll_deg", 0.0), d.get("pitch_deg", 0.0), d.get("yaw_deg", 0.0)])
+        )
         T = make_T(R_ego_from_body @ R_BODY_FROM_OPENCV, d["xyz"])
     else:
         raise DrivewmError(f"{where} ({name}): give T_ego_from_cam or xyz + yaw_deg")

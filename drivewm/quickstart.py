@@ -73,28 +73,79 @@ def _recipe_path(arg: str) -> str:
 
 def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     """The pipeline as (stage name, drivewm argv) in order."""
-    p = dataclasses.replace(p, **{f: [_recipe_path(a) for a in getattr(p, f)] for f in
-                                  ("simulate", "curate", "tokenizer_train", "pretrain", "posttrain", "generate", "eval")})
-    logs, clips, tok, t2w, mv, gen = (out / n for n in ("logs", "clips", "tokenizer", "text2world", "multiview", "generated"))
+    p = dataclasses.replace(
+        p,
+        **{
+            f: [_recipe_path(a) for a in getattr(p, f)]
+            for f in ("simulate", "curate", "tokenizer_train", "pretrain", "posttrain", "generate", "eval")
+        },
+    )
+    logs, clips, tok, t2w, mv, gen = (
+        out / n for n in ("logs", "clips", "tokenizer", "text2world", "multiview", "generated")
+    )
     stages = [
         ("simulate", ["simulate", *p.simulate, "--rig", p.rig, "--out", str(logs)]),
         ("view", ["view", FIRST_LOG, "--out", str(out / "drive.rrd")]),
         ("curate", ["curate", str(logs), "--out", str(clips), *p.curate]),
         ("tokenizer-train", ["tokenizer", "train", "--data", str(clips), "--out", str(tok), *p.tokenizer_train]),
-        ("tokenizer-eval", ["tokenizer", "eval", "--model", str(tok), "--data", str(clips), "--out", str(out / "tokenizer_eval"),
-                            "--split", "holdout"]),
+        (
+            "tokenizer-eval",
+            [
+                "tokenizer",
+                "eval",
+                "--model",
+                str(tok),
+                "--data",
+                str(clips),
+                "--out",
+                str(out / "tokenizer_eval"),
+                "--split",
+                "holdout",
+            ],
+        ),
         ("tokenizer-encode", ["tokenizer", "encode", "--model", str(tok), "--data", str(clips)]),
         ("pretrain", ["pretrain", "--data", str(clips), "--tokenizer", str(tok), "--out", str(t2w), *p.pretrain]),
-        ("posttrain", ["posttrain", "--init", str(t2w), "--data", str(clips), "--rig", p.rig, "--out", str(mv), *p.posttrain]),
+        (
+            "posttrain",
+            ["posttrain", "--init", str(t2w), "--data", str(clips), "--rig", p.rig, "--out", str(mv), *p.posttrain],
+        ),
     ]
     for g in p.generations:
-        argv = ["generate", "--model", str(mv), "--rig", p.rig, "--prompt", g.prompt, "--trajectory", g.trajectory,
-                "--seed", str(g.seed), "--out", str(gen / g.name), *p.generate]
+        argv = [
+            "generate",
+            "--model",
+            str(mv),
+            "--rig",
+            p.rig,
+            "--prompt",
+            g.prompt,
+            "--trajectory",
+            g.trajectory,
+            "--seed",
+            str(g.seed),
+            "--out",
+            str(gen / g.name),
+            *p.generate,
+        ]
         stages.append((f"generate-{g.name}", argv))
     stages.append(("eval-real", ["eval", str(clips), "--rig", p.rig, "--out", str(out / "eval" / "real"), *p.eval]))
     for g in p.generations:
-        stages.append((f"eval-{g.name}", ["eval", str(gen / g.name), "--rig", p.rig, "--out", str(out / "eval" / g.name),
-                                          "--reference", str(out / "eval" / "real" / "metrics.json"), *p.eval]))
+        stages.append(
+            (
+                f"eval-{g.name}",
+                [
+                    "eval",
+                    str(gen / g.name),
+                    "--rig",
+                    p.rig,
+                    "--out",
+                    str(out / "eval" / g.name),
+                    "--reference",
+                    str(out / "eval" / "real" / "metrics.json"),
+                    *p.eval,
+                ],
+            )
+        )
     return stages
 
 
@@ -125,8 +176,11 @@ def quickstart(out: Path, profile_name: str = "full") -> Path:
 
     profile = load_profile(profile_name)
     stages = stage_commands(profile, out)
-    print(f"[quickstart] profile {profile_name}: {len(stages)} stages, expected about "
-          f"{profile.expected_minutes:.0f} minutes on a 2-core CPU machine; output in {out}", flush=True)
+    print(
+        f"[quickstart] profile {profile_name}: {len(stages)} stages, expected about "
+        f"{profile.expected_minutes:.0f} minutes on a 2-core CPU machine; output in {out}",
+        flush=True,
+    )
     tic = time.perf_counter()
     for name, argv in stages:
         run_stage(name, argv, out)

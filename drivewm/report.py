@@ -67,7 +67,9 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
     """Every number and figure the report shows, from the stage outputs in ``out``."""
     curate = _read_json(out / "clips" / "report.json")
     figures = {"Simulated clips (curated, all views)": out / "clips" / "contact_sheet.png"}
-    figures.update({"Tokenizer reconstruction (input | output)": p for p in sorted((out / "tokenizer_eval").glob("*.png"))[:1]})
+    figures.update(
+        {"Tokenizer reconstruction (input | output)": p for p in sorted((out / "tokenizer_eval").glob("*.png"))[:1]}
+    )
     curves = training_curves(out, out / "training_curves.png")
     if curves:
         figures["Training curves"] = curves
@@ -109,9 +111,19 @@ def _cell(metrics: dict, key: str) -> str:
 def _eval_table(facts: dict) -> tuple[list[str], list[list[str]]]:
     """Header (metric, meaning, one column per evaluated set) and rows for the metrics present."""
     sets = facts["eval"]
-    header = ["metric", "meaning", *[(f"real clips ({m.get('num_clips', 0)})" if n == "real" else f"generated: {n} ({m.get('num_clips', 0)})")
-                                     for n, m in sets.items()]]
-    rows = [[k, EVAL_ROWS[k], *[_cell(m, k) for m in sets.values()]] for k in EVAL_ROWS if any(k in m for m in sets.values())]
+    header = [
+        "metric",
+        "meaning",
+        *[
+            (f"real clips ({m.get('num_clips', 0)})" if n == "real" else f"generated: {n} ({m.get('num_clips', 0)})")
+            for n, m in sets.items()
+        ],
+    ]
+    rows = [
+        [k, EVAL_ROWS[k], *[_cell(m, k) for m in sets.values()]]
+        for k in EVAL_ROWS
+        if any(k in m for m in sets.values())
+    ]
     return header, rows
 
 
@@ -125,17 +137,40 @@ def _curate_line(curate: dict) -> str:
 
 def to_markdown(facts: dict, stages: list[tuple[str, list[str]]], out: Path) -> str:
     tok = facts["tokenizer"]
-    lines = ["# drivewm quickstart report", "", f"Rig: `{facts['rig']}`", "",
-             "## Curation", "", _curate_line(facts["curate"]), "",
-             "## Tokenizer", "", f"PSNR {_fmt(tok.get('psnr'))} dB, SSIM {_fmt(tok.get('ssim'))} on held-out clips", "",
-             "## Consistency benchmark: real vs generated", ""]
+    lines = [
+        "# drivewm quickstart report",
+        "",
+        f"Rig: `{facts['rig']}`",
+        "",
+        "## Curation",
+        "",
+        _curate_line(facts["curate"]),
+        "",
+        "## Tokenizer",
+        "",
+        f"PSNR {_fmt(tok.get('psnr'))} dB, SSIM {_fmt(tok.get('ssim'))} on held-out clips",
+        "",
+        "## Consistency benchmark: real vs generated",
+        "",
+    ]
     header, rows = _eval_table(facts)
     lines += ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join([f"`{r[0]}`", *r[1:]]) + " |" for r in rows]
     lines += ["", "## Figures", ""]
     lines += [f"### {title}\n\n![{title}]({path.relative_to(out)})\n" for title, path in facts["figures"].items()]
-    lines += ["## Rerun recording", "", f"`{facts['recording']}` (open with `rerun {facts['recording'].name}`)", "",
-              "## Commands run", "", "```"] + [f"drivewm {' '.join(argv)}" for _, argv in stages] + ["```", ""]
+    lines += (
+        [
+            "## Rerun recording",
+            "",
+            f"`{facts['recording']}` (open with `rerun {facts['recording'].name}`)",
+            "",
+            "## Commands run",
+            "",
+            "```",
+        ]
+        + [f"drivewm {' '.join(argv)}" for _, argv in stages]
+        + ["```", ""]
+    )
     return "\n".join(lines)
 
 
@@ -144,24 +179,29 @@ def to_html(facts: dict, stages: list[tuple[str, list[str]]], out: Path) -> str:
     tok = facts["tokenizer"]
     header, table = _eval_table(facts)
     head = "".join(f"<th>{e(h)}</th>" for h in header)
-    rows = "".join("<tr><td><code>" + e(r[0]) + "</code></td>" + "".join(f"<td>{e(c)}</td>" for c in r[1:]) + "</tr>" for r in table)
-    figs = "".join(f"<figure><img src='{e(str(p.relative_to(out)))}' alt='{e(t)}'><figcaption>{e(t)}</figcaption></figure>"
-                   for t, p in facts["figures"].items())
+    rows = "".join(
+        "<tr><td><code>" + e(r[0]) + "</code></td>" + "".join(f"<td>{e(c)}</td>" for c in r[1:]) + "</tr>"
+        for r in table
+    )
+    figs = "".join(
+        f"<figure><img src='{e(str(p.relative_to(out)))}' alt='{e(t)}'><figcaption>{e(t)}</figcaption></figure>"
+        for t, p in facts["figures"].items()
+    )
     cmds = e("\n".join(f"drivewm {' '.join(argv)}" for _, argv in stages))
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>drivewm quickstart report</title>
 <style>body{{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}}
 table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;text-align:left}}
 figure{{margin:1.5em 0}}img{{max-width:100%;border:1px solid #ddd}}pre{{background:#f6f6f6;padding:1em;overflow:auto}}</style></head>
-<body data-figures="{len(facts['figures'])}">
+<body data-figures="{len(facts["figures"])}">
 <h1>drivewm quickstart report</h1>
-<p>Rig <code>{e(facts['rig'])}</code>. <span id="figure-status">loading figures...</span></p>
-<h2>Curation</h2><p>{e(_curate_line(facts['curate']))}</p>
-<h2>Tokenizer</h2><p>PSNR {e(_fmt(tok.get('psnr')))} dB, SSIM {e(_fmt(tok.get('ssim')))} on held-out clips.</p>
+<p>Rig <code>{e(facts["rig"])}</code>. <span id="figure-status">loading figures...</span></p>
+<h2>Curation</h2><p>{e(_curate_line(facts["curate"]))}</p>
+<h2>Tokenizer</h2><p>PSNR {e(_fmt(tok.get("psnr")))} dB, SSIM {e(_fmt(tok.get("ssim")))} on held-out clips.</p>
 <h2>Consistency benchmark: real vs generated</h2>
 <table id="eval-table"><tr>{head}</tr>{rows}</table>
 <h2>Figures</h2>{figs}
-<h2>Rerun recording</h2><p><code>{e(str(facts['recording']))}</code> (open with <code>rerun</code>)</p>
+<h2>Rerun recording</h2><p><code>{e(str(facts["recording"]))}</code> (open with <code>rerun</code>)</p>
 <h2>Commands run</h2><pre>{cmds}</pre>
 <script>
 window.addEventListener("load", () => {{

@@ -25,13 +25,16 @@ def test_overrides_reach_nested_fields_with_their_types():
     assert (cfg.train.steps, cfg.name, cfg.sizes) == (3, "x", [3, 4])
 
 
-@pytest.mark.parametrize("override,message", [
-    ("train.stpes=3", r"unknown key\(s\) \['stpes'\]"),
-    ("train.steps=three", "expected an integer"),
-    ("train.steps=true", "expected an integer"),
-    ("train.lr=fast", "expected a number"),
-    ("novalue", "expected KEY=VALUE"),
-])
+@pytest.mark.parametrize(
+    "override,message",
+    [
+        ("train.stpes=3", r"unknown key\(s\) \['stpes'\]"),
+        ("train.steps=three", "expected an integer"),
+        ("train.steps=true", "expected an integer"),
+        ("train.lr=fast", "expected a number"),
+        ("novalue", "expected KEY=VALUE"),
+    ],
+)
 def test_bad_overrides_are_clear_errors(override, message):
     with pytest.raises(DrivewmError, match=message):
         apply_overrides(Outer, {}, [override])

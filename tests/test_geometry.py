@@ -5,13 +5,13 @@ import pytest
 from drivewm.errors import DrivewmError
 from drivewm.geometry import (
     R_to_quat_xyzw,
+    backproject,
     euler_to_R,
     fundamental_from_T,
     invert_T,
     load_rig,
     make_T,
     project,
-    backproject,
     quat_xyzw_to_R,
     rig_from_dict,
     sampson_distance_sq,
@@ -53,7 +53,9 @@ def test_named_rigs_load_and_look_outward(name, count):
         assert abs(axis[2]) < 0.1
     # a point 20 m ahead of the car is seen near the centre of CAM_FRONT
     front = rig.camera("CAM_FRONT")
-    uv, z = project(front.K, transform_points(invert_T(front.T_ego_from_cam), np.array([[21.7, 0.0, front.T_ego_from_cam[2, 3]]])))
+    uv, z = project(
+        front.K, transform_points(invert_T(front.T_ego_from_cam), np.array([[21.7, 0.0, front.T_ego_from_cam[2, 3]]]))
+    )
     assert z[0] > 0 and abs(uv[0, 0] - front.K[0, 2]) < 1e-6
 
 

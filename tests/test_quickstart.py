@@ -15,13 +15,25 @@ import pytest
 from drivewm.clips import iter_clips
 from drivewm.quickstart import load_profile
 
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 def run_quickstart(out: Path) -> str:
-    proc = subprocess.run([sys.executable, "-m", "drivewm.cli", "quickstart", "--profile", "smoke", "--out", str(out)],
-                          capture_output=True, text=True, timeout=1500)
+    proc = subprocess.run(
+        [sys.executable, "-m", "drivewm.cli", "quickstart", "--profile", "smoke", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=1500,
+    )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return proc.stdout
 
@@ -59,16 +71,29 @@ def test_report_lists_real_and_generated_numbers(quickstart_dir):
     assert "drive.rrd" in md and (out / "drive.rrd").stat().st_size > 10_000
 
 
-@pytest.mark.skipif(shutil.which("chromium") is None, reason="Debian's chromium is not installed (scripts/run-tests.sh installs it)")
+@pytest.mark.skipif(
+    shutil.which("chromium") is None, reason="Debian's chromium is not installed (scripts/run-tests.sh installs it)"
+)
 def test_report_figures_load_in_headless_chromium(quickstart_dir, tmp_path):
     out, _ = quickstart_dir
-    dom = subprocess.run(["chromium", *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000",
-                          "--dump-dom", (out / "report.html").as_uri()], capture_output=True, text=True, timeout=120).stdout
+    dom = subprocess.run(
+        [
+            "chromium",
+            *CHROMIUM_FLAGS,
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--virtual-time-budget=10000",
+            "--dump-dom",
+            (out / "report.html").as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
     body = re.search(r'<body data-figures="(\d+)" data-figures-loaded="(\d+)"', dom)
     assert body, dom[:500]
     expected, loaded = int(body.group(1)), int(body.group(2))
     assert expected >= 4 and loaded == expected
-    assert "<table id=\"eval-table\">" in dom
+    assert '<table id="eval-table">' in dom
 
 
 def test_rerun_reuses_finished_stages(quickstart_dir):

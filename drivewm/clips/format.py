@@ -62,7 +62,7 @@ class ClipMeta:
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_json(cls, data: dict, where: str) -> "ClipMeta":
+    def from_json(cls, data: dict, where: str) -> ClipMeta:
         version = data.get("format_version")
         if version != CLIP_FORMAT_VERSION:
             raise DrivewmError(f"{where}: clip format_version {version!r}, this drivewm reads {CLIP_FORMAT_VERSION}")
@@ -100,7 +100,9 @@ class Clip:
         return np.stack([self.video(c) for c in self.meta.cameras])
 
 
-def clip_from_arrays(meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18) -> Clip:
+def clip_from_arrays(
+    meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18
+) -> Clip:
     """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta)."""
     from drivewm.clips.video import encode_mp4
 

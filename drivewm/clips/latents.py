@@ -38,7 +38,9 @@ class LatentClip:
     T_world_from_ego: np.ndarray
 
 
-def write_latent_clip(cache_dir: str | Path, meta: ClipMeta, latents: torch.Tensor, T_world_from_ego: np.ndarray) -> dict:
+def write_latent_clip(
+    cache_dir: str | Path, meta: ClipMeta, latents: torch.Tensor, T_world_from_ego: np.ndarray
+) -> dict:
     """Atomically write one clip's latents; returns its index row."""
     if latents.ndim != 5:
         raise DrivewmError(f"clip {meta.key}: latents must be (V, c, t, h, w), got {tuple(latents.shape)}")
@@ -54,7 +56,10 @@ def write_latent_clip(cache_dir: str | Path, meta: ClipMeta, latents: torch.Tens
 
 def write_latent_index(cache_dir: str | Path, tokenizer_info: dict, rows: list[dict]) -> None:
     """Atomically write ``index.json`` (see module docstring)."""
-    write_json(Path(cache_dir) / "index.json", {"format_version": LATENT_CACHE_VERSION, "tokenizer": tokenizer_info, "clips": rows})
+    write_json(
+        Path(cache_dir) / "index.json",
+        {"format_version": LATENT_CACHE_VERSION, "tokenizer": tokenizer_info, "clips": rows},
+    )
 
 
 class LatentCache:

@@ -71,7 +71,10 @@ class TemplateCaptioner(Captioner):
         caption = f"{scene}{motion}."
         if clip_info.description:
             caption += f" {clip_info.description.strip().rstrip('.')}."
-        views = {c.name: f"The {camera_direction(c)} camera view of {scene[0].lower()}{scene[1:]}{motion}." for c in clip_info.cameras}
+        views = {
+            c.name: f"The {camera_direction(c)} camera view of {scene[0].lower()}{scene[1:]}{motion}."
+            for c in clip_info.cameras
+        }
         return caption, views
 
 

@@ -10,12 +10,25 @@ DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "datasets" / "curate" / "
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("curate", help="drive logs -> synchronized, filtered, captioned multi-view clip shards")
-    p.add_argument("logs", nargs="+", type=Path, help="MCAP drive logs: files, folders of *.mcap, or split ROS 2 bag folders")
-    p.add_argument("--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png")
+    p.add_argument(
+        "logs", nargs="+", type=Path, help="MCAP drive logs: files, folders of *.mcap, or split ROS 2 bag folders"
+    )
+    p.add_argument(
+        "--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png"
+    )
     p.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="curation recipe (datasets/curate/*.yaml)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field, e.g. filters.dedup_cosine=0.99")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config field, e.g. filters.dedup_cosine=0.99",
+    )
     p.add_argument("--executor", choices=("local", "ray"), default="local")
-    p.add_argument("--workers", type=int, default=1, help="parallel logs (local processes, or Ray CPUs when starting Ray locally)")
+    p.add_argument(
+        "--workers", type=int, default=1, help="parallel logs (local processes, or Ray CPUs when starting Ray locally)"
+    )
     p.add_argument("--ray-address", default=None, help="connect to a Ray cluster instead of starting one")
     p.set_defaults(func=_curate)
 
@@ -23,7 +36,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("videos", nargs="+", type=Path, help="mp4 files or folders of them")
     v.add_argument("--calibration", required=True, help="rig YAML with one camera (its size is the stored image size)")
     v.add_argument("--out", required=True, type=Path, help="folder for the NAME.mcap logs")
-    v.add_argument("--tag", action="append", default=[], metavar="KEY=VALUE", help="scene tag, e.g. weather=rain (default: unknown)")
+    v.add_argument(
+        "--tag",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scene tag, e.g. weather=rain (default: unknown)",
+    )
     v.set_defaults(func=_import_video)
 
 
@@ -44,8 +63,12 @@ def _curate(args: argparse.Namespace) -> int:
 
     cfg = load_curate_config(args.config, args.overrides)
     print(json.dumps(to_dict(cfg)))
-    report = curate(_expand(args.logs), args.out, cfg, executor=args.executor, workers=args.workers, ray_address=args.ray_address)
-    print(f"kept {report['kept']} clips, dropped {report['dropped']}; logs ok {report['logs_ok']}, failed {report['logs_failed']}")
+    report = curate(
+        _expand(args.logs), args.out, cfg, executor=args.executor, workers=args.workers, ray_address=args.ray_address
+    )
+    print(
+        f"kept {report['kept']} clips, dropped {report['dropped']}; logs ok {report['logs_ok']}, failed {report['logs_failed']}"
+    )
     for name, log in report["logs"].items():
         if log["status"] == "failed":
             print(f"  {name}: {log['error']}")

@@ -114,7 +114,9 @@ class CurateConfig:
         if self.clip_frames < 2 or self.stride_frames < 1 or self.fps <= 0:
             raise DrivewmError("curate config: need clip_frames >= 2, stride_frames >= 1 and fps > 0")
         if self.sync_tolerance_ms * 1e-3 >= 0.5 / self.fps:
-            raise DrivewmError(f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame ({500 / self.fps:.1f} ms)")
+            raise DrivewmError(
+                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame ({500 / self.fps:.1f} ms)"
+            )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
         if self.trajectory_waypoints < 1:

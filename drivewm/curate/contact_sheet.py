@@ -47,7 +47,9 @@ def write_contact_sheet(out_dir: Path, rows: list[dict], n_clips: int) -> Path |
         clip = next(c for c in iter_shard(Path(out_dir) / row["shard"]) if c.key == row["key"])
         blocks.append(clip_block(clip))
     width = max(b.shape[1] for b in blocks)
-    sheet = np.concatenate([np.pad(b, ((0, 6), (0, width - b.shape[1]), (0, 0)), constant_values=255) for b in blocks], axis=0)
+    sheet = np.concatenate(
+        [np.pad(b, ((0, 6), (0, width - b.shape[1]), (0, 0)), constant_values=255) for b in blocks], axis=0
+    )
     ok, png = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
     path = Path(out_dir) / "contact_sheet.png"
     write_bytes(path, png.tobytes())

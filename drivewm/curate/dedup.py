@@ -21,13 +21,17 @@ def clip_embedding(frames: np.ndarray) -> np.ndarray:
     parts = []
     for cam in frames:
         for t in (0, T // 2, T - 1):
-            thumb = cv2.resize(cv2.cvtColor(cam[t], cv2.COLOR_RGB2GRAY), THUMB_WH, interpolation=cv2.INTER_AREA).astype(np.float32)
+            thumb = cv2.resize(cv2.cvtColor(cam[t], cv2.COLOR_RGB2GRAY), THUMB_WH, interpolation=cv2.INTER_AREA).astype(
+                np.float32
+            )
             parts.append((thumb - thumb.mean()).ravel())
     vec = np.concatenate(parts)
     return (vec / max(float(np.linalg.norm(vec)), 1e-6)).astype(np.float32)
 
 
-def near_duplicates(embeddings: np.ndarray, threshold: float, kept: np.ndarray | None = None) -> list[tuple[int, int, float]]:
+def near_duplicates(
+    embeddings: np.ndarray, threshold: float, kept: np.ndarray | None = None
+) -> list[tuple[int, int, float]]:
     """Greedy dedup in order: returns (index, index of the earlier kept clip it duplicates, cosine).
 
     ``embeddings`` (N, D) unit rows in a deterministic order; ``kept`` (M, D) rows already kept

@@ -11,8 +11,8 @@ from __future__ import annotations
 import json
 import os
 import traceback
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable
 
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.stage import curate_log
@@ -27,7 +27,15 @@ def _safe_curate(log: str, out_dir: str, cfg: CurateConfig, name: str) -> dict:
         return curate_log(log, out_dir, cfg, name)
     except Exception as exc:  # a bug or an unforeseen bad input: report it, keep the other logs
         detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
-        return {"log": log, "name": name, "status": "failed", "error": f"{log}: unexpected error: {detail}", "kept": 0, "dropped": {}, "rows": []}
+        return {
+            "log": log,
+            "name": name,
+            "status": "failed",
+            "error": f"{log}: unexpected error: {detail}",
+            "kept": 0,
+            "dropped": {},
+            "rows": [],
+        }
 
 
 def _one_thread_per_worker() -> None:
@@ -37,7 +45,9 @@ def _one_thread_per_worker() -> None:
     cv2.setNumThreads(1)
 
 
-def run_local(jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, workers: int, progress: Progress) -> list[dict]:
+def run_local(
+    jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, workers: int, progress: Progress
+) -> list[dict]:
     """``jobs`` (log path, name) -> results in input order, ``workers`` processes (1 = in-process)."""
     if workers <= 1:
         results = []
@@ -57,7 +67,14 @@ def run_local(jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, work
     return [by_index[i] for i in range(len(jobs))]
 
 
-def run_ray(jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, workers: int, progress: Progress, address: str | None = None) -> list[dict]:
+def run_ray(
+    jobs: list[tuple[str, str]],
+    out_dir: str,
+    cfg: CurateConfig,
+    workers: int,
+    progress: Progress,
+    address: str | None = None,
+) -> list[dict]:
     """The same stage as a Ray Data ``map`` (one log per row). ``address`` None starts a local Ray
     with ``max(workers, 2)`` CPUs; otherwise connects to that cluster (e.g. "ray://head:10001" or "auto")."""
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
@@ -68,12 +85,16 @@ def run_ray(jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, worker
         raise DrivewmError("--executor ray needs Ray: pip install 'drivewm[ray]'") from None
     started = not ray.is_initialized()
     if started:
-        ray.init(address=address, num_cpus=None if address else max(workers, 2), include_dashboard=False, log_to_driver=False)
+        ray.init(
+            address=address, num_cpus=None if address else max(workers, 2), include_dashboard=False, log_to_driver=False
+        )
     try:
         rows = [{"i": i, "log": log, "name": name} for i, (log, name) in enumerate(jobs)]
         ds = ray.data.from_items(rows, override_num_blocks=max(1, len(rows)))
         # results travel as JSON text: Arrow would coerce the nested, ragged result dicts
-        mapped = ds.map(lambda r: {"i": r["i"], "result": json.dumps(_safe_curate(r["log"], out_dir, cfg, r["name"]))}, num_cpus=1)
+        mapped = ds.map(
+            lambda r: {"i": r["i"], "result": json.dumps(_safe_curate(r["log"], out_dir, cfg, r["name"]))}, num_cpus=1
+        )
         by_index = {}
         for row in mapped.iter_rows():
             by_index[int(row["i"])] = json.loads(row["result"])

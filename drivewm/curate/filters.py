@@ -22,7 +22,9 @@ def grey_small(frames: np.ndarray) -> np.ndarray:
     out = np.empty((V, T, h, ANALYSIS_WIDTH), dtype=np.uint8)
     for v in range(V):
         for t in range(T):
-            out[v, t] = cv2.resize(cv2.cvtColor(frames[v, t], cv2.COLOR_RGB2GRAY), (ANALYSIS_WIDTH, h), interpolation=cv2.INTER_AREA)
+            out[v, t] = cv2.resize(
+                cv2.cvtColor(frames[v, t], cv2.COLOR_RGB2GRAY), (ANALYSIS_WIDTH, h), interpolation=cv2.INTER_AREA
+            )
     return out
 
 
@@ -32,7 +34,9 @@ def sharpness(grey: np.ndarray) -> float:
     return float(np.median(per, axis=1).min())
 
 
-def bad_exposure_fraction(grey: np.ndarray, dark_luma: float, dark_highlight: float, bright_fraction: float) -> tuple[float, float]:
+def bad_exposure_fraction(
+    grey: np.ndarray, dark_luma: float, dark_highlight: float, bright_fraction: float
+) -> tuple[float, float]:
     """Fraction of ticks whose rig-wide picture (all cameras together) is too dark or blown out, and
     the mean luma. Too dark: mean luma below ``dark_luma`` *and* the brightest 1 % below
     ``dark_highlight`` (a night street with lamps and headlights is footage; a fade to black is not).

@@ -19,7 +19,13 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.logs.types import SceneInfo
 
-UNKNOWN_TAGS = {"weather": "unknown", "time_of_day": "unknown", "road_type": "unknown", "traffic_density": "unknown", "source": "video"}
+UNKNOWN_TAGS = {
+    "weather": "unknown",
+    "time_of_day": "unknown",
+    "road_type": "unknown",
+    "traffic_density": "unknown",
+    "source": "video",
+}
 
 
 def list_videos(inputs: list[Path]) -> list[Path]:
@@ -37,7 +43,9 @@ def list_videos(inputs: list[Path]) -> list[Path]:
     return videos
 
 
-def import_video(video: Path, calibration: str | Path, out_path: Path, tags: dict[str, str] | None = None, description: str = "") -> Path:
+def import_video(
+    video: Path, calibration: str | Path, out_path: Path, tags: dict[str, str] | None = None, description: str = ""
+) -> Path:
     """Write one video as a single-camera drive log; returns ``out_path``."""
     from drivewm.logs.writer import LogWriter
 
@@ -72,9 +80,14 @@ def _frames(video: Path):
         raise DrivewmError(f"{video}: cannot decode video ({exc.__class__.__name__})") from None
 
 
-def import_videos(inputs: list[Path], calibration: str | Path, out_dir: Path, tags: dict[str, str] | None = None) -> list[Path]:
+def import_videos(
+    inputs: list[Path], calibration: str | Path, out_dir: Path, tags: dict[str, str] | None = None
+) -> list[Path]:
     """Import every mp4 of ``inputs`` (files or folders) into ``out_dir/NAME.mcap``."""
     from tqdm import tqdm
 
     out_dir = Path(out_dir)
-    return [import_video(v, calibration, out_dir / f"{v.stem}.mcap", tags) for v in tqdm(list_videos(inputs), desc="import-video", unit="video")]
+    return [
+        import_video(v, calibration, out_dir / f"{v.stem}.mcap", tags)
+        for v in tqdm(list_videos(inputs), desc="import-video", unit="video")
+    ]

@@ -29,10 +29,21 @@ EXECUTORS = ("local", "ray")
 def name_logs(log_paths: list[Path]) -> list[str]:
     """Unique shard names: the stem, plus a short hash of the folder where two logs share a stem."""
     stems = [log_name(p) for p in log_paths]
-    return [s if stems.count(s) == 1 else f"{s}_{hashlib.sha1(str(Path(p).resolve().parent).encode()).hexdigest()[:6]}" for s, p in zip(stems, log_paths)]
+    return [
+        s if stems.count(s) == 1 else f"{s}_{hashlib.sha1(str(Path(p).resolve().parent).encode()).hexdigest()[:6]}"
+        for s, p in zip(stems, log_paths)
+    ]
 
 
-def curate(log_paths: list[Path], out_dir: Path, cfg: CurateConfig, executor: str = "local", workers: int = 1, ray_address: str | None = None, progress: bool = True) -> dict:
+def curate(
+    log_paths: list[Path],
+    out_dir: Path,
+    cfg: CurateConfig,
+    executor: str = "local",
+    workers: int = 1,
+    ray_address: str | None = None,
+    progress: bool = True,
+) -> dict:
     """Curate ``log_paths`` into ``out_dir``; returns the report (also written to report.json)."""
     if executor not in EXECUTORS:
         raise DrivewmError(f"executor {executor!r}: choose one of {list(EXECUTORS)}")
@@ -62,12 +73,19 @@ def remove_leftovers(out_dir: Path) -> None:
                 shutil.rmtree(tmp, ignore_errors=True)
 
 
-def _run(jobs, out_dir: Path, cfg: CurateConfig, executor: str, workers: int, ray_address: str | None, progress: bool) -> list[dict]:
+def _run(
+    jobs, out_dir: Path, cfg: CurateConfig, executor: str, workers: int, ray_address: str | None, progress: bool
+) -> list[dict]:
     from tqdm import tqdm
 
     from drivewm.curate import executors
 
-    bar = tqdm(total=len(jobs), desc=f"curate ({executor}, {workers} worker{'s' * (workers != 1)})", unit="log", disable=not progress)
+    bar = tqdm(
+        total=len(jobs),
+        desc=f"curate ({executor}, {workers} worker{'s' * (workers != 1)})",
+        unit="log",
+        disable=not progress,
+    )
     tick = lambda r: (bar.update(1), bar.set_postfix_str(f"{r['name']}: {r['status']}, {r['kept']} clips"))  # noqa: E731
     try:
         if executor == "ray":
@@ -119,7 +137,9 @@ def prune_shards(out_dir: Path, results: list[dict], drop: set[str]) -> None:
                 out.addfile(member, io.BytesIO(data))
 
 
-def build_report(results: list[dict], rows: list[dict], cross: dict[str, str], cfg: CurateConfig, sheet: Path | None) -> dict:
+def build_report(
+    results: list[dict], rows: list[dict], cross: dict[str, str], cfg: CurateConfig, sheet: Path | None
+) -> dict:
     """report.json: totals kept/dropped by reason, and per log its status, error, warnings and sync."""
     dropped: dict[str, int] = {}
     for res in results:

@@ -9,7 +9,7 @@ every few frames on textured scenes) is not a cut, while a hard cut still stands
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 import cv2
 import numpy as np
@@ -33,7 +33,10 @@ def shot_boundaries(frames_rgb: Iterable[np.ndarray], fps: float, threshold: flo
     cuts: list[int] = []
     n = 0
     for n, frame in enumerate(frames_rgb):
-        cuts += [int(tc.frame_num) for tc in detector.process_frame(FrameTimecode(n, float(fps)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))]
+        cuts += [
+            int(tc.frame_num)
+            for tc in detector.process_frame(FrameTimecode(n, float(fps)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        ]
     cuts += [int(tc.frame_num) for tc in detector.post_process(FrameTimecode(n + 1, float(fps)))]
     return sorted(c for c in set(cuts) if c > 0)
 

@@ -13,8 +13,8 @@ import dataclasses
 import hashlib
 import json
 import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -75,7 +75,15 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
     except DrivewmError as exc:
         for shard in _stale_shards(out, name):  # shards flushed before the failure: not part of the dataset
             shard.unlink()
-        return {"log": str(log_path), "name": name, "status": "failed", "error": str(exc), "kept": 0, "dropped": {}, "rows": []}
+        return {
+            "log": str(log_path),
+            "name": name,
+            "status": "failed",
+            "error": str(exc),
+            "kept": 0,
+            "dropped": {},
+            "rows": [],
+        }
     write_json(marker_path(out, name), result)
     return result
 
@@ -155,7 +163,12 @@ def _windows(ctx: _LogContext) -> list[tuple[int, int]]:
             continue
         cuts: list[int] = []
         if cfg.shot_threshold > 0:
-            cuts = [a + c for c in split.shot_boundaries(_reference_frames(ctx, a, b), cfg.fps, cfg.shot_threshold, cfg.shot_min_frames)]
+            cuts = [
+                a + c
+                for c in split.shot_boundaries(
+                    _reference_frames(ctx, a, b), cfg.fps, cfg.shot_threshold, cfg.shot_min_frames
+                )
+            ]
         segments += split.split_segment(a, b, cuts)
     return split.clip_windows(segments, cfg.clip_frames, cfg.stride_frames)
 
@@ -182,7 +195,9 @@ def _make_clip(ctx: _LogContext, name: str, start: int, end: int, kept_embedding
     """(clip or None, drop reason or None, embedding) for ticks [start, end)."""
     cfg, ticks = ctx.cfg, np.arange(start, end)
     try:
-        frames = np.stack([np.stack([ctx.image(v, t) for t in ticks]) for v in range(len(ctx.rig.cameras))])  # (V, T, H, W, 3)
+        frames = np.stack(
+            [np.stack([ctx.image(v, t) for t in ticks]) for v in range(len(ctx.rig.cameras))]
+        )  # (V, T, H, W, 3)
     except DrivewmError:  # one corrupt JPEG costs its clip, not the log
         return None, "undecodable_frame", None
     t_ns = ctx.table.tick_ns[ticks]
@@ -202,19 +217,43 @@ def _make_clip(ctx: _LogContext, name: str, start: int, end: int, kept_embedding
     return clip, None, emb
 
 
-def _meta(ctx: _LogContext, name: str, start: int, t_ns: np.ndarray, poses: np.ndarray, scores: dict, frames: np.ndarray) -> ClipMeta:
+def _meta(
+    ctx: _LogContext, name: str, start: int, t_ns: np.ndarray, poses: np.ndarray, scores: dict, frames: np.ndarray
+) -> ClipMeta:
     cfg, known = ctx.cfg, ctx.smooth is not None
     motion = _motion(poses, t_ns) if known else {"manoeuvre": "unknown", "speed_mps": None}
-    info = ClipInfo(dict(ctx.log.scene.tags), ctx.log.scene.description, ctx.rig.cameras, motion["manoeuvre"], motion["speed_mps"], frames)
+    info = ClipInfo(
+        dict(ctx.log.scene.tags),
+        ctx.log.scene.description,
+        ctx.rig.cameras,
+        motion["manoeuvre"],
+        motion["speed_mps"],
+        frames,
+    )
     caption, views = ctx.captioner.caption(info)
-    waypoints, dt_s = trajectory.future_waypoints(poses, t_ns, cfg.trajectory_waypoints) if known else (np.zeros((0, 3)), 0.0)
+    waypoints, dt_s = (
+        trajectory.future_waypoints(poses, t_ns, cfg.trajectory_waypoints) if known else (np.zeros((0, 3)), 0.0)
+    )
     skew = int(ctx.table.skew_ns[start : start + len(t_ns)].max())
-    tags = {**{k: str(v) for k, v in ctx.log.scene.tags.items()}, "ego_motion": "known" if known else "unknown", "manoeuvre": motion["manoeuvre"]}
+    tags = {
+        **{k: str(v) for k, v in ctx.log.scene.tags.items()},
+        "ego_motion": "known" if known else "unknown",
+        "manoeuvre": motion["manoeuvre"],
+    }
     return ClipMeta(
-        key=f"{name}-{start:06d}", source_log=str(ctx.log.path), start_time_ns=int(t_ns[0]), fps=cfg.fps,
-        timestamps_ns=[int(t) for t in t_ns], rig=ctx.rig.to_dict(), caption=caption, view_captions=views, tags=tags,
-        quality={k: round(float(v), 4) for k, v in scores.items()}, sync_error_ns=skew,
-        trajectory_ego=np.round(waypoints, 4).tolist(), trajectory_dt_s=dt_s,
+        key=f"{name}-{start:06d}",
+        source_log=str(ctx.log.path),
+        start_time_ns=int(t_ns[0]),
+        fps=cfg.fps,
+        timestamps_ns=[int(t) for t in t_ns],
+        rig=ctx.rig.to_dict(),
+        caption=caption,
+        view_captions=views,
+        tags=tags,
+        quality={k: round(float(v), 4) for k, v in scores.items()},
+        sync_error_ns=skew,
+        trajectory_ego=np.round(waypoints, 4).tolist(),
+        trajectory_dt_s=dt_s,
         extra={"speed_mps": motion["speed_mps"], "description": ctx.log.scene.description},
     )
 
@@ -232,27 +271,58 @@ def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
 def _manifest_row(meta: ClipMeta) -> dict:
     """One manifest.jsonl row: enough to filter and balance without opening shards."""
     return {
-        "key": meta.key, "shard": "", "source_log": meta.source_log, "start_time_ns": meta.start_time_ns,
-        "num_frames": meta.num_frames, "fps": meta.fps, "duration_s": round(meta.num_frames / meta.fps, 4),
-        "cameras": meta.cameras, "tags": meta.tags, "quality": meta.quality, "caption": meta.caption,
+        "key": meta.key,
+        "shard": "",
+        "source_log": meta.source_log,
+        "start_time_ns": meta.start_time_ns,
+        "num_frames": meta.num_frames,
+        "fps": meta.fps,
+        "duration_s": round(meta.num_frames / meta.fps, 4),
+        "cameras": meta.cameras,
+        "tags": meta.tags,
+        "quality": meta.quality,
+        "caption": meta.caption,
         "sync_error_ns": meta.sync_error_ns,
     }
 
 
-def _result(log: DriveLog, name: str, cfg: CurateConfig, ctx: _LogContext, rows: list[dict], embeddings: list, dropped: dict) -> dict:
+def _result(
+    log: DriveLog, name: str, cfg: CurateConfig, ctx: _LogContext, rows: list[dict], embeddings: list, dropped: dict
+) -> dict:
     """The per-log result (also the done-marker's content)."""
     table, smooth = ctx.table, ctx.smooth
-    warnings = [f"{c}: {s['missing_ticks']} of {len(table.tick_ns)} ticks without a frame within tolerance" for c, s in table.stats.items() if s["missing_ticks"]]
-    warnings += [f"{c}: {s['duplicate_timestamps']} duplicated timestamps (kept the first)" for c, s in table.stats.items() if s.get("duplicate_timestamps")]
+    warnings = [
+        f"{c}: {s['missing_ticks']} of {len(table.tick_ns)} ticks without a frame within tolerance"
+        for c, s in table.stats.items()
+        if s["missing_ticks"]
+    ]
+    warnings += [
+        f"{c}: {s['duplicate_timestamps']} duplicated timestamps (kept the first)"
+        for c, s in table.stats.items()
+        if s.get("duplicate_timestamps")
+    ]
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")
     elif smooth.missing or smooth.rejected:
-        warnings.append(f"ego poses: {smooth.missing} NaN/missing bridged, {smooth.rejected} rejected as jitter by the Kalman gate")
+        warnings.append(
+            f"ego poses: {smooth.missing} NaN/missing bridged, {smooth.rejected} rejected as jitter by the Kalman gate"
+        )
     if not rows:
         warnings.append("no clip kept")
     return {
-        "log": str(log.path), "name": name, "status": "ok", "config": config_fingerprint(cfg), "kept": len(rows),
-        "dropped": dropped, "warnings": warnings, "rows": rows,
-        "sync": {"ticks": int(len(table.tick_ns)), "valid_ticks": int(table.valid.sum()), "worst_skew_ns": table.worst_skew_ns, "cameras": table.stats},
+        "log": str(log.path),
+        "name": name,
+        "status": "ok",
+        "config": config_fingerprint(cfg),
+        "kept": len(rows),
+        "dropped": dropped,
+        "warnings": warnings,
+        "rows": rows,
+        "sync": {
+            "ticks": int(len(table.tick_ns)),
+            "valid_ticks": int(table.valid.sum()),
+            "worst_skew_ns": table.worst_skew_ns,
+            "cameras": table.stats,
+        },
         "embeddings": [np.round(e, 5).tolist() for e in embeddings],
     }

@@ -45,7 +45,11 @@ def dedupe_timestamps(timestamps_ns: np.ndarray) -> tuple[np.ndarray, int]:
 
 def nearest_frames(frame_ns: np.ndarray, tick_ns: np.ndarray, tolerance_ns: float) -> tuple[np.ndarray, np.ndarray]:
     """Nearest frame to each tick: (index or -1 beyond tolerance, |dt| in ns)."""
-    right = np.clip(np.searchsorted(frame_ns, tick_ns), 1, len(frame_ns) - 1) if len(frame_ns) > 1 else np.zeros(len(tick_ns), int)
+    right = (
+        np.clip(np.searchsorted(frame_ns, tick_ns), 1, len(frame_ns) - 1)
+        if len(frame_ns) > 1
+        else np.zeros(len(tick_ns), int)
+    )
     left = np.maximum(right - 1, 0)
     dl, dr = np.abs(tick_ns - frame_ns[left]), np.abs(frame_ns[right] - tick_ns)
     idx = np.where(dr < dl, right, left)
@@ -53,10 +57,14 @@ def nearest_frames(frame_ns: np.ndarray, tick_ns: np.ndarray, tolerance_ns: floa
     return np.where(dt <= tolerance_ns, idx, -1), dt
 
 
-def reference_ticks(first_ns: list[int], last_ns: list[int], ref_first_ns: np.ndarray, period_ns: float, tolerance_ns: float) -> np.ndarray:
+def reference_ticks(
+    first_ns: list[int], last_ns: list[int], ref_first_ns: np.ndarray, period_ns: float, tolerance_ns: float
+) -> np.ndarray:
     """The uniform tick grid over the span where every camera runs (int64 ns)."""
     start_min = max(first_ns) - tolerance_ns
-    start = int(ref_first_ns[np.searchsorted(ref_first_ns, start_min)]) if ref_first_ns[-1] >= start_min else max(first_ns)
+    start = (
+        int(ref_first_ns[np.searchsorted(ref_first_ns, start_min)]) if ref_first_ns[-1] >= start_min else max(first_ns)
+    )
     end = min(last_ns) + tolerance_ns
     if end < start:
         return np.zeros(0, dtype=np.int64)
@@ -64,17 +72,30 @@ def reference_ticks(first_ns: list[int], last_ns: list[int], ref_first_ns: np.nd
     return start + np.round(np.arange(count) * period_ns).astype(np.int64)
 
 
-def synchronize(camera_timestamps_ns: dict[str, np.ndarray], cameras: list[str], period_ns: float, tolerance_ns: float) -> SyncResult:
+def synchronize(
+    camera_timestamps_ns: dict[str, np.ndarray], cameras: list[str], period_ns: float, tolerance_ns: float
+) -> SyncResult:
     """Build the tick table for ``cameras`` (the first is the reference) from each camera's sorted frame times.
 
     ``frame_index`` refers to the de-duplicated frame order: use :func:`dedupe_timestamps` on the
     same arrays to map back to the log's frames.
     """
-    unique = {c: np.asarray(camera_timestamps_ns[c], dtype=np.int64)[dedupe_timestamps(np.asarray(camera_timestamps_ns[c]))[0]] for c in cameras}
+    unique = {
+        c: np.asarray(camera_timestamps_ns[c], dtype=np.int64)[
+            dedupe_timestamps(np.asarray(camera_timestamps_ns[c]))[0]
+        ]
+        for c in cameras
+    }
     if any(len(unique[c]) == 0 for c in cameras):
         empty = [c for c in cameras if len(unique[c]) == 0]
         return _empty(cameras, {c: {"frames": len(unique[c]), "missing_camera": int(c in empty)} for c in cameras})
-    ticks = reference_ticks([int(unique[c][0]) for c in cameras], [int(unique[c][-1]) for c in cameras], unique[cameras[0]], period_ns, tolerance_ns)
+    ticks = reference_ticks(
+        [int(unique[c][0]) for c in cameras],
+        [int(unique[c][-1]) for c in cameras],
+        unique[cameras[0]],
+        period_ns,
+        tolerance_ns,
+    )
     index = np.full((len(ticks), len(cameras)), -1, dtype=np.int64)
     dts = np.zeros((len(ticks), len(cameras)), dtype=np.int64)
     for v, cam in enumerate(cameras):
@@ -84,7 +105,9 @@ def synchronize(camera_timestamps_ns: dict[str, np.ndarray], cameras: list[str],
     return SyncResult(list(cameras), ticks, index, valid, skew, _stats(camera_timestamps_ns, cameras, unique, index))
 
 
-def _stats(raw: dict[str, np.ndarray], cameras: list[str], unique: dict[str, np.ndarray], index: np.ndarray) -> dict[str, dict[str, int]]:
+def _stats(
+    raw: dict[str, np.ndarray], cameras: list[str], unique: dict[str, np.ndarray], index: np.ndarray
+) -> dict[str, dict[str, int]]:
     start = min(int(unique[c][0]) for c in cameras)
     return {
         cam: {

@@ -13,7 +13,7 @@ a freshly inserted sub-layer is the identity and the block starts as the network
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 import torch.nn.functional as F
@@ -102,7 +102,11 @@ class MLP(nn.Module):
 
 
 #: Sub-layer builders by the name used in ``DiTConfig.block_layers``.
-SUBLAYERS: dict[str, Callable[[DiTConfig], nn.Module]] = {"self_attn": SelfAttention, "cross_attn": CrossAttention, "mlp": MLP}
+SUBLAYERS: dict[str, Callable[[DiTConfig], nn.Module]] = {
+    "self_attn": SelfAttention,
+    "cross_attn": CrossAttention,
+    "mlp": MLP,
+}
 
 
 def register_sublayer(name: str, builder: Callable[[DiTConfig], nn.Module]) -> None:
@@ -121,7 +125,9 @@ class ModulatedSublayer(nn.Module):
         self.norm = nn.LayerNorm(cfg.hidden_dim, elementwise_affine=False, eps=1e-6)
         self.layer = SUBLAYERS[name](cfg)
         self.adaln = nn.Sequential(
-            nn.SiLU(), nn.Linear(cfg.hidden_dim, cfg.adaln_lora_dim, bias=False), nn.Linear(cfg.adaln_lora_dim, 3 * cfg.hidden_dim, bias=False)
+            nn.SiLU(),
+            nn.Linear(cfg.hidden_dim, cfg.adaln_lora_dim, bias=False),
+            nn.Linear(cfg.adaln_lora_dim, 3 * cfg.hidden_dim, bias=False),
         )
 
     def forward(self, x: torch.Tensor, emb: torch.Tensor, adaln_lora: torch.Tensor, ctx: BlockContext) -> torch.Tensor:

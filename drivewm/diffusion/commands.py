@@ -21,10 +21,19 @@ GENERATORS = {
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("pretrain", help="train a Text2World diffusion model on tokenizer latents")
     p.add_argument("--preset", default="debug", help="size recipe: debug, small, base, large, xl")
-    p.add_argument("--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)")
+    p.add_argument(
+        "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
+    )
     p.add_argument("--tokenizer", type=Path, help="tokenizer model folder that encoded the latents")
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override, e.g. train.steps=100")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override, e.g. train.steps=100",
+    )
     p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
     p.set_defaults(func=pretrain_command)
 
@@ -37,12 +46,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=int, default=1, help="samples per prompt")
     g.add_argument("--sampler", default="heun", choices=["heun", "euler"])
-    g.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to sample (auto: CUDA when available)")
+    g.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to sample (auto: CUDA when available)"
+    )
     g.add_argument("--rig", help="camera rig (multi-view models)")
     g.add_argument("--trajectory", help="straight|left|right|stop|FILE (multi-view models)")
     g.add_argument("--condition-clip", type=Path, help="clip whose first frames condition the sample (Video2World)")
-    g.add_argument("--trajectory-guidance", type=float, default=1.0,
-                   help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)")
+    g.add_argument(
+        "--trajectory-guidance",
+        type=float,
+        default=1.0,
+        help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)",
+    )
     g.set_defaults(func=generate_command)
 
 
@@ -77,8 +92,12 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.errors import DrivewmError
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
-        raise DrivewmError(f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)")
-    options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device)
+        raise DrivewmError(
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)"
+        )
+    options = GenerateOptions(
+        args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device
+    )
     files = generate_text2world(args.model, options, args.out)
     print(f"wrote {len(files)} files to {args.out}")
     return 0

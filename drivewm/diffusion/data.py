@@ -56,8 +56,10 @@ class LatentDataset:
     def _clip(self, i: int):
         clip = self.cache[i]
         if tuple(clip.latents.shape[1:]) != self.latent_shape or clip.latents.shape[0] != self.num_views:
-            raise DrivewmError(f"{self.cache.dir}: clip {clip.meta.key} latents {tuple(clip.latents.shape)} differ from the first clip's "
-                               f"({self.num_views}, {', '.join(map(str, self.latent_shape))}); re-encode at one resolution")
+            raise DrivewmError(
+                f"{self.cache.dir}: clip {clip.meta.key} latents {tuple(clip.latents.shape)} differ from the first clip's "
+                f"({self.num_views}, {', '.join(map(str, self.latent_shape))}); re-encode at one resolution"
+            )
         return clip
 
     def __getitem__(self, i: int) -> LatentSample:

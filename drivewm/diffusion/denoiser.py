@@ -10,7 +10,7 @@ so ``sigma_data = 0.5`` as in Cosmos.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torch import nn
@@ -55,16 +55,18 @@ class Conditioning:
     view_neighbors: torch.Tensor | None = None
     """(V, K) long: the views each view attends to in cross-view sub-layers (None = all)."""
 
-    def drop_text(self, keep: torch.Tensor) -> "Conditioning":
+    def drop_text(self, keep: torch.Tensor) -> Conditioning:
         """A copy where samples with ``keep`` (B,) False have their caption masked out."""
         return dataclasses.replace(self, text_mask=self.text_mask & keep[:, None])
 
-    def unconditional(self) -> "Conditioning":
+    def unconditional(self) -> Conditioning:
         """The same conditioning without any caption (CFG's unconditional branch)."""
         return dataclasses.replace(self, text_mask=torch.zeros_like(self.text_mask))
 
 
-def edm_scalings(sigma: torch.Tensor, sigma_data: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+def edm_scalings(
+    sigma: torch.Tensor, sigma_data: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """(c_skip, c_out, c_in, c_noise) of EDM Table 1 for ``sigma`` (any shape)."""
     sd2 = sigma_data**2
     c_skip = sd2 / (sigma**2 + sd2)
@@ -98,7 +100,9 @@ class EDMDenoiser(nn.Module):
 
     def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond: Conditioning) -> torch.Tensor:
         """``x`` (B, C, T, H, W) noisy latents at ``sigma`` (B,) -> denoised latents (B, C, T, H, W)."""
-        c_skip, c_out, c_in, c_noise = (s.view(-1, 1, 1, 1, 1) for s in edm_scalings(sigma.to(x.dtype), self.cfg.sigma_data))
+        c_skip, c_out, c_in, c_noise = (
+            s.view(-1, 1, 1, 1, 1) for s in edm_scalings(sigma.to(x.dtype), self.cfg.sigma_data)
+        )
         net_in = c_in * x
         mask = None
         if cond.cond_latents is not None and cond.cond_frames > 0:
@@ -110,8 +114,14 @@ class EDMDenoiser(nn.Module):
             m = mask if mask is not None else torch.zeros(1, 1, x.shape[2], 1, 1, device=x.device)
             net_in = torch.cat([net_in, m.expand(x.shape[0], 1, *x.shape[2:]).to(x.dtype)], dim=1)
         out = self.backbone(
-            net_in, c_noise.flatten(), cond.text_emb, cond.text_mask, cond.fps,
-            extra_token_cond=cond.extra_token_cond, extra_global_cond=cond.extra_global_cond, num_views=cond.num_views,
+            net_in,
+            c_noise.flatten(),
+            cond.text_emb,
+            cond.text_mask,
+            cond.fps,
+            extra_token_cond=cond.extra_token_cond,
+            extra_global_cond=cond.extra_global_cond,
+            num_views=cond.num_views,
             view_neighbors=cond.view_neighbors,
         )
         denoised = c_skip * x + c_out * out.to(x.dtype)

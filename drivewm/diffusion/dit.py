@@ -46,7 +46,9 @@ class TimestepEmbedding(nn.Module):
         args = noise_level.float()[:, None] * 1000.0 * freqs[None]  # c_noise ~ ln(sigma)/4 is O(1): spread it
         return torch.cat([args.cos(), args.sin()], dim=-1)
 
-    def forward(self, noise_level: torch.Tensor, extra_global_cond: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, noise_level: torch.Tensor, extra_global_cond: torch.Tensor | None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         emb = self.mlp(self.sinusoid(noise_level))  # (B, D)
         if extra_global_cond is not None:
             emb = emb + extra_global_cond
@@ -79,7 +81,11 @@ class DiT(nn.Module):
         patch_in = (cfg.in_channels + int(cfg.cond_mask_channel)) * cfg.patch_t * cfg.patch_size**2
         self.patch_embed = nn.Linear(patch_in, cfg.hidden_dim)
         self.time_embed = TimestepEmbedding(cfg.hidden_dim)
-        self.text_proj = nn.Sequential(nn.Linear(cfg.text_dim, cfg.hidden_dim), nn.GELU(approximate="tanh"), nn.Linear(cfg.hidden_dim, cfg.hidden_dim))
+        self.text_proj = nn.Sequential(
+            nn.Linear(cfg.text_dim, cfg.hidden_dim),
+            nn.GELU(approximate="tanh"),
+            nn.Linear(cfg.hidden_dim, cfg.hidden_dim),
+        )
         # A learned always-visible "null" text token: dropped captions (CFG) attend to it alone.
         self.null_text = nn.Parameter(torch.zeros(1, 1, cfg.hidden_dim))
         self.blocks = nn.ModuleList(DiTBlock(cfg) for _ in range(cfg.depth))

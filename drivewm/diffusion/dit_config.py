@@ -45,7 +45,9 @@ class DiTConfig:
 
     def validate(self) -> None:
         if self.hidden_dim % self.num_heads or self.head_dim % 2:
-            raise DrivewmError(f"dit: hidden_dim {self.hidden_dim} must split into {self.num_heads} heads of even width")
+            raise DrivewmError(
+                f"dit: hidden_dim {self.hidden_dim} must split into {self.num_heads} heads of even width"
+            )
         if min(self.patch_size, self.patch_t, self.depth, self.in_channels) < 1:
             raise DrivewmError("dit: patch_size, patch_t, depth and in_channels must be >= 1")
         if not self.block_layers or len(set(self.block_layers)) != len(self.block_layers):

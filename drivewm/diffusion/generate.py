@@ -74,7 +74,9 @@ def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None) -> np.ndarr
     return np.concatenate([video_to_uint8(tokenizer.decode(z[None])) for z in latents])
 
 
-def write_grid_png(videos: np.ndarray, path: str | Path, captions: list[str] | None = None, max_frames: int = 6) -> Path:
+def write_grid_png(
+    videos: np.ndarray, path: str | Path, captions: list[str] | None = None, max_frames: int = 6
+) -> Path:
     """Contact sheet: one row per video (B, T, H, W, 3) uint8, ``max_frames`` frames spread over time."""
     from PIL import Image, ImageDraw
 
@@ -95,11 +97,21 @@ def write_grid_png(videos: np.ndarray, path: str | Path, captions: list[str] | N
 def clip_meta(key: str, rig: dict, fps: float, num_frames: int, prompt: str, extra: dict) -> ClipMeta:
     """Metadata of one generated clip (source_log ``generated``, timestamps from fps)."""
     step_ns = int(round(1e9 / fps))
-    return ClipMeta(key=key, source_log="generated", start_time_ns=0, fps=fps, timestamps_ns=[i * step_ns for i in range(num_frames)],
-                    rig=rig, caption=prompt, extra=extra)
+    return ClipMeta(
+        key=key,
+        source_log="generated",
+        start_time_ns=0,
+        fps=fps,
+        timestamps_ns=[i * step_ns for i in range(num_frames)],
+        rig=rig,
+        caption=prompt,
+        extra=extra,
+    )
 
 
-def write_generated(out_dir: Path, videos: np.ndarray, prompts: list[str], rig: dict, fps: float, extras: list[dict]) -> list[Path]:
+def write_generated(
+    out_dir: Path, videos: np.ndarray, prompts: list[str], rig: dict, fps: float, extras: list[dict]
+) -> list[Path]:
     """Write clips (shards + manifest), one mp4 per sample and the contact sheet; returns the written files."""
     out_dir.mkdir(parents=True, exist_ok=True)
     camera = rig["cameras"][0]["name"]
@@ -130,8 +142,18 @@ def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir
     latents = []
     for start in tqdm(range(0, len(prompts), options.batch_size), desc="generate"):
         part = slice(start, start + options.batch_size)
-        latents.append(model.sample_latents(prompts[part], seeds[part], options.steps, options.guidance, options.sampler))
+        latents.append(
+            model.sample_latents(prompts[part], seeds[part], options.steps, options.guidance, options.sampler)
+        )
     videos = decode_latents(torch.cat(latents), model.latent.tokenizer)
-    extras = [{"model": str(Path(model_dir).resolve()), "prompt": p, "seed": s, "steps": options.steps, "guidance": options.guidance}
-              for p, s in zip(prompts, seeds)]
+    extras = [
+        {
+            "model": str(Path(model_dir).resolve()),
+            "prompt": p,
+            "seed": s,
+            "steps": options.steps,
+            "guidance": options.guidance,
+        }
+        for p, s in zip(prompts, seeds)
+    ]
     return write_generated(Path(out_dir), videos, prompts, model.latent.rig, model.latent.fps, extras)

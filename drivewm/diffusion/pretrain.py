@@ -54,13 +54,31 @@ class PretrainConfig:
 
 #: Per-preset training defaults (copy-and-change of the base TrainConfig).
 TRAIN_PRESETS: dict[str, dict] = {
-    "debug": dict(steps=300, batch_size=8, lr=1e-3, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100),
+    "debug": dict(
+        steps=300, batch_size=8, lr=1e-3, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100
+    ),
     "small": dict(steps=20000, batch_size=32, lr=3e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
     "base": dict(steps=100000, batch_size=64, lr=2e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000),
-    "large": dict(steps=200000, batch_size=128, lr=1e-4, warmup_steps=2000, checkpoint_every=2000, sample_every=5000,
-                  activation_checkpointing=True, parallel="fsdp"),
-    "xl": dict(steps=300000, batch_size=256, lr=1e-4, warmup_steps=2000, checkpoint_every=2000, sample_every=5000,
-               activation_checkpointing=True, parallel="fsdp"),
+    "large": dict(
+        steps=200000,
+        batch_size=128,
+        lr=1e-4,
+        warmup_steps=2000,
+        checkpoint_every=2000,
+        sample_every=5000,
+        activation_checkpointing=True,
+        parallel="fsdp",
+    ),
+    "xl": dict(
+        steps=300000,
+        batch_size=256,
+        lr=1e-4,
+        warmup_steps=2000,
+        checkpoint_every=2000,
+        sample_every=5000,
+        activation_checkpointing=True,
+        parallel="fsdp",
+    ),
 }
 
 
@@ -78,7 +96,9 @@ def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | No
         raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
     cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
     if not (cache / "index.json").is_file():
-        raise DrivewmError(f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first")
+        raise DrivewmError(
+            f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first"
+        )
     return cache
 
 
@@ -96,11 +116,17 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     same_config = "config" not in recorded or info.get("config") == recorded["config"]
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
     if not same_config or not same_stats:
-        raise DrivewmError(f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}")
+        raise DrivewmError(
+            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}"
+        )
 
 
 def _close(a: list[float] | None, b: list[float] | None) -> bool:
-    return a is None or b is None or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-4, atol=1e-6))
+    return (
+        a is None
+        or b is None
+        or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-4, atol=1e-6))
+    )
 
 
 class Text2WorldTask:
@@ -131,8 +157,12 @@ class Text2WorldTask:
         noise = torch.stack([torch.randn(x0.shape[1:], generator=g) for g in gens]).to(device)
         keep = torch.tensor([float(torch.rand(1, generator=g)) >= self.cfg.edm.text_dropout for g in gens])
         cond = self.bundle.conditioning([s.caption for s in samples])
-        cond = dataclasses.replace(cond, text_emb=cond.text_emb.to(device), text_mask=cond.text_mask.to(device),
-                                   fps=torch.tensor([s.fps for s in samples], device=device))
+        cond = dataclasses.replace(
+            cond,
+            text_emb=cond.text_emb.to(device),
+            text_mask=cond.text_mask.to(device),
+            fps=torch.tensor([s.fps for s in samples], device=device),
+        )
         return edm_loss(forward, self.cfg.edm, x0, cond, sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> tuple[Text2World, dict[str, torch.Tensor]]:
@@ -158,8 +188,14 @@ class Text2WorldTask:
 def latent_info(dataset: LatentDataset, tokenizer_dir: Path | None) -> LatentInfo:
     first = dataset.cache[0].meta
     rig = first.get_rig().subset(first.cameras[:1]).to_dict()
-    return LatentInfo(list(dataset.latent_shape), dataset.cache.latent_mean.tolist(), dataset.cache.latent_std.tolist(),
-                      dataset.fps, str(Path(tokenizer_dir).resolve()) if tokenizer_dir else None, rig)
+    return LatentInfo(
+        list(dataset.latent_shape),
+        dataset.cache.latent_mean.tolist(),
+        dataset.cache.latent_std.tolist(),
+        dataset.fps,
+        str(Path(tokenizer_dir).resolve()) if tokenizer_dir else None,
+        rig,
+    )
 
 
 def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainConfig:
@@ -169,12 +205,20 @@ def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainCon
     text_dim = cfg.text.dim if cfg.text.kind == "hashed" else build_text_encoder(cfg.text).dim
     c, t, h, w = dataset.latent_shape
     if h % cfg.model.patch_size or w % cfg.model.patch_size or t % cfg.model.patch_t:
-        raise DrivewmError(f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}")
+        raise DrivewmError(
+            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
+        )
     model = dataclasses.replace(cfg.model, in_channels=c, text_dim=text_dim, cond_mask_channel=cfg.edm.cond_frames > 0)
     return dataclasses.replace(cfg, model=model)
 
 
-def pretrain(cfg: PretrainConfig, data_dir: str | Path, tokenizer_dir: str | Path | None, out_dir: str | Path, stop_after: int | None = None) -> dict:
+def pretrain(
+    cfg: PretrainConfig,
+    data_dir: str | Path,
+    tokenizer_dir: str | Path | None,
+    out_dir: str | Path,
+    stop_after: int | None = None,
+) -> dict:
     """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
     dataset = LatentDataset(find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents), cfg.edm.sigma_data)

@@ -7,7 +7,7 @@ returns the denoised estimate D(x; sigma) for a batch; ``x`` starts as noise at 
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 from torch import nn
@@ -40,7 +40,13 @@ def _d(model: Model, x: torch.Tensor, sigma: torch.Tensor, extra_args: dict) -> 
 
 
 @torch.no_grad()
-def sample_euler(model: Model, x: torch.Tensor, sigmas: torch.Tensor, extra_args: dict | None = None, callback: Callback | None = None) -> torch.Tensor:
+def sample_euler(
+    model: Model,
+    x: torch.Tensor,
+    sigmas: torch.Tensor,
+    extra_args: dict | None = None,
+    callback: Callback | None = None,
+) -> torch.Tensor:
     """EDM Algorithm 1 without its second-order correction: first-order Euler steps of the ODE."""
     extra_args = extra_args or {}
     for i in range(len(sigmas) - 1):
@@ -52,7 +58,13 @@ def sample_euler(model: Model, x: torch.Tensor, sigmas: torch.Tensor, extra_args
 
 
 @torch.no_grad()
-def sample_heun(model: Model, x: torch.Tensor, sigmas: torch.Tensor, extra_args: dict | None = None, callback: Callback | None = None) -> torch.Tensor:
+def sample_heun(
+    model: Model,
+    x: torch.Tensor,
+    sigmas: torch.Tensor,
+    extra_args: dict | None = None,
+    callback: Callback | None = None,
+) -> torch.Tensor:
     """EDM Algorithm 1 (deterministic Heun, 2nd order): an Euler step corrected by the average
     slope at its end, except on the last step to sigma = 0 (lines 9-11)."""
     extra_args = extra_args or {}

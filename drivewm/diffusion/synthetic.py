@@ -19,7 +19,11 @@ CONDITIONS = {"clear day on a highway": 0.6, "heavy snow on a highway": -0.6}
 
 
 def make_synthetic_latent_cache(
-    out_dir: str | Path, clips_per_condition: int = 4, latent_shape: tuple[int, int, int, int] = (4, 3, 4, 6), fps: float = 10.0, seed: int = 0
+    out_dir: str | Path,
+    clips_per_condition: int = 4,
+    latent_shape: tuple[int, int, int, int] = (4, 3, 4, 6),
+    fps: float = 10.0,
+    seed: int = 0,
 ) -> Path:
     """Write ``out_dir/index.json`` + one safetensors per clip; latents (1, c, t, h, w) per clip."""
     out_dir = Path(out_dir)

@@ -66,7 +66,7 @@ class Text2World:
         self.denoiser = EDMDenoiser(self.dit, cfg.edm, cfg.dit.cond_mask_channel)
         self.device = torch.device("cpu")
 
-    def to(self, device: str | torch.device) -> "Text2World":
+    def to(self, device: str | torch.device) -> Text2World:
         """Run sampling on ``device`` (``auto``: CUDA when available); noise stays seeded on the CPU."""
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
@@ -80,22 +80,35 @@ class Text2World:
         save_model_folder(path, MODEL_TYPE, to_dict(self.cfg), state, {"latent": to_dict(self.latent)})
 
     @classmethod
-    def from_pretrained(cls, path: str | Path) -> "Text2World":
+    def from_pretrained(cls, path: str | Path) -> Text2World:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        model = cls(from_dict(Text2WorldConfig, info["config"], where), from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"))
+        model = cls(
+            from_dict(Text2WorldConfig, info["config"], where),
+            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
+        )
         load_weights(model.dit, state, path)
         return model
 
     def conditioning(self, prompts: list[str], fps: float | None = None) -> Conditioning:
         """Caption embeddings and frame rate for ``prompts``, on the model's device."""
         emb, mask = self.text_encoder.encode(prompts)
-        return Conditioning(emb.to(self.device), mask.to(self.device), torch.full((len(prompts),), fps or self.latent.fps, device=self.device))
+        return Conditioning(
+            emb.to(self.device),
+            mask.to(self.device),
+            torch.full((len(prompts),), fps or self.latent.fps, device=self.device),
+        )
 
     @torch.no_grad()
     def sample_latents(
-        self, prompts: list[str], seeds: list[int], steps: int = 35, guidance: float = 7.0, sampler: str = "heun",
-        fps: float | None = None, cond_latents: torch.Tensor | None = None,
+        self,
+        prompts: list[str],
+        seeds: list[int],
+        steps: int = 35,
+        guidance: float = 7.0,
+        sampler: str = "heun",
+        fps: float | None = None,
+        cond_latents: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Generate raw (denormalised) latents (B, c, t, h, w), one per prompt, sample i from ``seeds[i]``.
 

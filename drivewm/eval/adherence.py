@@ -28,8 +28,20 @@ import numpy as np
 
 from drivewm.errors import DrivewmError
 
-FEATURES = ("luma_mean", "luma_p99", "saturation", "contrast", "dark_channel", "white_fraction",
-            "warmth", "sky_blue", "edge_energy", "ground_luma", "horizon_contrast", "flicker")
+FEATURES = (
+    "luma_mean",
+    "luma_p99",
+    "saturation",
+    "contrast",
+    "dark_channel",
+    "white_fraction",
+    "warmth",
+    "sky_blue",
+    "edge_energy",
+    "ground_luma",
+    "horizon_contrast",
+    "flicker",
+)
 DARK_CHANNEL_PATCH = 15  # He et al. 2009 use 15x15 patches
 MAX_FRAMES = 8  # statistics are averaged over at most this many evenly spaced frames
 
@@ -53,8 +65,8 @@ def _frame_stats(rgb: np.ndarray) -> dict[str, float]:
         "warmth": float(f[..., 0].mean() - f[..., 2].mean()),
         "sky_blue": float(top[..., 2].mean() - top[..., 0].mean()),
         "edge_energy": float(np.abs(cv2.Laplacian(luma, cv2.CV_32F)).mean()),
-        "ground_luma": float(luma[2 * h // 3:].mean()),
-        "horizon_contrast": float(luma[h // 3: 2 * h // 3].std() / (luma[h // 3: 2 * h // 3].mean() + 0.05)),
+        "ground_luma": float(luma[2 * h // 3 :].mean()),
+        "horizon_contrast": float(luma[h // 3 : 2 * h // 3].std() / (luma[h // 3 : 2 * h // 3].mean() + 0.05)),
     }
 
 
@@ -68,7 +80,9 @@ def condition_scores(frames: np.ndarray) -> dict[str, float]:
     cameras (each camera's statistics averaged). Keys: :data:`FEATURES`."""
     frames = np.asarray(frames)
     if frames.dtype != np.uint8 or frames.shape[-1] != 3 or frames.ndim not in (4, 5):
-        raise DrivewmError(f"condition_scores: expected uint8 (T, H, W, 3) or (V, T, H, W, 3), got {frames.dtype} {frames.shape}")
+        raise DrivewmError(
+            f"condition_scores: expected uint8 (T, H, W, 3) or (V, T, H, W, 3), got {frames.dtype} {frames.shape}"
+        )
     views = frames if frames.ndim == 5 else frames[None]
     per_view = [_view_scores(v) for v in views]
     return {k: float(np.mean([s[k] for s in per_view])) for k in FEATURES}
@@ -121,7 +135,12 @@ def fit_calibration(samples: list[tuple[dict[str, float], str, str]]) -> dict:
     Z = (X - mean) / std
     labels = np.array([f"{w}/{t}" for _, w, t in samples])
     cents = {str(c): Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
-    return {"features": list(FEATURES), "mean": mean.round(8).tolist(), "std": std.round(8).tolist(), "centroids": cents}
+    return {
+        "features": list(FEATURES),
+        "mean": mean.round(8).tolist(),
+        "std": std.round(8).tolist(),
+        "centroids": cents,
+    }
 
 
 def adherence(scores: dict[str, float], prompted: dict[str, str], calibration: dict | None = None) -> dict:

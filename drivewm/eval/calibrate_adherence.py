@@ -26,8 +26,15 @@ def render_scores(weather: str, time_of_day: str, seed: int, source: tuple[str, 
     from drivewm.logs.reader import read_log
     from drivewm.sim import SimConfig, simulate
 
-    cfg = SimConfig(source=source[0], scenario=source[1], weather=weather, time_of_day=time_of_day,
-                    duration_s=duration_s, fps=5.0, seed=seed)
+    cfg = SimConfig(
+        source=source[0],
+        scenario=source[1],
+        weather=weather,
+        time_of_day=time_of_day,
+        duration_s=duration_s,
+        fps=5.0,
+        seed=seed,
+    )
     with tempfile.TemporaryDirectory() as tmp:
         log = read_log(simulate(cfg, Path(tmp) / "drive.mcap", progress=False))
     n = min(len(v) for v in log.images.values())
@@ -36,8 +43,9 @@ def render_scores(weather: str, time_of_day: str, seed: int, source: tuple[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
-    from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
     from tqdm import tqdm
+
+    from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=2)
@@ -50,13 +58,22 @@ def main(argv: list[str] | None = None) -> int:
     preds = [classify_condition(s, table) for s, _, _ in samples]
     acc_w = float(np.mean([p["weather"] == w for p, (_, w, _) in zip(preds, samples)]))
     acc_t = float(np.mean([p["time_of_day"] == t for p, (_, _, t) in zip(preds, samples)]))
-    header = (f'"""Adherence classifier tables fitted by drivewm.eval.calibrate_adherence on {len(samples)} simulator\n'
-              f"renders ({args.seeds} seeds x weathers x times of day x sources {SOURCES}, {args.duration} s at 5 fps).\n"
-              f'Training accuracy: weather {acc_w:.3f}, time of day {acc_t:.3f}. Regenerate; do not edit by hand."""\n\n')
+    header = (
+        f'"""Adherence classifier tables fitted by drivewm.eval.calibrate_adherence on {len(samples)} simulator\n'
+        f"renders ({args.seeds} seeds x weathers x times of day x sources {SOURCES}, {args.duration} s at 5 fps).\n"
+        f'Training accuracy: weather {acc_w:.3f}, time of day {acc_t:.3f}. Regenerate; do not edit by hand."""\n\n'
+    )
     rows = [[w, t] + [round(s[k], 6) for k in FEATURES] for s, w, t in samples]
-    Path(args.out).write_text(header + "CALIBRATION = " + pprint.pformat(table, width=110, sort_dicts=False) + "\n\n"
-                              + "#: The renders' scores [weather, time_of_day, *FEATURES], kept so the tables can be refitted.\n"
-                              + "SAMPLES = " + pprint.pformat(rows, width=110) + "\n")
+    Path(args.out).write_text(
+        header
+        + "CALIBRATION = "
+        + pprint.pformat(table, width=110, sort_dicts=False)
+        + "\n\n"
+        + "#: The renders' scores [weather, time_of_day, *FEATURES], kept so the tables can be refitted.\n"
+        + "SAMPLES = "
+        + pprint.pformat(rows, width=110)
+        + "\n"
+    )
     print(f"wrote {args.out}: weather accuracy {acc_w:.3f}, time-of-day accuracy {acc_t:.3f}")
     return 0
 

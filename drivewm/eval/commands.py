@@ -6,18 +6,33 @@ import argparse
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("eval", help="score clips or generated videos: TSE, CSE, pose success, ATE/RPE/TFE, adherence",
-                              description="Score clip shards, a folder of per-camera mp4, or one grid mp4.")
-    p.add_argument("location", help="clip shard folder or .tar, a folder of CAMERA.mp4 (or of such folders), or a grid .mp4")
+    p = subparsers.add_parser(
+        "eval",
+        help="score clips or generated videos: TSE, CSE, pose success, ATE/RPE/TFE, adherence",
+        description="Score clip shards, a folder of per-camera mp4, or one grid mp4.",
+    )
+    p.add_argument(
+        "location", help="clip shard folder or .tar, a folder of CAMERA.mp4 (or of such folders), or a grid .mp4"
+    )
     p.add_argument("--rig", default=None, help="rig name or YAML (required for mp4 inputs; overrides a clip's own rig)")
-    p.add_argument("--out", required=True, help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd")
+    p.add_argument(
+        "--out", required=True, help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd"
+    )
     p.add_argument("--workers", type=int, default=1, help="clips scored in parallel (processes)")
     p.add_argument("--metrics", default=None, help="comma list of tse,cse,pose,traj,adherence (default: the suite's)")
-    p.add_argument("--reference", default=None, help="reference metrics JSON shown beside the results (eval/reference/*.json)")
+    p.add_argument(
+        "--reference", default=None, help="reference metrics JSON shown beside the results (eval/reference/*.json)"
+    )
     p.add_argument("--suite", default=None, help="suite YAML overriding protocol constants (eval/suites/*.yaml)")
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a protocol constant, e.g. match.ratio=0.75")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a protocol constant, e.g. match.ratio=0.75",
+    )
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
     p.set_defaults(func=run_eval)
 
@@ -33,8 +48,17 @@ def run_eval(args: argparse.Namespace) -> int:
     overrides = list(args.set) + ([f"metrics=[{args.metrics}]"] if args.metrics else [])
     cfg = apply_overrides(EvalConfig, base, overrides, where=args.suite or "eval config")
     cameras = args.cameras.split(",") if args.cameras else None
-    metrics = evaluate(args.location, args.rig, args.out, cfg, workers=args.workers, grid=args.grid, cameras=cameras,
-                       reference=args.reference, pictures=not args.no_pictures)
+    metrics = evaluate(
+        args.location,
+        args.rig,
+        args.out,
+        cfg,
+        workers=args.workers,
+        grid=args.grid,
+        cameras=cameras,
+        reference=args.reference,
+        pictures=not args.no_pictures,
+    )
     summary = {k: v for k, v in metrics.items() if k not in ("clips", "config")}
     print(json.dumps(summary, indent=2, default=str))
     print(f"wrote {args.out}/metrics.json and metrics.md")

@@ -44,7 +44,9 @@ def frustum_overlap(cam_a: Camera, cam_b: Camera, cfg: ConsistencyConfig) -> flo
     pts_a = np.concatenate([rays * d for d in cfg.overlap_depths_m])
     pts_b = transform_points(invert_T(cam_b.T_ego_from_cam) @ cam_a.T_ego_from_cam, pts_a)
     uv, z = project(cam_b.K, pts_b)
-    inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam_b.width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= cam_b.height - 1)
+    inside = (
+        (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam_b.width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= cam_b.height - 1)
+    )
     return float(np.mean(inside))
 
 
@@ -80,8 +82,14 @@ def _score_pair(m: Matches, T_b_from_a: np.ndarray | None, K_c: np.ndarray, cfg:
     return out
 
 
-def temporal_sampson(videos: dict[str, np.ndarray], rig: Rig, T_world_from_ego: np.ndarray | None,
-                     epi_cfg: EpipolarConfig, cfg: ConsistencyConfig, matcher: FrameMatcher) -> dict:
+def temporal_sampson(
+    videos: dict[str, np.ndarray],
+    rig: Rig,
+    T_world_from_ego: np.ndarray | None,
+    epi_cfg: EpipolarConfig,
+    cfg: ConsistencyConfig,
+    matcher: FrameMatcher,
+) -> dict:
     """TSE of a clip. ``videos``: uint8 (T, H, W, 3) per camera of ``rig``; ``T_world_from_ego`` (T, 4, 4) or None."""
     K_c = canonical_K(epi_cfg)
     per_camera = {}
@@ -100,8 +108,14 @@ def temporal_sampson(videos: dict[str, np.ndarray], rig: Rig, T_world_from_ego: 
     return summarize(per_camera)
 
 
-def cross_sampson(videos: dict[str, np.ndarray], rig: Rig, pairs: list[tuple[str, str]],
-                  epi_cfg: EpipolarConfig, matcher: FrameMatcher, matches_out: dict | None = None) -> dict:
+def cross_sampson(
+    videos: dict[str, np.ndarray],
+    rig: Rig,
+    pairs: list[tuple[str, str]],
+    epi_cfg: EpipolarConfig,
+    matcher: FrameMatcher,
+    matches_out: dict | None = None,
+) -> dict:
     """CSE of a clip over camera ``pairs``: one fitted F per pair over the matches of all frames.
     ``matches_out`` (optional) receives the pooled canonical matches per pair, for visualisation."""
     K_c = canonical_K(epi_cfg)

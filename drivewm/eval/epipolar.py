@@ -71,7 +71,13 @@ def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.nd
         return None, np.zeros(len(m), bool)
     try:
         E, mask = cv2.findEssentialMat(
-            m.uv_a, m.uv_b, K, cv2.USAC_MAGSAC, cfg.ransac_confidence, cfg.ransac_threshold_px, maxIters=cfg.ransac_max_iters
+            m.uv_a,
+            m.uv_b,
+            K,
+            cv2.USAC_MAGSAC,
+            cfg.ransac_confidence,
+            cfg.ransac_threshold_px,
+            maxIters=cfg.ransac_max_iters,
         )
     except cv2.error:
         return None, np.zeros(len(m), bool)

@@ -64,10 +64,22 @@ def working_frames(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig) ->
 
 def pair_correspondences(a: np.ndarray, b: np.ndarray, cfg: FlowMotionConfig) -> tuple[np.ndarray, np.ndarray]:
     """Grid points (N, 2) in frame ``a`` and where the dense flow a -> b puts them in ``b`` (px, x right, y down)."""
-    flow = cv2.calcOpticalFlowFarneback(a, b, None, pyr_scale=0.5, levels=cfg.pyramid_levels, winsize=cfg.window_px, iterations=5,
-                                        poly_n=7, poly_sigma=1.5, flags=0)
+    flow = cv2.calcOpticalFlowFarneback(
+        a,
+        b,
+        None,
+        pyr_scale=0.5,
+        levels=cfg.pyramid_levels,
+        winsize=cfg.window_px,
+        iterations=5,
+        poly_n=7,
+        poly_sigma=1.5,
+        flags=0,
+    )
     h, w = a.shape
-    ys, xs = np.mgrid[cfg.border_px : h - cfg.border_px : cfg.grid_step_px, cfg.border_px : w - cfg.border_px : cfg.grid_step_px]
+    ys, xs = np.mgrid[
+        cfg.border_px : h - cfg.border_px : cfg.grid_step_px, cfg.border_px : w - cfg.border_px : cfg.grid_step_px
+    ]
     ys, xs = ys.ravel(), xs.ravel()
     texture = cv2.cornerMinEigenVal(a, 5)[ys, xs]
     keep = texture >= np.quantile(texture, 1 - cfg.textured_fraction)
@@ -90,14 +102,18 @@ def relative_pose(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: FlowMotion
     return make_T(R, t.ravel() / max(np.linalg.norm(t), 1e-12))
 
 
-def flow_camera_poses(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+def flow_camera_poses(
+    frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """``T_world_from_cam`` (T, 4, 4) with world = the first camera frame, and ``registered`` (T,) bool,
     from uint8 RGB frames (T, H, W, 3) of one calibrated camera. A pair that cannot be fitted ends
     the chain (later frames stay unregistered, NaN), as an SfM model would break there."""
     cfg = cfg or FlowMotionConfig()
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8 or len(frames) < 2:
-        raise DrivewmError(f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} {frames.shape}")
+        raise DrivewmError(
+            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} {frames.shape}"
+        )
     grey, K = working_frames(frames, camera, cfg)
     poses = np.full((len(grey), 4, 4), np.nan)
     registered = np.zeros(len(grey), dtype=bool)

@@ -26,7 +26,7 @@ class GridLayout:
     cameras: list[str]
 
     @staticmethod
-    def parse(text: str, cameras: list[str]) -> "GridLayout":
+    def parse(text: str, cameras: list[str]) -> GridLayout:
         """``"2x3"`` plus the camera order (row-major); cells named '-' are skipped."""
         try:
             rows, cols = (int(v) for v in text.lower().split("x"))
@@ -87,7 +87,7 @@ def split_grid(frames: np.ndarray, grid: GridLayout, where: str) -> dict[str, np
     for i, name in enumerate(grid.cameras):
         if name != "-":
             r, c = divmod(i, grid.cols)
-            out[name] = np.ascontiguousarray(frames[:, r * h:(r + 1) * h, c * w:(c + 1) * w])
+            out[name] = np.ascontiguousarray(frames[:, r * h : (r + 1) * h, c * w : (c + 1) * w])
     return out
 
 
@@ -126,8 +126,18 @@ def _shard_items(shard: Path, rig: Rig | None) -> list[EvalItem]:
             c0 = clip_rig.cameras[0]
             clip_rig = _rig_for(rig, [n for n in rig.names if n in clip.meta.cameras], c0.width, c0.height)
         m = clip.meta
-        items.append(EvalItem(m.key, clip_rig, m.fps, clip.T_world_from_ego, dict(m.tags), list(m.trajectory_ego),
-                              m.trajectory_dt_s, clip=clip))
+        items.append(
+            EvalItem(
+                m.key,
+                clip_rig,
+                m.fps,
+                clip.T_world_from_ego,
+                dict(m.tags),
+                list(m.trajectory_ego),
+                m.trajectory_dt_s,
+                clip=clip,
+            )
+        )
     return items
 
 
@@ -140,8 +150,11 @@ def items_from_mp4_folder(location: Path, rig: Rig) -> list[EvalItem]:
         if not paths:
             raise DrivewmError(f"{folder}: no mp4 named after the rig's cameras {rig.names}")
         w, h, fps = _video_size(next(iter(paths.values())))
-        items.append(EvalItem(folder.name, _rig_for(rig, list(paths), w, h), fps,
-                              mp4_paths={c: str(p) for c, p in paths.items()}))
+        items.append(
+            EvalItem(
+                folder.name, _rig_for(rig, list(paths), w, h), fps, mp4_paths={c: str(p) for c, p in paths.items()}
+            )
+        )
     return items
 
 
@@ -149,11 +162,14 @@ def items_from_grid(path: Path, rig: Rig, grid: GridLayout) -> list[EvalItem]:
     """One mp4 holding a grid of views."""
     w, h, fps = _video_size(path)
     names = [n for n in grid.cameras if n != "-"]
-    return [EvalItem(path.stem, _rig_for(rig, names, w // grid.cols, h // grid.rows), fps, grid_path=str(path), grid=grid)]
+    return [
+        EvalItem(path.stem, _rig_for(rig, names, w // grid.cols, h // grid.rows), fps, grid_path=str(path), grid=grid)
+    ]
 
 
-def load_items(location: str | Path, rig: str | Path | Rig | None = None, grid: str | None = None,
-               cameras: list[str] | None = None) -> list[EvalItem]:
+def load_items(
+    location: str | Path, rig: str | Path | Rig | None = None, grid: str | None = None, cameras: list[str] | None = None
+) -> list[EvalItem]:
     """Items of any supported input. ``grid`` ('2x3') and ``cameras`` (row-major order, default the
     rig's) describe a grid video; mp4 folders and grid videos need ``rig``."""
     location = Path(location)
@@ -167,7 +183,9 @@ def load_items(location: str | Path, rig: str | Path | Rig | None = None, grid: 
     if location.is_file() and location.suffix == ".mp4":
         if not grid:
             if len(rig_obj.cameras) != 1:
-                raise DrivewmError(f"{location}: a single mp4 with a {len(rig_obj.cameras)}-camera rig needs --grid ROWSxCOLS")
+                raise DrivewmError(
+                    f"{location}: a single mp4 with a {len(rig_obj.cameras)}-camera rig needs --grid ROWSxCOLS"
+                )
             grid = "1x1"
         return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names))
     if location.is_dir():

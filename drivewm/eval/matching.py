@@ -38,10 +38,10 @@ class Matches:
         return len(self.uv_a)
 
     @staticmethod
-    def empty() -> "Matches":
+    def empty() -> Matches:
         return Matches(np.zeros((0, 2)), np.zeros((0, 2)))
 
-    def concat(self, other: "Matches") -> "Matches":
+    def concat(self, other: Matches) -> Matches:
         return Matches(np.concatenate([self.uv_a, other.uv_a]), np.concatenate([self.uv_b, other.uv_b]))
 
 
@@ -108,7 +108,9 @@ def load_learned_matcher(path: str):
     import torch
 
     if not path:
-        raise DrivewmError("eval config: match.matcher='learned' needs match.learned_weights (a local TorchScript file)")
+        raise DrivewmError(
+            "eval config: match.matcher='learned' needs match.learned_weights (a local TorchScript file)"
+        )
     try:
         return torch.jit.load(path, map_location="cpu").eval()
     except (RuntimeError, ValueError, OSError) as exc:

@@ -60,9 +60,14 @@ def markdown_table(metrics: dict, reference: dict) -> str:
     """The aggregate metrics beside the reference values, one row per metric."""
     ref_name = reference.get("name", "reference")
     ref = reference.get("metrics", {})
-    lines = [f"# drivewm eval: {metrics.get('location', '')}", "",
-             f"{metrics.get('num_clips', 0)} clips ({metrics.get('num_failed_clips', 0)} unreadable).", "",
-             f"| metric | evaluated | {ref_name} | unit | clips without a value | meaning |", "|---|---|---|---|---|---|"]
+    lines = [
+        f"# drivewm eval: {metrics.get('location', '')}",
+        "",
+        f"{metrics.get('num_clips', 0)} clips ({metrics.get('num_failed_clips', 0)} unreadable).",
+        "",
+        f"| metric | evaluated | {ref_name} | unit | clips without a value | meaning |",
+        "|---|---|---|---|---|---|",
+    ]
     for key, unit, text in TABLE_ROWS:
         if key in metrics:
             nan = metrics.get("nan_clips", {}).get(key, 0)
@@ -86,9 +91,12 @@ def plot_distributions(path: Path, metrics: dict) -> None:
             out += v if isinstance(v, list) else [v]
         return [x for x in out if x is not None and np.isfinite(x)]
 
-    panels = [("TSE pair medians (px)", "tse_pair_medians", "tse_calibrated_pair_medians"),
-              ("CSE pair medians (px)", "cse_pair_medians", "cse_calibrated_pair_medians"),
-              ("ATE per clip (m)", "ate", None), ("TFE per clip (m)", "tfe", None)]
+    panels = [
+        ("TSE pair medians (px)", "tse_pair_medians", "tse_calibrated_pair_medians"),
+        ("CSE pair medians (px)", "cse_pair_medians", "cse_calibrated_pair_medians"),
+        ("ATE per clip (m)", "ate", None),
+        ("TFE per clip (m)", "tfe", None),
+    ]
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.4))
     for ax, (title, key, cal_key) in zip(axes, panels):
         fitted = values(key)
@@ -127,8 +135,12 @@ def _log_clip(rec, rr, result) -> None:
         rec.log(f"{base}/matches/lines", rr.LineStrips2D(strips, colors=[[0, 255, 120]]), static=True)
     traj = result.artifacts.get("trajectory")
     if traj is not None:
-        rec.log(f"{base}/trajectory/reference", rr.LineStrips3D([traj["reference"]], colors=[[255, 200, 0]]), static=True)
-        rec.log(f"{base}/trajectory/recovered", rr.LineStrips3D([traj["recovered"]], colors=[[0, 160, 255]]), static=True)
+        rec.log(
+            f"{base}/trajectory/reference", rr.LineStrips3D([traj["reference"]], colors=[[255, 200, 0]]), static=True
+        )
+        rec.log(
+            f"{base}/trajectory/recovered", rr.LineStrips3D([traj["recovered"]], colors=[[0, 160, 255]]), static=True
+        )
 
 
 def _json_safe(obj):
@@ -143,7 +155,9 @@ def _json_safe(obj):
     return obj
 
 
-def write_report(out_dir: Path, metrics: dict, results: list, reference: str | Path | None, pictures: bool = True) -> None:
+def write_report(
+    out_dir: Path, metrics: dict, results: list, reference: str | Path | None, pictures: bool = True
+) -> None:
     """metrics.json (NaN written as null), metrics.md, error_distributions.png and eval.rrd."""
     ref = load_reference(reference)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -43,7 +43,9 @@ def run_sfm(videos: dict[str, np.ndarray], rig: Rig, cfg: PoseConfig, rig_aware:
     import pycolmap
 
     pycolmap.set_random_seed(cfg.seed)
-    pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 2)  # COLMAP's INFO lines would drown the progress bar
+    pycolmap.logging.minloglevel = max(
+        pycolmap.logging.minloglevel, 2
+    )  # COLMAP's INFO lines would drown the progress bar
     with tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"
@@ -71,8 +73,15 @@ def _extract(pycolmap, db_path: Path, images: Path, cam, num_frames: int, cfg: P
     extraction = pycolmap.FeatureExtractionOptions(num_threads=1)
     extraction.sift.max_num_features = cfg.max_features
     names = [f"{cam.name}/{t:04d}.png" for t in range(num_frames)]
-    pycolmap.extract_features(db_path, images, image_names=names, camera_mode=pycolmap.CameraMode.SINGLE,
-                              reader_options=reader, extraction_options=extraction, device=pycolmap.Device.cpu)
+    pycolmap.extract_features(
+        db_path,
+        images,
+        image_names=names,
+        camera_mode=pycolmap.CameraMode.SINGLE,
+        reader_options=reader,
+        extraction_options=extraction,
+        device=pycolmap.Device.cpu,
+    )
 
 
 def _apply_rig(pycolmap, db_path: Path, rig: Rig) -> None:
@@ -102,13 +111,18 @@ def _match(pycolmap, db_path: Path, cfg: PoseConfig, rig_aware: bool) -> None:
 def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> list:
     out.mkdir()
     options = pycolmap.IncrementalPipelineOptions(
-        min_model_size=cfg.min_model_size, random_seed=cfg.seed, num_threads=1,
-        ba_refine_focal_length=False, ba_refine_principal_point=False, ba_refine_extra_params=False,
+        min_model_size=cfg.min_model_size,
+        random_seed=cfg.seed,
+        num_threads=1,
+        ba_refine_focal_length=False,
+        ba_refine_principal_point=False,
+        ba_refine_extra_params=False,
         ba_refine_sensor_from_rig=False,
     )
     # Assign a whole new mapper-options object: mutating options.mapper in place is not reliable in pycolmap 4.2.
     options.mapper = pycolmap.IncrementalMapperOptions(
-        abs_pose_min_num_inliers=cfg.abs_pose_min_num_inliers, abs_pose_min_inlier_ratio=cfg.abs_pose_min_inlier_ratio,
+        abs_pose_min_num_inliers=cfg.abs_pose_min_num_inliers,
+        abs_pose_min_inlier_ratio=cfg.abs_pose_min_inlier_ratio,
         init_min_tri_angle=cfg.init_min_tri_angle_deg,
     )
     return list(pycolmap.incremental_mapping(db_path, images, out, options).values())

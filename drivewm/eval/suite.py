@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 import multiprocessing
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -23,8 +23,20 @@ from drivewm.eval.config import EvalConfig
 from drivewm.eval.inputs import EvalItem, load_items
 
 #: Aggregate keys (DESIGN.md section 8) and the per-clip field each averages.
-AGGREGATE_KEYS = ("tse", "tse_calibrated", "cse", "cse_calibrated", "pose_success", "registered_fraction",
-                  "ate", "rpe_trans", "rpe_rot", "tfe", "adherence_weather", "adherence_time_of_day")
+AGGREGATE_KEYS = (
+    "tse",
+    "tse_calibrated",
+    "cse",
+    "cse_calibrated",
+    "pose_success",
+    "registered_fraction",
+    "ate",
+    "rpe_trans",
+    "rpe_rot",
+    "tfe",
+    "adherence_weather",
+    "adherence_time_of_day",
+)
 
 
 @dataclasses.dataclass
@@ -77,7 +89,12 @@ def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
     _put_sampson(metrics, "cse", cross_sampson(videos, item.rig, pairs, cfg.epipolar, matcher))
     a, b = pairs[0]
     m = matcher.match((a, 0), videos[a][0], (b, 0), videos[b][0])
-    artifacts["cse_matches"] = {"cameras": (a, b), "images": (videos[a][0], videos[b][0]), "uv_a": m.uv_a, "uv_b": m.uv_b}
+    artifacts["cse_matches"] = {
+        "cameras": (a, b),
+        "images": (videos[a][0], videos[b][0]),
+        "uv_a": m.uv_a,
+        "uv_b": m.uv_b,
+    }
 
 
 def _put_sampson(metrics: dict, name: str, r: dict) -> None:
@@ -116,7 +133,9 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         metrics["rpe_trans"], metrics["rpe_rot"] = rpe(est, ref, cfg.trajectory.rpe_delta_frames, sim.scale)
         artifacts["trajectory"] = {"reference": ref[:, :3, 3], "recovered": sim.apply_points(est[:, :3, 3])}
     if item.trajectory_ego and reg.all():
-        metrics["tfe"] = tfe(ego.T_world_from_ego, item.fps, np.asarray(item.trajectory_ego), item.trajectory_dt_s or 1 / item.fps)
+        metrics["tfe"] = tfe(
+            ego.T_world_from_ego, item.fps, np.asarray(item.trajectory_ego), item.trajectory_dt_s or 1 / item.fps
+        )
     metrics["status"]["traj"] = "ok" if item.T_world_from_ego is not None else "no_reference"
 
 
@@ -148,7 +167,10 @@ def aggregate(results: list[ClipResult]) -> dict:
 
 def _mean_seconds(results: list[ClipResult]) -> dict[str, float]:
     names = sorted({n for r in results for n in r.metrics.get("seconds", {})})
-    return {n: float(np.mean([r.metrics["seconds"][n] for r in results if n in r.metrics.get("seconds", {})])) for n in names}
+    return {
+        n: float(np.mean([r.metrics["seconds"][n] for r in results if n in r.metrics.get("seconds", {})]))
+        for n in names
+    }
 
 
 def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress: bool = True) -> list[ClipResult]:
@@ -173,9 +195,18 @@ def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress
     return [results[i] for i in range(len(items))]
 
 
-def evaluate(location: str | Path, rig=None, out_dir: str | Path | None = None, cfg: EvalConfig | None = None,
-             workers: int = 1, grid: str | None = None, cameras: list[str] | None = None,
-             reference: str | Path | None = None, progress: bool = True, pictures: bool = True) -> dict:
+def evaluate(
+    location: str | Path,
+    rig=None,
+    out_dir: str | Path | None = None,
+    cfg: EvalConfig | None = None,
+    workers: int = 1,
+    grid: str | None = None,
+    cameras: list[str] | None = None,
+    reference: str | Path | None = None,
+    progress: bool = True,
+    pictures: bool = True,
+) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
     Returns the metrics dict (aggregates at the top, per clip under ``clips``); with ``out_dir``

@@ -40,8 +40,13 @@ def ego_from_sfm(sfm: SfmResult, rig: Rig, camera: str = "") -> EgoTrajectory:
     return EgoTrajectory(T, sfm.registered[camera].copy(), camera)
 
 
-def estimate_ego_trajectory(clip_or_videos, rig: Rig | Camera | None = None, camera: str = "",
-                            cfg: PoseConfig | None = None, method: str = "sfm") -> EgoTrajectory:
+def estimate_ego_trajectory(
+    clip_or_videos,
+    rig: Rig | Camera | None = None,
+    camera: str = "",
+    cfg: PoseConfig | None = None,
+    method: str = "sfm",
+) -> EgoTrajectory:
     """Camera motion recovered from a clip's frames, as ego poses up to a similarity.
 
     ``clip_or_videos``: a :class:`drivewm.clips.Clip` (its rig is used when ``rig`` is None), a

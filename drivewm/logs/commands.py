@@ -23,6 +23,8 @@ def run_view(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(args.log).with_suffix(".rrd")
     write_recording(log, out)
     frames = sum(len(f) for f in log.images.values())
-    print(f"{args.log}: {len(log.rig.cameras)} cameras, {frames} images, {len(log.pose_timestamps_ns)} poses, "
-          f"{len(log.agents)} agent ticks -> {out} (open with: rerun {out})")
+    print(
+        f"{args.log}: {len(log.rig.cameras)} cameras, {frames} images, {len(log.pose_timestamps_ns)} poses, "
+        f"{len(log.agents)} agent ticks -> {out} (open with: rerun {out})"
+    )
     return 0

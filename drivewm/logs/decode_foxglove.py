@@ -53,7 +53,12 @@ def quat_xyzw(q: Any) -> np.ndarray:
 
 def image(msg: Any) -> tuple[str, int, bytes, str]:
     """CompressedImage -> (frame_id, stamp_ns, data, format)."""
-    return field(msg, "frame_id", ""), time_ns(field(msg, "timestamp")), as_bytes(field(msg, "data", b"")), field(msg, "format", "")
+    return (
+        field(msg, "frame_id", ""),
+        time_ns(field(msg, "timestamp")),
+        as_bytes(field(msg, "data", b"")),
+        field(msg, "format", ""),
+    )
 
 
 def calibration(msg: Any) -> tuple[str, np.ndarray, np.ndarray, int, int]:
@@ -69,7 +74,9 @@ def transforms(msg: Any, schema_name: str) -> list[tuple[int, str, str, np.ndarr
     out = []
     for tf in items:
         T = join_T(vec3(field(tf, "translation", {})), quat_xyzw(field(tf, "rotation", {})))
-        out.append((time_ns(field(tf, "timestamp")), field(tf, "parent_frame_id", ""), field(tf, "child_frame_id", ""), T))
+        out.append(
+            (time_ns(field(tf, "timestamp")), field(tf, "parent_frame_id", ""), field(tf, "child_frame_id", ""), T)
+        )
     return out
 
 

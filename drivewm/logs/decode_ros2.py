@@ -64,7 +64,13 @@ def raw_image(msg: Any) -> tuple[str, int, bytes, str]:
 
 def camera_info(msg: Any) -> tuple[str, np.ndarray, np.ndarray, int, int]:
     """sensor_msgs/CameraInfo -> (frame_id, K (9,), D (n,), width, height)."""
-    return msg.header.frame_id, np.asarray(msg.k, dtype=np.float64), np.asarray(msg.d, dtype=np.float64), int(msg.width), int(msg.height)
+    return (
+        msg.header.frame_id,
+        np.asarray(msg.k, dtype=np.float64),
+        np.asarray(msg.d, dtype=np.float64),
+        int(msg.width),
+        int(msg.height),
+    )
 
 
 def tf_message(msg: Any) -> list[tuple[int, str, str, np.ndarray]]:
@@ -80,5 +86,7 @@ def tf_message(msg: Any) -> list[tuple[int, str, str, np.ndarray]]:
 def pose(msg: Any, schema_name: str) -> tuple[int, str, np.ndarray]:
     """PoseStamped / PoseWithCovarianceStamped / Odometry -> (stamp_ns, frame_id, T_frame_from_body)."""
     p = msg.pose if schema_name in POSE_STAMPED else msg.pose.pose
-    T = join_T([p.position.x, p.position.y, p.position.z], [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w])
+    T = join_T(
+        [p.position.x, p.position.y, p.position.z], [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]
+    )
     return stamp_ns(msg.header), msg.header.frame_id, T

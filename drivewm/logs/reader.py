@@ -187,7 +187,9 @@ def _camera_order(meta: dict, tmap: TopicMap, col: _Collected) -> list[str]:
 def _camera(path: str | Path, name: str, col: _Collected, tmap: TopicMap, ego: str) -> Camera:
     cal = col.calibrations[name]
     if cal.K.size != 9 or not np.all(np.isfinite(cal.K)) or cal.width <= 0 or cal.height <= 0:
-        raise DrivewmError(f"{path}: calibration of camera {name!r} is incomplete (K has {cal.K.size} values, size {cal.width}x{cal.height})")
+        raise DrivewmError(
+            f"{path}: calibration of camera {name!r} is incomplete (K has {cal.K.size} values, size {cal.width}x{cal.height})"
+        )
     mapped = tmap.cameras.get(name)
     frame = (mapped.frame if mapped else None) or cal.frame_id or name
     T_ego_from_cam = col.frames.static_transform(ego, frame)

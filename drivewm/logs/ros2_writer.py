@@ -40,8 +40,11 @@ def _pose_fields(T: np.ndarray) -> tuple[dict, dict]:
 
 def _transform(timestamp_ns: int, parent: str, child: str, T_parent_from_child: np.ndarray) -> dict:
     translation, rotation = _pose_fields(T_parent_from_child)
-    return {"header": _header(timestamp_ns, parent), "child_frame_id": child,
-            "transform": {"translation": translation, "rotation": rotation}}
+    return {
+        "header": _header(timestamp_ns, parent),
+        "child_frame_id": child,
+        "transform": {"translation": translation, "rotation": rotation},
+    }
 
 
 def image_topic(camera: str, raw: bool) -> str:
@@ -55,8 +58,13 @@ def ros2_topic_map(log: DriveLog, raw_cameras: tuple[str, ...] = (), ego_pose: s
         for c in log.rig.names
     }
     pose_topic = EGO_POSE_TOPICS[ego_pose]
-    return TopicMap(rig_name=log.rig.name, cameras=cameras, world_frame=WORLD, ego_frame=EGO,
-                    ego_pose=EgoPoseTopic(pose_topic) if pose_topic else None)
+    return TopicMap(
+        rig_name=log.rig.name,
+        cameras=cameras,
+        world_frame=WORLD,
+        ego_frame=EGO,
+        ego_pose=EgoPoseTopic(pose_topic) if pose_topic else None,
+    )
 
 
 def _static_messages(log: DriveLog, t0: int) -> list[tuple[str, str, dict]]:
@@ -65,11 +73,19 @@ def _static_messages(log: DriveLog, t0: int) -> list[tuple[str, str, dict]]:
     for cam in log.rig.cameras:
         x = cam.name.lower()
         P = np.concatenate([cam.K, np.zeros((3, 1))], axis=1)
-        info = {"header": _header(t0, f"{x}_optical_frame"), "height": cam.height, "width": cam.width,
-                "distortion_model": distortion_model(cam.distortion), "d": cam.distortion.tolist(),
-                "k": cam.K.reshape(-1).tolist(), "r": np.eye(3).reshape(-1).tolist(), "p": P.reshape(-1).tolist(),
-                "binning_x": 0, "binning_y": 0,
-                "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False}}
+        info = {
+            "header": _header(t0, f"{x}_optical_frame"),
+            "height": cam.height,
+            "width": cam.width,
+            "distortion_model": distortion_model(cam.distortion),
+            "d": cam.distortion.tolist(),
+            "k": cam.K.reshape(-1).tolist(),
+            "r": np.eye(3).reshape(-1).tolist(),
+            "p": P.reshape(-1).tolist(),
+            "binning_x": 0,
+            "binning_y": 0,
+            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+        }
         out.append((f"/{x}/camera_info", "sensor_msgs/msg/CameraInfo", info))
         T_ego_from_link = cam.T_ego_from_cam @ invert_T(T_LINK_FROM_OPTICAL)
         transforms.append(_transform(t0, EGO, f"{x}_link", T_ego_from_link))
@@ -81,10 +97,22 @@ def _static_messages(log: DriveLog, t0: int) -> list[tuple[str, str, dict]]:
 def _image_message(camera: str, ts: int, frame, raw: bool) -> tuple[str, str, dict]:
     header = _header(ts, f"{camera.lower()}_optical_frame")
     if not raw:
-        return image_topic(camera, False), "sensor_msgs/msg/CompressedImage", {"header": header, "format": frame.format, "data": frame.data}
+        return (
+            image_topic(camera, False),
+            "sensor_msgs/msg/CompressedImage",
+            {"header": header, "format": frame.format, "data": frame.data},
+        )
     rgb = frame.decode()
     h, w, _ = rgb.shape
-    msg = {"header": header, "height": h, "width": w, "encoding": "rgb8", "is_bigendian": 0, "step": 3 * w, "data": rgb.tobytes()}
+    msg = {
+        "header": header,
+        "height": h,
+        "width": w,
+        "encoding": "rgb8",
+        "is_bigendian": 0,
+        "step": 3 * w,
+        "data": rgb.tobytes(),
+    }
     return image_topic(camera, True), "sensor_msgs/msg/Image", msg
 
 
@@ -96,8 +124,12 @@ def _pose_message(ts: int, T: np.ndarray, ego_pose: str) -> tuple[str, str, dict
     if ego_pose == "pose_stamped":
         return EGO_POSE_TOPICS[ego_pose], "geometry_msgs/msg/PoseStamped", {"header": _header(ts, WORLD), "pose": pose}
     zero3, cov = {"x": 0.0, "y": 0.0, "z": 0.0}, [0.0] * 36
-    odom = {"header": _header(ts, WORLD), "child_frame_id": EGO, "pose": {"pose": pose, "covariance": cov},
-            "twist": {"twist": {"linear": zero3, "angular": zero3}, "covariance": cov}}
+    odom = {
+        "header": _header(ts, WORLD),
+        "child_frame_id": EGO,
+        "pose": {"pose": pose, "covariance": cov},
+        "twist": {"twist": {"linear": zero3, "angular": zero3}, "covariance": cov},
+    }
     return EGO_POSE_TOPICS[ego_pose], "nav_msgs/msg/Odometry", odom
 
 

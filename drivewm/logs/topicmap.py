@@ -79,7 +79,9 @@ def load_topic_map(name_or_path: str | Path) -> TopicMap:
         candidates = [d / f"{name_or_path}.yaml" for d in topicmap_search_dirs()]
         found = [c for c in candidates if c.is_file()]
         if not found:
-            raise DrivewmError(f"topic map {name_or_path!r}: no such file or named map in {[str(c.parent) for c in candidates]}")
+            raise DrivewmError(
+                f"topic map {name_or_path!r}: no such file or named map in {[str(c.parent) for c in candidates]}"
+            )
         path = found[0]
     tmap = from_dict(TopicMap, load_yaml(path), str(path))
     tmap.source = str(path)

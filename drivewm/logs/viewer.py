@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from drivewm.atomic import atomic_path
-from drivewm.logs.types import DriveLog
 from drivewm.logs.transforms import quat_xyzw_from_yaw
+from drivewm.logs.types import DriveLog
 
 TIMELINE = "log_time"  # the MCAP log time; Rerun's own wall-clock "log_time"/"log_tick" are switched off
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
@@ -39,14 +39,24 @@ def log_static(rec, log: DriveLog) -> None:
     for cam in log.rig.cameras:
         T = cam.T_ego_from_cam
         rec.log(f"world/ego/{cam.name}", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True)
-        pinhole = rr.Pinhole(image_from_camera=cam.K, resolution=[cam.width, cam.height], camera_xyz=rr.ViewCoordinates.RDF)
+        pinhole = rr.Pinhole(
+            image_from_camera=cam.K, resolution=[cam.width, cam.height], camera_xyz=rr.ViewCoordinates.RDF
+        )
         rec.log(f"world/ego/{cam.name}", pinhole, static=True)
-    rec.log("world/ego_trajectory", rr.LineStrips3D(trajectory_strips(log.T_world_from_ego), colors=[[255, 200, 0]]), static=True)
+    rec.log(
+        "world/ego_trajectory",
+        rr.LineStrips3D(trajectory_strips(log.T_world_from_ego), colors=[[255, 200, 0]]),
+        static=True,
+    )
     for kind in sorted({line.kind for line in log.road}):
         strips = [line.points_xyz for line in log.road if line.kind == kind]
-        rec.log(f"world/road/{kind}", rr.LineStrips3D(strips, colors=[ROAD_COLORS.get(kind, [200, 200, 200])]), static=True)
+        rec.log(
+            f"world/road/{kind}", rr.LineStrips3D(strips, colors=[ROAD_COLORS.get(kind, [200, 200, 200])]), static=True
+        )
     tags = "\n".join(f"- **{k}**: {v}" for k, v in log.scene.tags.items())
-    rec.log("scene", rr.TextDocument(f"{tags}\n\n{log.scene.description}", media_type=rr.MediaType.MARKDOWN), static=True)
+    rec.log(
+        "scene", rr.TextDocument(f"{tags}\n\n{log.scene.description}", media_type=rr.MediaType.MARKDOWN), static=True
+    )
 
 
 def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:

@@ -57,7 +57,9 @@ class LogWriter:
     Use as a context manager; leaving the block on an exception discards the file.
     """
 
-    def __init__(self, path: str | Path, rig: Rig, scene: SceneInfo, image_format: str = "jpeg", jpeg_quality: int = 92):
+    def __init__(
+        self, path: str | Path, rig: Rig, scene: SceneInfo, image_format: str = "jpeg", jpeg_quality: int = 92
+    ):
         if image_format not in IMAGE_FORMATS:
             raise DrivewmError(f"{path}: image_format must be one of {IMAGE_FORMATS}, got {image_format!r}")
         self.path = Path(path)
@@ -79,9 +81,12 @@ class LogWriter:
         options = MCAPWriteOptions(compression=MCAPCompression.Lz4, compression_threads=0)
         self._mcap = foxglove.open_mcap(tmp, context=self._ctx, writer_options=options)
         ctx = self._ctx
-        self._image_ch = {c.name: channels.CompressedImageChannel(names.image_topic(c.name), context=ctx) for c in self.rig.cameras}
+        self._image_ch = {
+            c.name: channels.CompressedImageChannel(names.image_topic(c.name), context=ctx) for c in self.rig.cameras
+        }
         self._calib_ch = {
-            c.name: channels.CameraCalibrationChannel(names.calibration_topic(c.name), context=ctx) for c in self.rig.cameras
+            c.name: channels.CameraCalibrationChannel(names.calibration_topic(c.name), context=ctx)
+            for c in self.rig.cameras
         }
         self._tf_static_ch = channels.FrameTransformsChannel(names.TF_STATIC_TOPIC, context=ctx)
         self._tf_ch = channels.FrameTransformsChannel(names.TF_TOPIC, context=ctx)
@@ -104,7 +109,9 @@ class LogWriter:
         self._static_written = True
         for cam in self.rig.cameras:
             self._calib_ch[cam.name].log(self._calibration_msg(cam, timestamp_ns), log_time=timestamp_ns)
-        statics = [self._transform_msg(timestamp_ns, names.EGO_FRAME, c.name, c.T_ego_from_cam) for c in self.rig.cameras]
+        statics = [
+            self._transform_msg(timestamp_ns, names.EGO_FRAME, c.name, c.T_ego_from_cam) for c in self.rig.cameras
+        ]
         self._tf_static_ch.log(self._msg.FrameTransforms(transforms=statics), log_time=timestamp_ns)
         scene = {"tags": dict(self.scene.tags), "description": self.scene.description}
         self._scene_ch.log(scene, log_time=timestamp_ns)
@@ -143,18 +150,35 @@ class LogWriter:
             orientation=m.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
         )
         r, g, b = (float(v) for v in box.color_rgb)
-        cube = m.CubePrimitive(pose=pose, size=m.Vector3(x=float(s[0]), y=float(s[1]), z=float(s[2])), color=m.Color(r=r, g=g, b=b, a=1.0))
+        cube = m.CubePrimitive(
+            pose=pose, size=m.Vector3(x=float(s[0]), y=float(s[1]), z=float(s[2])), color=m.Color(r=r, g=g, b=b, a=1.0)
+        )
         meta = [m.KeyValuePair(key="category", value=box.category)]
-        return m.SceneEntity(timestamp=self._timestamp(timestamp_ns), frame_id=names.WORLD_FRAME, id=box.track_id, cubes=[cube], metadata=meta)
+        return m.SceneEntity(
+            timestamp=self._timestamp(timestamp_ns),
+            frame_id=names.WORLD_FRAME,
+            id=box.track_id,
+            cubes=[cube],
+            metadata=meta,
+        )
 
     def _line_entity(self, timestamp_ns: int, index: int, line: RoadLine):
         m = self._msg
         points = [m.Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in line.points_xyz]
-        primitive = m.LinePrimitive(type=m.LinePrimitiveLineType.LineStrip, thickness=0.15, points=points,
-                                    color=m.Color(r=1.0, g=1.0, b=1.0, a=1.0))
+        primitive = m.LinePrimitive(
+            type=m.LinePrimitiveLineType.LineStrip,
+            thickness=0.15,
+            points=points,
+            color=m.Color(r=1.0, g=1.0, b=1.0, a=1.0),
+        )
         meta = [m.KeyValuePair(key="kind", value=line.kind), m.KeyValuePair(key="line_type", value=line.line_type)]
-        return m.SceneEntity(timestamp=self._timestamp(timestamp_ns), frame_id=names.WORLD_FRAME,
-                             id=f"{line.kind}/{index}", lines=[primitive], metadata=meta)
+        return m.SceneEntity(
+            timestamp=self._timestamp(timestamp_ns),
+            frame_id=names.WORLD_FRAME,
+            id=f"{line.kind}/{index}",
+            lines=[primitive],
+            metadata=meta,
+        )
 
     # ------------------------------------------------------------------ public API
 
@@ -166,7 +190,9 @@ class LogWriter:
             raise DrivewmError(
                 f"{self.path}: image for {camera} must be uint8 ({cam.height}, {cam.width}, 3), got {image.dtype} {image.shape}"
             )
-        self.write_encoded_image(camera, timestamp_ns, encode_image(image, self.image_format, self.jpeg_quality), self.image_format)
+        self.write_encoded_image(
+            camera, timestamp_ns, encode_image(image, self.image_format, self.jpeg_quality), self.image_format
+        )
 
     def write_images(self, timestamp_ns: int, images: dict[str, np.ndarray]) -> None:
         """Log one image per camera name (uint8 RGB H x W x 3) at ``timestamp_ns``."""
@@ -178,7 +204,9 @@ class LogWriter:
         if camera not in self._image_ch:
             raise DrivewmError(f"{self.path}: camera {camera!r} is not in rig {self.rig.name} ({self.rig.names})")
         self._ensure_static(timestamp_ns)
-        msg = self._msg.CompressedImage(timestamp=self._timestamp(timestamp_ns), frame_id=camera, data=bytes(data), format=format)
+        msg = self._msg.CompressedImage(
+            timestamp=self._timestamp(timestamp_ns), frame_id=camera, data=bytes(data), format=format
+        )
         self._image_ch[camera].log(msg, log_time=int(timestamp_ns))
 
     def write_pose(self, timestamp_ns: int, T_world_from_ego: np.ndarray) -> None:
@@ -198,7 +226,9 @@ class LogWriter:
     def write_road(self, timestamp_ns: int, lines: list[RoadLine]) -> None:
         """Log the static road polylines once (optional; viewers draw them)."""
         self._ensure_static(timestamp_ns)
-        update = self._msg.SceneUpdate(entities=[self._line_entity(timestamp_ns, i, line) for i, line in enumerate(lines)])
+        update = self._msg.SceneUpdate(
+            entities=[self._line_entity(timestamp_ns, i, line) for i, line in enumerate(lines)]
+        )
         self._road_ch.log(update, log_time=int(timestamp_ns))
 
     def close(self) -> Path:
@@ -217,7 +247,7 @@ class LogWriter:
             self._mcap.close()
             self._stack.__exit__(DrivewmError, DrivewmError("aborted"), None)
 
-    def __enter__(self) -> "LogWriter":
+    def __enter__(self) -> LogWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:

@@ -9,15 +9,27 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model")
+    p = sub.add_parser(
+        "posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model"
+    )
     p.add_argument("--preset", help="size preset: debug, small, base, large, xl (default: the recipe's, else debug)")
     p.add_argument("--recipe", type=Path, help="YAML with preset, rig and overrides (multiview/recipes/*.yaml)")
     p.add_argument("--init", required=True, type=Path, help="Text2World model folder to start from")
-    p.add_argument("--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)")
-    p.add_argument("--rig", help="cameras to train on: rig name or YAML (default: the recipe's, else all cameras of the clips)")
+    p.add_argument(
+        "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
+    )
+    p.add_argument(
+        "--rig", help="cameras to train on: rig name or YAML (default: the recipe's, else all cameras of the clips)"
+    )
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override, e.g. multiview.cross_view=joint or train.steps=100")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override, e.g. multiview.cross_view=joint or train.steps=100",
+    )
     p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
     p.set_defaults(func=posttrain_command)
 
@@ -25,14 +37,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--model", required=True, type=Path, help="multi-view model folder (with its tokenizer recorded)")
     r.add_argument("--clip", required=True, type=Path, help="clip shard (.tar) or clip folder")
     r.add_argument("--key", help="clip key inside --clip (default: the first clip)")
-    r.add_argument("--trajectory", default="straight", help="straight|left|right|stop or a waypoint file (.npy/.json, (N, 3) m)")
+    r.add_argument(
+        "--trajectory", default="straight", help="straight|left|right|stop or a waypoint file (.npy/.json, (N, 3) m)"
+    )
     r.add_argument("--windows", type=int, default=2, help="windows to generate after the conditioning frames")
     r.add_argument("--out", required=True, type=Path, help="output folder: clip shard, grid mp4, contact sheet")
     r.add_argument("--prompt", default="", help="caption for every view (default: the clip's own captions)")
     r.add_argument("--speed", type=float, default=0.0, help="speed of a named trajectory in m/s (default: the clip's)")
     r.add_argument("--steps", type=int, default=35, help="sampler steps per window")
     r.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
-    r.add_argument("--trajectory-guidance", type=float, default=1.0, help="weigh the trajectory's effect this many times (1 = plain)")
+    r.add_argument(
+        "--trajectory-guidance",
+        type=float,
+        default=1.0,
+        help="weigh the trajectory's effect this many times (1 = plain)",
+    )
     r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
     r.add_argument("--sampler", default="heun", choices=["heun", "euler"])
     r.set_defaults(func=rollout_command)
@@ -40,9 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def posttrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
-    from drivewm.multiview.posttrain import posttrain, posttrain_config
-
-    from drivewm.multiview.posttrain import load_recipe
+    from drivewm.multiview.posttrain import load_recipe, posttrain, posttrain_config
 
     recipe = load_recipe(args.recipe) if args.recipe else {}
     rig = args.rig if args.rig is not None else recipe.get("rig", "")
@@ -63,11 +80,22 @@ def rollout_command(args: argparse.Namespace) -> int:
     from drivewm.multiview.writer import write_samples
     from drivewm.tokenizer import Tokenizer
 
-    options = RolloutOptions(args.trajectory, args.windows, args.steps, args.guidance, args.trajectory_guidance, args.sampler, args.seed,
-                             args.prompt, args.speed)
+    options = RolloutOptions(
+        args.trajectory,
+        args.windows,
+        args.steps,
+        args.guidance,
+        args.trajectory_guidance,
+        args.sampler,
+        args.seed,
+        args.prompt,
+        args.speed,
+    )
     model = MultiView.from_pretrained(args.model)
     if not model.latent.tokenizer:
-        raise DrivewmError(f"{args.model}: no tokenizer recorded in the model folder; a rollout needs one to encode the clip")
+        raise DrivewmError(
+            f"{args.model}: no tokenizer recorded in the model folder; a rollout needs one to encode the clip"
+        )
     sample = rollout(model, load_clip(args.clip, args.key), options, Tokenizer.from_pretrained(model.latent.tokenizer))
     files = write_samples(args.out, [sample], model.latent.fps, name="rollout")
     print(f"wrote {len(files)} files to {args.out} ({sample.videos.shape[1]} frames per view)")

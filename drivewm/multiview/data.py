@@ -35,7 +35,9 @@ class MultiViewSample:
 class MultiViewDataset:
     """Clips of a latent cache restricted to ``camera_names`` (None = the first clip's cameras)."""
 
-    def __init__(self, cache_dir: str | Path, camera_names: list[str] | None, num_waypoints: int, sigma_data: float = 0.5):
+    def __init__(
+        self, cache_dir: str | Path, camera_names: list[str] | None, num_waypoints: int, sigma_data: float = 0.5
+    ):
         self.cache = LatentCache(cache_dir)
         self.sigma_data = sigma_data
         self.num_waypoints = num_waypoints
@@ -50,7 +52,9 @@ class MultiViewDataset:
 
     def median_speed_mps(self) -> float:
         """Median speed over the first waypoint step of every clip (the named trajectories' default)."""
-        return float(np.median([np.linalg.norm(self[i].trajectory[0, :2]) / self.trajectory_dt_s for i in range(len(self))]))
+        return float(
+            np.median([np.linalg.norm(self[i].trajectory[0, :2]) / self.trajectory_dt_s for i in range(len(self))])
+        )
 
     def __len__(self) -> int:
         return len(self.cache)
@@ -63,7 +67,9 @@ class MultiViewDataset:
         if missing:
             raise DrivewmError(f"{where}: no cameras {missing} (has {clip.meta.cameras}); choose another --rig")
         if tuple(clip.latents.shape[1:]) != self.latent_shape:
-            raise DrivewmError(f"{where}: latents {tuple(clip.latents.shape[1:])} differ from the first clip's {self.latent_shape}")
+            raise DrivewmError(
+                f"{where}: latents {tuple(clip.latents.shape[1:])} differ from the first clip's {self.latent_shape}"
+            )
         views = [clip.meta.cameras.index(c) for c in self.camera_names]
         z = normalize_latents(clip.latents[views], self.cache.latent_mean, self.cache.latent_std, self.sigma_data)
         captions = [clip.meta.view_captions.get(c) or clip.meta.caption for c in self.camera_names]

@@ -40,7 +40,9 @@ def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tup
     from drivewm.tokenizer import Tokenizer
 
     if not model.latent.tokenizer:
-        raise DrivewmError(f"{clip_path}: conditioning on a clip needs the model's tokenizer (none recorded in the model folder)")
+        raise DrivewmError(
+            f"{clip_path}: conditioning on a clip needs the model's tokenizer (none recorded in the model folder)"
+        )
     tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer)
     clip = load_clip(clip_path)
     rig = clip_rig(model, clip) if rig is None else clip.meta.get_rig().subset(rig.names)
@@ -51,8 +53,15 @@ def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tup
     return z[None], rig, initial_speed_mps(clip)
 
 
-def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec: str | None, trajectory: str | None,
-                       condition_clip: str | Path | None, out_dir: str | Path, trajectory_guidance: float = 1.0) -> list[Path]:
+def generate_multiview(
+    model_dir: str | Path,
+    options: GenerateOptions,
+    rig_spec: str | None,
+    trajectory: str | None,
+    condition_clip: str | Path | None,
+    out_dir: str | Path,
+    trajectory_guidance: float = 1.0,
+) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer)."""
     model = MultiView.from_pretrained(model_dir)
@@ -68,11 +77,29 @@ def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
     for prompt, seed in tqdm(jobs, desc="generate"):
         caps = view_captions(prompt, rig)
-        z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, options.guidance, options.sampler, cond_latents=cond,
-                                 trajectory_guidance=trajectory_guidance)
+        z = model.sample_latents(
+            rig,
+            [caps],
+            waypoints[None],
+            [seed],
+            options.steps,
+            options.guidance,
+            options.sampler,
+            cond_latents=cond,
+            trajectory_guidance=trajectory_guidance,
+        )
         videos = decode_latents(z[0], model.latent.tokenizer)  # (V, T, H, W, 3)
-        extra = {"model": str(Path(model_dir).resolve()), "prompt": prompt, "seed": seed, "steps": options.steps, "guidance": options.guidance,
-                 "trajectory_guidance": trajectory_guidance, "trajectory": trajectory or "straight", "speed_mps": float(speed), "condition_clip": str(condition_clip or "")}
+        extra = {
+            "model": str(Path(model_dir).resolve()),
+            "prompt": prompt,
+            "seed": seed,
+            "steps": options.steps,
+            "guidance": options.guidance,
+            "trajectory_guidance": trajectory_guidance,
+            "trajectory": trajectory or "straight",
+            "speed_mps": float(speed),
+            "condition_clip": str(condition_clip or ""),
+        }
         samples.append(GeneratedSample(videos, rig, prompt, caps, waypoints, mv.trajectory_dt_s, extra))
     return write_samples(out_dir, samples, model.latent.fps)
 
@@ -80,6 +107,8 @@ def generate_multiview(model_dir: str | Path, options: GenerateOptions, rig_spec
 def generate_command(args: argparse.Namespace) -> int:
     """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
     options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler)
-    files = generate_multiview(args.model, options, args.rig, args.trajectory, args.condition_clip, args.out, args.trajectory_guidance)
+    files = generate_multiview(
+        args.model, options, args.rig, args.trajectory, args.condition_clip, args.out, args.trajectory_guidance
+    )
     print(f"wrote {len(files)} files to {args.out}")
     return 0

@@ -20,14 +20,15 @@ from drivewm.multiview.cross_view import SUBLAYER_NAME
 from drivewm.multiview.model import MultiView
 
 
-
 def multiview_config(parent: Text2World, mv: MultiViewConfig, cond_frames: int) -> MultiViewModelConfig:
     """The parent's networks with ``cross_view_attn`` inserted after in-view self-attention and
     ``cond_frames`` Video2World latent frames (which need the mask input channel)."""
     layers = list(parent.cfg.dit.block_layers)
     if SUBLAYER_NAME not in layers:
         layers.insert(layers.index("self_attn") + 1 if "self_attn" in layers else 0, SUBLAYER_NAME)
-    dit = dataclasses.replace(parent.cfg.dit, block_layers=layers, cond_mask_channel=parent.cfg.dit.cond_mask_channel or cond_frames > 0)
+    dit = dataclasses.replace(
+        parent.cfg.dit, block_layers=layers, cond_mask_channel=parent.cfg.dit.cond_mask_channel or cond_frames > 0
+    )
     edm = dataclasses.replace(parent.cfg.edm, cond_frames=cond_frames)
     return MultiViewModelConfig(dit, edm, parent.cfg.text, mv)
 
@@ -55,7 +56,9 @@ def from_text2world(parent: Text2World, mv: MultiViewConfig | None = None, cond_
         if name == "patch_embed.weight":
             value = widen_patch_embed(value, state[key], d.patch_t * d.patch_size**2)
         if value.shape != state[key].shape:
-            raise DrivewmError(f"init: parent parameter {name} {tuple(value.shape)} != multi-view {tuple(state[key].shape)}")
+            raise DrivewmError(
+                f"init: parent parameter {name} {tuple(value.shape)} != multi-view {tuple(state[key].shape)}"
+            )
         state[key] = value.clone()
     model.net.load_state_dict(state)
     return model

@@ -57,12 +57,12 @@ class MultiViewConditioning(Conditioning):
     """(B V,) bool: False = this view's trajectory is dropped (training dropout, or the trajectory-free
     branch of trajectory guidance); None = every trajectory kept."""
 
-    def drop_trajectory(self, keep: torch.Tensor) -> "MultiViewConditioning":
+    def drop_trajectory(self, keep: torch.Tensor) -> MultiViewConditioning:
         """A copy where views with ``keep`` (B V,) False see no trajectory."""
         old = self.trajectory_keep if self.trajectory_keep is not None else torch.ones_like(keep)
         return dataclasses.replace(self, trajectory_keep=old & keep)
 
-    def without_trajectory(self) -> "MultiViewConditioning":
+    def without_trajectory(self) -> MultiViewConditioning:
         """The same conditioning with every trajectory dropped (trajectory guidance's other branch)."""
         return self.drop_trajectory(torch.zeros(self.fps.shape[0], dtype=torch.bool, device=self.fps.device))
 
@@ -80,9 +80,13 @@ class MultiViewNet(nn.Module):
         self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
         self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
-        self.warp_encoder = WarpEncoder(cfg.dit.in_channels, dim, cfg.dit.patch_size, cfg.dit.patch_t) if mv.warp_condition else None
+        self.warp_encoder = (
+            WarpEncoder(cfg.dit.in_channels, dim, cfg.dit.patch_size, cfg.dit.patch_t) if mv.warp_condition else None
+        )
         self.trajectory_encoder = (
-            TrajectoryEncoder(mv.trajectory_waypoints, dim, mv.trajectory_width, mv.trajectory_scale_m) if mv.trajectory_waypoints else None
+            TrajectoryEncoder(mv.trajectory_waypoints, dim, mv.trajectory_width, mv.trajectory_scale_m)
+            if mv.trajectory_waypoints
+            else None
         )
 
     @property
@@ -97,16 +101,27 @@ class MultiViewNet(nn.Module):
             if keep is not None and cond.static_rays is not None:
                 rays = torch.where(keep[:, None, None], rays, cond.static_rays)
             token_cond = self.camera_encoder(rays.to(x.dtype))  # (B V, N, D)
-        if self.warp_encoder is not None and cond.warp_grid is not None and cond.cond_latents is not None and cond.cond_frames > 0:
-            valid = cond.warp_valid if keep is None else cond.warp_valid & keep[:, None, None, None]  # dropped trajectory: no warp
-            warped = warp_first_frame(cond.cond_latents.to(x.dtype) / self.cfg.edm.sigma_data, cond.warp_grid, valid, cond.num_views)
+        if (
+            self.warp_encoder is not None
+            and cond.warp_grid is not None
+            and cond.cond_latents is not None
+            and cond.cond_frames > 0
+        ):
+            valid = (
+                cond.warp_valid if keep is None else cond.warp_valid & keep[:, None, None, None]
+            )  # dropped trajectory: no warp
+            warped = warp_first_frame(
+                cond.cond_latents.to(x.dtype) / self.cfg.edm.sigma_data, cond.warp_grid, valid, cond.num_views
+            )
             warp_cond = self.warp_encoder(warped)
             token_cond = warp_cond if token_cond is None else token_cond + warp_cond
         if self.trajectory_encoder is not None and cond.trajectory is not None:
             global_cond = self.trajectory_encoder(cond.trajectory.to(x.dtype))  # (B V, D)
             if keep is not None:
                 global_cond = global_cond * keep[:, None].to(global_cond.dtype)
-        return self.denoiser(x, sigma, dataclasses.replace(cond, extra_token_cond=token_cond, extra_global_cond=global_cond))
+        return self.denoiser(
+            x, sigma, dataclasses.replace(cond, extra_token_cond=token_cond, extra_global_cond=global_cond)
+        )
 
 
 class TrajectoryGuidedDenoiser(nn.Module):
@@ -143,10 +158,13 @@ class MultiView:
         save_model_folder(path, MODEL_TYPE, to_dict(self.cfg), state, {"latent": to_dict(self.latent)})
 
     @classmethod
-    def from_pretrained(cls, path: str | Path) -> "MultiView":
+    def from_pretrained(cls, path: str | Path) -> MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        model = cls(from_dict(MultiViewModelConfig, info["config"], where), from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"))
+        model = cls(
+            from_dict(MultiViewModelConfig, info["config"], where),
+            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
+        )
         load_weights(model.net, state, path)
         return model
 
@@ -162,14 +180,24 @@ class MultiView:
         d = self.cfg.dit
         return t // d.patch_t, h // d.patch_size, w // d.patch_size
 
-    def conditioning(self, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float | None = None) -> MultiViewConditioning:
+    def conditioning(
+        self, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float | None = None
+    ) -> MultiViewConditioning:
         """Conditioning of B clips of ``rig`` (V views): captions (B, V) strings, waypoints (B, W, 3) m."""
         return build_conditioning(self, rig, view_captions, trajectories, fps or self.latent.fps)
 
     @torch.no_grad()
     def sample_latents(
-        self, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, seeds: list[int], steps: int = 35,
-        guidance: float = 7.0, sampler: str = "heun", cond_latents: torch.Tensor | None = None, fps: float | None = None,
+        self,
+        rig: Rig,
+        view_captions: list[list[str]],
+        trajectories: np.ndarray | None,
+        seeds: list[int],
+        steps: int = 35,
+        guidance: float = 7.0,
+        sampler: str = "heun",
+        cond_latents: torch.Tensor | None = None,
+        fps: float | None = None,
         trajectory_guidance: float = 1.0,
     ) -> torch.Tensor:
         """Raw (denormalised) latents (B, V, c, t, h, w) of B clips; clip b's noise from ``seeds[b]``.
@@ -184,22 +212,33 @@ class MultiView:
         cond = self.conditioning(rig, view_captions, trajectories, fps)
         mean, std = self._stats()
         if cond_latents is not None:
-            z = normalize_latents(rearrange(cond_latents, "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data)
+            z = normalize_latents(
+                rearrange(cond_latents, "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data
+            )
             cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
         sigmas = karras_sigmas(steps)
         denoiser = GuidedDenoiser(self.net, guidance)
         if trajectories is not None and trajectory_guidance != 1.0:
             denoiser = TrajectoryGuidedDenoiser(denoiser, trajectory_guidance)
-        noise = torch.stack([torch.randn((v, *self.latent.latent_shape), generator=torch.Generator().manual_seed(int(s))) for s in seeds])
+        noise = torch.stack(
+            [
+                torch.randn((v, *self.latent.latent_shape), generator=torch.Generator().manual_seed(int(s)))
+                for s in seeds
+            ]
+        )
         x = rearrange(noise, "b v c t h w -> (b v) c t h w") * sigmas[0]
         x = SAMPLERS[sampler](denoiser, x, sigmas, extra_args={"cond": cond})
-        return rearrange(denormalize_latents(x, mean, std, self.cfg.edm.sigma_data), "(b v) c t h w -> b v c t h w", b=b)
+        return rearrange(
+            denormalize_latents(x, mean, std, self.cfg.edm.sigma_data), "(b v) c t h w -> b v c t h w", b=b
+        )
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)
 
 
-def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float) -> MultiViewConditioning:
+def build_conditioning(
+    model: MultiView, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float
+) -> MultiViewConditioning:
     """Text, rays, waypoints and view neighbours of B clips of ``rig``, folded to (B V)."""
     from drivewm.multiview.cross_view import view_neighbors
 
@@ -215,12 +254,28 @@ def build_conditioning(model: MultiView, rig: Rig, view_captions: list[list[str]
     if mv.warp_condition and trajectories is not None:
         grid, valid = clip_warp_grids(model, rig, trajectories, fps)
     static_rays = clip_rays(model, rig, b, None, fps)
-    rays = static_rays if trajectories is None or not mv.moving_camera_rays else clip_rays(model, rig, b, trajectories, fps)
-    return MultiViewConditioning(emb, mask, torch.full((b * v,), float(fps)), num_views=v, view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors),
-                                 rays=rays, static_rays=static_rays, trajectory=traj, warp_grid=grid, warp_valid=valid)
+    rays = (
+        static_rays
+        if trajectories is None or not mv.moving_camera_rays
+        else clip_rays(model, rig, b, trajectories, fps)
+    )
+    return MultiViewConditioning(
+        emb,
+        mask,
+        torch.full((b * v,), float(fps)),
+        num_views=v,
+        view_neighbors=view_neighbors(rig, mv.cross_view, mv.neighbors),
+        rays=rays,
+        static_rays=static_rays,
+        trajectory=traj,
+        warp_grid=grid,
+        warp_valid=valid,
+    )
 
 
-def clip_warp_grids(model: MultiView, rig: Rig, trajectories: np.ndarray, fps: float) -> tuple[torch.Tensor, torch.Tensor]:
+def clip_warp_grids(
+    model: MultiView, rig: Rig, trajectories: np.ndarray, fps: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(B V, T, h, w, 2) warp grids and (B V, T, h, w) validity of B clips: latent frame i at the
     ego pose of video frame i * temporal_compression along each clip's waypoints."""
     _, t, h, w = model.latent.latent_shape
@@ -228,7 +283,9 @@ def clip_warp_grids(model: MultiView, rig: Rig, trajectories: np.ndarray, fps: f
     grids = []
     for wp in np.asarray(trajectories):
         poses = poses_from_waypoints(wp, t, mv.trajectory_dt_s, fps / mv.temporal_compression)
-        grids.append(warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m))  # frame 0 is the ego frame itself
+        grids.append(
+            warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m)
+        )  # frame 0 is the ego frame itself
     return torch.cat([g for g, _ in grids]), torch.cat([m for _, m in grids])
 
 
@@ -240,6 +297,10 @@ def clip_rays(model: MultiView, rig: Rig, b: int, trajectories: np.ndarray | Non
     rays_hw = plucker_rays(rig, (h, w))  # (V, h*w, 6) in the ego frame
     if trajectories is None or not mv.moving_camera_rays:
         return repeat(token_rays(rays_hw, t), "v n c -> (b v) n c", b=b)
-    token_fps = fps / (mv.temporal_compression * model.cfg.dit.patch_t)  # token frame i shows video frame i * tc * patch_t
-    poses = [torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, token_fps)) for wp in np.asarray(trajectories)]
+    token_fps = fps / (
+        mv.temporal_compression * model.cfg.dit.patch_t
+    )  # token frame i shows video frame i * tc * patch_t
+    poses = [
+        torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, token_fps)) for wp in np.asarray(trajectories)
+    ]
     return torch.cat([moving_token_rays(rays_hw, T).float() for T in poses])

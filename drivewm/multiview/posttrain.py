@@ -50,13 +50,39 @@ class PosttrainConfig:
 #: Per-preset training defaults. Batches are clips of V views, so they are V times the tokens of
 #: a Text2World batch of the same size; the real-size presets checkpoint activations and shard.
 POSTTRAIN_PRESETS: dict[str, dict] = {
-    "debug": dict(steps=300, batch_size=2, lr=5e-4, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100),
+    "debug": dict(
+        steps=300, batch_size=2, lr=5e-4, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100
+    ),
     "small": dict(steps=10000, batch_size=8, lr=2e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
-    "base": dict(steps=30000, batch_size=16, lr=1e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000, activation_checkpointing=True),
-    "large": dict(steps=50000, batch_size=32, lr=1e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000,
-                  activation_checkpointing=True, parallel="fsdp"),
-    "xl": dict(steps=50000, batch_size=32, lr=5e-5, warmup_steps=1000, checkpoint_every=2000, sample_every=5000,
-               activation_checkpointing=True, parallel="fsdp"),
+    "base": dict(
+        steps=30000,
+        batch_size=16,
+        lr=1e-4,
+        warmup_steps=1000,
+        checkpoint_every=2000,
+        sample_every=5000,
+        activation_checkpointing=True,
+    ),
+    "large": dict(
+        steps=50000,
+        batch_size=32,
+        lr=1e-4,
+        warmup_steps=1000,
+        checkpoint_every=2000,
+        sample_every=5000,
+        activation_checkpointing=True,
+        parallel="fsdp",
+    ),
+    "xl": dict(
+        steps=50000,
+        batch_size=32,
+        lr=5e-5,
+        warmup_steps=1000,
+        checkpoint_every=2000,
+        sample_every=5000,
+        activation_checkpointing=True,
+        parallel="fsdp",
+    ),
 }
 
 
@@ -76,7 +102,9 @@ def load_recipe(path: str | Path) -> dict:
     unknown = set(recipe) - {"preset", "rig", "overrides"}
     if unknown:
         raise DrivewmError(f"{path}: unknown recipe keys {sorted(unknown)} (known: preset, rig, overrides)")
-    if not isinstance(recipe.get("overrides", []), list) or not all(isinstance(o, str) for o in recipe.get("overrides", [])):
+    if not isinstance(recipe.get("overrides", []), list) or not all(
+        isinstance(o, str) for o in recipe.get("overrides", [])
+    ):
         raise DrivewmError(f"{path}: 'overrides' must be a list of KEY=VALUE strings")
     return recipe
 
@@ -113,10 +141,17 @@ class MultiViewTask:
         sigma = torch.cat([sample_sigma(1, self.bundle.cfg.edm, g).expand(v) for g in gens])  # (B V,)
         noise = torch.cat([torch.randn(s.latents.shape, generator=g) for s, g in zip(samples, gens)]).to(device)
         keep = torch.cat([torch.rand(v, generator=g) >= self.bundle.cfg.edm.text_dropout for g in gens])
-        video2world = float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0]))) < self.cfg.multiview.video2world_prob
-        keep_traj = torch.cat([(torch.rand(1, generator=g) >= self.cfg.multiview.trajectory_dropout).expand(v) for g in gens])
+        video2world = (
+            float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0])))
+            < self.cfg.multiview.video2world_prob
+        )
+        keep_traj = torch.cat(
+            [(torch.rand(1, generator=g) >= self.cfg.multiview.trajectory_dropout).expand(v) for g in gens]
+        )
         edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
-        cond = cat_conditioning([build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples])
+        cond = cat_conditioning(
+            [build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples]
+        )
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
         return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
 
@@ -133,37 +168,70 @@ class MultiViewTask:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
         bundle, s = self._ema_bundle(ema_state), self.dataset[0]
-        z = bundle.sample_latents(s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0)
+        z = bundle.sample_latents(
+            s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0
+        )
         write_grid_png(decode_latents(z[0], bundle.latent.tokenizer), path, s.rig.names)  # one row per view
 
 
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
     """Concatenate per-clip conditionings (same views) along the folded (B V) batch."""
     first = conds[0]
-    cat = {f: torch.cat([getattr(c, f) for c in conds]) for f in ("text_emb", "text_mask", "fps", "rays", "static_rays", "trajectory", "warp_grid", "warp_valid", "trajectory_keep")
-           if getattr(first, f) is not None}
+    cat = {
+        f: torch.cat([getattr(c, f) for c in conds])
+        for f in (
+            "text_emb",
+            "text_mask",
+            "fps",
+            "rays",
+            "static_rays",
+            "trajectory",
+            "warp_grid",
+            "warp_valid",
+            "trajectory_keep",
+        )
+        if getattr(first, f) is not None
+    }
     return dataclasses.replace(first, **cat)
 
 
 def to_device(cond: MultiViewConditioning, device: torch.device) -> MultiViewConditioning:
-    moved = {f.name: getattr(cond, f.name).to(device) for f in dataclasses.fields(cond) if isinstance(getattr(cond, f.name), torch.Tensor)}
+    moved = {
+        f.name: getattr(cond, f.name).to(device)
+        for f in dataclasses.fields(cond)
+        if isinstance(getattr(cond, f.name), torch.Tensor)
+    }
     return dataclasses.replace(cond, **moved)
 
 
-def posttrain(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, out_dir: str | Path, stop_after: int | None = None) -> dict:
+def posttrain(
+    cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, out_dir: str | Path, stop_after: int | None = None
+) -> dict:
     """Post-train a multi-view model folder into ``out_dir`` from the Text2World folder ``init_dir``
     (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
     parent = Text2World.from_pretrained(init_dir)
     tokenizer = Path(parent.latent.tokenizer) if parent.latent.tokenizer else None
     cameras = load_rig(cfg.rig).names if cfg.rig else None
-    dataset = MultiViewDataset(find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents), cameras,
-                               cfg.multiview.trajectory_waypoints, parent.cfg.edm.sigma_data)
+    dataset = MultiViewDataset(
+        find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents),
+        cameras,
+        cfg.multiview.trajectory_waypoints,
+        parent.cfg.edm.sigma_data,
+    )
     if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
-        raise DrivewmError(f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}")
+        raise DrivewmError(
+            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}"
+        )
     torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
-    mv = dataclasses.replace(cfg.multiview, trajectory_dt_s=dataset.trajectory_dt_s, speed_mps=round(dataset.median_speed_mps(), 2),
-                             temporal_compression=dataset.temporal_compression)
+    mv = dataclasses.replace(
+        cfg.multiview,
+        trajectory_dt_s=dataset.trajectory_dt_s,
+        speed_mps=round(dataset.median_speed_mps(), 2),
+        temporal_compression=dataset.temporal_compression,
+    )
     model = from_text2world(parent, mv, cfg.cond_frames)
-    model.latent = dataclasses.replace(model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict())
+    model.latent = dataclasses.replace(
+        model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict()
+    )
     record = {**to_dict(cfg), "init": str(Path(init_dir).resolve())}
     return train(MultiViewTask(cfg, dataset, model), cfg.train, out_dir, config_record=record, stop_after=stop_after)

@@ -25,7 +25,13 @@ from drivewm.diffusion.generate import video_to_uint8
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.trajectories import NAMED, load_waypoints, named_poses, poses_from_waypoints, waypoints_from_poses
+from drivewm.multiview.trajectories import (
+    NAMED,
+    load_waypoints,
+    named_poses,
+    poses_from_waypoints,
+    waypoints_from_poses,
+)
 from drivewm.multiview.writer import GeneratedSample
 
 
@@ -134,34 +140,74 @@ def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) ->
     k = max(1, model.cfg.edm.cond_frames)
     win = _Windows(k, 1 + (k - 1) * tc, 1 + (t - 1) * tc, 1.0 / (clip.meta.fps * mv.trajectory_dt_s))
     if clip.meta.num_frames < win.n_cond:
-        raise DrivewmError(f"clip {clip.key}: needs at least {win.n_cond} frames to condition on, has {clip.meta.num_frames}")
+        raise DrivewmError(
+            f"clip {clip.key}: needs at least {win.n_cond} frames to condition on, has {clip.meta.num_frames}"
+        )
     speed = options.speed_mps or initial_speed_mps(clip)
     speed = speed if np.isfinite(speed) else mv.speed_mps
     total = win.n_cond + options.windows * (win.n_win - win.n_cond)
     num_poses = int(np.ceil(total * win.steps_per_frame)) + mv.trajectory_waypoints + 1
     poses = rollout_poses(options.trajectory, num_poses, mv.trajectory_dt_s, speed, (total - 1) / clip.meta.fps)
-    captions = [options.prompt] * len(rig.cameras) if options.prompt else [clip.meta.view_captions.get(n) or clip.meta.caption for n in rig.names]
+    captions = (
+        [options.prompt] * len(rig.cameras)
+        if options.prompt
+        else [clip.meta.view_captions.get(n) or clip.meta.caption for n in rig.names]
+    )
     size = (h * sc, w * sc)
-    first = frames_to_video(np.stack([clip.video(n)[: win.n_cond] for n in rig.names]), size)  # (V, 3, n_cond, h*sc, w*sc)
+    first = frames_to_video(
+        np.stack([clip.video(n)[: win.n_cond] for n in rig.names]), size
+    )  # (V, 3, n_cond, h*sc, w*sc)
     video = rearrange(first, "v c t h w -> v t h w c").add(1).mul(127.5).round().byte().numpy()
     for window in tqdm(range(options.windows), desc="rollout"):
         new = _next_window(model, tokenizer, rig, captions, video, poses, win, size, options, window, clip.meta.fps)
         video = np.concatenate([video, new], axis=1)
     traj = waypoints_from_poses(poses, 0, int(round((video.shape[1] - 1) * win.steps_per_frame)))
-    extra = {"rollout_of": clip.key, "source_log": clip.meta.source_log, "trajectory": options.trajectory, "windows": options.windows,
-             "speed_mps": speed, "seed": options.seed, "steps": options.steps, "guidance": options.guidance, "cond_video_frames": win.n_cond}
+    extra = {
+        "rollout_of": clip.key,
+        "source_log": clip.meta.source_log,
+        "trajectory": options.trajectory,
+        "windows": options.windows,
+        "speed_mps": speed,
+        "seed": options.seed,
+        "steps": options.steps,
+        "guidance": options.guidance,
+        "cond_video_frames": win.n_cond,
+    }
     return GeneratedSample(video, rig, captions[0], captions, traj, mv.trajectory_dt_s, extra)
 
 
-def _next_window(model: MultiView, tokenizer, rig: Rig, captions: list[str], video: np.ndarray, poses: np.ndarray, win: _Windows,
-                 size: tuple[int, int], options: RolloutOptions, window: int, fps: float) -> np.ndarray:
+def _next_window(
+    model: MultiView,
+    tokenizer,
+    rig: Rig,
+    captions: list[str],
+    video: np.ndarray,
+    poses: np.ndarray,
+    win: _Windows,
+    size: tuple[int, int],
+    options: RolloutOptions,
+    window: int,
+    fps: float,
+) -> np.ndarray:
     """The frames a window adds after its conditioning frames (the last ``n_cond`` of ``video``),
     uint8 (V, n_win - n_cond, H, W, 3)."""
     c, t, h, w = model.latent.latent_shape
     start = video.shape[1] - win.n_cond  # the window's first frame in the rollout
     cond = torch.zeros(len(rig.cameras), c, t, h, w)
     cond[:, :, : win.k] = encode_views(tokenizer, video[:, start:], size)[:, :, : win.k]
-    waypoints = waypoints_from_poses(poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints)
-    z = model.sample_latents(rig, [captions], waypoints[None], [options.seed + window], options.steps, options.guidance,
-                             options.sampler, cond_latents=cond[None], fps=fps, trajectory_guidance=options.trajectory_guidance)
+    waypoints = waypoints_from_poses(
+        poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints
+    )
+    z = model.sample_latents(
+        rig,
+        [captions],
+        waypoints[None],
+        [options.seed + window],
+        options.steps,
+        options.guidance,
+        options.sampler,
+        cond_latents=cond[None],
+        fps=fps,
+        trajectory_guidance=options.trajectory_guidance,
+    )
     return decode_views(tokenizer, z[0])[:, win.n_cond :]

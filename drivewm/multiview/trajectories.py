@@ -42,8 +42,14 @@ def named_arc_length(name: str, times_s: np.ndarray, speed_mps: float, horizon_s
     return speed_mps * t
 
 
-def named_poses(name: str, num_frames: int, dt_s: float, speed_mps: float = 15.0, curvature_per_m: float = 0.02,
-                horizon_s: float | None = None) -> np.ndarray:
+def named_poses(
+    name: str,
+    num_frames: int,
+    dt_s: float,
+    speed_mps: float = 15.0,
+    curvature_per_m: float = 0.02,
+    horizon_s: float | None = None,
+) -> np.ndarray:
     """(num_frames, 4, 4) T_world_from_ego of a named manoeuvre, frame 0 at the origin."""
     if name not in NAMED:
         raise DrivewmError(f"trajectory {name!r}: not one of {list(NAMED)} and not a file")

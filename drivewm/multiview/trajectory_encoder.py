@@ -26,5 +26,7 @@ class TrajectoryEncoder(nn.Module):
 
     def forward(self, waypoints_m: torch.Tensor) -> torch.Tensor:
         if waypoints_m.shape[-2:] != (self.num_waypoints, 3):
-            raise DrivewmError(f"trajectory: expected (B, {self.num_waypoints}, 3) waypoints, got {tuple(waypoints_m.shape)}")
+            raise DrivewmError(
+                f"trajectory: expected (B, {self.num_waypoints}, 3) waypoints, got {tuple(waypoints_m.shape)}"
+            )
         return self.net(rearrange(waypoints_m / self.scale_m, "b w c -> b (w c)"))

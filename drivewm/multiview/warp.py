@@ -31,7 +31,9 @@ from drivewm.geometry import Rig, pixel_rays, project
 from drivewm.multiview.camera import patch_centres_px
 
 
-def warp_grid(rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray, max_ground_m: float = 100.0) -> tuple[torch.Tensor, torch.Tensor]:
+def warp_grid(
+    rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray, max_ground_m: float = 100.0
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Sampling positions of every view's latent pixels in the first frame of the rig.
 
     ``T_ego0_from_ego`` (T, 4, 4): the ego pose of every latent frame in the first frame's ego frame.
@@ -73,7 +75,9 @@ def warp_grid(rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray,
     return torch.from_numpy(grid).float(), torch.from_numpy(valid)
 
 
-def warp_first_frame(cond_latents: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor, num_views: int) -> torch.Tensor:
+def warp_first_frame(
+    cond_latents: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor, num_views: int
+) -> torch.Tensor:
     """(B V, c, T, h, w) clean latents (first frame used) -> (B V, c + 1, T, h, w): the first frames
     warped by ``grid`` (B V, T, h, w, 2) where ``valid`` (B V, T, h, w), zero elsewhere, plus the mask."""
     first = rearrange(cond_latents[:, :, 0], "(b v) c h w -> b c h (v w)", v=num_views)

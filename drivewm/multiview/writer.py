@@ -60,7 +60,9 @@ def tile_views(videos: np.ndarray, layout: list[list[int]]) -> np.ndarray:
     return rearrange(grid, "r c t h w x -> t (r h) (c w) x")
 
 
-def write_samples(out_dir: str | Path, samples: list[GeneratedSample], fps: float, name: str = "generated") -> list[Path]:
+def write_samples(
+    out_dir: str | Path, samples: list[GeneratedSample], fps: float, name: str = "generated"
+) -> list[Path]:
     """Clip shards + manifest, ``sample_XXX.mp4`` grid videos and ``contact_sheet.png``; returns the files."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -86,7 +88,11 @@ def sample_clip(key: str, s: GeneratedSample, fps: float):
     _, t, h, w, _ = s.videos.shape
     rig = s.rig.scaled(w, h)
     meta = clip_meta(key, rig.to_dict(), fps, t, s.caption, s.extra)
-    meta = dataclasses.replace(meta, view_captions=dict(zip(rig.names, s.view_captions)),
-                               trajectory_ego=np.asarray(s.trajectory_ego).tolist(), trajectory_dt_s=s.trajectory_dt_s)
+    meta = dataclasses.replace(
+        meta,
+        view_captions=dict(zip(rig.names, s.view_captions)),
+        trajectory_ego=np.asarray(s.trajectory_ego).tolist(),
+        trajectory_dt_s=s.trajectory_dt_s,
+    )
     poses = poses_from_waypoints(s.trajectory_ego, t, s.trajectory_dt_s, fps)
     return clip_from_arrays(meta, dict(zip(rig.names, s.videos)), poses)

@@ -43,7 +43,7 @@ class FaceTextures:
     sizes: np.ndarray
 
     @classmethod
-    def from_dict(cls, textures: dict[str, np.ndarray]) -> "FaceTextures":
+    def from_dict(cls, textures: dict[str, np.ndarray]) -> FaceTextures:
         images = []
         for f in FACE_NAMES:
             rgb = cv2.copyMakeBorder(textures[f], 1, 1, 1, 1, cv2.BORDER_REPLICATE)
@@ -53,9 +53,12 @@ class FaceTextures:
         sizes = np.array([[textures[f].shape[1], textures[f].shape[0]] for f in FACE_NAMES], np.float64)
         return cls(images, sizes)
 
-    def shaded(self, shades: np.ndarray) -> "FaceTextures":
+    def shaded(self, shades: np.ndarray) -> FaceTextures:
         """The same textures with each face's colour scaled by ``shades`` (6,) (baked lighting)."""
-        images = [np.dstack([cv2.convertScaleAbs(img[..., :3], alpha=float(k)), img[..., 3]]) for img, k in zip(self.images, shades)]
+        images = [
+            np.dstack([cv2.convertScaleAbs(img[..., :3], alpha=float(k)), img[..., 3]])
+            for img, k in zip(self.images, shades)
+        ]
         return FaceTextures(images, self.sizes)
 
 
@@ -72,7 +75,7 @@ class BoxSet:
     shade: np.ndarray
 
     @classmethod
-    def from_boxes(cls, boxes: list[AgentBox], textures: list[FaceTextures], shade_fn, bake: bool = False) -> "BoxSet":
+    def from_boxes(cls, boxes: list[AgentBox], textures: list[FaceTextures], shade_fn, bake: bool = False) -> BoxSet:
         """``shade_fn(normals_world (N, 6, 3)) -> (N, 6)`` gives each face's brightness; ``bake``:
         multiply it into the textures once (static boxes) instead of per drawn face."""
         if not boxes:
@@ -93,8 +96,9 @@ class BoxSet:
         return cls(corners, normals, centers, np.linalg.norm(half, axis=1), textures, shade)
 
 
-def draw_boxes(img: np.ndarray, zbuf: np.ndarray, view, T_cam_from_world: np.ndarray, boxes: BoxSet,
-               max_range_m: float) -> None:
+def draw_boxes(
+    img: np.ndarray, zbuf: np.ndarray, view, T_cam_from_world: np.ndarray, boxes: BoxSet, max_range_m: float
+) -> None:
     """Draw every face of ``boxes`` visible to ``view`` into ``img`` (H, W, 3) uint8 with z-test
     against ``zbuf`` (H, W) float32 camera depth."""
     if len(boxes.centers) == 0:
@@ -134,15 +138,18 @@ def _draw_faces(img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, de
             rect = _pixel_rects(uv[None], view.width, view.height)[0]
             if rect[2] <= rect[0] or rect[3] <= rect[1]:
                 continue
-        draw_face(img, zbuf, view, rect, normals[k], depth_d[k], H[k], boxes.textures[box].images[f], boxes.shade[box, f])
+        draw_face(
+            img, zbuf, view, rect, normals[k], depth_d[k], H[k], boxes.textures[box].images[f], boxes.shade[box, f]
+        )
 
 
 def _pixel_rects(uv: np.ndarray, width: int, height: int) -> np.ndarray:
     """Pixel rectangles [x0, x1) x [y0, y1) (F, 4) holding polygons (F, M, 2), clipped to the image."""
     lo = np.floor(np.nan_to_num(uv.min(axis=1), nan=-1e9, posinf=1e9, neginf=-1e9).clip(-1e6, 1e6))
     hi = np.ceil(np.nan_to_num(uv.max(axis=1), nan=1e9, posinf=1e9, neginf=-1e9).clip(-1e6, 1e6)) + 1
-    return np.stack([lo[:, 0].clip(0, width), lo[:, 1].clip(0, height), hi[:, 0].clip(0, width), hi[:, 1].clip(0, height)],
-                    axis=1).astype(int)
+    return np.stack(
+        [lo[:, 0].clip(0, width), lo[:, 1].clip(0, height), hi[:, 0].clip(0, width), hi[:, 1].clip(0, height)], axis=1
+    ).astype(int)
 
 
 def _homographies(K: np.ndarray, quads: np.ndarray, sizes: np.ndarray) -> np.ndarray:
@@ -173,15 +180,26 @@ def _project_clipped(K: np.ndarray, quad_cam: np.ndarray) -> np.ndarray:
     return poly[:, :2] / poly[:, 2:3] @ K[:2, :2].T + K[:2, 2]
 
 
-def draw_face(img: np.ndarray, zbuf: np.ndarray, view, rect: np.ndarray, normal_cam: np.ndarray, plane_d: float,
-              H: np.ndarray, tex_rgba: np.ndarray, shade: float) -> None:
+def draw_face(
+    img: np.ndarray,
+    zbuf: np.ndarray,
+    view,
+    rect: np.ndarray,
+    normal_cam: np.ndarray,
+    plane_d: float,
+    H: np.ndarray,
+    tex_rgba: np.ndarray,
+    shade: float,
+) -> None:
     """Fill one planar face inside the pixel rectangle ``rect`` (x0, y0, x1, y1) where it is nearer
     than the z-buffer: plane n . X = d in the camera frame, padded-texel -> pixel homography ``H``."""
     x0, y0, x1, y1 = rect
     M = H.copy()
     M[0] -= x0 * H[2]
     M[1] -= y0 * H[2]
-    warped = cv2.warpPerspective(tex_rgba, M, (int(x1 - x0), int(y1 - y0)), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+    warped = cv2.warpPerspective(
+        tex_rgba, M, (int(x1 - x0), int(y1 - y0)), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
+    )
     nx, ny, nz = (float(v) for v in normal_cam)  # Python floats keep the per-pixel maths in float32
     z = float(plane_d) / (nx * view.xn[None, x0:x1] + ny * view.yn[y0:y1, None] + nz)
     zroi = zbuf[y0:y1, x0:x1]

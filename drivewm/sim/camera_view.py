@@ -44,7 +44,7 @@ class CameraView:
     fog_image: np.ndarray  # (H, W, 3) uint8 of the fog colour
 
     @classmethod
-    def build(cls, cam: Camera, texel_m: float, levels: int, cond: Condition, max_range_m: float) -> "CameraView":
+    def build(cls, cam: Camera, texel_m: float, levels: int, cond: Condition, max_range_m: float) -> CameraView:
         """Precompute ``cam``'s rays, ground hits (texture mip level ``levels`` - 1 at most for
         ``texel_m`` texels) and condition-dependent backgrounds."""
         xn = ((np.arange(cam.width) - cam.K[0, 2]) / cam.K[0, 0]).astype(np.float32)
@@ -55,17 +55,34 @@ class CameraView:
         ray_norm = np.linalg.norm(rays_cam, axis=-1).astype(np.float32)
         ground = np.isfinite(t)
         near = ground & (np.linalg.norm(hit - cam.T_ego_from_cam[:2, 3], axis=-1) <= max_range_m)
-        ground_idx, level_slices, detail_runs = _ground_runs(near, _mip_level(hit, texel_m, levels),
-                                                            _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1), levels)
+        ground_idx, level_slices, detail_runs = _ground_runs(
+            near, _mip_level(hit, texel_m, levels), _mip_level(hit, DETAIL_RES_M, DETAIL_LEVELS + 1), levels
+        )
         ground_xy = hit.reshape(-1, 2)[ground_idx]
         gain = _headlight_gain(ground_xy, cond)
         # The sky already has the condition's colour: only surfaces (finite depth) are fogged.
         fog = np.where(ground, fog_weight(t * ray_norm, cond.visibility_m), 1.0).astype(np.float32)
-        return cls(cam.name, cam.K, cam.width, cam.height, invert_T(cam.T_ego_from_cam), xn, yn, ray_norm,
-                   t.astype(np.float32), ground_idx, level_slices, ground_xy.astype(np.float32)[:, None, :],
-                   None if gain is None else gain[:, None].astype(np.float32), np.flatnonzero(ground & ~near), detail_runs,
-                   _sky(rays_ego, cond), fog, _side_planes(cam.K, cam.width, cam.height),
-                   np.broadcast_to(to_uint8(np.asarray(cond.fog_rgb)), (cam.height, cam.width, 3)).copy())
+        return cls(
+            cam.name,
+            cam.K,
+            cam.width,
+            cam.height,
+            invert_T(cam.T_ego_from_cam),
+            xn,
+            yn,
+            ray_norm,
+            t.astype(np.float32),
+            ground_idx,
+            level_slices,
+            ground_xy.astype(np.float32)[:, None, :],
+            None if gain is None else gain[:, None].astype(np.float32),
+            np.flatnonzero(ground & ~near),
+            detail_runs,
+            _sky(rays_ego, cond),
+            fog,
+            _side_planes(cam.K, cam.width, cam.height),
+            np.broadcast_to(to_uint8(np.asarray(cond.fog_rgb)), (cam.height, cam.width, 3)).copy(),
+        )
 
     def sphere_visible(self, centers_cam: np.ndarray, radii: np.ndarray, max_range_m: float) -> np.ndarray:
         """Which bounding spheres (N, 3 camera frame; N radii) touch the frustum within range."""
@@ -116,7 +133,9 @@ def _headlight_gain(ground_ego_xy: np.ndarray, cond: Condition) -> np.ndarray | 
     x, y = ground_ego_xy[:, 0] - EGO_HEADLIGHT_X_M, ground_ego_xy[:, 1]
     with np.errstate(invalid="ignore", over="ignore"):
         ang = np.arctan2(np.abs(y) - 0.4, np.maximum(x, 1e-3)).clip(0)
-        beam = np.where(x > 0, np.exp(-((ang / 0.35) ** 2)) * np.minimum(1.0, (x / 4.0) ** 2) / (1 + (x / 22.0) ** 2), 0.0)
+        beam = np.where(
+            x > 0, np.exp(-((ang / 0.35) ** 2)) * np.minimum(1.0, (x / 4.0) ** 2) / (1 + (x / 22.0) ** 2), 0.0
+        )
     strength = 9.0 if cond.time_of_day == "night" else 1.2
     return np.nan_to_num(1.0 + strength * beam, nan=1.0)
 

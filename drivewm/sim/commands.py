@@ -6,10 +6,13 @@ import argparse
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("simulate", help="simulate drives (highway-env or SUMO) into MCAP drive logs", description=__doc__)
+    p = subparsers.add_parser(
+        "simulate", help="simulate drives (highway-env or SUMO) into MCAP drive logs", description=__doc__
+    )
     p.add_argument("--source", choices=["highway", "sumo"], default=None, help="traffic simulator (default highway)")
-    p.add_argument("--scenario", default=None,
-                   help="highway|merge|roundabout|intersection (highway) or grid|spider|random (sumo)")
+    p.add_argument(
+        "--scenario", default=None, help="highway|merge|roundabout|intersection (highway) or grid|spider|random (sumo)"
+    )
     p.add_argument("--rig", default=None, help="rig name (multiview/rigs/) or YAML path (default nuscenes6)")
     p.add_argument("--weather", choices=["clear", "overcast", "rain", "snow", "fog"], default=None)
     p.add_argument("--time-of-day", choices=["day", "dusk", "night"], default=None)
@@ -19,16 +22,31 @@ def register(subparsers) -> None:
     p.add_argument("--width", type=int, default=None, help="image width (default: the rig's)")
     p.add_argument("--height", type=int, default=None, help="image height (default: the rig's)")
     p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
-    p.add_argument("--drives", type=int, default=1, help="number of drives (seeds seed, seed+1, ...); recipes give their own counts")
+    p.add_argument(
+        "--drives",
+        type=int,
+        default=1,
+        help="number of drives (seeds seed, seed+1, ...); recipes give their own counts",
+    )
     p.add_argument("--workers", type=int, default=1, help="drives simulated in parallel processes (default 1)")
     p.add_argument("--recipe", default=None, help="dataset recipe YAML (datasets/scenarios/); flags given override it")
     p.add_argument("--out", required=True, help="output folder for the .mcap logs")
     p.set_defaults(func=run_simulate)
 
 
-FLAG_FIELDS = {"source": "source", "scenario": "scenario", "rig": "rig", "weather": "weather", "time_of_day": "time_of_day",
-               "traffic": "traffic_density", "duration": "duration_s", "fps": "fps", "width": "width", "height": "height",
-               "seed": "seed"}
+FLAG_FIELDS = {
+    "source": "source",
+    "scenario": "scenario",
+    "rig": "rig",
+    "weather": "weather",
+    "time_of_day": "time_of_day",
+    "traffic": "traffic_density",
+    "duration": "duration_s",
+    "fps": "fps",
+    "width": "width",
+    "height": "height",
+    "seed": "seed",
+}
 
 
 def run_simulate(args: argparse.Namespace) -> int:

@@ -61,31 +61,81 @@ class Condition:
 def condition_for(weather: str, time_of_day: str) -> Condition:
     """The Condition for a weather (clear|overcast|rain|snow|fog) and time of day (day|dusk|night)."""
     if weather not in WEATHERS or time_of_day not in TIMES_OF_DAY:
-        raise DrivewmError(f"condition {weather}/{time_of_day}: weather must be one of {WEATHERS}, time_of_day one of {TIMES_OF_DAY}")
+        raise DrivewmError(
+            f"condition {weather}/{time_of_day}: weather must be one of {WEATHERS}, time_of_day one of {TIMES_OF_DAY}"
+        )
     w = {
-        "clear": dict(ambient=1.0, saturation=1.0, directional=1.0, sky_top=(0.30, 0.50, 0.85), sky_horizon=(0.70, 0.80, 0.92),
-                      visibility_m=900.0, fog_rgb=(0.75, 0.82, 0.92)),
-        "overcast": dict(ambient=0.78, saturation=0.65, directional=0.25, sky_top=(0.62, 0.64, 0.67), sky_horizon=(0.80, 0.81, 0.82),
-                         visibility_m=450.0, fog_rgb=(0.78, 0.79, 0.80)),
-        "rain": dict(ambient=0.55, saturation=0.55, directional=0.15, sky_top=(0.36, 0.38, 0.41), sky_horizon=(0.52, 0.53, 0.55),
-                     visibility_m=160.0, fog_rgb=(0.50, 0.52, 0.54)),
-        "snow": dict(ambient=0.90, saturation=0.55, directional=0.2, sky_top=(0.78, 0.80, 0.83), sky_horizon=(0.90, 0.91, 0.93),
-                     visibility_m=140.0, fog_rgb=(0.88, 0.89, 0.91)),
-        "fog": dict(ambient=0.80, saturation=0.50, directional=0.1, sky_top=(0.80, 0.81, 0.82), sky_horizon=(0.82, 0.83, 0.84),
-                    visibility_m=45.0, fog_rgb=(0.80, 0.81, 0.82)),
+        "clear": dict(
+            ambient=1.0,
+            saturation=1.0,
+            directional=1.0,
+            sky_top=(0.30, 0.50, 0.85),
+            sky_horizon=(0.70, 0.80, 0.92),
+            visibility_m=900.0,
+            fog_rgb=(0.75, 0.82, 0.92),
+        ),
+        "overcast": dict(
+            ambient=0.78,
+            saturation=0.65,
+            directional=0.25,
+            sky_top=(0.62, 0.64, 0.67),
+            sky_horizon=(0.80, 0.81, 0.82),
+            visibility_m=450.0,
+            fog_rgb=(0.78, 0.79, 0.80),
+        ),
+        "rain": dict(
+            ambient=0.55,
+            saturation=0.55,
+            directional=0.15,
+            sky_top=(0.36, 0.38, 0.41),
+            sky_horizon=(0.52, 0.53, 0.55),
+            visibility_m=160.0,
+            fog_rgb=(0.50, 0.52, 0.54),
+        ),
+        "snow": dict(
+            ambient=0.90,
+            saturation=0.55,
+            directional=0.2,
+            sky_top=(0.78, 0.80, 0.83),
+            sky_horizon=(0.90, 0.91, 0.93),
+            visibility_m=140.0,
+            fog_rgb=(0.88, 0.89, 0.91),
+        ),
+        "fog": dict(
+            ambient=0.80,
+            saturation=0.50,
+            directional=0.1,
+            sky_top=(0.80, 0.81, 0.82),
+            sky_horizon=(0.82, 0.83, 0.84),
+            visibility_m=45.0,
+            fog_rgb=(0.80, 0.81, 0.82),
+        ),
     }[weather]
-    t = {"day": (1.0, (1.0, 1.0, 1.0)), "dusk": (0.55, (1.0, 0.78, 0.58)), "night": (0.13, (0.70, 0.78, 1.0))}[time_of_day]
+    t = {"day": (1.0, (1.0, 1.0, 1.0)), "dusk": (0.55, (1.0, 0.78, 0.58)), "night": (0.13, (0.70, 0.78, 1.0))}[
+        time_of_day
+    ]
     params = dict(w)
     params["ambient"] *= t[0]
     if time_of_day != "day":
         k = 0.5 if time_of_day == "dusk" else 0.12
-        dusk_sky = np.array([(0.35, 0.30, 0.45), (0.95, 0.55, 0.30)]) if time_of_day == "dusk" else np.array([(0.01, 0.015, 0.04), (0.05, 0.05, 0.09)])
+        dusk_sky = (
+            np.array([(0.35, 0.30, 0.45), (0.95, 0.55, 0.30)])
+            if time_of_day == "dusk"
+            else np.array([(0.01, 0.015, 0.04), (0.05, 0.05, 0.09)])
+        )
         params["sky_top"] = tuple((np.array(w["sky_top"]) * k + dusk_sky[0]) / (1 + k))
         params["sky_horizon"] = tuple((np.array(w["sky_horizon"]) * k + dusk_sky[1]) / (1 + k))
         params["fog_rgb"] = tuple(np.array(w["fog_rgb"]) * (0.55 if time_of_day == "dusk" else 0.08))
         params["directional"] *= 0.5 if time_of_day == "dusk" else 0.0
-    return Condition(weather, time_of_day, tint=t[1], lights_on=time_of_day != "day" or weather in ("fog", "rain"),
-                     snow=weather == "snow", wet=weather == "rain", **params)
+    return Condition(
+        weather,
+        time_of_day,
+        tint=t[1],
+        lights_on=time_of_day != "day" or weather in ("fog", "rain"),
+        snow=weather == "snow",
+        wet=weather == "rain",
+        **params,
+    )
 
 
 def fog_weight(distance_m: np.ndarray, visibility_m: float) -> np.ndarray:

@@ -54,15 +54,24 @@ class SimConfig:
         if self.source not in ("highway", "sumo"):
             raise DrivewmError(f"sim config: source {self.source!r} is not one of ['highway', 'sumo']")
         if self.scenario not in known:
-            raise DrivewmError(f"sim config: scenario {self.scenario!r} is not one of {list(known)} for source {self.source}")
-        for name, value, allowed in (("weather", self.weather, WEATHERS), ("time_of_day", self.time_of_day, TIMES_OF_DAY),
-                                     ("traffic_density", self.traffic_density, ("low", "medium", "high"))):
+            raise DrivewmError(
+                f"sim config: scenario {self.scenario!r} is not one of {list(known)} for source {self.source}"
+            )
+        for name, value, allowed in (
+            ("weather", self.weather, WEATHERS),
+            ("time_of_day", self.time_of_day, TIMES_OF_DAY),
+            ("traffic_density", self.traffic_density, ("low", "medium", "high")),
+        ):
             if value not in allowed:
                 raise DrivewmError(f"sim config: {name} {value!r} is not one of {list(allowed)}")
         if self.duration_s <= 0 or self.fps <= 0:
             raise DrivewmError(f"sim config: duration_s ({self.duration_s}) and fps ({self.fps}) must be positive")
-        if (self.width is None) != (self.height is None) or (self.width is not None and min(self.width, self.height) < 16):
-            raise DrivewmError(f"sim config: give both width and height (>= 16 px) or neither, got {self.width}x{self.height}")
+        if (self.width is None) != (self.height is None) or (
+            self.width is not None and min(self.width, self.height) < 16
+        ):
+            raise DrivewmError(
+                f"sim config: give both width and height (>= 16 px) or neither, got {self.width}x{self.height}"
+            )
 
     @property
     def num_ticks(self) -> int:
@@ -72,4 +81,6 @@ class SimConfig:
     @property
     def road_type(self) -> str:
         """The scene tag road_type for this scenario."""
-        return {"grid": "urban_grid", "spider": "urban_radial", "random": "urban_random"}.get(self.scenario, self.scenario)
+        return {"grid": "urban_grid", "spider": "urban_radial", "random": "urban_random"}.get(
+            self.scenario, self.scenario
+        )

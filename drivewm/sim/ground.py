@@ -20,8 +20,12 @@ from drivewm.sim.scene import RoadMap, polyline_normals
 
 GRASS, SIDEWALK, KERB, ASPHALT = 0, 1, 2, 3
 #: Albedo per class, RGB in [0, 1], and its grain amplitude (relative luminance noise).
-ALBEDO = {GRASS: ((0.26, 0.36, 0.17), 0.22), SIDEWALK: ((0.60, 0.59, 0.56), 0.10), KERB: ((0.72, 0.72, 0.70), 0.08),
-          ASPHALT: ((0.25, 0.25, 0.26), 0.16)}
+ALBEDO = {
+    GRASS: ((0.26, 0.36, 0.17), 0.22),
+    SIDEWALK: ((0.60, 0.59, 0.56), 0.10),
+    KERB: ((0.72, 0.72, 0.70), 0.08),
+    ASPHALT: ((0.25, 0.25, 0.26), 0.16),
+}
 SNOW_ALBEDO = (0.93, 0.94, 0.97)
 SLUSH_ALBEDO = (0.70, 0.71, 0.73)
 PAINT_ALBEDO = (0.88, 0.88, 0.84)
@@ -59,8 +63,17 @@ class GroundTexture:
         return A
 
 
-def build_ground(road: RoadMap, lo_xy: np.ndarray, hi_xy: np.ndarray, cond: Condition, seed: int, urban: bool,
-                 lamp_xy: np.ndarray, max_texels: int = 8_000_000, min_res_m: float = 0.06) -> GroundTexture:
+def build_ground(
+    road: RoadMap,
+    lo_xy: np.ndarray,
+    hi_xy: np.ndarray,
+    cond: Condition,
+    seed: int,
+    urban: bool,
+    lamp_xy: np.ndarray,
+    max_texels: int = 8_000_000,
+    min_res_m: float = 0.06,
+) -> GroundTexture:
     """Rasterise the road map inside the world box [lo_xy, hi_xy] into a lit mip pyramid.
 
     Colour = class albedo (tinted, with paint and tyre tracks drawn in, uint8) x a per-texel
@@ -132,7 +145,9 @@ def _luminance_noise(classes: np.ndarray, rng: np.random.Generator, raster: _Ras
     return np.maximum(lum, 0.0, out=lum)
 
 
-def _base_colors(classes: np.ndarray, cond: Condition, raster: _Raster, road: RoadMap, rng: np.random.Generator) -> np.ndarray:
+def _base_colors(
+    classes: np.ndarray, cond: Condition, raster: _Raster, road: RoadMap, rng: np.random.Generator
+) -> np.ndarray:
     """(H, W, 3) uint8 albedo under the condition's tint (not its brightness), paint drawn in."""
     lut = np.array([ALBEDO[c][0] for c in (GRASS, SIDEWALK, KERB, ASPHALT)], np.float32)
     if cond.snow:
@@ -154,7 +169,9 @@ def _base_colors(classes: np.ndarray, cond: Condition, raster: _Raster, road: Ro
 SPOTS_PER_M2 = 0.6  # stones, tar patches and tufts per square metre
 
 
-def _scatter_spots(img: np.ndarray, classes: np.ndarray, colors: np.ndarray, raster: _Raster, rng: np.random.Generator) -> None:
+def _scatter_spots(
+    img: np.ndarray, classes: np.ndarray, colors: np.ndarray, raster: _Raster, rng: np.random.Generator
+) -> None:
     """Scatter small darker/lighter blobs (0.05-0.3 m): the stable, blob-like detail SIFT keys on."""
     H, W = classes.shape
     n = int(SPOTS_PER_M2 * H * W * raster.res_m**2)
@@ -214,9 +231,13 @@ def _lamp_pools(raster: _Raster, lamp_xy: np.ndarray, radius_m: float = 9.0) -> 
     small = np.zeros((raster.shape[0] // scale + 1, raster.shape[1] // scale + 1), np.float32)
     centers = (lamp_xy - raster.origin_xy) / (raster.res_m * scale)
     for c in centers:
-        cv2.circle(small, (int(round(c[0])), int(round(c[1]))), max(1, int(radius_m / 2 / (raster.res_m * scale))), 1.0, -1)
+        cv2.circle(
+            small, (int(round(c[0])), int(round(c[1]))), max(1, int(radius_m / 2 / (raster.res_m * scale))), 1.0, -1
+        )
     small = cv2.GaussianBlur(small, (0, 0), radius_m / 2 / (raster.res_m * scale))
-    return cv2.resize(small, (small.shape[1] * scale, small.shape[0] * scale), interpolation=cv2.INTER_LINEAR)[: raster.shape[0], : raster.shape[1]]
+    return cv2.resize(small, (small.shape[1] * scale, small.shape[0] * scale), interpolation=cv2.INTER_LINEAR)[
+        : raster.shape[0], : raster.shape[1]
+    ]
 
 
 def build_detail(seed: int) -> list[np.ndarray]:

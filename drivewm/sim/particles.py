@@ -37,13 +37,27 @@ class ParticleOverlays:
         if self.kind == "snow":
             for _ in range(int(260 * scale)):
                 r = max(1, int(round(rng.uniform(0.6, 2.4) * scale)))
-                cv2.circle(alpha, (int(rng.uniform(0, width)), int(rng.uniform(0, height))), r, float(rng.uniform(0.5, 0.95)), -1, cv2.LINE_AA)
+                cv2.circle(
+                    alpha,
+                    (int(rng.uniform(0, width)), int(rng.uniform(0, height))),
+                    r,
+                    float(rng.uniform(0.5, 0.95)),
+                    -1,
+                    cv2.LINE_AA,
+                )
             color = np.array([245, 246, 250], np.float32) * bright
         else:
             for _ in range(int(160 * scale)):
                 x, y = rng.uniform(0, width), rng.uniform(0, height)
                 length = rng.uniform(6, 18) * scale
-                cv2.line(alpha, (int(x), int(y)), (int(x + 0.25 * length), int(y + length)), float(rng.uniform(0.15, 0.35)), 1, cv2.LINE_AA)
+                cv2.line(
+                    alpha,
+                    (int(x), int(y)),
+                    (int(x + 0.25 * length), int(y + length)),
+                    float(rng.uniform(0.15, 0.35)),
+                    1,
+                    cv2.LINE_AA,
+                )
             color = np.array([210, 215, 222], np.float32) * bright
         idx = np.flatnonzero(alpha > 0.02)
         return idx, alpha.reshape(-1)[idx, None], color

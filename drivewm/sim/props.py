@@ -36,7 +36,10 @@ class _Occupancy:
     def free(self, footprint_xy: np.ndarray) -> bool:
         mask = np.zeros_like(self.grid)
         cv2.fillConvexPoly(mask, self._px(footprint_xy), 1)
-        inside = mask.sum() > 0 and np.all((footprint_xy >= self.origin) & (footprint_xy < self.origin + GRID_M * np.array(self.grid.shape[::-1]) - GRID_M))
+        inside = mask.sum() > 0 and np.all(
+            (footprint_xy >= self.origin)
+            & (footprint_xy < self.origin + GRID_M * np.array(self.grid.shape[::-1]) - GRID_M)
+        )
         return bool(inside) and not np.any(self.grid & mask)
 
     def take(self, footprint_xy: np.ndarray) -> None:
@@ -92,7 +95,9 @@ def _place_lamps(pts, out, occ, props, rng) -> None:
             continue
         occ.take(fp)
         k = len(props)
-        props.append(box_from_center(f"pole{k}", "pole", p[0], p[1], yaw, (0.22, 0.22, LAMP_HEIGHT_M), (0.45, 0.46, 0.48)))
+        props.append(
+            box_from_center(f"pole{k}", "pole", p[0], p[1], yaw, (0.22, 0.22, LAMP_HEIGHT_M), (0.45, 0.46, 0.48))
+        )
         head = p - 1.3 * out[i]
         lamp = box_from_center(f"lamp{k}", "lamp", head[0], head[1], yaw, (1.8, 0.45, 0.25), (0.35, 0.35, 0.37))
         lamp.center_xyz[2] = LAMP_HEIGHT_M - 0.1
@@ -116,8 +121,14 @@ def _place_buildings(pts, out, occ, props, rng, urban: bool) -> None:
 
 
 def _building_color(rng: np.random.Generator) -> tuple[float, float, float]:
-    palette = ((0.72, 0.66, 0.58), (0.62, 0.38, 0.30), (0.80, 0.78, 0.72), (0.55, 0.57, 0.60), (0.78, 0.70, 0.52),
-               (0.45, 0.42, 0.40))
+    palette = (
+        (0.72, 0.66, 0.58),
+        (0.62, 0.38, 0.30),
+        (0.80, 0.78, 0.72),
+        (0.55, 0.57, 0.60),
+        (0.78, 0.70, 0.52),
+        (0.45, 0.42, 0.40),
+    )
     return palette[int(rng.integers(len(palette)))]
 
 
@@ -134,7 +145,14 @@ def _place_trees(pts, out, occ, props, rng, urban: bool) -> None:
         yaw = rng.uniform(0, math.pi / 2)
         trunk_h = height * 0.4
         props.append(box_from_center(f"trunk{k}", "trunk", p[0], p[1], yaw, (0.35, 0.35, trunk_h), (0.33, 0.24, 0.16)))
-        crown = box_from_center(f"crown{k}", "crown", p[0], p[1], yaw, (crown_w, crown_w, height - trunk_h),
-                                (0.20, 0.36 + 0.1 * rng.uniform(), 0.14))
+        crown = box_from_center(
+            f"crown{k}",
+            "crown",
+            p[0],
+            p[1],
+            yaw,
+            (crown_w, crown_w, height - trunk_h),
+            (0.20, 0.36 + 0.1 * rng.uniform(), 0.14),
+        )
         crown.center_xyz[2] = trunk_h + (height - trunk_h) / 2
         props.append(crown)

@@ -25,7 +25,9 @@ def load_recipe(path: str | Path, overrides: dict | None = None) -> list[tuple[S
     data = load_yaml(path)
     unknown = sorted(set(data) - {"common", "drives"})
     if unknown or not isinstance(data.get("drives"), list) or not data["drives"]:
-        raise DrivewmError(f"{path}: a recipe has 'common' (optional) and a non-empty 'drives' list; unknown keys {unknown}")
+        raise DrivewmError(
+            f"{path}: a recipe has 'common' (optional) and a non-empty 'drives' list; unknown keys {unknown}"
+        )
     common = data.get("common") or {}
     out = []
     for i, entry in enumerate(data["drives"]):

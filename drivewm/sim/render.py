@@ -34,8 +34,17 @@ from drivewm.sim.textures import object_textures
 class Renderer:
     """Renders one drive: built once from the static world, then called per tick."""
 
-    def __init__(self, rig: Rig, road: RoadMap, cond: Condition, seed: int, lo_xy: np.ndarray, hi_xy: np.ndarray,
-                 urban: bool, max_range_m: float = 150.0):
+    def __init__(
+        self,
+        rig: Rig,
+        road: RoadMap,
+        cond: Condition,
+        seed: int,
+        lo_xy: np.ndarray,
+        hi_xy: np.ndarray,
+        urban: bool,
+        max_range_m: float = 150.0,
+    ):
         self.rig, self.cond, self.seed, self.max_range_m = rig, cond, seed, max_range_m
         lamps = np.array([b.center_xyz[:2] for b in road.props if b.category == "lamp"]).reshape(-1, 2)
         self.ground = build_ground(road, lo_xy, hi_xy, cond, seed, urban, lamps)
@@ -47,7 +56,9 @@ class Renderer:
         self.particles = ParticleOverlays(rig, cond, seed)
         self._agent_tex: dict[str, FaceTextures] = {}
 
-    def render(self, T_world_from_ego: np.ndarray, agents: list[AgentBox], timestamp_ns: int = 0) -> dict[str, np.ndarray]:
+    def render(
+        self, T_world_from_ego: np.ndarray, agents: list[AgentBox], timestamp_ns: int = 0
+    ) -> dict[str, np.ndarray]:
         """Images (H, W, 3) uint8 RGB per camera name for the ego at ``T_world_from_ego``."""
         moving = BoxSet.from_boxes(agents, [self._agent_textures(a) for a in agents], self.cond.face_shade)
         return {v.name: self._render_view(v, T_world_from_ego, moving, timestamp_ns) for v in self.views}
@@ -58,7 +69,9 @@ class Renderer:
             self._agent_tex[agent.track_id] = FaceTextures.from_dict(object_textures(agent, self.cond, rng))
         return self._agent_tex[agent.track_id]
 
-    def _render_view(self, view: CameraView, T_world_from_ego: np.ndarray, moving: BoxSet, timestamp_ns: int) -> np.ndarray:
+    def _render_view(
+        self, view: CameraView, T_world_from_ego: np.ndarray, moving: BoxSet, timestamp_ns: int
+    ) -> np.ndarray:
         img = view.sky.copy()
         self._draw_ground(img, view, T_world_from_ego)
         zbuf = view.ground_z.copy()
@@ -96,7 +109,6 @@ class Renderer:
         boxes = zbuf < view.ground_z
         w[boxes] = fog_weight(zbuf[boxes] * view.ray_norm[boxes], self.cond.visibility_m)
         return cv2.blendLinear(img, view.fog_image, w, 1.0 - w)
-
 
 
 REMAP_ROW = 4096  # cv2.remap wants maps under 32767 rows/cols: points are laid out in rows of this many

@@ -11,8 +11,16 @@ from drivewm.sim.scene import LaneBoundary, polyline_normals
 
 #: Body colours (RGB in [0, 1]) of simulated vehicles: the common real-world car colours.
 CAR_PALETTE = (
-    (0.92, 0.92, 0.92), (0.08, 0.08, 0.09), (0.55, 0.56, 0.58), (0.72, 0.73, 0.75), (0.62, 0.08, 0.07),
-    (0.10, 0.20, 0.50), (0.15, 0.35, 0.20), (0.85, 0.65, 0.10), (0.45, 0.30, 0.18), (0.20, 0.45, 0.70),
+    (0.92, 0.92, 0.92),
+    (0.08, 0.08, 0.09),
+    (0.55, 0.56, 0.58),
+    (0.72, 0.73, 0.75),
+    (0.62, 0.08, 0.07),
+    (0.10, 0.20, 0.50),
+    (0.15, 0.35, 0.20),
+    (0.85, 0.65, 0.10),
+    (0.45, 0.30, 0.18),
+    (0.20, 0.45, 0.70),
 )
 #: (category, height m, probability): what a simulated 2D vehicle becomes in 3D.
 BODY_TYPES = (("car", 1.48, 0.72), ("car", 1.70, 0.18), ("van", 2.05, 0.10))
@@ -36,8 +44,9 @@ def vehicle_look(seed: int, track_id: str) -> tuple[str, float, tuple[float, flo
     return category, height, color
 
 
-def road_edges_from_boundaries(boundaries: list[LaneBoundary], surface_polygons: list[np.ndarray],
-                               probe_m: float = 0.6) -> list[np.ndarray]:
+def road_edges_from_boundaries(
+    boundaries: list[LaneBoundary], surface_polygons: list[np.ndarray], probe_m: float = 0.6
+) -> list[np.ndarray]:
     """Lane borders with paved surface on one side only: the kerbs.
 
     A border is an edge where points ``probe_m`` to one side lie off every surface polygon.

@@ -75,12 +75,20 @@ class SceneRecording:
         return np.array([t.T_world_from_ego[:2, 3] for t in self.ticks])
 
 
-def box_from_center(track_id: str, category: str, x: float, y: float, yaw_rad: float,
-                    size_lwh: tuple[float, float, float], color_rgb: tuple[float, float, float]) -> AgentBox:
+def box_from_center(
+    track_id: str,
+    category: str,
+    x: float,
+    y: float,
+    yaw_rad: float,
+    size_lwh: tuple[float, float, float],
+    color_rgb: tuple[float, float, float],
+) -> AgentBox:
     """An AgentBox standing on the ground (z = 0) with its footprint centre at (x, y)."""
     length, width, height = size_lwh
-    return AgentBox(track_id, category, np.array([x, y, height / 2]), np.array([length, width, height]),
-                    float(yaw_rad), color_rgb)
+    return AgentBox(
+        track_id, category, np.array([x, y, height / 2]), np.array([length, width, height]), float(yaw_rad), color_rgb
+    )
 
 
 def polyline_normals(points_xy: np.ndarray) -> np.ndarray:

@@ -36,15 +36,25 @@ def record(cfg: SimConfig) -> SceneRecording:
 
 def describe(cfg: SimConfig, rec: SceneRecording) -> str:
     """A one-sentence description of the drive from its configuration and what happened in it."""
-    road = {"highway": "a multi-lane highway", "merge": "a highway with a merging on-ramp", "roundabout": "a roundabout",
-            "intersection": "a four-way intersection", "grid": "a city street grid", "spider": "radial city streets",
-            "random": "irregular city streets"}[cfg.scenario]
+    road = {
+        "highway": "a multi-lane highway",
+        "merge": "a highway with a merging on-ramp",
+        "roundabout": "a roundabout",
+        "intersection": "a four-way intersection",
+        "grid": "a city street grid",
+        "spider": "radial city streets",
+        "random": "irregular city streets",
+    }[cfg.scenario]
     light = {"day": "during the day", "dusk": "at dusk", "night": "at night"}[cfg.time_of_day]
-    weather = {"clear": "clear weather", "overcast": "overcast weather", "rain": "rain", "snow": "snow", "fog": "fog"}[cfg.weather]
+    weather = {"clear": "clear weather", "overcast": "overcast weather", "rain": "rain", "snow": "snow", "fog": "fog"}[
+        cfg.weather
+    ]
     speed = np.mean([t.ego_speed_mps for t in rec.ticks]) * 3.6
     others = int(np.mean([len(t.agents) for t in rec.ticks]))
-    return (f"The ego car drives through {road} in {weather} {light}, at about {speed:.0f} km/h, "
-            f"with {cfg.traffic_density} traffic ({others} other vehicles in the scene).")
+    return (
+        f"The ego car drives through {road} in {weather} {light}, at about {speed:.0f} km/h, "
+        f"with {cfg.traffic_density} traffic ({others} other vehicles in the scene)."
+    )
 
 
 def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Path:
@@ -81,7 +91,9 @@ def drive_name(cfg: SimConfig) -> str:
     return f"{cfg.source}_{cfg.scenario}_{cfg.weather}_{cfg.time_of_day}_s{cfg.seed:04d}.mcap"
 
 
-def simulate_many(cfg: SimConfig, drives: int, out_dir: str | Path, progress: bool = True, workers: int = 1) -> list[Path]:
+def simulate_many(
+    cfg: SimConfig, drives: int, out_dir: str | Path, progress: bool = True, workers: int = 1
+) -> list[Path]:
     """``drives`` drives with seeds cfg.seed, cfg.seed + 1, ... into ``out_dir``; returns their paths.
 
     A drive whose file already exists is kept (runs are deterministic and writes atomic, so a
@@ -99,7 +111,9 @@ def simulate_many(cfg: SimConfig, drives: int, out_dir: str | Path, progress: bo
             simulate(c, p, progress)
             bar.update()
     else:
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init) as pool:
+        with ProcessPoolExecutor(
+            workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
+        ) as pool:
             for future in as_completed([pool.submit(simulate, c, p, False) for c, p in missing]):
                 future.result()
                 bar.update()

@@ -31,8 +31,12 @@ def make_env(scenario: str, traffic_density: str, seed: int):
     import highway_env.envs as envs
 
     count, density = DENSITY[traffic_density]
-    classes = {"highway": envs.HighwayEnv, "merge": envs.MergeEnv, "roundabout": envs.RoundaboutEnv,
-               "intersection": envs.IntersectionEnv}
+    classes = {
+        "highway": envs.HighwayEnv,
+        "merge": envs.MergeEnv,
+        "roundabout": envs.RoundaboutEnv,
+        "intersection": envs.IntersectionEnv,
+    }
     config = {"vehicles_count": count, "vehicles_density": density} if scenario == "highway" else {}
     if scenario == "intersection":
         config = {"initial_vehicle_count": count // 3, "spawn_probability": min(0.3 * density, 0.9)}
@@ -97,8 +101,17 @@ def _tick(env, ego, timestamp_ns: int, ids: dict[int, str], seed: int) -> SceneT
             continue
         track_id = ids.setdefault(id(v), f"veh{len(ids):03d}")
         category, height, color = vehicle_look(seed, track_id)
-        agents.append(box_from_center(track_id, category, float(v.position[0]), -float(v.position[1]),
-                                      -float(v.heading), (float(v.LENGTH), float(v.WIDTH), height), color))
+        agents.append(
+            box_from_center(
+                track_id,
+                category,
+                float(v.position[0]),
+                -float(v.position[1]),
+                -float(v.heading),
+                (float(v.LENGTH), float(v.WIDTH), height),
+                color,
+            )
+        )
     return SceneTick(timestamp_ns, T_from_xyz_yaw(rear_x, rear_y, 0.0, yaw), agents, float(ego.speed))
 
 

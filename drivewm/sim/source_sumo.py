@@ -29,10 +29,28 @@ WARMUP_S = 40.0  # simulated time before the first logged tick, so the streets a
 TRIP_PERIOD_S = {"low": 2.5, "medium": 1.2, "high": 0.6}  # randomTrips --period: one new trip every P s
 NETGENERATE_ARGS = {
     "grid": ["--grid", "--grid.number", "4", "--grid.length", "110", "--default.lanenumber", "2"],
-    "spider": ["--spider", "--spider.arm-number", "6", "--spider.circle-number", "3", "--spider.space-radius", "70",
-               "--default.lanenumber", "2"],
-    "random": ["--rand", "--rand.iterations", "40", "--rand.min-distance", "70", "--rand.max-distance", "160",
-               "--default.lanenumber", "2"],
+    "spider": [
+        "--spider",
+        "--spider.arm-number",
+        "6",
+        "--spider.circle-number",
+        "3",
+        "--spider.space-radius",
+        "70",
+        "--default.lanenumber",
+        "2",
+    ],
+    "random": [
+        "--rand",
+        "--rand.iterations",
+        "40",
+        "--rand.min-distance",
+        "70",
+        "--rand.max-distance",
+        "160",
+        "--default.lanenumber",
+        "2",
+    ],
 }
 
 
@@ -57,11 +75,45 @@ def generate_network(scenario: str, seed: int, traffic_density: str, end_s: floa
     import sumolib
 
     net, routes = folder / "net.net.xml", folder / "routes.rou.xml"
-    _run([sumolib.checkBinary("netgenerate"), *NETGENERATE_ARGS[scenario], "--seed", str(seed),
-          "--junctions.corner-detail", "5", "--no-turnarounds", "true", "-o", str(net)], "netgenerate")
-    _run([sys.executable, str(sumo_tools_dir() / "randomTrips.py"), "-n", str(net), "-o", str(folder / "trips.xml"),
-          "-r", str(routes), "-e", str(int(end_s)), "-p", str(TRIP_PERIOD_S[traffic_density]), "--seed", str(seed),
-          "--fringe-factor", "3", "--min-distance", "100", "--validate"], "randomTrips")
+    _run(
+        [
+            sumolib.checkBinary("netgenerate"),
+            *NETGENERATE_ARGS[scenario],
+            "--seed",
+            str(seed),
+            "--junctions.corner-detail",
+            "5",
+            "--no-turnarounds",
+            "true",
+            "-o",
+            str(net),
+        ],
+        "netgenerate",
+    )
+    _run(
+        [
+            sys.executable,
+            str(sumo_tools_dir() / "randomTrips.py"),
+            "-n",
+            str(net),
+            "-o",
+            str(folder / "trips.xml"),
+            "-r",
+            str(routes),
+            "-e",
+            str(int(end_s)),
+            "-p",
+            str(TRIP_PERIOD_S[traffic_density]),
+            "--seed",
+            str(seed),
+            "--fringe-factor",
+            "3",
+            "--min-distance",
+            "100",
+            "--validate",
+        ],
+        "randomTrips",
+    )
     return net, routes
 
 
@@ -71,9 +123,28 @@ def record_sumo(cfg: SimConfig) -> SceneRecording:
 
     dt = 1.0 / cfg.fps
     with tempfile.TemporaryDirectory(prefix="drivewm-sumo-") as tmp:
-        net_path, routes = generate_network(cfg.scenario, cfg.seed, cfg.traffic_density, WARMUP_S + cfg.duration_s + 60, Path(tmp))
-        libsumo.start(["sumo", "-n", str(net_path), "-r", str(routes), "--step-length", f"{dt}", "--seed", str(cfg.seed),
-                       "--no-step-log", "true", "--no-warnings", "true", "--collision.action", "none"])
+        net_path, routes = generate_network(
+            cfg.scenario, cfg.seed, cfg.traffic_density, WARMUP_S + cfg.duration_s + 60, Path(tmp)
+        )
+        libsumo.start(
+            [
+                "sumo",
+                "-n",
+                str(net_path),
+                "-r",
+                str(routes),
+                "--step-length",
+                f"{dt}",
+                "--seed",
+                str(cfg.seed),
+                "--no-step-log",
+                "true",
+                "--no-warnings",
+                "true",
+                "--collision.action",
+                "none",
+            ]
+        )
         try:
             ticks, step_cpu_s = _drive(libsumo, cfg, dt)
         finally:
@@ -153,7 +224,9 @@ def _tick(traci, timestamp_ns: int, seed: int) -> SceneTick:
             continue
         c = np.array([fx, fy]) - 0.5 * length * d
         category, height, color = vehicle_look(seed, vid)
-        agents.append(box_from_center(vid, category, c[0], c[1], yaw, (length, traci.vehicle.getWidth(vid), height), color))
+        agents.append(
+            box_from_center(vid, category, c[0], c[1], yaw, (length, traci.vehicle.getWidth(vid), height), color)
+        )
     if ego_T is None:
         raise DrivewmError("SUMO: the ego vehicle left the simulation")
     return SceneTick(timestamp_ns, ego_T, agents, float(speed))

@@ -47,7 +47,14 @@ class _Canvas:
             self.glow[r0:r1, c0:c1] = True
 
     def circle(self, a: float, b: float, r: float, rgb) -> None:
-        cv2.circle(self.albedo, (int(round(a * self.s)), int(round(b * self.s))), max(1, int(round(r * self.s))), rgb, -1, cv2.LINE_AA)
+        cv2.circle(
+            self.albedo,
+            (int(round(a * self.s)), int(round(b * self.s))),
+            max(1, int(round(r * self.s))),
+            rgb,
+            -1,
+            cv2.LINE_AA,
+        )
 
     def grain(self, rng: np.random.Generator, amp: float) -> None:
         self.albedo *= 1.0 + amp * rng.standard_normal((self.h, self.w, 1)).astype(np.float32)
@@ -61,16 +68,28 @@ class _Canvas:
 
 def object_textures(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Lit uint8 RGB textures for the faces of ``box``, by its category."""
-    builder = {"building": _building, "pole": _plain, "marker": _plain, "trunk": _trunk, "crown": _crown,
-               "lamp": _lamp}.get(box.category, _vehicle)
+    builder = {
+        "building": _building,
+        "pole": _plain,
+        "marker": _plain,
+        "trunk": _trunk,
+        "crown": _crown,
+        "lamp": _lamp,
+    }.get(box.category, _vehicle)
     return builder(box, cond, rng)
 
 
 def face_size_m(face: str, size_lwh: np.ndarray) -> tuple[float, float]:
     """(width, height) in metres of a face of a box with size (length, width, height)."""
     length, width, height = size_lwh
-    return {"front": (width, height), "back": (width, height), "left": (length, height), "right": (length, height),
-            "top": (width, length), "bottom": (width, length)}[face]
+    return {
+        "front": (width, height),
+        "back": (width, height),
+        "left": (length, height),
+        "right": (length, height),
+        "top": (width, length),
+        "bottom": (width, length),
+    }[face]
 
 
 def _vehicle(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -91,9 +110,14 @@ def _vehicle(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[s
     side.rect(length - 0.06, 0.55 * height, length, 0.62 * height, TAIL_DAY, TAIL_GLOW)
     side.grain(rng, 0.03)
     left = side.lit(cond)
-    return {"left": left, "right": left[:, ::-1].copy(), "front": _vehicle_end(box, cond, rng, True),
-            "back": _vehicle_end(box, cond, rng, False), "top": _top(width, length, body * 0.95, cond, rng, 24),
-            "bottom": _plain_tex(width, length, (0.06, 0.06, 0.06), cond, rng, 8)}
+    return {
+        "left": left,
+        "right": left[:, ::-1].copy(),
+        "front": _vehicle_end(box, cond, rng, True),
+        "back": _vehicle_end(box, cond, rng, False),
+        "top": _top(width, length, body * 0.95, cond, rng, 24),
+        "bottom": _plain_tex(width, length, (0.06, 0.06, 0.06), cond, rng, 8),
+    }
 
 
 def _vehicle_end(box: AgentBox, cond: Condition, rng: np.random.Generator, front: bool) -> np.ndarray:
@@ -123,8 +147,10 @@ def _plain_tex(width, height, rgb, cond, rng, px_per_m, grain=0.06) -> np.ndarra
 
 
 def _plain(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    return {f: _plain_tex(*face_size_m(f, box.size_lwh), box.color_rgb, cond, rng, 16)
-            for f in ("front", "back", "left", "right", "top", "bottom")}
+    return {
+        f: _plain_tex(*face_size_m(f, box.size_lwh), box.color_rgb, cond, rng, 16)
+        for f in ("front", "back", "left", "right", "top", "bottom")
+    }
 
 
 def _lamp(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -158,7 +184,9 @@ def _crown(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str
 
 
 def _building(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    out = {f: _facade(*face_size_m(f, box.size_lwh), box.color_rgb, cond, rng) for f in ("front", "back", "left", "right")}
+    out = {
+        f: _facade(*face_size_m(f, box.size_lwh), box.color_rgb, cond, rng) for f in ("front", "back", "left", "right")
+    }
     out["top"] = _top(box.size_lwh[1], box.size_lwh[0], (0.40, 0.40, 0.41), cond, rng, 6)
     out["bottom"] = _plain_tex(box.size_lwh[1], box.size_lwh[0], (0.2, 0.2, 0.2), cond, rng, 2)
     return out
@@ -167,8 +195,15 @@ def _building(box: AgentBox, cond: Condition, rng: np.random.Generator) -> dict[
 def _facade(width: float, height: float, wall_rgb, cond: Condition, rng: np.random.Generator) -> np.ndarray:
     """A wall with floors of windows (3.2 m apart) and a ground-floor door; some windows lit at night."""
     c = _Canvas(width, height, 10, wall_rgb, lamp=True)
-    c.albedo *= (1.0 + 0.08 * cv2.resize(rng.standard_normal((max(2, c.h // 8), max(2, c.w // 8))).astype(np.float32),
-                                          (c.w, c.h), interpolation=cv2.INTER_CUBIC))[..., None]
+    c.albedo *= (
+        1.0
+        + 0.08
+        * cv2.resize(
+            rng.standard_normal((max(2, c.h // 8), max(2, c.w // 8))).astype(np.float32),
+            (c.w, c.h),
+            interpolation=cv2.INTER_CUBIC,
+        )
+    )[..., None]
     c.grain(rng, 0.06)
     n_cols = max(1, int((width - 1.0) // 2.8))
     margin = (width - n_cols * 2.8) / 2

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from drivewm.geometry import Rig, load_rig
 from drivewm.sim.conditions import condition_for
 from drivewm.sim.config import SimConfig

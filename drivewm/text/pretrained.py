@@ -22,7 +22,9 @@ class PretrainedTextEncoder(TextEncoder):
         super().__init__(max_length, cache_size)
         self.path = Path(path)
         if not (self.path / "config.json").is_file():
-            raise DrivewmError(f"{self.path}: not a local Hugging Face model folder (no config.json); text encoders are never downloaded")
+            raise DrivewmError(
+                f"{self.path}: not a local Hugging Face model folder (no config.json); text encoders are never downloaded"
+            )
         from transformers import AutoModel, AutoTokenizer, T5EncoderModel
 
         try:
@@ -30,7 +32,9 @@ class PretrainedTextEncoder(TextEncoder):
             loader = T5EncoderModel if kind == "t5" else AutoModel
             self.model = loader.from_pretrained(self.path, local_files_only=True).eval()
         except (OSError, ValueError) as exc:
-            raise DrivewmError(f"{self.path}: cannot load {kind} text encoder ({exc.__class__.__name__}: {str(exc)[:200]})") from None
+            raise DrivewmError(
+                f"{self.path}: cannot load {kind} text encoder ({exc.__class__.__name__}: {str(exc)[:200]})"
+            ) from None
         for p in self.model.parameters():
             p.requires_grad_(False)
 
@@ -41,7 +45,9 @@ class PretrainedTextEncoder(TextEncoder):
 
     @torch.no_grad()
     def encode_uncached(self, captions: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
-        batch = self.tokenizer(captions, padding="max_length", truncation=True, max_length=self.max_length, return_tensors="pt")
+        batch = self.tokenizer(
+            captions, padding="max_length", truncation=True, max_length=self.max_length, return_tensors="pt"
+        )
         hidden = self.model(input_ids=batch["input_ids"], attention_mask=batch["attention_mask"]).last_hidden_state
         mask = batch["attention_mask"].bool()
         return (hidden.float() * mask[..., None]).cpu(), mask.cpu()

@@ -15,8 +15,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
     t.add_argument("--out", required=True, type=Path, help="model folder; rerun with the same --out to resume")
     t.add_argument("--steps", type=int, default=None, help="total optimizer steps")
-    t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a config field, e.g. lr=1e-3, crop=[128,192], model.base_channels=32")
+    t.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config field, e.g. lr=1e-3, crop=[128,192], model.base_channels=32",
+    )
     _threads(t)
     t.set_defaults(func=_train)
 
@@ -40,8 +46,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument("--model", required=True, type=Path, help="tokenizer model folder")
     v.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
     v.add_argument("--out", required=True, type=Path, help="folder for metrics.json and side_by_side.png")
-    v.add_argument("--split", choices=("all", "holdout", "train"), default="all",
-                   help="which clips: all, or those held out (or not) from training by key hash")
+    v.add_argument(
+        "--split",
+        choices=("all", "holdout", "train"),
+        default="all",
+        help="which clips: all, or those held out (or not) from training by key hash",
+    )
     v.add_argument("--holdout-percent", type=int, default=10, help="the training run's holdout_percent")
     v.add_argument("--max-clips", type=int, default=None, help="score only the first N clips")
     v.add_argument("--max-views", type=int, default=None, help="score only the first N cameras of each clip")
@@ -120,8 +130,9 @@ def _eval(args: argparse.Namespace) -> int:
     from drivewm.tokenizer.evaluate import evaluate_tokenizer
 
     _set_threads(args)
-    metrics = evaluate_tokenizer(args.model, args.data, args.out, args.split, args.holdout_percent, args.max_clips,
-                                 args.max_views)
+    metrics = evaluate_tokenizer(
+        args.model, args.data, args.out, args.split, args.holdout_percent, args.max_clips, args.max_views
+    )
     print(json.dumps({k: v for k, v in metrics.items() if k != "clips"}))
     print(f"metrics: {args.out / 'metrics.json'}")
     return 0

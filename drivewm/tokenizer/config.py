@@ -60,9 +60,13 @@ class TokenizerConfig:
 
     def validate(self) -> None:
         if self.spatial_compression not in (4, 8, 16):
-            raise DrivewmError(f"tokenizer config: spatial_compression must be 4, 8 or 16, got {self.spatial_compression}")
+            raise DrivewmError(
+                f"tokenizer config: spatial_compression must be 4, 8 or 16, got {self.spatial_compression}"
+            )
         if self.temporal_compression not in (1, 2, 4, 8):
-            raise DrivewmError(f"tokenizer config: temporal_compression must be 1, 2, 4 or 8, got {self.temporal_compression}")
+            raise DrivewmError(
+                f"tokenizer config: temporal_compression must be 1, 2, 4 or 8, got {self.temporal_compression}"
+            )
         if len(self.channel_multipliers) != self.spatial_downs + 1:
             raise DrivewmError(
                 f"tokenizer config: channel_multipliers needs {self.spatial_downs + 1} entries for spatial_compression "
@@ -96,7 +100,9 @@ def _build_presets() -> dict[str, TokenizerConfig]:
             mults = mults + [mults[-1]] * (int(math.log2(spatial // 2)) + 1 - len(mults))
             common = dict(fields, channel_multipliers=mults, temporal_compression=temporal, spatial_compression=spatial)
             presets[f"{size}-{name}"] = TokenizerConfig(**common)
-            presets[f"{size}-{name}-fsq"] = TokenizerConfig(**common, quantizer="fsq", fsq_levels=list(FSQ_LEVELS[size]))
+            presets[f"{size}-{name}-fsq"] = TokenizerConfig(
+                **common, quantizer="fsq", fsq_levels=list(FSQ_LEVELS[size])
+            )
         presets[size] = presets[f"{size}-4x8x8"]
     return presets
 

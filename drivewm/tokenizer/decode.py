@@ -30,8 +30,14 @@ def _write_views(out_dir: Path, key: str, cameras: list[str], video: torch.Tenso
 
 
 @torch.no_grad()
-def decode_to_mp4(model_dir: str | Path, source: str | Path, out_dir: str | Path, keys: list[str] | None = None,
-                  tiling: TilingConfig | None = None, progress: bool = True) -> list[Path]:
+def decode_to_mp4(
+    model_dir: str | Path,
+    source: str | Path,
+    out_dir: str | Path,
+    keys: list[str] | None = None,
+    tiling: TilingConfig | None = None,
+    progress: bool = True,
+) -> list[Path]:
     """Decode a latent cache folder (has ``index.json``) or reconstruct a clip folder/tar into mp4s."""
     tok = Tokenizer.from_pretrained(model_dir)
     out_dir = Path(out_dir)

@@ -32,7 +32,9 @@ def usable_frames(frames: int, f: int) -> int:
 
 
 @torch.no_grad()
-def reconstruct(tok: Tokenizer, video: torch.Tensor, tiling: TilingConfig | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+def reconstruct(
+    tok: Tokenizer, video: torch.Tensor, tiling: TilingConfig | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(reconstruction, latents) of (B, 3, T, H, W) in [-1, 1], cut to the longest 1 + k*f frames."""
     video = video[:, :, : usable_frames(video.shape[2], tok.config.temporal_compression)]
     tiling = tiling or TilingConfig(chunk_latent_frames=None, tile_latent=None)
@@ -49,9 +51,16 @@ def video_metrics(recon: torch.Tensor, video: torch.Tensor) -> dict[str, float]:
     return out
 
 
-def evaluate_tokenizer(model_dir: str | Path, clip_dir: str | Path, out_dir: str | Path, split: str = "all",
-                       holdout_percent: int = 10, max_clips: int | None = None, max_views: int | None = None,
-                       progress: bool = True) -> dict:
+def evaluate_tokenizer(
+    model_dir: str | Path,
+    clip_dir: str | Path,
+    out_dir: str | Path,
+    split: str = "all",
+    holdout_percent: int = 10,
+    max_clips: int | None = None,
+    max_views: int | None = None,
+    progress: bool = True,
+) -> dict:
     """Score the tokenizer in ``model_dir`` on the clips of ``clip_dir`` (the first ``max_clips``
     clips, the first ``max_views`` cameras of each); writes metrics.json and side_by_side.png."""
     tok = Tokenizer.from_pretrained(model_dir)
@@ -75,8 +84,9 @@ def evaluate_tokenizer(model_dir: str | Path, clip_dir: str | Path, out_dir: str
         raise DrivewmError(f"{clip_dir}: no clip could be scored ({next(iter(skipped.values()))})")
     metrics = {k: float(np.mean([m[k] for m in per_clip.values()])) for k in next(iter(per_clip.values()))}
     metrics.update(_compression(tok, first[0], first[2], codes))
-    metrics.update({"clips_scored": len(per_clip), "split": split, "model": str(model_dir), "skipped": skipped,
-                    "clips": per_clip})
+    metrics.update(
+        {"clips_scored": len(per_clip), "split": split, "model": str(model_dir), "skipped": skipped, "clips": per_clip}
+    )
     write_json(out_dir / "metrics.json", metrics)
     save_side_by_side(first[0], first[1], out_dir / "side_by_side.png")
     return metrics
@@ -88,7 +98,9 @@ def _compression(tok: Tokenizer, video: torch.Tensor, latents: torch.Tensor, cod
         used = torch.cat(codes).unique().numel()
         size = tok.quantizer.codebook_size
         out["codebook_usage"] = used / size
-        out["bits_per_pixel"] = latents[0, 0].numel() * math.log2(size) / (video.shape[2] * video.shape[3] * video.shape[4])
+        out["bits_per_pixel"] = (
+            latents[0, 0].numel() * math.log2(size) / (video.shape[2] * video.shape[3] * video.shape[4])
+        )
     return out
 
 

@@ -23,8 +23,13 @@ def clip_video(clip: Clip) -> torch.Tensor:
     return torch.stack([to_model_range(clip.video(cam)) for cam in clip.meta.cameras])
 
 
-def encode_clips(model_dir: str | Path, clip_dir: str | Path, name: str | None = None,
-                 tiling: TilingConfig | None = None, progress: bool = True) -> dict:
+def encode_clips(
+    model_dir: str | Path,
+    clip_dir: str | Path,
+    name: str | None = None,
+    tiling: TilingConfig | None = None,
+    progress: bool = True,
+) -> dict:
     """Encode every clip of ``clip_dir`` with the tokenizer in ``model_dir``.
 
     A clip the tokenizer cannot take (frames not 1 + k*f, size not a multiple of the spatial
@@ -45,7 +50,11 @@ def encode_clips(model_dir: str | Path, clip_dir: str | Path, name: str | None =
         rows.append(write_latent_clip(cache_dir, clip.meta, latents, clip.T_world_from_ego))
     if not rows:
         raise DrivewmError(f"{clip_dir}: no clip could be encoded ({skipped[0]['reason'] if skipped else 'no clips'})")
-    info = {"path": str(Path(model_dir).resolve()), "config": to_dict(tok.config),
-            "latent_mean": tok.latent_mean.tolist(), "latent_std": tok.latent_std.tolist()}
+    info = {
+        "path": str(Path(model_dir).resolve()),
+        "config": to_dict(tok.config),
+        "latent_mean": tok.latent_mean.tolist(),
+        "latent_std": tok.latent_std.tolist(),
+    }
     write_latent_index(cache_dir, info, rows)
     return {"cache": str(cache_dir), "encoded": len(rows), "skipped": skipped}

@@ -81,7 +81,9 @@ class Tokenizer(nn.Module):
         if channels != 3:
             raise DrivewmError(f"video has {channels} channels (shape {tuple(video.shape)}), expected 3 (RGB) at dim 1")
         if first_chunk and (frames - 1) % f:
-            raise DrivewmError(f"video has {frames} frames; this tokenizer takes T = 1 + k*{f} (e.g. 1, {1 + f}, {1 + 2 * f})")
+            raise DrivewmError(
+                f"video has {frames} frames; this tokenizer takes T = 1 + k*{f} (e.g. 1, {1 + f}, {1 + 2 * f})"
+            )
         if not first_chunk and (frames == 0 or frames % f):
             raise DrivewmError(f"a continuation chunk has {frames} frames; it needs a positive multiple of {f}")
         if height % s or width % s:
@@ -90,7 +92,9 @@ class Tokenizer(nn.Module):
     def check_latents(self, latents: torch.Tensor) -> None:
         c = self.config.code_channels
         if latents.ndim != 5 or latents.shape[1] != c:
-            raise DrivewmError(f"latents must be (B, {c}, t, h, w) for this tokenizer, got shape {tuple(latents.shape)}")
+            raise DrivewmError(
+                f"latents must be (B, {c}, t, h, w) for this tokenizer, got shape {tuple(latents.shape)}"
+            )
 
     # -- model folders ----------------------------------------------------------------------------
 
@@ -100,7 +104,7 @@ class Tokenizer(nn.Module):
         save_model_folder(path, MODEL_TYPE, to_dict(self.config), self.state_dict(), {**stats, **(extra or {})})
 
     @classmethod
-    def from_pretrained(cls, path: str | Path) -> "Tokenizer":
+    def from_pretrained(cls, path: str | Path) -> Tokenizer:
         """Load a model folder (safetensors only: nothing is unpickled). Weights that do not
         match ``config.json`` raise DrivewmError naming the folder."""
         info, state = load_model_folder(path, MODEL_TYPE)

@@ -12,7 +12,7 @@ from torch import nn
 
 from drivewm.tokenizer.causal import CausalContext
 from drivewm.tokenizer.config import TokenizerConfig
-from drivewm.tokenizer.layers import OutputHead, Downsample, FactorizedConv, ResBlock, Upsample
+from drivewm.tokenizer.layers import Downsample, FactorizedConv, OutputHead, ResBlock, Upsample
 
 
 def patch_channels(cfg: TokenizerConfig) -> int:

@@ -35,7 +35,9 @@ class TilingConfig:
         if self.chunk_latent_frames is not None and self.chunk_latent_frames < 1:
             raise DrivewmError(f"tiling: chunk_latent_frames must be >= 1, got {self.chunk_latent_frames}")
         if self.tile_latent is not None and not 0 <= self.overlap_latent < self.tile_latent:
-            raise DrivewmError(f"tiling: need 0 <= overlap_latent < tile_latent, got {self.overlap_latent}, {self.tile_latent}")
+            raise DrivewmError(
+                f"tiling: need 0 <= overlap_latent < tile_latent, got {self.overlap_latent}, {self.tile_latent}"
+            )
 
 
 def tile_starts(size: int, tile: int, overlap: int) -> list[int]:

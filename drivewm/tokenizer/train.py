@@ -103,9 +103,13 @@ def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, 
     start = _resume(out_dir, cfg, model, ema, opt, adversary)
     write_json(out_dir / "train_config.json", to_dict(cfg))
     t0, terms = time.perf_counter(), {}
-    for step in tqdm(range(start, cfg.steps), desc="tokenizer train", initial=start, total=cfg.steps, disable=not progress):
+    for step in tqdm(
+        range(start, cfg.steps), desc="tokenizer train", initial=start, total=cfg.steps, disable=not progress
+    ):
         adv = adversary if adversary is not None and step >= cfg.loss.adversarial_start else None
-        terms = _train_step(model, loss_fn, opt, sampler.batch(step, cfg.batch_size), learning_rate(cfg, step), cfg, adv)
+        terms = _train_step(
+            model, loss_fn, opt, sampler.batch(step, cfg.batch_size), learning_rate(cfg, step), cfg, adv
+        )
         ema.update(model, step)
         if (step + 1) % cfg.log_every == 0 or step + 1 == cfg.steps:
             _log(out_dir, {"step": step + 1, "lr": learning_rate(cfg, step), **terms})
@@ -113,14 +117,28 @@ def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, 
             _save_state(out_dir, cfg, model, ema, opt, adversary, step + 1)
     _save_state(out_dir, cfg, model, ema, opt, adversary, max(start, cfg.steps))
     shipped = ema_model(model, ema)
-    set_latent_stats(shipped, CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed + 1), cfg.stats_batches, cfg.batch_size)
+    set_latent_stats(
+        shipped, CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed + 1), cfg.stats_batches, cfg.batch_size
+    )
     shipped.save_pretrained(out_dir, {"trained_steps": max(start, cfg.steps)})
-    return {"steps": max(start, cfg.steps), "resumed_from": start, "seconds": time.perf_counter() - t0,
-            "train_videos": len(videos), **terms}
+    return {
+        "steps": max(start, cfg.steps),
+        "resumed_from": start,
+        "seconds": time.perf_counter() - t0,
+        "train_videos": len(videos),
+        **terms,
+    }
 
 
-def _train_step(model: Tokenizer, loss_fn: TokenizerLoss, opt: torch.optim.Optimizer, video: torch.Tensor,
-                lr: float, cfg: TokenizerTrainConfig, adversary: Adversary | None) -> dict[str, float]:
+def _train_step(
+    model: Tokenizer,
+    loss_fn: TokenizerLoss,
+    opt: torch.optim.Optimizer,
+    video: torch.Tensor,
+    lr: float,
+    cfg: TokenizerTrainConfig,
+    adversary: Adversary | None,
+) -> dict[str, float]:
     for group in opt.param_groups:
         group["lr"] = lr
     recon, _ = model(video)  # (B, 3, T, H, W)
@@ -141,14 +159,21 @@ def _train_step(model: Tokenizer, loss_fn: TokenizerLoss, opt: torch.optim.Optim
 @torch.no_grad()
 def set_latent_stats(model: Tokenizer, sampler: CropSampler, batches: int, batch_size: int) -> None:
     """Measure the per-channel mean and std of the latents over ``batches`` random batches."""
-    latents = torch.cat([model.encode(sampler.batch(i, batch_size)).transpose(0, 1).flatten(1) for i in range(batches)], 1)
+    latents = torch.cat(
+        [model.encode(sampler.batch(i, batch_size)).transpose(0, 1).flatten(1) for i in range(batches)], 1
+    )
     model.latent_mean.copy_(latents.mean(1))
     model.latent_std.copy_(latents.std(1).clamp_min(1e-6))
 
 
 def _save_state(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EMA, opt, adversary, step: int) -> None:
-    state = {"step": step, "config": json.dumps(to_dict(cfg)), "model": model.state_dict(),
-             "ema": ema.state_dict(), "optimizer": opt.state_dict()}
+    state = {
+        "step": step,
+        "config": json.dumps(to_dict(cfg)),
+        "model": model.state_dict(),
+        "ema": ema.state_dict(),
+        "optimizer": opt.state_dict(),
+    }
     if adversary is not None:
         state["adversary"] = adversary.state_dict()
     save_train_state(out_dir, state)
@@ -161,7 +186,9 @@ def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EMA, opt, adve
         return 0
     saved = json.loads(state["config"])
     if saved["model"] != to_dict(cfg.model):
-        raise DrivewmError(f"{out_dir}: holds a training run of a different model config; use a new --out or the same preset")
+        raise DrivewmError(
+            f"{out_dir}: holds a training run of a different model config; use a new --out or the same preset"
+        )
     model.load_state_dict(state["model"])
     ema.load_state_dict(state["ema"])
     opt.load_state_dict(state["optimizer"])

@@ -24,14 +24,19 @@ WEIGHTS_NAME = "model.safetensors"
 TRAIN_STATE_NAME = "train_state.pt"
 
 
-def save_model_folder(path: str | Path, model_type: str, config: dict, state_dict: dict[str, torch.Tensor], extra: dict | None = None) -> None:
+def save_model_folder(
+    path: str | Path, model_type: str, config: dict, state_dict: dict[str, torch.Tensor], extra: dict | None = None
+) -> None:
     """Write ``config.json`` ({"model_type", "drivewm_version", "config", **extra}) and weights."""
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().contiguous().cpu() for k, v in state_dict.items()}
     with atomic_path(path / WEIGHTS_NAME) as tmp:
         save_file(tensors, str(tmp))
-    write_json(path / CONFIG_NAME, {"model_type": model_type, "drivewm_version": __version__, "config": config, **(extra or {})})
+    write_json(
+        path / CONFIG_NAME,
+        {"model_type": model_type, "drivewm_version": __version__, "config": config, **(extra or {})},
+    )
 
 
 def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tuple[dict, dict[str, torch.Tensor]]:

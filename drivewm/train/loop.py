@@ -19,8 +19,9 @@ import functools
 import hashlib
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Literal, Protocol
+from typing import Literal, Protocol
 
 import torch
 import torch.distributed as dist
@@ -98,7 +99,9 @@ class TrainTask(Protocol):
     def tokens_per_sample(self) -> int:
         """Latent tokens per sample (throughput metric)."""
 
-    def loss(self, forward: Callable[..., torch.Tensor], indices: list[int], seeds: list[int], device: torch.device) -> torch.Tensor:
+    def loss(
+        self, forward: Callable[..., torch.Tensor], indices: list[int], seeds: list[int], device: torch.device
+    ) -> torch.Tensor:
         """Mean loss of the samples ``indices``, sample i drawing its randomness from ``seeds[i]``;
         ``forward`` is the (possibly wrapped) model to call."""
 
@@ -166,8 +169,13 @@ def _resume(run: _Run, out_dir: Path) -> None:
     state = load_train_state(out_dir)
     if state is None:
         return
-    set_state_dict(run.model, run.optimizer, model_state_dict=state["model"], optim_state_dict=state["optimizer"],
-                   options=StateDictOptions(full_state_dict=True))
+    set_state_dict(
+        run.model,
+        run.optimizer,
+        model_state_dict=state["model"],
+        optim_state_dict=state["optimizer"],
+        options=StateDictOptions(full_state_dict=True),
+    )
     run.ema.load_state_dict(state["ema"])
     run.step = int(state["step"])
     torch.set_rng_state(state["rng"]["torch"])
@@ -179,8 +187,18 @@ def _checkpoint(run: _Run, task: TrainTask, out_dir: Path, config_record: dict) 
     ema_sd = run.ema.state_dict()
     if run.info.is_main:
         task.save_model(ema_sd, out_dir)
-        save_train_state(out_dir, {"model": model_sd, "ema": ema_sd, "optimizer": optim_sd, "step": run.step,
-                                   "data_position": run.step, "rng": {"torch": torch.get_rng_state()}, "config": config_record})
+        save_train_state(
+            out_dir,
+            {
+                "model": model_sd,
+                "ema": ema_sd,
+                "optimizer": optim_sd,
+                "step": run.step,
+                "data_position": run.step,
+                "rng": {"torch": torch.get_rng_state()},
+                "config": config_record,
+            },
+        )
     barrier(run.info)
 
 
@@ -206,7 +224,9 @@ def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, fl
     with torch.autocast(info.device.type, dtype=torch.bfloat16, enabled=use_bf16):
         loss = task.loss(run.forward, indices[local], seeds[local], info.device)
     loss.backward()
-    grad_norm = torch.nn.utils.clip_grad_norm_(run.model.parameters(), cfg.grad_clip if cfg.grad_clip > 0 else float("inf"))
+    grad_norm = torch.nn.utils.clip_grad_norm_(
+        run.model.parameters(), cfg.grad_clip if cfg.grad_clip > 0 else float("inf")
+    )
     run.optimizer.step()
     run.optimizer.zero_grad(set_to_none=True)
     run.ema.update(run.model, step)
@@ -218,7 +238,13 @@ def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, fl
     return float(mean_loss), float(grad_norm.full_tensor() if hasattr(grad_norm, "full_tensor") else grad_norm)
 
 
-def train(task: TrainTask, cfg: TrainConfig, out_dir: str | Path, config_record: dict | None = None, stop_after: int | None = None) -> dict:
+def train(
+    task: TrainTask,
+    cfg: TrainConfig,
+    out_dir: str | Path,
+    config_record: dict | None = None,
+    stop_after: int | None = None,
+) -> dict:
     """Train ``task`` into ``out_dir`` (model folder + train_state.pt + metrics.jsonl + samples/),
     resuming from ``out_dir/train_state.pt`` when present. ``stop_after``: leave after this many
     steps of *this* call (as if killed right after a checkpoint), for tests and time-boxed jobs.
@@ -238,8 +264,13 @@ def train(task: TrainTask, cfg: TrainConfig, out_dir: str | Path, config_record:
         loss, grad_norm = _train_step(run, task, cfg)
         busy_s, busy_steps = busy_s + time.perf_counter() - tic, busy_steps + 1
         if run.step % cfg.log_every == 0 or run.step == end:
-            last = {"step": run.step, "loss": loss, "grad_norm": grad_norm, "lr": learning_rate(cfg, run.step - 1),
-                    "tokens_per_s": task.tokens_per_sample() * cfg.batch_size * busy_steps / max(busy_s, 1e-9)}
+            last = {
+                "step": run.step,
+                "loss": loss,
+                "grad_norm": grad_norm,
+                "lr": learning_rate(cfg, run.step - 1),
+                "tokens_per_s": task.tokens_per_sample() * cfg.batch_size * busy_steps / max(busy_s, 1e-9),
+            }
             busy_s, busy_steps = 0.0, 0
             if metrics:
                 metrics.write(json.dumps(last) + "\n")

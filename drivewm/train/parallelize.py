@@ -41,7 +41,12 @@ def apply_fsdp(model: nn.Module, blocks: list[nn.Module]) -> nn.Module:
 
 
 def parallelize(
-    model: nn.Module, blocks: list[nn.Module], info: DistInfo, activation_checkpointing: bool, compile: bool, parallel: Parallel
+    model: nn.Module,
+    blocks: list[nn.Module],
+    info: DistInfo,
+    activation_checkpointing: bool,
+    compile: bool,
+    parallel: Parallel,
 ) -> nn.Module:
     """Apply the options to ``model`` (whose repeated ``blocks`` are given); returns the module to
     call in training (the DDP wrapper under DDP, ``model`` itself otherwise). ``auto`` = DDP."""

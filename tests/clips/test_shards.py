@@ -32,8 +32,15 @@ def smooth_video(T=9, H=64, W=96, seed=0):
 
 def make_clip(key, T=9):
     rig = load_rig("front3").scaled(96, 64)
-    meta = ClipMeta(key=key, source_log="test.mcap", start_time_ns=0, fps=10.0,
-                    timestamps_ns=[i * 100_000_000 for i in range(T)], rig=rig.to_dict(), caption="a road")
+    meta = ClipMeta(
+        key=key,
+        source_log="test.mcap",
+        start_time_ns=0,
+        fps=10.0,
+        timestamps_ns=[i * 100_000_000 for i in range(T)],
+        rig=rig.to_dict(),
+        caption="a road",
+    )
     frames = {c: smooth_video(T, seed=i) for i, c in enumerate(rig.names)}
     ego = np.repeat(np.eye(4)[None], T, axis=0)
     ego[:, 0, 3] = np.arange(T)

@@ -56,10 +56,25 @@ def make_log(
             frames.append(ImageFrame(T0_NS + i * period + offset, data, "jpeg"))
         images[cam.name] = frames
     t = T0_NS + np.arange(n_frames, dtype=np.int64) * period
-    poses = np.stack([T_from_xyz_yaw(speed_mps * i / fps, 0.02 * (speed_mps * i / fps) ** 2 / 10, 0.0, 0.004 * i) for i in range(n_frames)])
+    poses = np.stack(
+        [
+            T_from_xyz_yaw(speed_mps * i / fps, 0.02 * (speed_mps * i / fps) ** 2 / 10, 0.0, 0.004 * i)
+            for i in range(n_frames)
+        ]
+    )
     for i in nan_poses:
         poses[i] = np.nan
-    scene = SceneInfo(tags or {"weather": "clear", "time_of_day": "day", "road_type": "highway", "traffic_density": "low", "source": "synthetic"}, "a synthetic test drive")
+    scene = SceneInfo(
+        tags
+        or {
+            "weather": "clear",
+            "time_of_day": "day",
+            "road_type": "highway",
+            "traffic_density": "low",
+            "source": "synthetic",
+        },
+        "a synthetic test drive",
+    )
     return DriveLog(str(path), rig_, images, t, poses, scene)
 
 

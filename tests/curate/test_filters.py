@@ -44,7 +44,9 @@ def test_dedup_embedding_separates_copies_from_other_moments():
     a, b = moving_clip(seed=1), moving_clip(seed=2)
     brighter = np.clip(a.astype(int) + 20, 0, 255).astype(np.uint8)
     tex = texture(1, 96, 640)
-    later = np.stack([np.stack([tex[:, 300 + t * 2 : 460 + t * 2] for t in range(17)]) for _ in range(2)])  # same world, elsewhere
+    later = np.stack(
+        [np.stack([tex[:, 300 + t * 2 : 460 + t * 2] for t in range(17)]) for _ in range(2)]
+    )  # same world, elsewhere
     E = np.stack([clip_embedding(x) for x in (a, brighter, b, later)])
     dups = near_duplicates(E, 0.985)
     assert [(i, j) for i, j, _ in dups] == [(1, 0)]  # only the re-exposed copy
@@ -52,10 +54,21 @@ def test_dedup_embedding_separates_copies_from_other_moments():
 
 def test_template_captions_name_conditions_and_directions():
     rig = load_rig("nuscenes6")
-    info = ClipInfo({"weather": "snow", "time_of_day": "night", "road_type": "urban_grid", "traffic_density": "high"}, "", rig.cameras, "left turn", 8.0)
+    info = ClipInfo(
+        {"weather": "snow", "time_of_day": "night", "road_type": "urban_grid", "traffic_density": "high"},
+        "",
+        rig.cameras,
+        "left turn",
+        8.0,
+    )
     caption, views = TemplateCaptioner().caption(info)
-    assert caption.startswith("A snow night drive on an urban grid in high traffic") and "turning left at 29 km/h" in caption
-    assert views["CAM_BACK"].startswith("The back camera") and views["CAM_FRONT_LEFT"].startswith("The front-left camera")
+    assert (
+        caption.startswith("A snow night drive on an urban grid in high traffic")
+        and "turning left at 29 km/h" in caption
+    )
+    assert views["CAM_BACK"].startswith("The back camera") and views["CAM_FRONT_LEFT"].startswith(
+        "The front-left camera"
+    )
     t = np.linspace(0, 1.6, 17)
     left = np.stack([10 * np.sin(t), 10 * (1 - np.cos(t)), 0 * t], 1)
     assert classify_manoeuvre(left, t, np.full(17, 10.0)) == "left turn"
@@ -68,7 +81,9 @@ class CountingCaptioner(Captioner):
     """A stand-in for a vision-language model: describes what it sees."""
 
     def caption(self, clip_info):
-        views = {c.name: f"{c.name} sees mean luma {clip_info.frames[i].mean():.0f}" for i, c in enumerate(clip_info.cameras)}
+        views = {
+            c.name: f"{c.name} sees mean luma {clip_info.frames[i].mean():.0f}" for i, c in enumerate(clip_info.cameras)
+        }
         return f"{len(clip_info.cameras)} views", views
 
 

@@ -25,7 +25,19 @@ def make_logs(folder: Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     logs = [
         write_synth_log(folder / "good_a.mcap", seed=1, n_frames=52),
-        write_synth_log(folder / "good_b.mcap", seed=2, n_frames=52, jitter_ns=8_000_000, tags={"weather": "snow", "time_of_day": "day", "road_type": "highway", "traffic_density": "low", "source": "synthetic"}),
+        write_synth_log(
+            folder / "good_b.mcap",
+            seed=2,
+            n_frames=52,
+            jitter_ns=8_000_000,
+            tags={
+                "weather": "snow",
+                "time_of_day": "day",
+                "road_type": "highway",
+                "traffic_density": "low",
+                "source": "synthetic",
+            },
+        ),
         write_synth_log(folder / "cam_drops.mcap", seed=3, n_frames=52, drop={"CAM_FRONT_RIGHT": [20, 21, 22]}),
         write_synth_log(folder / "nan_pose.mcap", seed=4, n_frames=52, nan_poses=[7, 8, 30]),
         write_synth_log(folder / "corrupt_jpeg.mcap", seed=6, n_frames=52, corrupt={"CAM_FRONT_LEFT": [25]}),
@@ -149,5 +161,10 @@ def test_same_drive_twice_is_deduplicated_across_logs(tmp_path):
     assert report["duplicates_across_logs"] == {"drive_b-000000": "drive_a-000000", "drive_b-000017": "drive_a-000017"}
     assert report["dropped"] == {"near_duplicate_across_logs": 2}
     keys = sorted(c.key for c in iter_clips(tmp_path / "out"))
-    assert keys == ["drive_a-000000", "drive_a-000017", "drive_c-000000", "drive_c-000017"]  # pruned from the shards too
+    assert keys == [
+        "drive_a-000000",
+        "drive_a-000017",
+        "drive_c-000000",
+        "drive_c-000017",
+    ]  # pruned from the shards too
     assert keys == sorted(r["key"] for r in read_manifest(tmp_path / "out"))

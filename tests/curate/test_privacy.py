@@ -30,13 +30,18 @@ def _covers(box, point, margin=4):
 def test_plate_detector_on_real_dashcam_stills(shared_data):
     hits, false_boxes = 0, 0
     for name, plates in PLATES.items():
-        image = cv2.cvtColor(cv2.imread(str(shared_data / f"video/dashcam_calibration/test_images/{name}.jpg")), cv2.COLOR_BGR2RGB)
+        image = cv2.cvtColor(
+            cv2.imread(str(shared_data / f"video/dashcam_calibration/test_images/{name}.jpg")), cv2.COLOR_BGR2RGB
+        )
         boxes = plate_candidates(image)
         hits += sum(any(_covers(b, p) for b in boxes) for p in plates)
         false_boxes += sum(not any(_covers(b, p) for p in plates) for b in boxes)
         blurred = blur_boxes(image, boxes)
         for x, y, w, h in boxes:  # the blur really removes detail inside every box
-            assert cv2.Laplacian(cv2.cvtColor(blurred[y : y + h, x : x + w], cv2.COLOR_RGB2GRAY), cv2.CV_64F).var() < cv2.Laplacian(cv2.cvtColor(image[y : y + h, x : x + w], cv2.COLOR_RGB2GRAY), cv2.CV_64F).var()
+            assert (
+                cv2.Laplacian(cv2.cvtColor(blurred[y : y + h, x : x + w], cv2.COLOR_RGB2GRAY), cv2.CV_64F).var()
+                < cv2.Laplacian(cv2.cvtColor(image[y : y + h, x : x + w], cv2.COLOR_RGB2GRAY), cv2.CV_64F).var()
+            )
         outside = np.ones(image.shape[:2], bool)
         for x, y, w, h in boxes:
             outside[y : y + h, x : x + w] = False

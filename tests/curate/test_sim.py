@@ -31,7 +31,9 @@ def test_sim_clips_have_every_camera_synced_and_logged_poses(sim_log_dir, sim_cl
         idx = np.searchsorted(log.pose_timestamps_ns, clip.meta.timestamps_ns)
         logged = log.T_world_from_ego[idx]
         pos_err = np.linalg.norm(clip.T_world_from_ego[:, :3, 3] - logged[:, :3, 3], axis=1).max()
-        yaw_err = max(abs((yaw_of(a) - yaw_of(b) + np.pi) % (2 * np.pi) - np.pi) for a, b in zip(clip.T_world_from_ego, logged))
+        yaw_err = max(
+            abs((yaw_of(a) - yaw_of(b) + np.pi) % (2 * np.pi) - np.pi) for a, b in zip(clip.T_world_from_ego, logged)
+        )
         assert pos_err < MAX_POSITION_ERROR_M and np.degrees(yaw_err) < MAX_YAW_ERROR_DEG, (clip.key, pos_err, yaw_err)
         # the waypoints are the logged motion seen from the first frame: ~speed * 1.6 s ahead
         assert len(clip.meta.trajectory_ego) == cfg.trajectory_waypoints

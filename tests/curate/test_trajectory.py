@@ -43,7 +43,9 @@ def test_no_finite_pose_means_unknown():
 
 def test_waypoints_in_first_ego_frame():
     t = (np.arange(17) * 1e8).astype(np.int64)
-    poses = np.stack([T_from_xyz_yaw(100 + 2.0 * i, 50.0, 0.0, np.pi / 2) for i in range(17)])  # moving along world +x, facing +y
+    poses = np.stack(
+        [T_from_xyz_yaw(100 + 2.0 * i, 50.0, 0.0, np.pi / 2) for i in range(17)]
+    )  # moving along world +x, facing +y
     wp, dt = future_waypoints(poses, t, 16)
     assert dt == 0.1 and wp.shape == (16, 3)
     # world +x is the ego's right (-y) when facing +y; first waypoint is frame 1

@@ -83,7 +83,18 @@ def test_import_video_cli_writes_a_log_with_unknown_poses(shared_data, tmp_path)
 
     (tmp_path / "cam.yaml").write_text(CALIBRATION)
     video = shared_data / "video/dashcam_highway/solidWhiteRight.mp4"
-    rc = main(["import-video", str(video), "--calibration", str(tmp_path / "cam.yaml"), "--out", str(tmp_path / "logs"), "--tag", "weather=clear"])
+    rc = main(
+        [
+            "import-video",
+            str(video),
+            "--calibration",
+            str(tmp_path / "cam.yaml"),
+            "--out",
+            str(tmp_path / "logs"),
+            "--tag",
+            "weather=clear",
+        ]
+    )
     assert rc == 0
     log = read_log(tmp_path / "logs/solidWhiteRight.mcap")
     assert log.rig.names == ["CAM_FRONT"] and len(log.images["CAM_FRONT"]) == 221
@@ -91,4 +102,16 @@ def test_import_video_cli_writes_a_log_with_unknown_poses(shared_data, tmp_path)
     assert np.allclose(np.diff([f.timestamp_ns for f in log.images["CAM_FRONT"]]), 40e6, atol=1e3)  # 25 fps
     assert not np.isfinite(log.T_world_from_ego).any()  # unknown ego motion, not identity
     assert log.scene.tags["weather"] == "clear" and log.scene.tags["road_type"] == "unknown"
-    assert main(["import-video", str(tmp_path / "missing.mp4"), "--calibration", str(tmp_path / "cam.yaml"), "--out", str(tmp_path / "x")]) == 2
+    assert (
+        main(
+            [
+                "import-video",
+                str(tmp_path / "missing.mp4"),
+                "--calibration",
+                str(tmp_path / "cam.yaml"),
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 2
+    )

@@ -17,8 +17,17 @@ from drivewm.config import to_dict
 from drivewm.geometry import load_rig
 from drivewm.tokenizer import Tokenizer, preset
 
-TINY = ["model.hidden_dim=32", "model.depth=1", "model.num_heads=2", "model.adaln_lora_dim=8", "text.dim=16",
-        "train.steps=3", "train.batch_size=2", "train.log_every=1", "sample_steps=2"]
+TINY = [
+    "model.hidden_dim=32",
+    "model.depth=1",
+    "model.num_heads=2",
+    "model.adaln_lora_dim=8",
+    "text.dim=16",
+    "train.steps=3",
+    "train.batch_size=2",
+    "train.log_every=1",
+    "sample_steps=2",
+]
 
 
 def _save_tokenizer(path: Path, **changes) -> Tokenizer:
@@ -33,9 +42,22 @@ def _write_cache(cache: Path, tok: Tokenizer, tok_dir: Path, n: int) -> None:
     rig = load_rig("front1").scaled(32, 16).to_dict()
     rows = []
     for i in range(n):
-        meta = ClipMeta(f"c{i}", "synthetic", 0, 10.0, [j * 100_000_000 for j in range(5)], rig, caption=["clear day", "heavy snow"][i % 2])
+        meta = ClipMeta(
+            f"c{i}",
+            "synthetic",
+            0,
+            10.0,
+            [j * 100_000_000 for j in range(5)],
+            rig,
+            caption=["clear day", "heavy snow"][i % 2],
+        )
         rows.append(write_latent_clip(cache, meta, torch.randn(1, 16, 2, 2, 4), np.tile(np.eye(4), (5, 1, 1))))
-    info = {"path": str(tok_dir), "config": to_dict(tok.config), "latent_mean": tok.latent_mean.tolist(), "latent_std": tok.latent_std.tolist()}
+    info = {
+        "path": str(tok_dir),
+        "config": to_dict(tok.config),
+        "latent_mean": tok.latent_mean.tolist(),
+        "latent_std": tok.latent_std.tolist(),
+    }
     write_latent_index(cache, info, rows)
 
 
@@ -56,26 +78,67 @@ def _run(capsys, *argv: str) -> tuple[int, str, str]:
 
 def test_pretrain_then_generate_writes_clips_mp4_and_contact_sheet(clipdir, tmp_path, capsys):
     data, tok_dir = clipdir
-    code, out, err = _run(capsys, "pretrain", "--data", data, "--tokenizer", tok_dir, "--out", tmp_path / "t2w", *[a for o in TINY for a in ("--set", o)])
+    code, out, err = _run(
+        capsys,
+        "pretrain",
+        "--data",
+        data,
+        "--tokenizer",
+        tok_dir,
+        "--out",
+        tmp_path / "t2w",
+        *[a for o in TINY for a in ("--set", o)],
+    )
     assert code == 0, err
     assert json.loads((tmp_path / "t2w" / "config.json").read_text())["model_type"] == "text2world"
-    assert (tmp_path / "t2w" / "samples" / "step_0000003.png").is_file() and (tmp_path / "t2w" / "metrics.jsonl").is_file()
-    code, out, err = _run(capsys, "generate", "--model", tmp_path / "t2w", "--prompt", "heavy snow", "--steps", "2", "--num-samples", "2",
-                          "--out", tmp_path / "gen")
+    assert (tmp_path / "t2w" / "samples" / "step_0000003.png").is_file() and (
+        tmp_path / "t2w" / "metrics.jsonl"
+    ).is_file()
+    code, out, err = _run(
+        capsys,
+        "generate",
+        "--model",
+        tmp_path / "t2w",
+        "--prompt",
+        "heavy snow",
+        "--steps",
+        "2",
+        "--num-samples",
+        "2",
+        "--out",
+        tmp_path / "gen",
+    )
     assert code == 0, err
     clips = list(iter_clips(tmp_path / "gen"))
     assert [c.meta.caption for c in clips] == ["heavy snow", "heavy snow"] and clips[0].meta.extra["seed"] == 0
     video = clips[1].video(clips[1].meta.cameras[0])
     assert video.shape == (5, 16, 32, 3) and clips[1].meta.get_rig().cameras[0].width == 32
-    assert (tmp_path / "gen" / "sample_001.mp4").stat().st_size > 0 and (tmp_path / "gen" / "contact_sheet.png").is_file()
+    assert (tmp_path / "gen" / "sample_001.mp4").stat().st_size > 0 and (
+        tmp_path / "gen" / "contact_sheet.png"
+    ).is_file()
 
 
 def test_dry_run_prints_resolved_config_with_overrides(clipdir, tmp_path, capsys):
     data, tok_dir = clipdir
-    code, out, _ = _run(capsys, "pretrain", "--preset", "small", "--data", data, "--tokenizer", tok_dir, "--out", tmp_path / "x",
-                        "--set", "train.steps=7", "--dry-run")
+    code, out, _ = _run(
+        capsys,
+        "pretrain",
+        "--preset",
+        "small",
+        "--data",
+        data,
+        "--tokenizer",
+        tok_dir,
+        "--out",
+        tmp_path / "x",
+        "--set",
+        "train.steps=7",
+        "--dry-run",
+    )
     cfg = json.loads(out)
-    assert code == 0 and cfg["train"]["steps"] == 7 and cfg["model"]["hidden_dim"] == 384 and not (tmp_path / "x").exists()
+    assert (
+        code == 0 and cfg["train"]["steps"] == 7 and cfg["model"]["hidden_dim"] == 384 and not (tmp_path / "x").exists()
+    )
 
 
 @pytest.mark.parametrize(

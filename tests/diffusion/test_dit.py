@@ -29,7 +29,13 @@ def _randomize(model: nn.Module) -> nn.Module:
 def _inputs(b: int = 2, t: int = 3, fps: float = 10.0):
     g = torch.Generator().manual_seed(0)
     x = torch.randn(b, 4, t, 4, 6, generator=g)
-    return x, torch.zeros(b), torch.randn(b, 5, 16, generator=g), torch.ones(b, 5, dtype=torch.bool), torch.full((b,), fps)
+    return (
+        x,
+        torch.zeros(b),
+        torch.randn(b, 5, 16, generator=g),
+        torch.ones(b, 5, dtype=torch.bool),
+        torch.full((b,), fps),
+    )
 
 
 def test_patchify_roundtrip_and_output_shape():
@@ -68,7 +74,9 @@ def test_output_depends_on_text_fps_and_extra_conditions_but_not_masked_tokens()
     assert not torch.allclose(model(x, noise, altered, mask, fps), base, atol=1e-3)
     assert not torch.allclose(model(x, noise, text, mask, fps * 2), base, atol=1e-3)
     n_tok = 3 * 2 * 3
-    assert not torch.allclose(model(x, noise, text, mask, fps, extra_token_cond=torch.randn(2, n_tok, 64)), base, atol=1e-3)
+    assert not torch.allclose(
+        model(x, noise, text, mask, fps, extra_token_cond=torch.randn(2, n_tok, 64)), base, atol=1e-3
+    )
     assert not torch.allclose(model(x, noise, text, mask, fps, extra_global_cond=torch.randn(2, 64)), base, atol=1e-3)
     # A caption dropped entirely (CFG) still gives finite output through the null token.
     assert torch.isfinite(model(x, noise, text, torch.zeros_like(mask), fps)).all()
@@ -91,7 +99,9 @@ def test_inserting_a_sublayer_by_config_starts_as_the_original_model():
     register_sublayer("toy_view_attn", _ScaledCopy)
     try:
         base = _randomize(DiT(CFG)).eval()
-        extended = DiT(dataclasses.replace(CFG, block_layers=["self_attn", "toy_view_attn", "cross_attn", "mlp"])).eval()
+        extended = DiT(
+            dataclasses.replace(CFG, block_layers=["self_attn", "toy_view_attn", "cross_attn", "mlp"])
+        ).eval()
         missing, unexpected = extended.load_state_dict(base.state_dict(), strict=False)
         assert not unexpected and all(".toy_view_attn." in k for k in missing)
         assert torch.allclose(extended(*_inputs(), num_views=3), base(*_inputs()), atol=1e-6)

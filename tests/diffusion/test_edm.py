@@ -6,7 +6,15 @@ import math
 
 import torch
 
-from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser, edm_loss, edm_loss_weight, edm_scalings, sample_sigma
+from drivewm.diffusion.denoiser import (
+    Conditioning,
+    EDMConfig,
+    EDMDenoiser,
+    edm_loss,
+    edm_loss_weight,
+    edm_scalings,
+    sample_sigma,
+)
 from drivewm.diffusion.samplers import GuidedDenoiser, karras_sigmas, sample_euler, sample_heun, seeded_noise
 
 # A 2D Gaussian mixture: weights, means (K, 2), isotropic stds (K,).
@@ -28,7 +36,9 @@ def oracle_denoiser(x: torch.Tensor, sigma: torch.Tensor) -> torch.Tensor:
 
 def mixture_moments() -> tuple[torch.Tensor, torch.Tensor]:
     mean = (WEIGHTS[:, None] * MEANS).sum(0)
-    second = (WEIGHTS[:, None, None] * (MEANS[:, :, None] * MEANS[:, None, :] + torch.eye(2) * STDS[:, None, None] ** 2)).sum(0)
+    second = (
+        WEIGHTS[:, None, None] * (MEANS[:, :, None] * MEANS[:, None, :] + torch.eye(2) * STDS[:, None, None] ** 2)
+    ).sum(0)
     return mean, second - mean[:, None] * mean[None]
 
 
@@ -72,7 +82,9 @@ def test_loss_matches_formula_and_video2world_masks_frames():
     s = sigma.view(-1, 1, 1, 1, 1)
     c_skip, c_out, c_in, _ = (c.view(-1, 1, 1, 1, 1) for c in edm_scalings(sigma, 0.5))
     y = x0 + s * noise
-    by_hand = (edm_loss_weight(sigma, 0.5) * ((c_skip * y + c_out * 0.3 * c_in * y - x0) ** 2).mean(dim=(1, 2, 3, 4))).mean()
+    by_hand = (
+        edm_loss_weight(sigma, 0.5) * ((c_skip * y + c_out * 0.3 * c_in * y - x0) ** 2).mean(dim=(1, 2, 3, 4))
+    ).mean()
     assert torch.allclose(loss, by_hand, rtol=1e-5)
     # Video2World: the given frames come back exactly, and the loss ignores them.
     v2w = EDMDenoiser(LinearBackbone(0.3), EDMConfig(cond_frames=2))
@@ -105,7 +117,10 @@ def test_samplers_reproduce_gaussian_mixture_moments():
 
 def test_heun_converges_faster_than_euler():
     exact = _sample_mixture(sample_heun, 200, 2000)
-    err = {s.__name__: (_sample_mixture(s, 18, 2000) - exact).pow(2).mean().sqrt().item() for s in (sample_euler, sample_heun)}
+    err = {
+        s.__name__: (_sample_mixture(s, 18, 2000) - exact).pow(2).mean().sqrt().item()
+        for s in (sample_euler, sample_heun)
+    }
     assert err["sample_heun"] < 0.5 * err["sample_euler"], err
 
 

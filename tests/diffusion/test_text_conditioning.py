@@ -62,19 +62,35 @@ def condition_cache(sim_clip_dir: Path, tmp_path_factory) -> tuple[Path, dict[st
 @pytest.fixture(scope="module")
 def trained(condition_cache, tmp_path_factory) -> Text2World:
     cache, _, _ = condition_cache
-    cfg = pretrain_config("debug", ["train.steps=250", "train.batch_size=8", "train.log_every=50", "train.checkpoint_every=1000",
-                                    "model.hidden_dim=96", "model.depth=3", "model.num_heads=4", "sample_steps=4", "edm.text_dropout=0.2"])
+    cfg = pretrain_config(
+        "debug",
+        [
+            "train.steps=250",
+            "train.batch_size=8",
+            "train.log_every=50",
+            "train.checkpoint_every=1000",
+            "model.hidden_dim=96",
+            "model.depth=3",
+            "model.num_heads=4",
+            "sample_steps=4",
+            "edm.text_dropout=0.2",
+        ],
+    )
     out = tmp_path_factory.mktemp("t2w_cond")
     pretrain(cfg, cache, None, out)
     return Text2World.from_pretrained(out)
 
 
-def _classify(model: Text2World, captions: dict[str, list[str]], threshold: float, snow_brighter: bool, guidance: float):
+def _classify(
+    model: Text2World, captions: dict[str, list[str]], threshold: float, snow_brighter: bool, guidance: float
+):
     """Generate one clip per distinct view caption of each condition; fraction assigned correctly, mean stat gap."""
     correct, means = [], {}
     for i, (cond, caps) in enumerate(captions.items()):
         prompts = sorted(set(caps))
-        videos = latents_preview(model.sample_latents(prompts, [100 * i + j for j in range(len(prompts))], steps=12, guidance=guidance))
+        videos = latents_preview(
+            model.sample_latents(prompts, [100 * i + j for j in range(len(prompts))], steps=12, guidance=guidance)
+        )
         values = np.array([ground_luma(v) for v in videos])
         means[cond] = values.mean()
         is_snow = values > threshold if snow_brighter else values < threshold
@@ -89,6 +105,8 @@ def test_generated_clips_follow_the_prompted_condition_and_guidance_strengthens_
     threshold = (clear + snow) / 2
     acc_guided, gap_guided = _classify(trained, captions, threshold, snow > clear, guidance=4.0)
     acc_plain, gap_plain = _classify(trained, captions, threshold, snow > clear, guidance=1.0)
-    print(f"clear {clear:.3f} snow {snow:.3f}; accuracy guided {acc_guided:.2f} (gap {gap_guided:.3f}), plain {acc_plain:.2f} (gap {gap_plain:.3f})")
+    print(
+        f"clear {clear:.3f} snow {snow:.3f}; accuracy guided {acc_guided:.2f} (gap {gap_guided:.3f}), plain {acc_plain:.2f} (gap {gap_plain:.3f})"
+    )
     assert acc_guided >= 0.9, "chance is 0.5"
     assert gap_guided > gap_plain

@@ -15,7 +15,9 @@ def synth_clip6():
 
     from drivewm.clips import Clip
 
-    clip = synth_clip(load_rig("nuscenes6"), "corridor", num_frames=9, seed=0, tags={"weather": "clear", "time_of_day": "day"})
+    clip = synth_clip(
+        load_rig("nuscenes6"), "corridor", num_frames=9, seed=0, tags={"weather": "clear", "time_of_day": "day"}
+    )
     return Clip(clip.meta, clip.mp4, clip.T_world_from_ego)  # frames decoded from H.264, as from a shard
 
 
@@ -25,8 +27,16 @@ def synth_item(synth_clip6):
     from drivewm.eval.inputs import EvalItem
 
     m = synth_clip6.meta
-    item = EvalItem(m.key, m.get_rig(), m.fps, synth_clip6.T_world_from_ego, dict(m.tags), m.trajectory_ego, m.trajectory_dt_s,
-                    clip=synth_clip6)
+    item = EvalItem(
+        m.key,
+        m.get_rig(),
+        m.fps,
+        synth_clip6.T_world_from_ego,
+        dict(m.tags),
+        m.trajectory_ego,
+        m.trajectory_dt_s,
+        clip=synth_clip6,
+    )
     item.videos()
     return item
 

@@ -39,17 +39,21 @@ def make_texture(seed: int) -> np.ndarray:
     return np.clip(base + 28.0 * acc, 0, 255)
 
 
-def render(rig: Rig, T_world_from_ego: np.ndarray, textures: list[np.ndarray], supersample: int = 2) -> dict[str, np.ndarray]:
+def render(
+    rig: Rig, T_world_from_ego: np.ndarray, textures: list[np.ndarray], supersample: int = 2
+) -> dict[str, np.ndarray]:
     """One uint8 RGB (H, W, 3) image per camera of ``rig`` at ego pose ``T_world_from_ego``."""
     out = {}
     for cam in rig.cameras:
         big = cam.scaled(cam.width * supersample, cam.height * supersample)
-        vv, uu = np.mgrid[0:big.height, 0:big.width]
+        vv, uu = np.mgrid[0 : big.height, 0 : big.width]
         rays = pixel_rays(big.K, np.stack([uu.ravel(), vv.ravel()], 1).astype(np.float64))
         T_wc = T_world_from_ego @ cam.T_ego_from_cam
         dirs, origin = rays @ T_wc[:3, :3].T, T_wc[:3, 3]
         color = _cast(origin, dirs, textures).reshape(big.height, big.width, 3)
-        out[cam.name] = cv2.resize(color, (cam.width, cam.height), interpolation=cv2.INTER_AREA).round().astype(np.uint8)
+        out[cam.name] = (
+            cv2.resize(color, (cam.width, cam.height), interpolation=cv2.INTER_AREA).round().astype(np.uint8)
+        )
     return out
 
 
@@ -92,7 +96,9 @@ def trajectory_waypoints(T_world_from_ego: np.ndarray) -> list[list[float]]:
     return [(T0_inv @ T)[:3, 3].tolist() for T in T_world_from_ego[1:]]
 
 
-def synth_frames(rig: Rig, num_frames: int = 9, fps: float = 10.0, seed: int = 0) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def synth_frames(
+    rig: Rig, num_frames: int = 9, fps: float = 10.0, seed: int = 0
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Per-camera uint8 (T, H, W, 3) videos and T_world_from_ego (T, 4, 4)."""
     textures = [make_texture(seed * 10 + i) for i in range(len(PLANES))]
     poses = ego_path(num_frames, fps)
@@ -104,9 +110,15 @@ def synth_clip(rig: Rig, key: str, num_frames: int = 9, fps: float = 10.0, seed:
     """A :class:`drivewm.clips.Clip` of the synthetic world (H.264 encoded, like any real clip)."""
     frames, poses = synth_frames(rig, num_frames, fps, seed)
     meta = ClipMeta(
-        key=key, source_log="synthetic", start_time_ns=0, fps=fps,
-        timestamps_ns=[int(i * 1e9 / fps) for i in range(num_frames)], rig=rig.to_dict(),
-        caption="a textured corridor", tags=tags or {},
-        trajectory_ego=trajectory_waypoints(poses), trajectory_dt_s=1.0 / fps,
+        key=key,
+        source_log="synthetic",
+        start_time_ns=0,
+        fps=fps,
+        timestamps_ns=[int(i * 1e9 / fps) for i in range(num_frames)],
+        rig=rig.to_dict(),
+        caption="a textured corridor",
+        tags=tags or {},
+        trajectory_ego=trajectory_waypoints(poses),
+        trajectory_dt_s=1.0 / fps,
     )
     return clip_from_arrays(meta, frames, poses)

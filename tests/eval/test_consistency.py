@@ -10,15 +10,23 @@ from drivewm.eval.consistency import cross_sampson, overlapping_pairs, temporal_
 from drivewm.eval.matching import FrameMatcher
 from drivewm.geometry import Rig, euler_to_R, load_rig, make_T
 
-RING = [("CAM_FRONT", "CAM_FRONT_RIGHT"), ("CAM_FRONT", "CAM_FRONT_LEFT"), ("CAM_FRONT_RIGHT", "CAM_BACK_RIGHT"),
-        ("CAM_BACK_RIGHT", "CAM_BACK"), ("CAM_BACK", "CAM_BACK_LEFT"), ("CAM_BACK_LEFT", "CAM_FRONT_LEFT")]
+RING = [
+    ("CAM_FRONT", "CAM_FRONT_RIGHT"),
+    ("CAM_FRONT", "CAM_FRONT_LEFT"),
+    ("CAM_FRONT_RIGHT", "CAM_BACK_RIGHT"),
+    ("CAM_BACK_RIGHT", "CAM_BACK"),
+    ("CAM_BACK", "CAM_BACK_LEFT"),
+    ("CAM_BACK_LEFT", "CAM_FRONT_LEFT"),
+]
 
 
 def test_overlapping_pairs_come_from_geometry_not_names():
     rig = load_rig("nuscenes6")
     assert overlapping_pairs(rig, ConsistencyConfig()) == RING
     renamed = Rig("x", [dataclasses.replace(c, name=f"cam{i}") for i, c in enumerate(rig.cameras)])
-    assert overlapping_pairs(renamed, ConsistencyConfig()) == [(f"cam{rig.names.index(a)}", f"cam{rig.names.index(b)}") for a, b in RING]
+    assert overlapping_pairs(renamed, ConsistencyConfig()) == [
+        (f"cam{rig.names.index(a)}", f"cam{rig.names.index(b)}") for a, b in RING
+    ]
     assert overlapping_pairs(load_rig("front1"), ConsistencyConfig()) == []
 
 
@@ -37,8 +45,14 @@ def baseline(synth_item, synth_videos):
 
 def test_synthetic_clip_scores_low_tse_and_cse(baseline):
     t, c = baseline
-    print("synthetic TSE fitted/calibrated", t["fitted"]["value_px"], t["calibrated"]["value_px"],
-          "CSE fitted/calibrated", c["fitted"]["value_px"], c["calibrated"]["value_px"])
+    print(
+        "synthetic TSE fitted/calibrated",
+        t["fitted"]["value_px"],
+        t["calibrated"]["value_px"],
+        "CSE fitted/calibrated",
+        c["fitted"]["value_px"],
+        c["calibrated"]["value_px"],
+    )
     assert t["fitted"]["status_counts"] == {"ok": 48} and c["calibrated"]["status_counts"] == {"ok": 6}
     assert 0.01 < t["fitted"]["value_px"] < 0.3
     assert 0.01 < t["calibrated"]["value_px"] < 0.3
@@ -67,7 +81,12 @@ def test_shuffled_frames_raise_tse(synth_item, synth_videos, baseline):
     order = np.array([0, 5, 2, 7, 4, 1, 8, 3, 6])
     shuffled = {c: v[order] for c, v in synth_videos.items()}
     t = tse(shuffled, synth_item.rig, synth_item.T_world_from_ego)
-    print("shuffled TSE fitted/calibrated", t["fitted"]["value_px"], t["calibrated"]["value_px"], t["fitted"]["status_counts"])
+    print(
+        "shuffled TSE fitted/calibrated",
+        t["fitted"]["value_px"],
+        t["calibrated"]["value_px"],
+        t["fitted"]["status_counts"],
+    )
     # The calibrated TSE sees the broken motion at once (~26x here). A static world stays
     # epipolar-consistent in any frame order, so the fitted-F TSE rises only through the harder,
     # wider-baseline matching (~1.3x here); moving traffic in real clips adds to it.

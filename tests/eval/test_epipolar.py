@@ -1,6 +1,7 @@
 import cv2
 import numpy as np
 import pytest
+from eval_euroc import load_euroc
 
 from drivewm.eval.config import EpipolarConfig, MatchConfig
 from drivewm.eval.epipolar import (
@@ -17,8 +18,6 @@ from drivewm.eval.epipolar import (
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import rotation_angle_deg
 
-from eval_euroc import load_euroc
-
 
 def test_sampson_equals_opencv_sampson_distance():
     rng = np.random.default_rng(0)
@@ -28,7 +27,7 @@ def test_sampson_equals_opencv_sampson_distance():
     ours_sq = sampson_px(F, x_a, x_b) ** 2
     ha = np.concatenate([x_a, np.ones((200, 1))], 1)
     hb = np.concatenate([x_b, np.ones((200, 1))], 1)
-    theirs = np.array([cv2.sampsonDistance(ha[i:i + 1].T, hb[i:i + 1].T, F) for i in range(200)])
+    theirs = np.array([cv2.sampsonDistance(ha[i : i + 1].T, hb[i : i + 1].T, F) for i in range(200)])
     np.testing.assert_allclose(ours_sq, theirs, rtol=1e-9)
     assert ours_sq.max() > 1.0  # random points are far from the epipolar lines: the check is not vacuous
 
@@ -51,7 +50,9 @@ def euroc_matches(shared_data):
     cam0, cam1, T_1_from_0, pairs = load_euroc(shared_data / "stereo" / "euroc_v101")
     matcher = FrameMatcher(MatchConfig())
     K_c = canonical_K(EpipolarConfig())
-    rect = [rectify_matches(matcher.match(("c0", i), a, ("c1", i), b), cam0, cam1, K_c) for i, (a, b) in enumerate(pairs)]
+    rect = [
+        rectify_matches(matcher.match(("c0", i), a, ("c1", i), b), cam0, cam1, K_c) for i, (a, b) in enumerate(pairs)
+    ]
     return K_c, T_1_from_0, rect
 
 

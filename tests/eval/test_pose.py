@@ -25,8 +25,12 @@ def test_synthetic_clip_registers_and_trajectory_matches(synth_item, front_sfm):
     ref = synth_item.T_world_from_ego
     err, sim = ate(ego.T_world_from_ego, ref)
     trans, rot = rpe(ego.T_world_from_ego, ref, 1, sim.scale)
-    follow = tfe(ego.T_world_from_ego, synth_item.fps, np.asarray(synth_item.trajectory_ego), synth_item.trajectory_dt_s)
-    print(f"synthetic SfM: ATE {err:.4f} m, RPE {trans:.4f} m / {rot:.4f} deg, TFE {follow:.4f} m, scale {sim.scale:.4f}")
+    follow = tfe(
+        ego.T_world_from_ego, synth_item.fps, np.asarray(synth_item.trajectory_ego), synth_item.trajectory_dt_s
+    )
+    print(
+        f"synthetic SfM: ATE {err:.4f} m, RPE {trans:.4f} m / {rot:.4f} deg, TFE {follow:.4f} m, scale {sim.scale:.4f}"
+    )
     assert err < 0.05 and trans < 0.05 and rot < 0.2 and follow < 0.05
     assert sim.scale == pytest.approx(1.0, abs=0.05)  # rig-aware: the fixed rig baselines make it metric
 

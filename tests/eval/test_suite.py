@@ -46,8 +46,20 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
 
 def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path, capsys):
     out = tmp_path / "eval"
-    rc = main(["eval", str(shard_dir), "--out", str(out), "--metrics", "tse,cse", "--workers", "2",
-               "--reference", "eval/reference/cosmos_paper.json"])
+    rc = main(
+        [
+            "eval",
+            str(shard_dir),
+            "--out",
+            str(out),
+            "--metrics",
+            "tse,cse",
+            "--workers",
+            "2",
+            "--reference",
+            "eval/reference/cosmos_paper.json",
+        ]
+    )
     assert rc == 0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["num_clips"] == 2 and set(metrics["clips"]) == {"corridor", "corridor2"}
@@ -74,9 +86,13 @@ def test_mp4_folder_and_grid_inputs_match_the_shard(shard_dir, synth_clip6, tmp_
     order = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_BACK_LEFT", "CAM_BACK", "CAM_BACK_RIGHT"]
     v = synth_clip6.videos()
     idx = [synth_clip6.meta.cameras.index(c) for c in order]
-    grid = np.concatenate([np.concatenate([v[i] for i in idx[:3]], axis=2), np.concatenate([v[i] for i in idx[3:]], axis=2)], axis=1)
+    grid = np.concatenate(
+        [np.concatenate([v[i] for i in idx[:3]], axis=2), np.concatenate([v[i] for i in idx[3:]], axis=2)], axis=1
+    )
     (tmp_path / "grid.mp4").write_bytes(encode_mp4(grid, 10.0))
-    by_grid = evaluate(tmp_path / "grid.mp4", rig="nuscenes6", grid="2x3", cameras=order, cfg=cfg, progress=False)["clips"]["grid"]
+    by_grid = evaluate(tmp_path / "grid.mp4", rig="nuscenes6", grid="2x3", cameras=order, cfg=cfg, progress=False)[
+        "clips"
+    ]["grid"]
     print("CSE shard / folder / grid:", ref["cse"], by_folder["cse"], by_grid["cse"])
     assert by_grid["cse"] == pytest.approx(ref["cse"], abs=0.1)  # re-encoded once more
     assert by_grid["cse_calibrated"] < 0.6
@@ -86,7 +102,10 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
     assert main(["eval", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "no such file or folder" in capsys.readouterr().err
     (tmp_path / "x.mp4").write_bytes(b"not a video")
-    assert main(["eval", str(tmp_path / "x.mp4"), "--rig", "nuscenes6", "--grid", "2x2", "--out", str(tmp_path / "o")]) == 2
+    assert (
+        main(["eval", str(tmp_path / "x.mp4"), "--rig", "nuscenes6", "--grid", "2x2", "--out", str(tmp_path / "o")])
+        == 2
+    )
     assert "4 cells but 6 camera names" in capsys.readouterr().err
     assert main(["eval", str(tmp_path / "x.mp4"), "--rig", "front1", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err

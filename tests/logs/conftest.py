@@ -41,7 +41,9 @@ def synthetic_pose(tick: int) -> np.ndarray:
 
 def synthetic_agents(tick: int) -> list[AgentBox]:
     return [
-        AgentBox("car-1", "car", np.array([20.0 + tick, 3.5, 0.8]), np.array([4.6, 1.9, 1.6]), 0.1 * tick, (0.9, 0.1, 0.2)),
+        AgentBox(
+            "car-1", "car", np.array([20.0 + tick, 3.5, 0.8]), np.array([4.6, 1.9, 1.6]), 0.1 * tick, (0.9, 0.1, 0.2)
+        ),
         AgentBox("truck-7", "truck", np.array([-15.0, -3.5, 1.6]), np.array([12.0, 2.5, 3.2]), -2.5, (0.2, 0.3, 0.9)),
     ]
 
@@ -54,9 +56,13 @@ def synthetic_road() -> list[RoadLine]:
     def line(offset: float) -> np.ndarray:
         return np.stack([10.0 + s, -3.0 + curve + offset, np.zeros_like(s)], axis=1)
 
-    return [RoadLine("lane_center", line(-1.75)), RoadLine("lane_center", line(1.75)),
-            RoadLine("lane_boundary", line(0.0), "dashed"), RoadLine("road_edge", line(-3.5), "solid"),
-            RoadLine("road_edge", line(3.5), "solid")]
+    return [
+        RoadLine("lane_center", line(-1.75)),
+        RoadLine("lane_center", line(1.75)),
+        RoadLine("lane_boundary", line(0.0), "dashed"),
+        RoadLine("road_edge", line(-3.5), "solid"),
+        RoadLine("road_edge", line(3.5), "solid"),
+    ]
 
 
 def make_synthetic_log(path: str = "synthetic") -> DriveLog:
@@ -67,8 +73,10 @@ def make_synthetic_log(path: str = "synthetic") -> DriveLog:
         for k, cam in enumerate(rig.cameras)
     }
     poses = np.stack([synthetic_pose(i) for i in range(TICKS)])
-    scene = SceneInfo({"weather": "snow", "time_of_day": "dusk", "road_type": "highway", "traffic_density": "low", "source": "test"},
-                      "a synthetic snowy drive")
+    scene = SceneInfo(
+        {"weather": "snow", "time_of_day": "dusk", "road_type": "highway", "traffic_density": "low", "source": "test"},
+        "a synthetic snowy drive",
+    )
     agents = [(t, synthetic_agents(i)) for i, t in enumerate(ts)]
     return DriveLog(path, rig, images, np.array(ts, dtype=np.int64), poses, scene, agents, synthetic_road())
 
@@ -86,7 +94,9 @@ def synthetic_mcap(tmp_path_factory, synthetic_log) -> str:
     return str(write_log(synthetic_log, tmp_path_factory.mktemp("logs") / "synthetic.mcap"))
 
 
-def _assert_same_log(got: DriveLog, want: DriveLog, rot_atol: float = 1e-12, agents: bool = True, road: bool = True) -> None:
+def _assert_same_log(
+    got: DriveLog, want: DriveLog, rot_atol: float = 1e-12, agents: bool = True, road: bool = True
+) -> None:
     """Same cameras (K, D, size exact; T_ego_from_cam to ``rot_atol``), same image bytes and
     times, same pose times, translations exact and rotations to ``rot_atol`` (the wire format is
     a quaternion), NaN gaps kept, same tags and description, same agents."""

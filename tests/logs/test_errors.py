@@ -53,13 +53,18 @@ def test_missing_file_and_unknown_topic_map(tmp_path, synthetic_mcap):
 
 def test_topic_map_naming_a_missing_topic(shared_data):
     talker = shared_data / "mcap/rosbag2_tests/rosbag2_py/test/resources/mcap/talker/talker.mcap"
-    with pytest.raises(DrivewmError, match=rf"^{talker}: topic map \S+/datasets/topicmaps/reductstore_demo.yaml names topic\(s\) \['/nissan/gps/duro/current_pose'\]"):
+    with pytest.raises(
+        DrivewmError,
+        match=rf"^{talker}: topic map \S+/datasets/topicmaps/reductstore_demo.yaml names topic\(s\) \['/nissan/gps/duro/current_pose'\]",
+    ):
         read_log(talker, topic_map="reductstore_demo", require_images=False)
 
 
 def test_images_without_calibration(tmp_path, synthetic_log):
     names = synthetic_log.rig.names
-    log = dataclasses.replace(synthetic_log, rig=synthetic_log.rig.subset(names[:2]))  # third camera loses its calibration
+    log = dataclasses.replace(
+        synthetic_log, rig=synthetic_log.rig.subset(names[:2])
+    )  # third camera loses its calibration
     path = write_log_json(log, tmp_path / "nocal.mcap")
     with pytest.raises(DrivewmError, match=rf"^{path}: images of camera\(s\) \['{names[2]}'\] have no calibration"):
         read_log(path)

@@ -18,7 +18,9 @@ RECEIVE_DELAY_NS = 3_000_000
 @pytest.mark.parametrize("ego_pose", ["tf", "pose_stamped", "odometry"])
 def test_ros2_bag_reads_as_same_drive(tmp_path, synthetic_log, assert_same_log, ego_pose):
     raw = (synthetic_log.rig.names[0],)  # one camera as raw sensor_msgs/Image, the others compressed
-    path = write_log_ros2(synthetic_log, tmp_path / "bag.mcap", raw_cameras=raw, ego_pose=ego_pose, receive_delay_ns=RECEIVE_DELAY_NS)
+    path = write_log_ros2(
+        synthetic_log, tmp_path / "bag.mcap", raw_cameras=raw, ego_pose=ego_pose, receive_delay_ns=RECEIVE_DELAY_NS
+    )
     tmap = ros2_topic_map(synthetic_log, raw, ego_pose)
     tmap.tags, tmap.description = dict(synthetic_log.scene.tags), synthetic_log.scene.description
     got = read_log(path, topic_map=tmap)

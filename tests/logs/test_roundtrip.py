@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from drivewm.errors import DrivewmError
 from drivewm.logs.reader import read_log
 from drivewm.logs.types import SceneInfo
 from drivewm.logs.writer import LogWriter, write_log
-
-from mcap.reader import make_reader
 
 
 def test_round_trip_same_drive(synthetic_mcap, synthetic_log, assert_same_log):
@@ -88,7 +87,10 @@ def test_two_writers_at_once_keep_their_own_channels(tmp_path):
     from drivewm.geometry import load_rig
 
     front, back = load_rig("front1").scaled(64, 48), load_rig("front3").scaled(32, 24)
-    a, b = LogWriter(tmp_path / "a.mcap", front, SceneInfo({"n": "a"})), LogWriter(tmp_path / "b.mcap", back, SceneInfo({"n": "b"}))
+    a, b = (
+        LogWriter(tmp_path / "a.mcap", front, SceneInfo({"n": "a"})),
+        LogWriter(tmp_path / "b.mcap", back, SceneInfo({"n": "b"})),
+    )
     for t in range(3):
         a.write_pose(t, np.eye(4))
         b.write_pose(t, np.eye(4))

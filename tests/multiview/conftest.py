@@ -46,8 +46,10 @@ def mv_latents(sim_clip_dir, tmp_path_factory):
 def mv_parent_dir(tmp_path_factory):
     """A tiny random Text2World model folder for those latents (the post-training init)."""
     torch.manual_seed(0)
-    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=48, depth=2, num_heads=4, adaln_lora_dim=8)),
-                        LatentInfo([3, 5, 6, 10], [0.0] * 3, [0.5] * 3, 10.0, None, {}))
+    parent = Text2World(
+        Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=48, depth=2, num_heads=4, adaln_lora_dim=8)),
+        LatentInfo([3, 5, 6, 10], [0.0] * 3, [0.5] * 3, 10.0, None, {}),
+    )
     out = tmp_path_factory.mktemp("mv_parent")
     parent.save_pretrained(out)
     return out

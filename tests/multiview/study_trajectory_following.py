@@ -55,7 +55,9 @@ def mirrored_cache(clip_dir: Path, out: Path, tok: PoolTokenizer) -> tuple[int, 
             z = tok.encode(rearrange(torch.from_numpy(v).float() / 127.5 - 1, "t h w c -> 1 c t h w"))
             traj = np.asarray(clip.meta.trajectory_ego) * (MIRROR_Y if mirror else 1.0)
             rig = clip.meta.get_rig().subset(["CAM_FRONT"]).to_dict()
-            meta = dataclasses.replace(clip.meta, key=clip.key + ("-m" if mirror else ""), trajectory_ego=traj.tolist(), rig=rig)
+            meta = dataclasses.replace(
+                clip.meta, key=clip.key + ("-m" if mirror else ""), trajectory_ego=traj.tolist(), rig=rig
+            )
             rows.append(write_latent_clip(out, meta, z, clip.T_world_from_ego))
     write_latent_index(out, {"path": None, "latent_mean": [0.0] * 3, "latent_std": [0.5] * 3}, rows)
     return tuple(z.shape[1:])
@@ -96,7 +98,19 @@ def conditional_losses(model: MultiView, ds: MultiViewDataset) -> np.ndarray:
             cond = build_conditioning(model, s.rig, [s.view_captions] * 4, np.stack([traj] * 4), s.fps)
             noise = torch.randn((4, *s.latents.shape[1:]), generator=torch.Generator().manual_seed(i))
             with torch.no_grad():
-                row.append(float(edm_loss(model.net, edm, s.latents.repeat(4, 1, 1, 1, 1), cond, sigmas, noise, torch.zeros(4, dtype=torch.bool))))
+                row.append(
+                    float(
+                        edm_loss(
+                            model.net,
+                            edm,
+                            s.latents.repeat(4, 1, 1, 1, 1),
+                            cond,
+                            sigmas,
+                            noise,
+                            torch.zeros(4, dtype=torch.bool),
+                        )
+                    )
+                )
         out.append(row)
     return np.array(out)
 
@@ -112,11 +126,22 @@ def main() -> None:
     tok = PoolTokenizer(args.pool)
     c, t, h, w = mirrored_cache(args.clip_dir, root / "latents", tok)
     torch.manual_seed(0)
-    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=c, hidden_dim=64, depth=3, num_heads=4, adaln_lora_dim=16)),
-                        LatentInfo([c, t, h, w], [0.0] * c, [0.5] * c, 10.0, None, {}))
+    parent = Text2World(
+        Text2WorldConfig(DiTConfig(in_channels=c, hidden_dim=64, depth=3, num_heads=4, adaln_lora_dim=16)),
+        LatentInfo([c, t, h, w], [0.0] * c, [0.5] * c, 10.0, None, {}),
+    )
     parent.save_pretrained(root / "t2w")
-    cfg = posttrain_config("debug", [f"train.steps={args.steps}", "train.batch_size=4", "train.lr=0.001", "train.checkpoint_every=100000",
-                                     "train.log_every=50", "sample_steps=2"])
+    cfg = posttrain_config(
+        "debug",
+        [
+            f"train.steps={args.steps}",
+            "train.batch_size=4",
+            "train.lr=0.001",
+            "train.checkpoint_every=100000",
+            "train.log_every=50",
+            "sample_steps=2",
+        ],
+    )
     print("post-training:", posttrain(cfg, root / "t2w", root / "latents", root / "mv"))
     model = MultiView.from_pretrained(root / "mv")
     ds = MultiViewDataset(root / "latents", None, 16)
@@ -126,17 +151,35 @@ def main() -> None:
         s = ds[i]
         if abs(heading_rad(s.trajectory)) < 0.15:
             continue
-        zs = [model.sample_latents(s.rig, [s.view_captions], tr[None], [i], steps=12, guidance=0.0)[0, 0] for tr in (s.trajectory, s.trajectory * MIRROR_Y)]
+        zs = [
+            model.sample_latents(s.rig, [s.view_captions], tr[None], [i], steps=12, guidance=0.0)[0, 0]
+            for tr in (s.trajectory, s.trajectory * MIRROR_Y)
+        ]
         real = phase_yaw_rad(ds.cache[i].latents[0], args.pool, focal)
-        rows.append((heading_rad(s.trajectory), real, *(phase_yaw_rad(z, args.pool, focal) for z in zs), *(sfm_registered(model, z, tok, s.rig) for z in zs)))
-        print("%-28s heading %+.2f  real-clip yaw %+.2f  sample yaw (own %+.2f, mirrored %+.2f)  SfM registered %d, %d of %d"
-              % (ds.cache.rows[i]["key"], *rows[-1], tok.decode(zs[0][None]).shape[2]))
+        rows.append(
+            (
+                heading_rad(s.trajectory),
+                real,
+                *(phase_yaw_rad(z, args.pool, focal) for z in zs),
+                *(sfm_registered(model, z, tok, s.rig) for z in zs),
+            )
+        )
+        print(
+            "%-28s heading %+.2f  real-clip yaw %+.2f  sample yaw (own %+.2f, mirrored %+.2f)  SfM registered %d, %d of %d"
+            % (ds.cache.rows[i]["key"], *rows[-1], tok.decode(zs[0][None]).shape[2])
+        )
     r = np.array(rows)
-    agree = np.concatenate([np.abs(r[:, 2] - r[:, 0]) < np.abs(r[:, 2] + r[:, 0]), np.abs(r[:, 3] + r[:, 0]) < np.abs(r[:, 3] - r[:, 0])])
-    print(f"phase-correlation yaw agrees with the conditioned (not the mirrored) trajectory: {agree.mean():.2f} of {len(agree)} (chance 0.5)")
+    agree = np.concatenate(
+        [np.abs(r[:, 2] - r[:, 0]) < np.abs(r[:, 2] + r[:, 0]), np.abs(r[:, 3] + r[:, 0]) < np.abs(r[:, 3] - r[:, 0])]
+    )
+    print(
+        f"phase-correlation yaw agrees with the conditioned (not the mirrored) trajectory: {agree.mean():.2f} of {len(agree)} (chance 0.5)"
+    )
     losses = conditional_losses(model, ds)
-    print("EDM loss own %.4f shuffled %.4f mirrored %.4f; own < shuffled in %.2f, own < mirrored in %.2f of %d clips"
-          % (*losses.mean(0), np.mean(losses[:, 0] < losses[:, 1]), np.mean(losses[:, 0] < losses[:, 2]), len(losses)))
+    print(
+        "EDM loss own %.4f shuffled %.4f mirrored %.4f; own < shuffled in %.2f, own < mirrored in %.2f of %d clips"
+        % (*losses.mean(0), np.mean(losses[:, 0] < losses[:, 1]), np.mean(losses[:, 0] < losses[:, 2]), len(losses))
+    )
     shutil.rmtree(root, ignore_errors=True)
 
 

@@ -81,18 +81,40 @@ from drivewm.multiview.model import MultiView, build_conditioning  # noqa: E402
 from drivewm.multiview.posttrain import posttrain, posttrain_config  # noqa: E402
 
 
-def train_model(latent_dir: Path, root: Path, steps: int, lr: float, batch_size: int, p_mean: float = -1.2, overrides: list[str] | None = None) -> MultiView:
+def train_model(
+    latent_dir: Path,
+    root: Path,
+    steps: int,
+    lr: float,
+    batch_size: int,
+    p_mean: float = -1.2,
+    overrides: list[str] | None = None,
+) -> MultiView:
     """A tiny random Text2World parent (patch 4 on the (3, 5, 24, 40) latents) post-trained with
     Video2World on every step. ``p_mean``: centre of the training ln(sigma) (EDM default -1.2;
     higher puts the training on the noise levels where the motion is decided, not read off the input)."""
     torch.manual_seed(0)
     dit = DiTConfig(in_channels=3, patch_size=4, hidden_dim=64, depth=3, num_heads=4, adaln_lora_dim=16)
-    parent = Text2World(Text2WorldConfig(dit, EDMConfig(p_mean=p_mean)),
-                        LatentInfo([3, 5, 24, 40], [0.0] * 3, [0.5] * 3, 10.0, None, {}))
+    parent = Text2World(
+        Text2WorldConfig(dit, EDMConfig(p_mean=p_mean)),
+        LatentInfo([3, 5, 24, 40], [0.0] * 3, [0.5] * 3, 10.0, None, {}),
+    )
     parent.save_pretrained(root / "t2w")
-    cfg = posttrain_config("debug", [f"train.steps={steps}", f"train.batch_size={batch_size}", f"train.lr={lr}", "train.warmup_steps=20",
-                                     "train.checkpoint_every=100000", "train.log_every=100", "sample_steps=2",
-                                     "multiview.video2world_prob=1.0", "cond_frames=1", *(overrides or [])])
+    cfg = posttrain_config(
+        "debug",
+        [
+            f"train.steps={steps}",
+            f"train.batch_size={batch_size}",
+            f"train.lr={lr}",
+            "train.warmup_steps=20",
+            "train.checkpoint_every=100000",
+            "train.log_every=100",
+            "sample_steps=2",
+            "multiview.video2world_prob=1.0",
+            "cond_frames=1",
+            *(overrides or []),
+        ],
+    )
     posttrain(cfg, root / "t2w", latent_dir, root / "mv")
     return MultiView.from_pretrained(root / "mv")
 
@@ -100,10 +122,16 @@ def train_model(latent_dir: Path, root: Path, steps: int, lr: float, batch_size:
 def turned_pairs(ds: MultiViewDataset, rate: float) -> list[tuple[int, int]]:
     """(index of the +rate copy, index of the -rate copy) of every clip."""
     by_key = {ds.cache.rows[i]["key"]: i for i in range(len(ds))}
-    return [(i, by_key[k.replace(f"@{rate:+.2f}", f"@{-rate:+.2f}")]) for k, i in sorted(by_key.items()) if k.endswith(f"@{rate:+.2f}")]
+    return [
+        (i, by_key[k.replace(f"@{rate:+.2f}", f"@{-rate:+.2f}")])
+        for k, i in sorted(by_key.items())
+        if k.endswith(f"@{rate:+.2f}")
+    ]
 
 
-def sampled_pairs(model: MultiView, ds: MultiViewDataset, rate: float, steps: int, seeds: int = 1, trajectory_guidance: float = 1.0) -> list[tuple[float, float, float, float]]:
+def sampled_pairs(
+    model: MultiView, ds: MultiViewDataset, rate: float, steps: int, seeds: int = 1, trajectory_guidance: float = 1.0
+) -> list[tuple[float, float, float, float]]:
     """Per clip and seed: (conditioned yaw left, right, recovered yaw left, right); both samples from
     the same seed and the clip's own frame 0 (Video2World)."""
     out = []
@@ -112,11 +140,21 @@ def sampled_pairs(model: MultiView, ds: MultiViewDataset, rate: float, steps: in
         s = ds[pair[0]]
         rec = []
         for i in pair:
-            z = model.sample_latents(s.rig, [s.view_captions], ds[i].trajectory[None], [n], steps=steps, guidance=1.0,
-                                     cond_latents=ds.cache[i].latents[None], trajectory_guidance=trajectory_guidance)[0, 0]
+            z = model.sample_latents(
+                s.rig,
+                [s.view_captions],
+                ds[i].trajectory[None],
+                [n],
+                steps=steps,
+                guidance=1.0,
+                cond_latents=ds.cache[i].latents[None],
+                trajectory_guidance=trajectory_guidance,
+            )[0, 0]
             rec.append(recovered_yaw(decode_bilinear(z), s.rig.cameras[0]))
         out.append((trajectory_yaw(ds[pair[0]].trajectory), trajectory_yaw(ds[pair[1]].trajectory), *rec))
-        print("%-28s conditioned yaw %+.2f / %+.2f  recovered %+.2f / %+.2f" % (ds.cache.rows[pair[0]]["key"], *out[-1]))
+        print(
+            "%-28s conditioned yaw %+.2f / %+.2f  recovered %+.2f / %+.2f" % (ds.cache.rows[pair[0]]["key"], *out[-1])
+        )
     return out
 
 
@@ -130,8 +168,19 @@ def conditional_losses(model: MultiView, ds: MultiViewDataset, rate: float, sigm
                 cond = build_conditioning(model, s.rig, [s.view_captions] * 4, np.stack([traj] * 4), s.fps)
                 noise = torch.randn((4, *s.latents.shape[1:]), generator=torch.Generator().manual_seed(a))
                 with torch.no_grad():
-                    row.append(float(edm_loss(model.net, model.cfg.edm, s.latents.repeat(4, 1, 1, 1, 1), cond, torch.full((4,), sigma),
-                                              noise, torch.ones(4, dtype=torch.bool))))
+                    row.append(
+                        float(
+                            edm_loss(
+                                model.net,
+                                model.cfg.edm,
+                                s.latents.repeat(4, 1, 1, 1, 1),
+                                cond,
+                                torch.full((4,), sigma),
+                                noise,
+                                torch.ones(4, dtype=torch.bool),
+                            )
+                        )
+                    )
             rows.append(row)
     return np.array(rows)
 
@@ -147,9 +196,17 @@ def main() -> None:
     p.add_argument("--sample-steps", type=int, nargs="+", default=[8], help="sampler steps (one measurement each)")
     p.add_argument("--seeds", type=int, default=1, help="sample pairs per clip")
     p.add_argument("--p-mean", type=float, default=-1.2, help="centre of the training ln(sigma)")
-    p.add_argument("--trajectory-guidance", type=float, nargs="+", default=[1.0], help="trajectory guidance scales to sample with")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="post-training override, e.g. multiview.warp_condition=true")
+    p.add_argument(
+        "--trajectory-guidance", type=float, nargs="+", default=[1.0], help="trajectory guidance scales to sample with"
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="post-training override, e.g. multiview.warp_condition=true",
+    )
     p.add_argument("--rate", type=float, default=0.25, help="extra yaw rate (rad/s) of the turned copies")
     args = p.parse_args()
     torch.set_num_threads(1)
@@ -160,12 +217,16 @@ def main() -> None:
     for steps, w in [(s, w) for s in args.sample_steps for w in args.trajectory_guidance]:
         pairs = sampled_pairs(model, ds, args.rate, steps, seeds=args.seeds, trajectory_guidance=w)
         hits = paired_agreement(pairs)
-        print(f"{steps} Heun steps, trajectory guidance {w}: pairs whose recovered yaws fit their own trajectories better than the swapped ones: {hits} of "
-              f"{len(pairs)} (random response 1/2; one-sided binomial p = {binomtest(hits, len(pairs), 0.5, alternative='greater').pvalue:.3f})")
+        print(
+            f"{steps} Heun steps, trajectory guidance {w}: pairs whose recovered yaws fit their own trajectories better than the swapped ones: {hits} of "
+            f"{len(pairs)} (random response 1/2; one-sided binomial p = {binomtest(hits, len(pairs), 0.5, alternative='greater').pvalue:.3f})"
+        )
     for sigma in (0.2, 1.0, 5.0):
         losses = conditional_losses(model, ds, args.rate, sigma)
-        print(f"sigma {sigma}: Video2World EDM loss own {losses[:, 0].mean():.4f} swapped {losses[:, 1].mean():.4f}; "
-              f"own < swapped for {np.mean(losses[:, 0] < losses[:, 1]):.2f} of {len(losses)}")
+        print(
+            f"sigma {sigma}: Video2World EDM loss own {losses[:, 0].mean():.4f} swapped {losses[:, 1].mean():.4f}; "
+            f"own < swapped for {np.mean(losses[:, 0] < losses[:, 1]):.2f} of {len(losses)}"
+        )
     shutil.rmtree(root, ignore_errors=True)
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from mv_standin import PoolTokenizer
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
@@ -18,8 +19,6 @@ from drivewm.multiview.model import MultiView
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
 
-from mv_standin import PoolTokenizer
-
 FRONT3 = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
 
 
@@ -28,8 +27,23 @@ def trained_mv(mv_latents: Path, mv_parent_dir: Path, tmp_path_factory) -> tuple
     """A multi-view model post-trained on front3 (30 steps) from the tiny Text2World parent."""
     root, cache = tmp_path_factory.mktemp("mv_cli"), mv_latents
     (root / "t2w").symlink_to(mv_parent_dir)
-    args = ["posttrain", "--init", str(root / "t2w"), "--data", str(cache), "--rig", "front3", "--out", str(root / "mv"),
-            "--set", "train.steps=30", "--set", "train.checkpoint_every=1000", "--set", "sample_steps=2"]
+    args = [
+        "posttrain",
+        "--init",
+        str(root / "t2w"),
+        "--data",
+        str(cache),
+        "--rig",
+        "front3",
+        "--out",
+        str(root / "mv"),
+        "--set",
+        "train.steps=30",
+        "--set",
+        "train.checkpoint_every=1000",
+        "--set",
+        "sample_steps=2",
+    ]
     assert main(args) == 0
     return root, cache
 
@@ -48,14 +62,38 @@ def test_posttrain_writes_a_multiview_folder(trained_mv):
 def test_generate_writes_clips_for_any_rig(trained_mv, rig, views):
     root, _ = trained_mv
     out = root / f"gen_{rig}"
-    assert main(["generate", "--model", str(root / "mv"), "--rig", rig, "--prompt", "a snowy highway", "--trajectory", "left",
-                 "--steps", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "--model",
+                str(root / "mv"),
+                "--rig",
+                rig,
+                "--prompt",
+                "a snowy highway",
+                "--trajectory",
+                "left",
+                "--steps",
+                "2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     clips = list(iter_clips(out))
     assert len(clips) == 1 and len(clips[0].meta.cameras) == views
     meta = clips[0].meta
-    np.testing.assert_allclose(meta.trajectory_ego, resolve_trajectory("left", 16, 0.1, meta.extra["speed_mps"]), atol=1e-9)
+    np.testing.assert_allclose(
+        meta.trajectory_ego, resolve_trajectory("left", 16, 0.1, meta.extra["speed_mps"]), atol=1e-9
+    )
     assert meta.trajectory_ego[-1][1] > 0.1  # a left turn ends to the left (ego y > 0)
-    assert clips[0].videos().shape[:2] == (views, 5) and clips[0].T_world_from_ego.shape == (5, 4, 4)  # preview: latent frames
+    assert clips[0].videos().shape[:2] == (views, 5) and clips[0].T_world_from_ego.shape == (
+        5,
+        4,
+        4,
+    )  # preview: latent frames
     assert "front-left camera view of a snowy highway" in meta.view_captions["CAM_FRONT_LEFT"]
     assert (out / "sample_000.mp4").stat().st_size > 0 and (out / "contact_sheet.png").is_file()
     from drivewm.eval.inputs import load_items
@@ -75,14 +113,46 @@ def test_rollout_continues_a_real_clip_and_keeps_its_frames(trained_mv, sim_clip
     assert (real - kept).abs().mean() < 1.0
     travelled = sample.trajectory_ego[-1][0]
     assert np.asarray(sample.trajectory_ego).shape == (32, 3)
-    np.testing.assert_allclose(travelled, sample.extra["speed_mps"] * 3.2 / 2, rtol=0.02)  # uniform stop over 3.2 s: v T / 2
+    np.testing.assert_allclose(
+        travelled, sample.extra["speed_mps"] * 3.2 / 2, rtol=0.02
+    )  # uniform stop over 3.2 s: v T / 2
 
 
 def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
     root, cache = trained_mv
-    assert main(["generate", "--model", str(root / "mv"), "--prompt", "x", "--trajectory", str(tmp_path / "nope.npy"), "--out", str(tmp_path / "g")]) == 2
+    assert (
+        main(
+            [
+                "generate",
+                "--model",
+                str(root / "mv"),
+                "--prompt",
+                "x",
+                "--trajectory",
+                str(tmp_path / "nope.npy"),
+                "--out",
+                str(tmp_path / "g"),
+            ]
+        )
+        == 2
+    )
     assert "nope.npy" in capsys.readouterr().err
-    assert main(["posttrain", "--init", str(root / "t2w"), "--data", str(cache), "--rig", "nonexistent_rig", "--out", str(tmp_path / "m")]) == 2
+    assert (
+        main(
+            [
+                "posttrain",
+                "--init",
+                str(root / "t2w"),
+                "--data",
+                str(cache),
+                "--rig",
+                "nonexistent_rig",
+                "--out",
+                str(tmp_path / "m"),
+            ]
+        )
+        == 2
+    )
     assert "nonexistent_rig" in capsys.readouterr().err
     assert main(["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
     assert "model_type" in capsys.readouterr().err
@@ -94,7 +164,10 @@ def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(
     assert model.net.trajectory_encoder.net[-1].weight.abs().sum() > 0  # left zero-init behind
     rig = model.training_rig
     caps = [["a highway"] * 3]
-    z = [model.sample_latents(rig, caps, resolve_trajectory(name, 16, 0.1, 20.0)[None], [7], steps=4, guidance=1.0) for name in ("left", "right")]
+    z = [
+        model.sample_latents(rig, caps, resolve_trajectory(name, 16, 0.1, 20.0)[None], [7], steps=4, guidance=1.0)
+        for name in ("left", "right")
+    ]
     assert (z[0] - z[1]).abs().mean() > 1e-3  # same seed, other trajectory: another sample
 
 
@@ -112,8 +185,10 @@ def mv_with_tokenizer(tmp_path_factory) -> Path:
     torch.manual_seed(0)
     tok = Tokenizer(preset("debug"))
     tok.save_pretrained(root / "tok")
-    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
-                        LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}))
+    parent = Text2World(
+        Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
+        LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}),
+    )
     from drivewm.multiview.config import MultiViewConfig
 
     mv = from_text2world(parent, MultiViewConfig(warp_condition=True))
@@ -124,16 +199,58 @@ def mv_with_tokenizer(tmp_path_factory) -> Path:
 
 def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_tokenizer, sim_clip_dir, tmp_path):
     first = load_clip(sim_clip_dir)
-    assert main(["rollout", "--model", str(mv_with_tokenizer), "--clip", str(sim_clip_dir), "--key", first.key, "--trajectory", "right",
-                 "--windows", "1", "--steps", "1", "--trajectory-guidance", "2", "--out", str(tmp_path / "roll")]) == 0
+    assert (
+        main(
+            [
+                "rollout",
+                "--model",
+                str(mv_with_tokenizer),
+                "--clip",
+                str(sim_clip_dir),
+                "--key",
+                first.key,
+                "--trajectory",
+                "right",
+                "--windows",
+                "1",
+                "--steps",
+                "1",
+                "--trajectory-guidance",
+                "2",
+                "--out",
+                str(tmp_path / "roll"),
+            ]
+        )
+        == 0
+    )
     (clip,) = list(iter_clips(tmp_path / "roll"))
-    assert clip.meta.cameras == ["CAM_FRONT"] and clip.meta.num_frames == 17 and clip.meta.extra["rollout_of"] == first.key
+    assert (
+        clip.meta.cameras == ["CAM_FRONT"] and clip.meta.num_frames == 17 and clip.meta.extra["rollout_of"] == first.key
+    )
     real, kept = first.video("CAM_FRONT")[0].astype(float), clip.video("CAM_FRONT")[0].astype(float)
     assert np.abs(real - kept).mean() < 4.0  # the conditioning frame is the real one (through H.264 at crf 18)
     assert clip.meta.trajectory_ego[-1][1] < -0.05  # turning right: the ego ends to the right (y < 0)
 
-    assert main(["generate", "--model", str(mv_with_tokenizer), "--prompt", "night", "--condition-clip", str(sim_clip_dir),
-                 "--steps", "1", "--trajectory-guidance", "3", "--out", str(tmp_path / "gen")]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "--model",
+                str(mv_with_tokenizer),
+                "--prompt",
+                "night",
+                "--condition-clip",
+                str(sim_clip_dir),
+                "--steps",
+                "1",
+                "--trajectory-guidance",
+                "3",
+                "--out",
+                str(tmp_path / "gen"),
+            ]
+        )
+        == 0
+    )
     (gen,) = list(iter_clips(tmp_path / "gen"))
     assert gen.meta.num_frames == 17 and gen.meta.extra["condition_clip"] == str(sim_clip_dir)
     assert gen.meta.extra["trajectory_guidance"] == 3.0

@@ -16,7 +16,14 @@ from drivewm.multiview.cross_view import view_neighbors
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.trajectories import resolve_trajectory
 
-CAPTIONS = ["a snowy highway", "a clear roundabout at noon", "night in a city grid", "fog on a bridge", "rain, lorry ahead", "empty road"]
+CAPTIONS = [
+    "a snowy highway",
+    "a clear roundabout at noon",
+    "night in a city grid",
+    "fog on a bridge",
+    "rain, lorry ahead",
+    "empty road",
+]
 
 
 def _inputs(model, rig, b=2, seed=0):
@@ -50,7 +57,9 @@ def test_same_checkpoint_runs_three_and_six_camera_rigs(parent, tmp_path):
     mv = MultiView.from_pretrained(tmp_path / "mv")
     for rig_name, v in [("front3", 3), ("nuscenes6", 6)]:
         rig = load_rig(rig_name)
-        z = mv.sample_latents(rig, [CAPTIONS[:v]], resolve_trajectory("straight", 16, 0.1)[None], seeds=[0], steps=3, guidance=2.0)
+        z = mv.sample_latents(
+            rig, [CAPTIONS[:v]], resolve_trajectory("straight", 16, 0.1)[None], seeds=[0], steps=3, guidance=2.0
+        )
         assert z.shape == (1, v, *mv.latent.latent_shape) and torch.isfinite(z).all()
 
 
@@ -130,7 +139,15 @@ def test_video2world_keeps_the_conditioning_frames(parent):
     mv = from_text2world(parent, cond_frames=1)
     rig = load_rig("front3")
     cond_latents = torch.randn(1, 3, *mv.latent.latent_shape) * 0.9 + 0.1
-    z = mv.sample_latents(rig, [CAPTIONS[:3]], resolve_trajectory("right", 16, 0.1)[None], [5], steps=3, guidance=1.0, cond_latents=cond_latents)
+    z = mv.sample_latents(
+        rig,
+        [CAPTIONS[:3]],
+        resolve_trajectory("right", 16, 0.1)[None],
+        [5],
+        steps=3,
+        guidance=1.0,
+        cond_latents=cond_latents,
+    )
     torch.testing.assert_close(z[:, :, :, :1], cond_latents[:, :, :, :1], rtol=1e-5, atol=1e-5)
     assert (z[:, :, :, 1:] - cond_latents[:, :, :, 1:]).abs().mean() > 0.1
 
@@ -146,7 +163,9 @@ def test_plucker_rays_are_the_camera_rays_and_move_with_the_ego():
     cam = rig.cameras[0]
     # A point at depth 7 m along the ray of a patch centre lies on the Plucker line: m = p x d.
     d, m = rays[0, 13, :3].numpy(), rays[0, 13, 3:].numpy()
-    p = transform_points(cam.T_ego_from_cam, 7.0 * np.linalg.solve(cam.K, [(3 + 0.5) * 32 - 0.5, (1 + 0.5) * 32 - 0.5, 1.0]))
+    p = transform_points(
+        cam.T_ego_from_cam, 7.0 * np.linalg.solve(cam.K, [(3 + 0.5) * 32 - 0.5, (1 + 0.5) * 32 - 0.5, 1.0])
+    )
     np.testing.assert_allclose(np.cross(p, d), m, atol=1e-9)
     # Moving the ego by T equals the rig mounted at T @ T_ego_from_cam.
     T = T_from_xyz_yaw(4.0, -1.5, 0.0, 0.3)

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from yaw_augment import decode_bilinear, paired_agreement, recovered_yaw, trajectory_yaw, turned_poses, write_turned_cache
+from yaw_augment import (
+    decode_bilinear,
+    paired_agreement,
+    recovered_yaw,
+    trajectory_yaw,
+    turned_poses,
+    write_turned_cache,
+)
 
 from drivewm.clips import iter_clips
 from drivewm.geometry import invert_T, yaw_of
@@ -40,7 +47,13 @@ def test_estimator_tells_left_from_right_turned_copies_after_tokenizer(turned_la
         if key.endswith("@+0.25"):
             j = by_key[key.replace("@+0.25", "@-0.25")]
             cam = ds[i].rig.cameras[0]
-            pairs.append((trajectory_yaw(ds[i].trajectory), trajectory_yaw(ds[j].trajectory),
-                          recovered_yaw(decode_bilinear(ds.cache[i].latents[0]), cam), recovered_yaw(decode_bilinear(ds.cache[j].latents[0]), cam)))
+            pairs.append(
+                (
+                    trajectory_yaw(ds[i].trajectory),
+                    trajectory_yaw(ds[j].trajectory),
+                    recovered_yaw(decode_bilinear(ds.cache[i].latents[0]), cam),
+                    recovered_yaw(decode_bilinear(ds.cache[j].latents[0]), cam),
+                )
+            )
     assert len(pairs) == 12
     assert paired_agreement(pairs) >= 11, pairs

@@ -94,8 +94,10 @@ def test_warp_reaches_the_model_only_with_its_trajectory():
     from drivewm.multiview.trajectories import resolve_trajectory
 
     torch.manual_seed(0)
-    parent = Text2World(Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
-                        LatentInfo([3, 3, 8, 12], [0.0] * 3, [0.5] * 3, 10.0, None, {}))
+    parent = Text2World(
+        Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
+        LatentInfo([3, 3, 8, 12], [0.0] * 3, [0.5] * 3, 10.0, None, {}),
+    )
     with torch.no_grad():  # as after pre-training: zero-initialised output layers are not zero any more
         for p in parent.dit.parameters():
             p.add_(0.05 * torch.randn_like(p))
@@ -109,7 +111,9 @@ def test_warp_reaches_the_model_only_with_its_trajectory():
     sigma = torch.full((3,), 2.0)
     with torch.no_grad():
         fresh = mv.net(x, sigma, cond)
-        torch.testing.assert_close(fresh, mv.net(x, sigma, dataclasses.replace(cond, warp_grid=None)))  # zero init: no effect yet
+        torch.testing.assert_close(
+            fresh, mv.net(x, sigma, dataclasses.replace(cond, warp_grid=None))
+        )  # zero init: no effect yet
         torch.nn.init.normal_(mv.net.warp_encoder.proj.weight, std=0.5)
         used = mv.net(x, sigma, cond)
         free = mv.net(x, sigma, cond.without_trajectory())

@@ -65,8 +65,13 @@ def write_turned_cache(clip_dir: Path, out: Path, yaw_rates_rps: tuple[float, ..
             P = turned_poses(clip.T_world_from_ego, rate, dt)
             video = turned_video(clip.video(CAMERA), clip.T_world_from_ego, P, camera)
             z = tok.encode(rearrange(torch.from_numpy(video).float() / 127.5 - 1, "t h w c -> 1 c t h w"))
-            meta = dataclasses.replace(clip.meta, key=f"{clip.key}@{rate:+.2f}", trajectory_ego=P[1:, :3, 3].tolist(),
-                                       trajectory_dt_s=dt, rig=clip.meta.get_rig().subset([CAMERA]).to_dict())
+            meta = dataclasses.replace(
+                clip.meta,
+                key=f"{clip.key}@{rate:+.2f}",
+                trajectory_ego=P[1:, :3, 3].tolist(),
+                trajectory_dt_s=dt,
+                rig=clip.meta.get_rig().subset([CAMERA]).to_dict(),
+            )
             rows.append(write_latent_clip(out, meta, z, clip.T_world_from_ego[0] @ P))
     write_latent_index(out, {"path": None, "latent_mean": [0.0] * 3, "latent_std": [0.5] * 3}, rows)
     return out
@@ -75,7 +80,9 @@ def write_turned_cache(clip_dir: Path, out: Path, yaw_rates_rps: tuple[float, ..
 def decode_bilinear(latents: torch.Tensor, pool: int = 8) -> np.ndarray:
     """Raw pooled latents (c, t, h, w) in [-1, 1] -> uint8 (1 + 4 (t - 1), H, W, 3): each latent
     frame upsampled bilinearly (a smooth stand-in decoder), laid out 4x as PoolTokenizer.decode does."""
-    frames = F.interpolate(rearrange(latents, "c t h w -> t c h w"), scale_factor=pool, mode="bilinear", align_corners=False)
+    frames = F.interpolate(
+        rearrange(latents, "c t h w -> t c h w"), scale_factor=pool, mode="bilinear", align_corners=False
+    )
     frames = torch.cat([frames[:1], frames[1:].repeat_interleave(4, dim=0)])
     return ((rearrange(frames, "t c h w -> t h w c").clamp(-1, 1) + 1) * 127.5).round().byte().numpy()
 

@@ -24,7 +24,9 @@ def sift(img_rgb: np.ndarray, ignore: np.ndarray | None = None) -> tuple[np.ndar
     return xy, desc
 
 
-def match(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray], ratio: float = 0.8) -> tuple[np.ndarray, np.ndarray]:
+def match(
+    a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray], ratio: float = 0.8
+) -> tuple[np.ndarray, np.ndarray]:
     """Lowe ratio-test matches between two (keypoints, descriptors): (x_a, x_b) each (M, 2)."""
     if len(a[1]) < 2 or len(b[1]) < 2:
         return np.zeros((0, 2)), np.zeros((0, 2))
@@ -38,8 +40,13 @@ def in_view_of(cam_from: Camera, cam_to: Camera, uv: np.ndarray, margin_px: floa
     ``margin_px`` for parallax): a match outside the shared field of view cannot be right."""
     R = (invert_T(cam_to.T_ego_from_cam) @ cam_from.T_ego_from_cam)[:3, :3]
     p, z = project(cam_to.K, pixel_rays(cam_from.K, uv) @ R.T)
-    return (z > 0) & (p[:, 0] > -margin_px) & (p[:, 0] < cam_to.width + margin_px) & (p[:, 1] > -margin_px) & (
-        p[:, 1] < cam_to.height + margin_px)
+    return (
+        (z > 0)
+        & (p[:, 0] > -margin_px)
+        & (p[:, 0] < cam_to.width + margin_px)
+        & (p[:, 1] > -margin_px)
+        & (p[:, 1] < cam_to.height + margin_px)
+    )
 
 
 def agent_mask(cam: Camera, T_world_from_ego: np.ndarray, boxes: list[AgentBox], pad_px: int = 3) -> np.ndarray:

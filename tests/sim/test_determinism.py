@@ -10,8 +10,16 @@ from drivewm.sim.simulate import record
 
 
 def test_same_seed_same_pixels(tmp_path) -> None:
-    cfg = SimConfig(source="highway", scenario="merge", weather="rain", time_of_day="dusk", duration_s=0.4, seed=11,
-                    width=160, height=96)
+    cfg = SimConfig(
+        source="highway",
+        scenario="merge",
+        weather="rain",
+        time_of_day="dusk",
+        duration_s=0.4,
+        seed=11,
+        width=160,
+        height=96,
+    )
     a = read_log(simulate(cfg, tmp_path / "a.mcap", progress=False))
     b = read_log(simulate(cfg, tmp_path / "b.mcap", progress=False))
     c = read_log(simulate(SimConfig(**{**cfg.__dict__, "seed": 12}), tmp_path / "c.mcap", progress=False))

@@ -12,14 +12,17 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from sim_matching import agent_mask, in_view_of, match, sift
 
 from drivewm.geometry import fundamental_from_T, invert_T, rotation_angle_deg, sampson_distance_sq
 from drivewm.logs.reader import read_log
 
-from sim_matching import agent_mask, in_view_of, match, sift
-
-PAIRS = [("CAM_FRONT", "CAM_FRONT_LEFT"), ("CAM_FRONT_RIGHT", "CAM_FRONT"), ("CAM_BACK", "CAM_BACK_LEFT"),
-         ("CAM_BACK_RIGHT", "CAM_BACK")]
+PAIRS = [
+    ("CAM_FRONT", "CAM_FRONT_LEFT"),
+    ("CAM_FRONT_RIGHT", "CAM_FRONT"),
+    ("CAM_BACK", "CAM_BACK_LEFT"),
+    ("CAM_BACK_RIGHT", "CAM_BACK"),
+]
 
 
 @pytest.fixture(scope="module")

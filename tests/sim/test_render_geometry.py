@@ -24,15 +24,27 @@ def _straight_road() -> RoadMap:
     x = np.linspace(-60, 120, 181)
     center = np.stack([x, np.zeros_like(x)], axis=1)
     right, left = center - [0, 1.75], center + [0, 1.75]
-    return RoadMap([center], [3.5], [LaneBoundary(right, "solid"), LaneBoundary(left, "dashed")], [right, left],
-                   [np.concatenate([right, left[::-1]])])
+    return RoadMap(
+        [center],
+        [3.5],
+        [LaneBoundary(right, "solid"), LaneBoundary(left, "dashed")],
+        [right, left],
+        [np.concatenate([right, left[::-1]])],
+    )
 
 
 @pytest.fixture(scope="module")
 def renderer() -> Renderer:
     rig = load_rig("nuscenes6")
-    return Renderer(rig, _straight_road(), condition_for("clear", "day"), 0, np.array([-80.0, -80.0]), np.array([140.0, 80.0]),
-                    urban=False)
+    return Renderer(
+        rig,
+        _straight_road(),
+        condition_for("clear", "day"),
+        0,
+        np.array([-80.0, -80.0]),
+        np.array([140.0, 80.0]),
+        urban=False,
+    )
 
 
 def _marker(point, facing_xy: np.ndarray):
@@ -73,8 +85,15 @@ def _check_marker(renderer: Renderer, images: dict, name: str, marker, point) ->
     assert np.abs(centroid(found) - uv[0]).max() < 0.5 + 1e-6  # the centre, up to border quantisation
 
 
-@pytest.mark.parametrize("camera,point", [("CAM_FRONT", (14.0, 1.2, 1.6)), ("CAM_FRONT_LEFT", (7.0, 7.5, 1.0)),
-                                          ("CAM_BACK", (-7.0, -1.0, 0.9)), ("CAM_BACK_RIGHT", (-4.0, -9.0, 1.2))])
+@pytest.mark.parametrize(
+    "camera,point",
+    [
+        ("CAM_FRONT", (14.0, 1.2, 1.6)),
+        ("CAM_FRONT_LEFT", (7.0, 7.5, 1.0)),
+        ("CAM_BACK", (-7.0, -1.0, 0.9)),
+        ("CAM_BACK_RIGHT", (-4.0, -9.0, 1.2)),
+    ],
+)
 def test_marker_lands_on_its_projection(renderer: Renderer, camera: str, point) -> None:
     marker = _marker(point, renderer.rig.camera(camera).T_ego_from_cam[:2, 3])
     _check_marker(renderer, renderer.render(T_WORLD_FROM_EGO, [marker]), camera, marker, point)

@@ -30,7 +30,9 @@ def _check_recording(rec, cfg: SimConfig) -> None:
     # Heading agrees with the direction of travel, for the ego and for every moving agent.
     moved = np.diff(xy, axis=0)
     fast = np.linalg.norm(moved, axis=1) > 0.3
-    heading_err = np.angle(np.exp(1j * (np.arctan2(moved[:, 1], moved[:, 0]) - [yaw_of(t.T_world_from_ego) for t in rec.ticks[:-1]])))
+    heading_err = np.angle(
+        np.exp(1j * (np.arctan2(moved[:, 1], moved[:, 0]) - [yaw_of(t.T_world_from_ego) for t in rec.ticks[:-1]]))
+    )
     assert np.all(np.abs(heading_err[fast]) < 0.35)
     errors = []
     for a, b in zip(rec.ticks[:-1], rec.ticks[1:]):
@@ -43,7 +45,9 @@ def _check_recording(rec, cfg: SimConfig) -> None:
                 errors.append(abs(np.angle(np.exp(1j * (np.arctan2(d[1], d[0]) - mid_yaw)))))
     # (SUMO snaps headings to lane directions inside junctions, hence a few outliers are allowed.)
     assert len(errors) > 5 and np.mean(np.array(errors) < 0.3) > 0.95, np.round(sorted(errors)[-5:], 2)
-    assert all(np.all(x.size_lwh > 0) and x.center_xyz[2] == pytest.approx(x.size_lwh[2] / 2) for x in rec.ticks[0].agents)
+    assert all(
+        np.all(x.size_lwh > 0) and x.center_xyz[2] == pytest.approx(x.size_lwh[2] / 2) for x in rec.ticks[0].agents
+    )
     types = {b.line_type for b in rec.road.boundaries}
     assert {"solid", "dashed"} <= types and rec.road.road_edges and rec.road.surface_polygons
 
@@ -61,18 +65,32 @@ def test_sumo_networks_generated_from_nothing(scenario: str) -> None:
     cfg = SimConfig(source="sumo", scenario=scenario, duration_s=3.0, seed=7)
     rec = record(cfg)
     _check_recording(rec, cfg)
-    assert rec.tags["source"] == "sumo" and rec.tags["road_type"] == f"urban_{'radial' if scenario == 'spider' else 'random'}"
+    assert (
+        rec.tags["source"] == "sumo"
+        and rec.tags["road_type"] == f"urban_{'radial' if scenario == 'spider' else 'random'}"
+    )
 
 
 def test_shared_logs_read_back_with_tags_and_calibration(sim_log_dir) -> None:
-    expected = {"highway_clear": ("clear", "day", "highway", "highway-env"), "highway_snow": ("snow", "day", "highway", "highway-env"),
-                "roundabout_clear": ("clear", "day", "roundabout", "highway-env"), "sumo_grid_night": ("clear", "night", "urban_grid", "sumo")}
+    expected = {
+        "highway_clear": ("clear", "day", "highway", "highway-env"),
+        "highway_snow": ("snow", "day", "highway", "highway-env"),
+        "roundabout_clear": ("clear", "day", "roundabout", "highway-env"),
+        "sumo_grid_night": ("clear", "night", "urban_grid", "sumo"),
+    }
     for name, (weather, tod, road, source) in expected.items():
         log = read_log(sim_log_dir / f"{name}.mcap")
         tags = log.scene.tags
         assert (tags["weather"], tags["time_of_day"], tags["road_type"], tags["source"]) == (weather, tod, road, source)
         assert tags["traffic_density"] == "medium" and log.scene.description
-        assert log.rig.names == ["CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_BACK_RIGHT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_FRONT_LEFT"]
+        assert log.rig.names == [
+            "CAM_FRONT",
+            "CAM_FRONT_RIGHT",
+            "CAM_BACK_RIGHT",
+            "CAM_BACK",
+            "CAM_BACK_LEFT",
+            "CAM_FRONT_LEFT",
+        ]
         assert all(len(log.images[c]) == 60 for c in log.rig.names) and len(log.pose_timestamps_ns) == 60
         assert log.images["CAM_FRONT"][0].decode().shape == (192, 320, 3)
         kinds = {(line.kind, line.line_type) for line in log.road}

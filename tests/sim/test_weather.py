@@ -18,26 +18,46 @@ import pytest
 
 from drivewm.sim import SimConfig
 from drivewm.sim.conditions import condition_for
+from drivewm.sim.props import place_props
 from drivewm.sim.render import Renderer
 from drivewm.sim.simulate import record
 from drivewm.sim.world import TEXTURE_MARGIN_M, sim_rig
-from drivewm.sim.props import place_props
 
-CONDITIONS = [("clear", "day"), ("snow", "day"), ("clear", "night"), ("fog", "day"), ("clear", "dusk"), ("overcast", "day"),
-              ("rain", "day")]
+CONDITIONS = [
+    ("clear", "day"),
+    ("snow", "day"),
+    ("clear", "night"),
+    ("fog", "day"),
+    ("clear", "dusk"),
+    ("overcast", "day"),
+    ("rain", "day"),
+]
 
 
 def stats(images: dict[str, np.ndarray]) -> dict[str, float]:
     imgs = list(images.values())
-    hsv = np.concatenate([cv2.cvtColor(i, cv2.COLOR_RGB2HSV_FULL).reshape(-1, 3) for i in imgs]).astype(np.float64) / 255
-    lower = np.concatenate([cv2.cvtColor(i[i.shape[0] // 2 :], cv2.COLOR_RGB2HSV_FULL).reshape(-1, 3) for i in imgs]) / 255
+    hsv = (
+        np.concatenate([cv2.cvtColor(i, cv2.COLOR_RGB2HSV_FULL).reshape(-1, 3) for i in imgs]).astype(np.float64) / 255
+    )
+    lower = (
+        np.concatenate([cv2.cvtColor(i[i.shape[0] // 2 :], cv2.COLOR_RGB2HSV_FULL).reshape(-1, 3) for i in imgs]) / 255
+    )
     y = np.concatenate([cv2.cvtColor(i, cv2.COLOR_RGB2GRAY).ravel() for i in imgs]) / 255
     h = imgs[0].shape[0]
-    lap = [np.abs(cv2.Laplacian(cv2.cvtColor(i, cv2.COLOR_RGB2GRAY).astype(np.float32) / 255, cv2.CV_32F))[h // 2 - h // 8 : h // 2 + h // 12] for i in imgs]
+    lap = [
+        np.abs(cv2.Laplacian(cv2.cvtColor(i, cv2.COLOR_RGB2GRAY).astype(np.float32) / 255, cv2.CV_32F))[
+            h // 2 - h // 8 : h // 2 + h // 12
+        ]
+        for i in imgs
+    ]
     rgb = np.concatenate([i.reshape(-1, 3) for i in imgs]).astype(np.float64)
-    return {"luminance": float(y.mean()), "far_detail": float(np.mean(lap)), "saturation": float(hsv[:, 1].mean()),
-            "snow_cover": float(np.mean((lower[:, 2] > 0.7) & (lower[:, 1] < 0.15))),
-            "warmth": float(rgb[:, 0].mean() / rgb[:, 2].mean())}
+    return {
+        "luminance": float(y.mean()),
+        "far_detail": float(np.mean(lap)),
+        "saturation": float(hsv[:, 1].mean()),
+        "snow_cover": float(np.mean((lower[:, 2] > 0.7) & (lower[:, 1] < 0.15))),
+        "warmth": float(rgb[:, 0].mean() / rgb[:, 2].mean()),
+    }
 
 
 @pytest.fixture(scope="module")
@@ -78,5 +98,3 @@ def test_overcast_and_rain_are_grey(renders) -> None:
     assert renders["overcast", "day"]["saturation"] < 0.8 * day["saturation"]
     assert renders["rain", "day"]["saturation"] < 0.8 * day["saturation"]
     assert renders["rain", "day"]["luminance"] < 0.85 * day["luminance"]
-
-

@@ -15,7 +15,9 @@ def test_hashed_encoder_is_deterministic_masked_and_separates_conditions():
     emb, mask = enc.encode(["Snow, day, highway", "clear day highway", ""])
     assert emb.shape == (3, 8, 64) and mask.dtype == torch.bool
     assert mask.sum(1).tolist() == [3, 3, 0]
-    again = build_text_encoder(TextConfig(dim=64, max_length=8)).encode(["snow day highway"])[0]  # fresh encoder, case folded
+    again = build_text_encoder(TextConfig(dim=64, max_length=8)).encode(["snow day highway"])[
+        0
+    ]  # fresh encoder, case folded
     assert torch.equal(again[0], emb[0])
     # Different words give nearly orthogonal vectors; the shared words ("day", "highway") agree.
     snow, clear = emb[0, 0], emb[1, 0]
@@ -42,7 +44,9 @@ def tiny_t5(tmp_path_factory):
     tok.pre_tokenizer = pre_tokenizers.Whitespace()
     fast = PreTrainedTokenizerFast(tokenizer_object=tok, pad_token="<pad>", eos_token="</s>", unk_token="<unk>")
     torch.manual_seed(0)
-    model = T5EncoderModel(T5Config(vocab_size=len(words), d_model=32, d_kv=8, d_ff=64, num_layers=2, num_heads=4)).eval()
+    model = T5EncoderModel(
+        T5Config(vocab_size=len(words), d_model=32, d_kv=8, d_ff=64, num_layers=2, num_heads=4)
+    ).eval()
     path = tmp_path_factory.mktemp("t5")
     model.save_pretrained(path)
     fast.save_pretrained(path)
@@ -80,7 +84,9 @@ def test_hf_encoder_folder_like_sentence_transformers_loads(tmp_path):
     tok = Tokenizer(models.WordLevel(vocab, unk_token="[UNK]"))
     tok.pre_tokenizer = pre_tokenizers.Whitespace()
     PreTrainedTokenizerFast(tokenizer_object=tok, pad_token="[PAD]", unk_token="[UNK]").save_pretrained(tmp_path)
-    BertModel(BertConfig(vocab_size=5, hidden_size=24, num_hidden_layers=1, num_attention_heads=2, intermediate_size=32)).save_pretrained(tmp_path)
+    BertModel(
+        BertConfig(vocab_size=5, hidden_size=24, num_hidden_layers=1, num_attention_heads=2, intermediate_size=32)
+    ).save_pretrained(tmp_path)
     (tmp_path / "modules.json").write_text("[]")  # what marks a sentence-transformers folder; ignored here
     enc = build_text_encoder(TextConfig(kind="hf", path=str(tmp_path), max_length=4))
     emb, mask = enc.encode(["snow fog", "night"])

@@ -14,6 +14,7 @@ import json
 
 import pytest
 import torch
+from tokenizer_synthetic import write_synthetic_clips
 
 from drivewm.cli import main
 from drivewm.clips.latents import LatentCache
@@ -27,14 +28,14 @@ from drivewm.tokenizer.metrics import psnr
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
 from drivewm.tokenizer.train import TokenizerTrainConfig, train
 
-from tokenizer_synthetic import write_synthetic_clips
-
 HOLDOUT = 25  # percent of clips held out by key hash: 3 of the 12 simulated clips
 VIEWS = 2  # cameras scored per held-out clip (evaluation at 192x320 dominates the test time)
 
 
 def run_config(name: str, steps: int, **fields) -> TokenizerTrainConfig:
-    base = dict(steps=steps, batch_size=4, frames=9, crop=[64, 96], holdout_percent=HOLDOUT, checkpoint_every=50, log_every=10)
+    base = dict(
+        steps=steps, batch_size=4, frames=9, crop=[64, 96], holdout_percent=HOLDOUT, checkpoint_every=50, log_every=10
+    )
     return TokenizerTrainConfig(model=preset(name), **{**base, **fields})
 
 
@@ -48,8 +49,12 @@ def trained(sim_clip_dir, tmp_path_factory):
 def test_trained_debug_model_reconstructs_heldout_sim_clips(trained, sim_clip_dir, tmp_path):
     torch.manual_seed(0)
     Tokenizer(preset("debug-4x8x8")).save_pretrained(tmp_path / "untrained")
-    before = evaluate_tokenizer(tmp_path / "untrained", sim_clip_dir, tmp_path / "e0", "holdout", HOLDOUT, max_views=VIEWS, progress=False)
-    after = evaluate_tokenizer(trained, sim_clip_dir, tmp_path / "e1", "holdout", HOLDOUT, max_views=VIEWS, progress=False)
+    before = evaluate_tokenizer(
+        tmp_path / "untrained", sim_clip_dir, tmp_path / "e0", "holdout", HOLDOUT, max_views=VIEWS, progress=False
+    )
+    after = evaluate_tokenizer(
+        trained, sim_clip_dir, tmp_path / "e1", "holdout", HOLDOUT, max_views=VIEWS, progress=False
+    )
     assert after["clips_scored"] == 3
     assert after["psnr"] > 21.5 and after["psnr"] > before["psnr"] + 1.5, (before["psnr"], after["psnr"])
     assert after["ssim"] > before["ssim"] + 0.2
@@ -80,7 +85,9 @@ def test_fsq_variant_uses_its_codebook(sim_clip_dir, tmp_path):
     # 40 steps; the 1,000-code debug codebook ([8, 5, 5, 5]) on 3 held-out clips x 2 views (14,400 code positions):
     # measured ~11% of the codes used (14.5% with all 6 views); a collapsed quantizer would use a handful
     train(sim_clip_dir, tmp_path / "fsq", run_config("debug-4x8x8-fsq", 40), progress=False)
-    metrics = evaluate_tokenizer(tmp_path / "fsq", sim_clip_dir, tmp_path / "eval", "holdout", HOLDOUT, max_views=VIEWS, progress=False)
+    metrics = evaluate_tokenizer(
+        tmp_path / "fsq", sim_clip_dir, tmp_path / "eval", "holdout", HOLDOUT, max_views=VIEWS, progress=False
+    )
     print("fsq codebook usage", metrics["codebook_usage"], "psnr", metrics["psnr"])
     assert metrics["codebook_usage"] > 0.08, metrics["codebook_usage"]
     assert metrics["bits_per_pixel"] == pytest.approx(5 * 24 * 40 * 9.9658 / (17 * 192 * 320), rel=1e-3)
@@ -105,7 +112,9 @@ def test_resume_continues_exactly(sim_clip_dir, tmp_path):
     rows = [json.loads(line) for line in (tmp_path / "straight" / "metrics.jsonl").read_text().splitlines()]
     assert "adversarial" in rows[-1] and "discriminator" in rows[-1]
     with pytest.raises(DrivewmError, match="different model config"):
-        train(sim_clip_dir, tmp_path / "resumed", run_config("debug-8x8x8", 6, **{**small, "frames": 9}), progress=False)
+        train(
+            sim_clip_dir, tmp_path / "resumed", run_config("debug-8x8x8", 6, **{**small, "frames": 9}), progress=False
+        )
 
 
 def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
@@ -127,10 +136,41 @@ def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
     assert item.latents.shape == (6, 16, 5, 24, 40) and item.T_world_from_ego.shape == (17, 4, 4)
 
     out = tmp_path / "decoded"
-    assert main(["tokenizer", "decode", "--model", str(trained), "--latents", str(clips / "latents" / "dbg"),
-                 "--key", item.meta.key, "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "tokenizer",
+                "decode",
+                "--model",
+                str(trained),
+                "--latents",
+                str(clips / "latents" / "dbg"),
+                "--key",
+                item.meta.key,
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert sorted(p.name for p in out.iterdir()) == sorted(f"{item.meta.key}.{c}.mp4" for c in item.meta.cameras)
-    assert main(["tokenizer", "eval", "--model", str(trained), "--data", str(clips), "--out", str(tmp_path / "ev"), "--max-views", "1"]) == 0
+    assert (
+        main(
+            [
+                "tokenizer",
+                "eval",
+                "--model",
+                str(trained),
+                "--data",
+                str(clips),
+                "--out",
+                str(tmp_path / "ev"),
+                "--max-views",
+                "1",
+            ]
+        )
+        == 0
+    )
     scored = json.loads((tmp_path / "ev" / "metrics.json").read_text())
     assert scored["psnr"] > 18.0 and list(scored["skipped"]) == ["syn000"] and scored["clips_scored"] == 3
 
@@ -139,13 +179,41 @@ def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
 
 
 def test_cli_train_overrides_and_bad_config(sim_clip_dir, tmp_path, capsys):
-    assert main(["tokenizer", "train", "--preset", "debug-8x8x8", "--data", str(sim_clip_dir), "--out", str(tmp_path / "t"),
-                 "--steps", "1", "--set", "frames=9", "--set", "crop=[32,48]", "--set", "batch_size=1",
-                 "--set", "stats_batches=1"]) == 0
+    assert (
+        main(
+            [
+                "tokenizer",
+                "train",
+                "--preset",
+                "debug-8x8x8",
+                "--data",
+                str(sim_clip_dir),
+                "--out",
+                str(tmp_path / "t"),
+                "--steps",
+                "1",
+                "--set",
+                "frames=9",
+                "--set",
+                "crop=[32,48]",
+                "--set",
+                "batch_size=1",
+                "--set",
+                "stats_batches=1",
+            ]
+        )
+        == 0
+    )
     assert json.loads((tmp_path / "t" / "config.json").read_text())["config"]["temporal_compression"] == 8
-    assert main(["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "frames=8"]) == 2
+    assert (
+        main(["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "frames=8"])
+        == 2
+    )
     assert "frames=8 must be 1 + k*4" in capsys.readouterr().err
-    assert main(["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "lr_typo=1"]) == 2
+    assert (
+        main(["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "lr_typo=1"])
+        == 2
+    )
 
 
 def test_perceptual_term_needs_local_weights(tmp_path):

@@ -19,7 +19,10 @@ def road_video(T: int, H: int, W: int, seed: int) -> np.ndarray:
     horizon = H * rng.uniform(0.35, 0.5)
     sky = np.stack([110 + 60 * yy / H, 150 + 50 * yy / H, 230 - 20 * yy / H], -1)
     grass = np.stack([60 + 20 * np.sin(xx / 5 + yy / 3), 120 + 15 * np.cos(xx / 4), 50 + 0 * xx], -1)
-    cars = [(rng.uniform(0.2, 0.8), rng.uniform(0.1, 0.6), rng.uniform(0, 255, 3), rng.uniform(-0.03, 0.03)) for _ in range(3)]
+    cars = [
+        (rng.uniform(0.2, 0.8), rng.uniform(0.1, 0.6), rng.uniform(0, 255, 3), rng.uniform(-0.03, 0.03))
+        for _ in range(3)
+    ]
     frames = []
     for t in range(T):
         depth = np.clip((yy - horizon) / (H - horizon), 1e-3, 1)  # 0 at the horizon, 1 at the bottom
@@ -44,8 +47,15 @@ def write_synthetic_clips(out: Path, clips: int = 6, T: int = 17, H: int = 96, W
     rig = load_rig("front3").scaled(W, H)
     with ShardWriter(out, "synthetic", max_clips=4) as writer:
         for c in range(clips):
-            meta = ClipMeta(key=f"syn{c:03d}", source_log="synthetic", start_time_ns=0, fps=10.0,
-                            timestamps_ns=[i * 100_000_000 for i in range(T)], rig=rig.to_dict(), caption="a road")
+            meta = ClipMeta(
+                key=f"syn{c:03d}",
+                source_log="synthetic",
+                start_time_ns=0,
+                fps=10.0,
+                timestamps_ns=[i * 100_000_000 for i in range(T)],
+                rig=rig.to_dict(),
+                caption="a road",
+            )
             frames = {cam: road_video(T, H, W, seed=100 * c + i) for i, cam in enumerate(rig.names)}
             writer.write(clip_from_arrays(meta, frames, np.repeat(np.eye(4)[None], T, axis=0)))
     return out

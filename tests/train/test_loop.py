@@ -17,8 +17,18 @@ from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.train.loop import global_batch
 
 REPO = Path(__file__).resolve().parents[2]
-TINY = ["model.hidden_dim=32", "model.depth=2", "model.num_heads=2", "model.adaln_lora_dim=8", "text.dim=16",
-        "train.batch_size=4", "train.log_every=1", "train.checkpoint_every=100", "train.warmup_steps=2", "sample_steps=2"]
+TINY = [
+    "model.hidden_dim=32",
+    "model.depth=2",
+    "model.num_heads=2",
+    "model.adaln_lora_dim=8",
+    "text.dim=16",
+    "train.batch_size=4",
+    "train.log_every=1",
+    "train.checkpoint_every=100",
+    "train.warmup_steps=2",
+    "sample_steps=2",
+]
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +73,12 @@ def single_process_run(latents, tmp_path_factory) -> dict[str, torch.Tensor]:
 
 
 def test_activation_checkpointing_trains_the_same_weights(latents, single_process_run, tmp_path):
-    pretrain(pretrain_config("debug", TINY + ["train.steps=3", "train.activation_checkpointing=true"]), latents, None, tmp_path)
+    pretrain(
+        pretrain_config("debug", TINY + ["train.steps=3", "train.activation_checkpointing=true"]),
+        latents,
+        None,
+        tmp_path,
+    )
     ckpt = torch.load(tmp_path / "train_state.pt", weights_only=True)["model"]
     assert max((single_process_run[k] - ckpt[k]).abs().max().item() for k in ckpt) < 1e-6
 
@@ -78,8 +93,21 @@ def test_torchrun_two_cpu_processes_match_one_process(latents, single_process_ru
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(REPO)}
     for steps in runs:
         overrides = TINY + [f"train.steps={steps}", "train.device=cpu"] + parallel
-        cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2", "-m", "drivewm.cli", "pretrain",
-               "--data", str(latents), "--out", str(tmp_path / "dist")] + [a for o in overrides for a in ("--set", o)]
+        cmd = [
+            sys.executable,
+            "-m",
+            "torch.distributed.run",
+            "--standalone",
+            "--nproc_per_node",
+            "2",
+            "-m",
+            "drivewm.cli",
+            "pretrain",
+            "--data",
+            str(latents),
+            "--out",
+            str(tmp_path / "dist"),
+        ] + [a for o in overrides for a in ("--set", o)]
         proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr[-3000:]
     single, dist = single_process_run, torch.load(tmp_path / "dist" / "train_state.pt", weights_only=True)["model"]

@@ -17,8 +17,16 @@ def _forward_backward_calls(activation_checkpointing: bool) -> tuple[int, list[s
     calls = []
     for block in model.blocks:
         block.layers["mlp"].layer.register_forward_hook(lambda *_: calls.append(1))
-    forward = parallelize(model, list(model.blocks), DistInfo(), activation_checkpointing, compile=False, parallel="auto")
-    out = forward(torch.randn(1, 4, 2, 4, 4), torch.zeros(1), torch.randn(1, 3, 8), torch.ones(1, 3, dtype=torch.bool), torch.tensor([10.0]))
+    forward = parallelize(
+        model, list(model.blocks), DistInfo(), activation_checkpointing, compile=False, parallel="auto"
+    )
+    out = forward(
+        torch.randn(1, 4, 2, 4, 4),
+        torch.zeros(1),
+        torch.randn(1, 3, 8),
+        torch.ones(1, 3, dtype=torch.bool),
+        torch.tensor([10.0]),
+    )
     out.square().mean().backward()
     assert [n for n, _ in model.named_parameters()] == names
     return len(calls), names
