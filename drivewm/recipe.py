@@ -1,0 +1,110 @@
+"""Run recipes: the one way every stage's config is built (presets, recipe files, ``--set``).
+
+A stage describes its runs with a :class:`RecipeBook`: the config dataclass, named presets (nested
+dicts of field values: copy-and-change of the dataclass defaults, torchtitan style) and the default
+preset. A run's config is resolved in one order, later wins::
+
+    dataclass defaults  <-  preset  <-  recipe file "config"  <-  recipe file "overrides"  <-  --set
+
+A recipe file is YAML with three optional keys::
+
+    preset: small                       # a preset name of the stage
+    config: {train: {steps: 2000}}      # nested field values
+    overrides: [train.lr=1e-4]          # KEY=VALUE strings, exactly as --set takes them
+
+The result is validated once, by :func:`drivewm.config.from_dict` (unknown keys, wrong types and
+each config's ``validate()`` give a :class:`DrivewmError` naming the field), and printed by
+``--dry-run``. Command modules add the same flags through :meth:`RecipeBook.add_arguments`, with
+``--preset`` choices read from the book, so the CLI never repeats a registry by hand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+from drivewm.config import apply_overrides, load_yaml, to_dict
+from drivewm.errors import DrivewmError
+
+C = TypeVar("C")
+RECIPE_KEYS = ("preset", "config", "overrides")
+
+
+@dataclasses.dataclass(frozen=True)
+class RecipeBook(Generic[C]):
+    """How one stage's run config is made."""
+
+    stage: str
+    """Stage name used in messages (e.g. ``pretrain``)."""
+    config: type[C]
+    """The run's config dataclass."""
+    presets: Mapping[str, dict]
+    """Preset name -> nested field values applied over the dataclass defaults."""
+    default: str
+    """Preset used when neither the command line nor the recipe names one."""
+
+    def resolve(self, preset: str | None = None, recipe: str | Path | None = None, overrides: list[str] = ()) -> C:
+        """The validated config of a run (see the module docstring for the order)."""
+        data = load_recipe(recipe) if recipe is not None else {}
+        name = preset or data.get("preset") or self.default
+        if name not in self.presets:
+            raise DrivewmError(f"{self.stage}: unknown preset {name!r}; known: {sorted(self.presets)}")
+        base = deep_merge(self.preset_fields(name), data.get("config", {}))
+        return apply_overrides(self.config, base, [*data.get("overrides", []), *overrides], self.stage)
+
+    def preset_fields(self, name: str) -> dict:
+        """The preset's field values (a deep copy), with ``preset`` recorded when the config has that field."""
+        fields = deep_merge({}, self.presets[name])
+        if "preset" in {f.name for f in dataclasses.fields(self.config)}:
+            fields["preset"] = name
+        return fields
+
+    def add_arguments(self, parser: argparse.ArgumentParser) -> None:
+        """``--preset`` (choices from the book), ``--recipe``, ``--set KEY=VALUE`` and ``--dry-run``."""
+        parser.add_argument(
+            "--preset", choices=sorted(self.presets), help=f"named preset (default: the recipe's, else {self.default})"
+        )
+        parser.add_argument("--recipe", type=Path, help="recipe YAML (keys: preset, config, overrides)")
+        parser.add_argument(
+            "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field"
+        )
+        parser.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+
+    def from_args(self, args: argparse.Namespace) -> C:
+        """The config named by the flags of :meth:`add_arguments`."""
+        return self.resolve(args.preset, args.recipe, args.overrides)
+
+
+def load_recipe(path: str | Path) -> dict:
+    """Read a recipe YAML; unknown keys or badly typed values give a DrivewmError naming the file."""
+    data = load_yaml(path)
+    unknown = sorted(set(data) - set(RECIPE_KEYS))
+    if unknown:
+        raise DrivewmError(f"{path}: unknown recipe key(s) {unknown}; a recipe has {list(RECIPE_KEYS)}")
+    if "preset" in data and not isinstance(data["preset"], str):
+        raise DrivewmError(f"{path}: 'preset' must be a preset name")
+    if not isinstance(data.get("config", {}), dict):
+        raise DrivewmError(f"{path}: 'config' must be a mapping of config fields")
+    overrides = data.get("overrides", [])
+    if not isinstance(overrides, list) or not all(isinstance(o, str) for o in overrides):
+        raise DrivewmError(f"{path}: 'overrides' must be a list of KEY=VALUE strings")
+    return data
+
+
+def deep_merge(base: Mapping[str, Any], update: Mapping[str, Any]) -> dict:
+    """``base`` with ``update`` merged in, recursing into mappings (neither input is modified)."""
+    out = {k: deep_merge(v, {}) if isinstance(v, Mapping) else v for k, v in base.items()}
+    for key, value in update.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = deep_merge(out[key], value)
+        else:
+            out[key] = deep_merge(value, {}) if isinstance(value, Mapping) else value
+    return out
+
+
+def describe(cfg: Any) -> dict:
+    """The resolved config as a plain dict (what ``--dry-run`` prints and every run saves)."""
+    return to_dict(cfg)

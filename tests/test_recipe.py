@@ -1,0 +1,80 @@
+"""The one recipe form: preset <- recipe config <- recipe overrides <- --set, validated once."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import pytest
+
+from drivewm.errors import DrivewmError
+from drivewm.recipe import RecipeBook, deep_merge
+
+
+@dataclasses.dataclass
+class Inner:
+    steps: int = 10
+    lr: float = 1e-3
+
+    def validate(self) -> None:
+        if self.steps < 1:
+            raise DrivewmError("inner.steps must be >= 1")
+
+
+@dataclasses.dataclass
+class Run:
+    preset: str = ""
+    width: int = 8
+    train: Inner = dataclasses.field(default_factory=Inner)
+
+
+BOOK = RecipeBook("demo", Run, {"tiny": {"width": 4}, "big": {"width": 64, "train": {"steps": 500}}}, "tiny")
+
+
+def test_later_sources_win_in_order(tmp_path):
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("preset: big\nconfig: {train: {lr: 0.5}}\noverrides: [train.steps=7]\n")
+    cfg = BOOK.resolve(None, recipe, ["width=3"])
+    assert (cfg.preset, cfg.width, cfg.train.steps, cfg.train.lr) == ("big", 3, 7, 0.5)
+    assert BOOK.resolve("tiny", recipe).preset == "tiny"  # the command line's preset beats the recipe's
+    assert BOOK.resolve().width == 4 and BOOK.resolve().train.steps == 10
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "presett: big\n",
+        "preset: [1]\n",
+        "config: 3\n",
+        "overrides: train.steps=1\n",
+        "overrides: [train.nope=1]\n",
+        "config: {train: {steps: 0}}\n",
+        "- a\n",
+    ],
+)
+def test_bad_recipes_are_one_line_errors(tmp_path, text):
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(text)
+    with pytest.raises(DrivewmError):
+        BOOK.resolve(None, recipe)
+
+
+def test_unknown_preset_lists_the_known_ones():
+    with pytest.raises(DrivewmError, match="big"):
+        BOOK.resolve("huge")
+
+
+def test_cli_flags_come_from_the_book():
+    parser = argparse.ArgumentParser()
+    BOOK.add_arguments(parser)
+    args = parser.parse_args(["--preset", "big", "--set", "train.lr=2e-4"])
+    assert BOOK.from_args(args).train.lr == 2e-4
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--preset", "huge"])
+
+
+def test_deep_merge_copies():
+    base = {"a": {"b": 1}}
+    merged = deep_merge(base, {"a": {"c": 2}})
+    merged["a"]["b"] = 5
+    assert base == {"a": {"b": 1}} and merged == {"a": {"b": 5, "c": 2}}
