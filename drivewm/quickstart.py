@@ -71,15 +71,16 @@ def _recipe_path(arg: str) -> str:
     return str(path) if not Path(arg).is_absolute() and "/" in arg and path.is_file() else arg
 
 
+def recipe_args(profile):
+    """A copy of a profile dataclass whose argument lists name the checkout's recipe files absolutely."""
+    lists = {f.name: getattr(profile, f.name) for f in dataclasses.fields(profile)}
+    lists = {k: v for k, v in lists.items() if isinstance(v, list) and all(isinstance(a, str) for a in v)}
+    return dataclasses.replace(profile, **{k: [_recipe_path(a) for a in v] for k, v in lists.items()})
+
+
 def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     """The pipeline as (stage name, drivewm argv) in order."""
-    p = dataclasses.replace(
-        p,
-        **{
-            f: [_recipe_path(a) for a in getattr(p, f)]
-            for f in ("simulate", "curate", "tokenizer_train", "pretrain", "posttrain", "generate", "eval")
-        },
-    )
+    p = recipe_args(p)
     logs, clips, tok, t2w, mv, gen = (
         out / n for n in ("logs", "clips", "tokenizer", "text2world", "multiview", "generated")
     )
@@ -149,7 +150,7 @@ def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     return stages
 
 
-def run_stage(name: str, argv: list[str], out: Path) -> float:
+def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") -> float:
     """Run one stage unless its marker says the same command finished; returns seconds spent."""
     from drivewm.atomic import write_json
     from drivewm.cli import main
@@ -158,13 +159,13 @@ def run_stage(name: str, argv: list[str], out: Path) -> float:
     argv = [str(logs[0]) if a == FIRST_LOG and logs else a for a in argv]
     marker = out / ".stages" / f"{name}.json"
     if marker.is_file() and json.loads(marker.read_text()).get("argv") == argv:
-        print(f"[quickstart] {name}: done before, skipped")
+        print(f"[{label}] {name}: done before, skipped")
         return 0.0
-    print(f"[quickstart] {name}: drivewm {shlex.join(argv)}", flush=True)
+    print(f"[{label}] {name}: drivewm {shlex.join(argv)}", flush=True)
     tic = time.perf_counter()
     code = main(argv)
     if code:
-        raise DrivewmError(f"quickstart stage {name!r} failed (exit {code}); rerun quickstart to resume from it")
+        raise DrivewmError(f"{label} stage {name!r} failed (exit {code}); rerun {label} to resume from it")
     seconds = time.perf_counter() - tic
     write_json(marker, {"argv": argv, "seconds": seconds})
     return seconds

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
@@ -64,18 +64,23 @@ class RecipeBook(Generic[C]):
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
         """``--preset`` (choices from the book), ``--recipe``, ``--set KEY=VALUE`` and ``--dry-run``."""
-        parser.add_argument(
-            "--preset", choices=sorted(self.presets), help=f"named preset (default: the recipe's, else {self.default})"
-        )
-        parser.add_argument("--recipe", type=Path, help="recipe YAML (keys: preset, config, overrides)")
-        parser.add_argument(
-            "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field"
-        )
-        parser.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+        add_recipe_arguments(parser, self.presets, self.default)
 
     def from_args(self, args: argparse.Namespace) -> C:
         """The config named by the flags of :meth:`add_arguments`."""
         return self.resolve(args.preset, args.recipe, args.overrides)
+
+
+def add_recipe_arguments(parser: argparse.ArgumentParser, presets: Iterable[str], default: str) -> None:
+    """The recipe flags with ``--preset`` choices ``presets``: for command modules that must not import
+    a stage's (heavy) config classes to build the parser; the handler resolves through the book."""
+    help_text = f"named preset (default: the recipe's, else {default})"
+    parser.add_argument("--preset", choices=sorted(presets), help=help_text)
+    parser.add_argument("--recipe", type=Path, help="recipe YAML (keys: preset, config, overrides)")
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field"
+    )
+    parser.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
 
 
 def load_recipe(path: str | Path) -> dict:

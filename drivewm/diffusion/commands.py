@@ -11,6 +11,9 @@ import importlib
 import json
 from pathlib import Path
 
+from drivewm.diffusion.dit_config import DIT_PRESETS
+from drivewm.recipe import add_recipe_arguments
+
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
 GENERATORS = {
     "text2world": "drivewm.diffusion.commands:generate_text2world_command",
@@ -20,25 +23,21 @@ GENERATORS = {
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("pretrain", help="train a Text2World diffusion model on tokenizer latents")
-    p.add_argument("--preset", default="debug", help="size recipe: debug, small, base, large, xl")
+    add_recipe_arguments(p, DIT_PRESETS, "debug")
+    p.add_argument("--init", type=Path, help="Text2World folder whose weights start the run (warm start, fine-tuning)")
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
     )
     p.add_argument("--tokenizer", type=Path, help="tokenizer model folder that encoded the latents")
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override, e.g. train.steps=100",
-    )
-    p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
     p.set_defaults(func=pretrain_command)
 
     g = sub.add_parser("generate", help="generate clips from a Text2World or multi-view model")
-    g.add_argument("--model", required=True, type=Path, help="model folder (config.json + model.safetensors)")
+    g.add_argument(
+        "--model",
+        type=Path,
+        help="model folder (config.json + model.safetensors); default: the shipped multi-view model",
+    )
     g.add_argument("--prompt", required=True, action="append", help="caption (repeat for several)")
     g.add_argument("--out", required=True, type=Path, help="output folder: clip shards, mp4s, contact_sheet.png")
     g.add_argument("--steps", type=int, default=35, help="sampler steps")
@@ -63,9 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def pretrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
-    from drivewm.diffusion.pretrain import pretrain, pretrain_config
+    from drivewm.diffusion.pretrain import RECIPES, pretrain
 
-    cfg = pretrain_config(args.preset, args.overrides)
+    init = [f"init={args.init.resolve()}"] if args.init else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*init, *args.overrides])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0
@@ -77,6 +77,10 @@ def pretrain_command(args: argparse.Namespace) -> int:
 def generate_command(args: argparse.Namespace) -> int | None:
     from drivewm.errors import DrivewmError
 
+    if args.model is None:
+        from drivewm.release import shipped_model
+
+        args.model = shipped_model("multiview")
     cfg_path = args.model / "config.json"
     if not cfg_path.is_file():
         raise DrivewmError(f"{args.model}: not a drivewm model folder (no config.json)")

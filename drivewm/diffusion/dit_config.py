@@ -55,9 +55,10 @@ class DiTConfig:
 
 
 #: Named sizes (DiT-paper style). Parameter counts at text_dim=256, in_channels=16, p=2:
-#: debug ~1.5M, small ~33M, base ~132M, large ~486M, xl ~1.2B.
+#: debug ~1.5M, tiny ~6.4M, small ~33M, base ~132M, large ~486M, xl ~1.2B.
 DIT_PRESETS: dict[str, dict] = {
     "debug": dict(hidden_dim=128, depth=4, num_heads=4, adaln_lora_dim=32),
+    "tiny": dict(hidden_dim=224, depth=6, num_heads=4, adaln_lora_dim=64),  # the shipped CPU size
     "small": dict(hidden_dim=384, depth=12, num_heads=6, adaln_lora_dim=64),
     "base": dict(hidden_dim=768, depth=12, num_heads=12, adaln_lora_dim=128),
     "large": dict(hidden_dim=1024, depth=24, num_heads=16, adaln_lora_dim=256),

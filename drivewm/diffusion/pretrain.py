@@ -14,14 +14,15 @@ from pathlib import Path
 import torch
 
 from drivewm.clips.latents import LatentCache
-from drivewm.config import apply_overrides, to_dict
+from drivewm.config import to_dict
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.errors import DrivewmError
+from drivewm.recipe import RecipeBook
 from drivewm.text import TextConfig
-from drivewm.train.loop import TrainConfig, train
+from drivewm.train.loop import TrainConfig, TrainTask, train
 
 
 @dataclasses.dataclass
@@ -30,6 +31,14 @@ class DataConfig:
 
     latents: str | None = None
     """Cache name under CLIPDIR/latents/ (default: the tokenizer folder's name)."""
+    frames: int = 0
+    """Latent frames per sample, from the first (0 = all). 1 trains on images: the causal tokenizer
+    codes frame 0 alone, so latent frame 0 of every clip is an image latent (Cosmos' progressive
+    schedule starts with images: many more samples per second, the same network)."""
+
+    def validate(self) -> None:
+        if self.frames < 0:
+            raise DrivewmError(f"pretrain data.frames must be >= 0, got {self.frames}")
 
 
 @dataclasses.dataclass
@@ -50,6 +59,10 @@ class PretrainConfig:
     """Latent cache selection."""
     sample_steps: int = 12
     """Sampler steps for the sample grids written during training."""
+    init: str | None = None
+    """Text2World model folder whose DiT weights start the run (warm start: the next stage of a
+    progressive schedule, or fine-tuning shipped weights on a fleet's logs); None = random init.
+    Its DiT and text settings must equal this run's."""
 
 
 #: Per-preset training defaults (copy-and-change of the base TrainConfig).
@@ -57,6 +70,7 @@ TRAIN_PRESETS: dict[str, dict] = {
     "debug": dict(
         steps=300, batch_size=8, lr=1e-3, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100
     ),
+    "tiny": dict(steps=4000, batch_size=32, lr=5e-4, warmup_steps=200, ema_decay=0.999, checkpoint_every=250),
     "small": dict(steps=20000, batch_size=32, lr=3e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
     "base": dict(steps=100000, batch_size=64, lr=2e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000),
     "large": dict(
@@ -82,10 +96,17 @@ TRAIN_PRESETS: dict[str, dict] = {
 }
 
 
+RECIPES: RecipeBook[PretrainConfig] = RecipeBook(
+    "pretrain",
+    PretrainConfig,
+    {name: {"model": dit_preset(name), "train": TRAIN_PRESETS[name]} for name in TRAIN_PRESETS},
+    "debug",
+)
+
+
 def pretrain_config(preset: str, overrides: list[str] | None = None) -> PretrainConfig:
     """The recipe for ``preset`` with ``KEY=VALUE`` overrides (unknown keys/bad values raise DrivewmError)."""
-    base = {"preset": preset, "model": dit_preset(preset), "train": dict(TRAIN_PRESETS[preset])}
-    return apply_overrides(PretrainConfig, base, overrides or [], "pretrain")
+    return RECIPES.resolve(preset, None, overrides or [])
 
 
 def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | None) -> Path:
@@ -129,7 +150,7 @@ def _close(a: list[float] | None, b: list[float] | None) -> bool:
     )
 
 
-class Text2WorldTask:
+class Text2WorldTask(TrainTask):
     """drivewm.train.loop.TrainTask for Text2World pretraining on a latent dataset."""
 
     def __init__(self, cfg: PretrainConfig, dataset: LatentDataset, latent: LatentInfo):
@@ -221,10 +242,24 @@ def pretrain(
 ) -> dict:
     """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
-    dataset = LatentDataset(find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents), cfg.edm.sigma_data)
+    cache = find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents)
+    dataset = LatentDataset(cache, cfg.edm.sigma_data, cfg.data.frames or None)
     if tokenizer_dir is not None:
         check_tokenizer(dataset.cache, tokenizer_dir)
     cfg = resolve_for_data(cfg, dataset)
     torch.manual_seed(cfg.train.seed)  # the DiT's initial weights
     task = Text2WorldTask(cfg, dataset, latent_info(dataset, tokenizer_dir))
+    if cfg.init:
+        warm_start(task.bundle, Path(cfg.init))
     return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)
+
+
+def warm_start(bundle: Text2World, init_dir: Path) -> None:
+    """Load the DiT weights of the Text2World folder ``init_dir`` into ``bundle`` (same DiT and text config)."""
+    parent = Text2World.from_pretrained(init_dir)
+    for name in ("dit", "text"):
+        ours, theirs = to_dict(getattr(bundle.cfg, name)), to_dict(getattr(parent.cfg, name))
+        differ = sorted(k for k in ours if ours[k] != theirs.get(k))
+        if differ:
+            raise DrivewmError(f"{init_dir}: --init model's {name} config differs from this run's at {differ}")
+    bundle.dit.load_state_dict(parent.dit.state_dict())

@@ -55,6 +55,15 @@ class LatentInfo:
     """Single-camera rig (dict form) written into generated clips."""
 
 
+def read_latent_info(info: dict, folder: str | Path) -> LatentInfo:
+    """The ``latent`` entry of a model folder's config.json; a relative tokenizer path (shipped
+    weights point at ``../tokenizer``) is resolved against the model folder."""
+    latent = from_dict(LatentInfo, info.get("latent", {}), f"{Path(folder) / 'config.json'} latent")
+    if latent.tokenizer and not Path(latent.tokenizer).is_absolute():
+        latent = dataclasses.replace(latent, tokenizer=str((Path(folder) / latent.tokenizer).resolve()))
+    return latent
+
+
 class Text2World:
     """Inference bundle. ``sample_latents(prompts, seeds) -> raw tokenizer latents (B, c, t, h, w)``."""
 
@@ -85,7 +94,7 @@ class Text2World:
         where = f"{Path(path) / 'config.json'}"
         model = cls(
             from_dict(Text2WorldConfig, info["config"], where),
-            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
+            read_latent_info(info, path),
         )
         load_weights(model.dit, state, path)
         return model

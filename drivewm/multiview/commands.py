@@ -7,14 +7,18 @@ import argparse
 import json
 from pathlib import Path
 
+from drivewm.diffusion.dit_config import DIT_PRESETS
+from drivewm.recipe import add_recipe_arguments
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model"
     )
-    p.add_argument("--preset", help="size preset: debug, small, base, large, xl (default: the recipe's, else debug)")
-    p.add_argument("--recipe", type=Path, help="YAML with preset, rig and overrides (multiview/recipes/*.yaml)")
-    p.add_argument("--init", required=True, type=Path, help="Text2World model folder to start from")
+    add_recipe_arguments(p, DIT_PRESETS, "debug")
+    p.add_argument(
+        "--init", required=True, type=Path, help="Text2World folder to start from, or a multi-view folder to fine-tune"
+    )
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
     )
@@ -22,19 +26,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--rig", help="cameras to train on: rig name or YAML (default: the recipe's, else all cameras of the clips)"
     )
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override, e.g. multiview.cross_view=joint or train.steps=100",
-    )
-    p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
     p.set_defaults(func=posttrain_command)
 
     r = sub.add_parser("rollout", help="continue a real clip autoregressively under a chosen ego trajectory")
-    r.add_argument("--model", required=True, type=Path, help="multi-view model folder (with its tokenizer recorded)")
+    r.add_argument(
+        "--model", type=Path, help="multi-view model folder (with its tokenizer recorded); default: the shipped one"
+    )
     r.add_argument("--clip", required=True, type=Path, help="clip shard (.tar) or clip folder")
     r.add_argument("--key", help="clip key inside --clip (default: the first clip)")
     r.add_argument(
@@ -59,12 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def posttrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
-    from drivewm.multiview.posttrain import load_recipe, posttrain, posttrain_config
+    from drivewm.multiview.posttrain import RECIPES, posttrain
 
-    recipe = load_recipe(args.recipe) if args.recipe else {}
-    rig = args.rig if args.rig is not None else recipe.get("rig", "")
-    overrides = [*recipe.get("overrides", []), *([f"rig={rig}"] if rig else []), *args.overrides]
-    cfg = posttrain_config(args.preset or recipe.get("preset", "debug"), overrides)
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*([f"rig={args.rig}"] if args.rig else []), *args.overrides])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0
@@ -91,6 +85,10 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.prompt,
         args.speed,
     )
+    if args.model is None:
+        from drivewm.release import shipped_model
+
+        args.model = shipped_model("multiview")
     model = MultiView.from_pretrained(args.model)
     if not model.latent.tokenizer:
         raise DrivewmError(

@@ -22,7 +22,7 @@ from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
-from drivewm.diffusion.text2world import LatentInfo
+from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, invert_T
 from drivewm.multiview import cross_view  # noqa: F401  (registers the cross_view_attn sub-layer)
@@ -163,7 +163,7 @@ class MultiView:
         where = f"{Path(path) / 'config.json'}"
         model = cls(
             from_dict(MultiViewModelConfig, info["config"], where),
-            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
+            read_latent_info(info, path),
         )
         load_weights(model.net, state, path)
         return model

@@ -39,6 +39,20 @@ def save_model_folder(
     )
 
 
+def read_model_type(path: str | Path) -> str | None:
+    """The ``model_type`` of the model folder ``path`` (DrivewmError when it is not one)."""
+    cfg_path = Path(path) / CONFIG_NAME
+    if not cfg_path.is_file():
+        raise DrivewmError(f"{path}: not a drivewm model folder (no {CONFIG_NAME})")
+    try:
+        info = json.loads(cfg_path.read_text())
+    except json.JSONDecodeError:
+        raise DrivewmError(f"{cfg_path}: not valid JSON") from None
+    if not isinstance(info, dict):
+        raise DrivewmError(f"{cfg_path}: expected a JSON object")
+    return info.get("model_type")
+
+
 def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tuple[dict, dict[str, torch.Tensor]]:
     """Read a model folder; returns (config.json contents, state dict).
 

@@ -58,6 +58,22 @@ def test_posttrain_writes_a_multiview_folder(trained_mv):
     assert (root / "mv" / "samples" / "step_0000030.png").is_file()
 
 
+def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
+    """--init a multi-view folder (the fleet fine-tuning path): its weights start the run, nothing new
+    is zero-initialised, and a structurally different config is refused in one line."""
+    root, cache = trained_mv
+    args = ["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--rig", "front3"]
+    assert main([*args, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
+    state = torch.load(tmp_path / "ft" / "train_state.pt", weights_only=True)
+    start = MultiView.from_pretrained(root / "mv").net.state_dict()
+    tuned = MultiView.from_pretrained(tmp_path / "ft").net.state_dict()
+    assert state["config"]["init"] == str((root / "mv").resolve()) and start.keys() == tuned.keys()
+    deltas = [float((tuned[k] - start[k]).abs().max()) for k in start if start[k].is_floating_point()]
+    assert 0 < max(deltas) < 0.05  # two small steps away from the multi-view model, not a fresh init
+    bad = [*args, "--out", str(tmp_path / "bad"), "--set", "multiview.camera_width=64"]
+    assert main(bad) == 2
+
+
 @pytest.mark.parametrize("rig,views", [("front3", 3), ("nuscenes6", 6)])
 def test_generate_writes_clips_for_any_rig(trained_mv, rig, views):
     root, _ = trained_mv
@@ -154,8 +170,8 @@ def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
         == 2
     )
     assert "nonexistent_rig" in capsys.readouterr().err
-    assert main(["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
-    assert "model_type" in capsys.readouterr().err
+    assert main(["posttrain", "--init", str(tmp_path), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
+    assert "not a drivewm model folder" in capsys.readouterr().err
 
 
 def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(trained_mv):
