@@ -18,8 +18,6 @@ from pathlib import Path
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 
-REPO = Path(__file__).resolve().parents[1]
-
 
 def simulate_logs(out: Path, drives: int, duration_s: float) -> list[Path]:
     from drivewm.sim import SimConfig, simulate
@@ -60,7 +58,7 @@ def decode_rate(logs: list[Path]) -> tuple[int, float, float]:
 def curate_time(logs: list[Path], out: Path, workers: int) -> tuple[float, int]:
     from drivewm.curate import curate, load_curate_config
 
-    cfg = load_curate_config(REPO / "datasets/curate/default.yaml")
+    cfg = load_curate_config("default")
     start = time.perf_counter()
     report = curate(logs, out, cfg, executor="local", workers=workers, progress=False)
     return time.perf_counter() - start, report["kept"]

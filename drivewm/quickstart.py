@@ -3,7 +3,7 @@
 Each stage is the exact ``drivewm ...`` command a user would type (printed before it runs), with
 the stage recipes of ``datasets/``, ``multiview/`` and ``eval/``. A stage that finished leaves a
 marker in ``OUT/.stages/`` holding its command; a rerun skips it (and a changed command reruns
-it), so a killed quickstart resumes where it stopped. The profile (``datasets/quickstart.yaml``)
+it), so a killed quickstart resumes where it stopped. The profile (``drivewm/recipes/quickstart.yaml``)
 gives each stage's arguments and expected time; ``smoke`` is the few-minute version the tests run.
 """
 
@@ -16,10 +16,11 @@ import shlex
 import time
 from pathlib import Path
 
+from drivewm import resources
 from drivewm.errors import DrivewmError
 
-REPO = Path(__file__).resolve().parent.parent
-RECIPE = REPO / "datasets" / "quickstart.yaml"
+PACKAGE = resources.package_dir("")
+RECIPE = PACKAGE / "recipes" / "quickstart.yaml"
 FIRST_LOG = "{first_log}"  # stands for the first simulated log, known once simulate has run
 
 
@@ -65,9 +66,9 @@ def load_profile(name: str, recipe: Path = RECIPE) -> Profile:
 
 
 def _recipe_path(arg: str) -> str:
-    """A profile argument naming a recipe file of the checkout (``datasets/...``), made absolute so
+    """A profile argument naming a recipe file of the package (``recipes/...``), made absolute so
     quickstart runs from any working directory; other arguments are returned unchanged."""
-    path = REPO / arg
+    path = PACKAGE / arg
     return str(path) if not Path(arg).is_absolute() and "/" in arg and path.is_file() else arg
 
 

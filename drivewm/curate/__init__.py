@@ -2,7 +2,7 @@
 
 ``curate(log_paths, out_dir, cfg, executor="local"|"ray", workers=1, ray_address=None)`` runs
 the per-log stage (:mod:`drivewm.curate.stage`) on an executor and writes shards, manifest.jsonl,
-report.json and contact_sheet.png (see ``datasets/curate/README.md``).
+report.json and contact_sheet.png (see ``drivewm/recipes/curate/README.md``).
 """
 
 _EXPORTS = {

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "datasets" / "curate" / "default.yaml"
+from drivewm import resources
+
+DEFAULT_CONFIG = resources.package_dir("recipes/curate") / "default.yaml"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,7 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png"
     )
-    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="curation recipe (datasets/curate/*.yaml)")
+    p.add_argument(
+        "--config", type=Path, default=DEFAULT_CONFIG, help="curation recipe (drivewm/recipes/curate/*.yaml)"
+    )
     p.add_argument(
         "--set",
         dest="overrides",

@@ -1,4 +1,4 @@
-"""Curation configuration: typed dataclasses loaded from ``datasets/curate/*.yaml``.
+"""Curation configuration: typed dataclasses loaded from ``drivewm/recipes/curate/*.yaml``.
 
 Every field has a default, so a recipe names only what it changes; unknown keys and wrong
 types are refused by :func:`drivewm.config.from_dict` with the key named.
@@ -9,7 +9,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from drivewm.config import from_dict, load_yaml
+from drivewm import resources
+from drivewm.config import apply_overrides, from_dict, load_yaml
 from drivewm.errors import DrivewmError
 
 
@@ -76,7 +77,7 @@ class TrajectoryConfig:
 
 @dataclasses.dataclass
 class CurateConfig:
-    """One curation recipe (``datasets/curate/*.yaml``)."""
+    """One curation recipe (``drivewm/recipes/curate/*.yaml``)."""
 
     clip_frames: int = 17
     """Frames per clip (T = 1 + 4k suits the 4x and 8x temporal tokenizers)."""
@@ -87,7 +88,7 @@ class CurateConfig:
     resolution: list[int] | None = None
     """Output [W, H] (even numbers); null keeps the log's image size."""
     topic_map: str | None = None
-    """Topic map (a name in datasets/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2, other Foxglove layouts)."""
+    """Topic map (a name in drivewm/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2, other Foxglove layouts)."""
     cameras: list[str] | None = None
     """Cameras to keep, in this order; null keeps the log's rig."""
     sync_tolerance_ms: float = 25.0
@@ -128,10 +129,9 @@ class CurateConfig:
         return 1e9 / self.fps
 
 
-def load_curate_config(path: str | Path, overrides: list[str] | None = None) -> CurateConfig:
-    """Read a curation recipe (YAML), applying ``KEY=VALUE`` overrides."""
-    from drivewm.config import apply_overrides
-
+def load_curate_config(name_or_path: str | Path, overrides: list[str] | None = None) -> CurateConfig:
+    """Read a curation recipe (a packaged name such as ``test``, or a YAML path), applying ``KEY=VALUE`` overrides."""
+    path = resources.find("recipes/curate", name_or_path, "curate recipe")
     data = load_yaml(path)
     if overrides:
         return apply_overrides(CurateConfig, data, overrides, str(path))

@@ -21,9 +21,9 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=int, default=1, help="clips scored in parallel (processes)")
     p.add_argument("--metrics", default=None, help="comma list of tse,cse,pose,traj,adherence (default: the suite's)")
     p.add_argument(
-        "--reference", default=None, help="reference metrics JSON shown beside the results (eval/reference/*.json)"
+        "--reference", default=None, help="reference metrics JSON shown beside the results (drivewm/references/*.json)"
     )
-    p.add_argument("--suite", default=None, help="suite YAML overriding protocol constants (eval/suites/*.yaml)")
+    p.add_argument("--suite", default=None, help="suite YAML overriding protocol constants (drivewm/recipes/eval/*.yaml)")
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument(

@@ -1,6 +1,6 @@
-"""The evaluation protocol as one typed config: every constant of eval/protocol.md lives here.
+"""The evaluation protocol as one typed config: every constant of docs/eval-protocol.md lives here.
 
-Defaults are the pinned protocol; a suite YAML (eval/suites/*.yaml) may override them, and the
+Defaults are the pinned protocol; a suite YAML (drivewm/recipes/eval/*.yaml) may override them, and the
 resolved config is written next to every metrics.json so numbers can be traced to their settings.
 """
 

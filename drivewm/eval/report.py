@@ -3,7 +3,7 @@
 ``metrics.json``: aggregates at the top level (tse, cse, pose_success, ate, rpe_trans, rpe_rot, tfe,
 ...), per clip under ``clips``, the resolved protocol under ``config``. ``metrics.md``: one row per
 aggregate with the reference ("real") value beside it when a reference JSON is given (same keys;
-eval/reference/*.json). ``error_distributions.png``: per-pair TSE / CSE medians and per-clip
+drivewm/references/*.json). ``error_distributions.png``: per-pair TSE / CSE medians and per-clip
 trajectory errors. ``eval.rrd``: per clip, the first CSE pair's matches and the recovered vs
 reference trajectory.
 """

@@ -9,7 +9,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("view", help="write a Rerun recording (.rrd) of a drive log", description=__doc__)
     p.add_argument("log", help="MCAP drive log, or a folder of split-bag .mcap files")
     p.add_argument("--out", default=None, help="output .rrd (default: next to the log, LOG.rrd)")
-    p.add_argument("--topic-map", default=None, help="topic map name or YAML for fleet logs (datasets/topicmaps/)")
+    p.add_argument("--topic-map", default=None, help="topic map name or YAML for fleet logs (drivewm/topicmaps/)")
     p.set_defaults(func=run_view)
 
 

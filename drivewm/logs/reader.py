@@ -53,7 +53,7 @@ class _Collected:
 
 
 def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, require_images: bool = True) -> DriveLog:
-    """Read one drive. ``topic_map``: a TopicMap, a YAML path or a name in datasets/topicmaps/.
+    """Read one drive. ``topic_map``: a TopicMap, a YAML path or a name in drivewm/topicmaps/.
 
     ``require_images``: raise unless the log has camera images and ego poses (the contract of
     :meth:`DriveLog.validate`); False loads pose-only or sensor-only logs as they are.

@@ -13,7 +13,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model"
     )
     p.add_argument("--preset", help="size preset: debug, small, base, large, xl (default: the recipe's, else debug)")
-    p.add_argument("--recipe", type=Path, help="YAML with preset, rig and overrides (multiview/recipes/*.yaml)")
+    p.add_argument("--recipe", type=Path, help="YAML with preset, rig and overrides (drivewm/recipes/posttrain/*.yaml)")
     p.add_argument("--init", required=True, type=Path, help="Text2World model folder to start from")
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"

@@ -13,7 +13,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "--scenario", default=None, help="highway|merge|roundabout|intersection (highway) or grid|spider|random (sumo)"
     )
-    p.add_argument("--rig", default=None, help="rig name (multiview/rigs/) or YAML path (default nuscenes6)")
+    p.add_argument("--rig", default=None, help="rig name (drivewm/rigs/) or YAML path (default nuscenes6)")
     p.add_argument("--weather", choices=["clear", "overcast", "rain", "snow", "fog"], default=None)
     p.add_argument("--time-of-day", choices=["day", "dusk", "night"], default=None)
     p.add_argument("--traffic", choices=["low", "medium", "high"], default=None, help="traffic density")
@@ -29,7 +29,7 @@ def register(subparsers) -> None:
         help="number of drives (seeds seed, seed+1, ...); recipes give their own counts",
     )
     p.add_argument("--workers", type=int, default=1, help="drives simulated in parallel processes (default 1)")
-    p.add_argument("--recipe", default=None, help="dataset recipe YAML (datasets/scenarios/); flags given override it")
+    p.add_argument("--recipe", default=None, help="dataset recipe YAML (drivewm/recipes/simulate/); flags given override it")
     p.add_argument("--out", required=True, help="output folder for the .mcap logs")
     p.set_defaults(func=run_simulate)
 

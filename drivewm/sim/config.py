@@ -22,7 +22,7 @@ class SimConfig:
     """highway|merge|roundabout|intersection (highway-env) or grid|spider|random (SUMO); None: the
     source's first."""
     rig: str = "nuscenes6"
-    """Camera rig name (multiview/rigs/NAME.yaml) or a rig YAML path."""
+    """Camera rig name (drivewm/rigs/NAME.yaml) or a rig YAML path."""
     weather: Literal["clear", "overcast", "rain", "snow", "fog"] = "clear"
     """Weather rendered (also written as the scene tag)."""
     time_of_day: Literal["day", "dusk", "night"] = "day"

@@ -1,4 +1,4 @@
-"""Dataset recipes (datasets/scenarios/*.yaml): several kinds of drives in one file.
+"""Dataset recipes (drivewm/recipes/simulate/*.yaml): several kinds of drives in one file.
 
 Layout::
 

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from synth import write_synth_log  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "datasets" / "curate" / "test.yaml"
+CONFIG = "test"
 
 
 def make_logs(folder: Path) -> list[Path]:

@@ -1,14 +1,11 @@
 """Real video through import-video + curate: Sintel cuts and dark runs, a real dashcam drive."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from drivewm.curate import curate, load_curate_config
 from drivewm.curate.import_video import import_videos
 
-REPO = Path(__file__).resolve().parents[2]
 # Facts from ../shared/data/README.md (source frame indices at 24 fps, measured roughly)
 SINTEL_DARK_RUNS = [(99, 182), (214, 239)]  # test_clip_10s
 SINTEL_CUTS = [348, 372, 523, 573, 610, 624]  # test_video_30s
@@ -24,7 +21,7 @@ def curated(shared_data, tmp_path_factory):
     (root / "cam.yaml").write_text(CALIBRATION)
     videos = [shared_data / "video/sintel_cuts", shared_data / "video/dashcam_highway"]
     logs = import_videos(videos, root / "cam.yaml", root / "logs")
-    report = curate(logs, root / "out", load_curate_config(REPO / "datasets/curate/video.yaml"), progress=False)
+    report = curate(logs, root / "out", load_curate_config("video"), progress=False)
     from drivewm.clips import read_manifest
 
     rows = read_manifest(root / "out")

@@ -7,10 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from drivewm import resources
 from drivewm.cli import main
 from drivewm.clips import ShardWriter
 from drivewm.clips.video import encode_mp4
-from drivewm.eval.config import EvalConfig
+from drivewm.config import load_yaml, to_dict
+from drivewm.eval.config import EvalConfig, eval_config_from_dict
 from drivewm.eval.inputs import EvalItem
 from drivewm.eval.suite import aggregate, evaluate, evaluate_item
 from drivewm.geometry import load_rig
@@ -57,7 +59,7 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
             "--workers",
             "2",
             "--reference",
-            "eval/reference/cosmos_paper.json",
+            "drivewm/references/cosmos_paper.json",
         ]
     )
     assert rc == 0
@@ -113,12 +115,7 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
 
 
 def test_default_suite_yaml_pins_the_config_defaults():
-    from pathlib import Path
-
-    from drivewm.config import load_yaml, to_dict
-    from drivewm.eval.config import eval_config_from_dict
-
-    suite = Path(__file__).resolve().parents[2] / "eval" / "suites" / "default.yaml"
+    suite = resources.package_dir("recipes/eval") / "default.yaml"
     assert to_dict(eval_config_from_dict(load_yaml(suite))) == to_dict(EvalConfig())
 
 

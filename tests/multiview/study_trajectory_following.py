@@ -1,6 +1,6 @@
 """Does a debug multi-view model post-trained on the simulated clips follow the trajectory it is
 conditioned on? A study, not a pytest test: at debug scale the answer is "not measurably", and this
-script prints the numbers behind that statement (see the multiview report / multiview/recipes/README.md).
+script prints the numbers behind that statement (see the multiview report / drivewm/recipes/posttrain/README.md).
 
     python tests/multiview/study_trajectory_following.py CLIPDIR [--pool 16] [--steps 300]
 
