@@ -1,6 +1,6 @@
 """Geometry shared by every stage: SE(3), quaternions, pinhole cameras, rigs, epipolar relations.
 
-Conventions (DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
+Conventions (docs/DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
 origin on the ground under the rear axle. Cameras are OpenCV (x right, y down, z forward).
 Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points are (..., 3).
 """
@@ -228,7 +228,7 @@ class Camera:
 
 @dataclasses.dataclass
 class Rig:
-    """An ordered list of cameras (DESIGN.md section 3). Order is the view order in models."""
+    """An ordered list of cameras (docs/DESIGN.md section 3). Order is the view order in models."""
 
     name: str
     cameras: list[Camera]

@@ -1,4 +1,4 @@
-"""The clip: synchronized multi-camera frames, ego poses and metadata (DESIGN.md section 4).
+"""The clip: synchronized multi-camera frames, ego poses and metadata (docs/DESIGN.md section 4).
 
 On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`) and
 ``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) inside a WebDataset tar.

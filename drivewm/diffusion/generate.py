@@ -1,6 +1,6 @@
 """Text2World generation: prompts -> latents -> video via the tokenizer -> clip shards, mp4, contact sheet.
 
-Generated samples use the clip format (DESIGN.md section 4) so drivewm.eval scores them like
+Generated samples use the clip format (docs/DESIGN.md section 4) so drivewm.eval scores them like
 real clips: ``GENDIR/generated-000000.tar`` + ``manifest.jsonl``, plus ``sample_XXX.mp4`` per
 sample and ``contact_sheet.png``.
 """

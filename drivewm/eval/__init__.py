@@ -1,4 +1,4 @@
-"""The geometric-consistency benchmark (DESIGN.md stage 4): TSE, CSE, pose success, trajectory errors, adherence.
+"""The geometric-consistency benchmark (docs/DESIGN.md stage 4): TSE, CSE, pose success, trajectory errors, adherence.
 
 ``evaluate(location, rig=None, out_dir=...)`` scores clip shards, per-camera mp4 folders or a grid mp4;
 the pieces (matching, epipolar, consistency, sfm, trajectory, adherence) are usable alone.

@@ -1,4 +1,4 @@
-"""``drivewm eval LOCATION --rig R --out DIR``: the geometric-consistency benchmark (DESIGN.md section 8)."""
+"""``drivewm eval LOCATION --rig R --out DIR``: the geometric-consistency benchmark (docs/DESIGN.md section 8)."""
 
 from __future__ import annotations
 

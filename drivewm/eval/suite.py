@@ -22,7 +22,7 @@ from drivewm.errors import DrivewmError
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.inputs import EvalItem, load_items
 
-#: Aggregate keys (DESIGN.md section 8) and the per-clip field each averages.
+#: Aggregate keys (docs/DESIGN.md section 8) and the per-clip field each averages.
 AGGREGATE_KEYS = (
     "tse",
     "tse_calibrated",

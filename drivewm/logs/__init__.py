@@ -1,4 +1,4 @@
-"""Drive logs: the in-memory :class:`DriveLog` and MCAP read/write (DESIGN.md section 4).
+"""Drive logs: the in-memory :class:`DriveLog` and MCAP read/write (docs/DESIGN.md section 4).
 
 - :mod:`drivewm.logs.writer`: ``LogWriter`` / ``write_log`` (Foxglove SDK, protobuf, atomic);
 - :mod:`drivewm.logs.reader`: ``read_log`` (Foxglove protobuf or JSON, ROS 2 through a topic map);

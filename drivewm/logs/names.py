@@ -1,4 +1,4 @@
-"""Topic and frame names of drivewm's own drive logs (DESIGN.md section 4, apis.md).
+"""Topic and frame names of drivewm's own drive logs (docs/DESIGN.md section 4).
 
 Written logs use these; the reader uses them as the defaults for Foxglove files, and a topic map
 (``drivewm/topicmaps/``) overrides them for fleet logs.

@@ -1,4 +1,4 @@
-"""Write drive logs as MCAP with the Foxglove SDK (protobuf Foxglove schemas, DESIGN.md section 4).
+"""Write drive logs as MCAP with the Foxglove SDK (protobuf Foxglove schemas, docs/DESIGN.md section 4).
 
 Topics (see :mod:`drivewm.logs.names`): ``/CAMERA/image`` (foxglove.CompressedImage, frame_id =
 camera), ``/CAMERA/calibration`` (foxglove.CameraCalibration), ``/tf_static`` (FrameTransforms

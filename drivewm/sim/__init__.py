@@ -1,5 +1,5 @@
 """Simulated multi-camera drive logs: traffic from highway-env or SUMO, a calibrated camera rig
-rendered from the scene state, written as MCAP drive logs (DESIGN.md section 4).
+rendered from the scene state, written as MCAP drive logs (docs/DESIGN.md section 4).
 
 - :mod:`drivewm.sim.scene`: the scene-state stream (road map, ego pose, agent boxes);
 - :mod:`drivewm.sim.source_highway`, :mod:`drivewm.sim.source_sumo`: the two sources;

@@ -14,7 +14,7 @@ SUMO_SCENARIOS = ("grid", "spider", "random")
 
 @dataclasses.dataclass
 class SimConfig:
-    """One simulated drive (apis.md, drivewm.sim)."""
+    """One simulated drive (drivewm.sim)."""
 
     source: Literal["highway", "sumo"] = "highway"
     """Traffic simulator: highway-env or SUMO (libsumo)."""

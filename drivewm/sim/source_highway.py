@@ -1,6 +1,6 @@
 """highway-env scenario source: highway, merge, roundabout, intersection -> SceneRecording.
 
-highway-env is 2D with its y axis pointing down in its own render (DESIGN.md section 9), so a
+highway-env is 2D with its y axis pointing down in its own render (docs/DESIGN.md section 9), so a
 z-up world is X = x, Y = -y, yaw = -heading. Its vehicle position is the box centre; the ego
 origin is on the ground under the rear axle. The ego is an IDM + MOBIL driver (car following and
 lane changes, Treiber 2000 / Kesting 2007), so drives are sensible without a trained policy.

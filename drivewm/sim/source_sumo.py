@@ -3,7 +3,7 @@
 Nothing needs to exist beforehand: ``netgenerate`` builds the network and ``randomTrips.py``
 (shipped with the eclipse-sumo package) the traffic, in a temporary folder, all seeded.
 SUMO's ``getAngle`` is in degrees, 0 = north, clockwise, and ``getPosition`` is the front bumper
-(DESIGN.md section 9); drivewm's ego origin is on the ground under the rear axle.
+(docs/DESIGN.md section 9); drivewm's ego origin is on the ground under the rear axle.
 """
 
 from __future__ import annotations
