@@ -91,14 +91,19 @@ class RecipeBook(Generic[C]):
         parser.add_argument(
             "--recipe", help=f"recipe YAML (keys: preset, config, overrides) or a packaged recipe's name{packaged}"
         )
-        parser.add_argument(
-            "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field"
-        )
-        parser.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+        add_override_arguments(parser)
 
     def from_args(self, args: argparse.Namespace) -> C:
         """The config named by the flags of :meth:`add_arguments`."""
         return self.resolve(getattr(args, "preset", None), args.recipe, args.overrides)
+
+
+def add_override_arguments(parser: argparse.ArgumentParser, what: str = "a config field", run: str = "run") -> None:
+    """``--set KEY=VALUE`` (repeatable, into ``args.overrides``) and ``--dry-run``: the same in every stage."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=f"override {what}"
+    )
+    parser.add_argument("--dry-run", action="store_true", help=f"print the resolved config of the {run} and exit")
 
 
 def load_recipe(path: str | Path) -> dict:

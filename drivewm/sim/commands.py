@@ -9,6 +9,7 @@ import argparse
 
 from drivewm import resources
 from drivewm.choices import add_registry_argument
+from drivewm.recipe import add_override_arguments
 
 
 def register(subparsers) -> None:
@@ -48,15 +49,7 @@ def register(subparsers) -> None:
         help="dataset recipe: a YAML path or a packaged name "
         f"({', '.join(resources.names('recipes/simulate'))}); flags and --set apply to every drive",
     )
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a SimConfig field in every drive, e.g. jpeg_quality=80",
-    )
-    p.add_argument("--dry-run", action="store_true", help="print the drives' configs and exit")
+    add_override_arguments(p, "a SimConfig field in every drive, e.g. jpeg_quality=80", "drives")
     p.add_argument("--out", required=True, help="output folder for the .mcap logs")
     p.set_defaults(func=run_simulate)
 
