@@ -123,7 +123,7 @@ def _wait_for(pattern_dir: Path, proc: subprocess.Popen, timeout: float = 120.0)
 def test_sigkill_then_rerun_equals_uninterrupted(run, tmp_path):
     root, logs, cfg, report = run
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--config", str(CONFIG)]
+    cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--recipe", CONFIG]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     _wait_for(out / "logs", proc)
