@@ -7,12 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from drivewm import resources
 from drivewm.cli import main
 from drivewm.clips import ShardWriter
 from drivewm.clips.video import encode_mp4
 from drivewm.config import load_yaml, to_dict
-from drivewm.eval.config import EvalConfig, eval_config_from_dict
+from drivewm.eval.config import EVAL_RECIPES, EvalConfig
 from drivewm.eval.inputs import EvalItem
 from drivewm.eval.suite import aggregate, evaluate, evaluate_item
 from drivewm.geometry import load_rig
@@ -59,7 +58,7 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
             "--workers",
             "2",
             "--reference",
-            "drivewm/references/cosmos_paper.json",
+            "cosmos_paper",
         ]
     )
     assert rc == 0
@@ -115,8 +114,12 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
 
 
 def test_default_suite_yaml_pins_the_config_defaults():
-    suite = resources.package_dir("recipes/eval") / "default.yaml"
-    assert to_dict(eval_config_from_dict(load_yaml(suite))) == to_dict(EvalConfig())
+    assert EVAL_RECIPES.recipe_names() == ["default", "quick"]
+    assert to_dict(EVAL_RECIPES.resolve(recipe="default")) == to_dict(EvalConfig())
+    written = load_yaml(EVAL_RECIPES.recipe_path("default"))["config"]
+    assert set(written) == set(to_dict(EvalConfig()))
+    assert all(set(v) == set(to_dict(EvalConfig())[k]) for k, v in written.items() if isinstance(v, dict))
+    assert EVAL_RECIPES.resolve(recipe="quick", overrides=["match.ratio=0.75"]).match.ratio == 0.75
 
 
 def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
