@@ -11,6 +11,8 @@ import importlib
 import json
 from pathlib import Path
 
+from drivewm.choices import add_registry_argument
+
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
 GENERATORS = {
     "text2world": "drivewm.diffusion.commands:generate_text2world_command",
@@ -45,7 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
     g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=int, default=1, help="samples per prompt")
-    g.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    add_registry_argument(
+        g, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
+    )
     g.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to sample (auto: CUDA when available)"
     )

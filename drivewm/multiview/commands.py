@@ -7,6 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
+from drivewm.choices import add_registry_argument
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -53,7 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
     r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
-    r.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    add_registry_argument(
+        r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
+    )
     r.set_defaults(func=rollout_command)
 
 
