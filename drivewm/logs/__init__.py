@@ -7,9 +7,12 @@
   Foxglove and as a ROS 2 bag;
 - :mod:`drivewm.logs.viewer`: a Rerun recording of a log (``drivewm view``).
 
-Heavy modules (the Foxglove SDK, mcap decoders, rerun) load only when used.
+Heavy modules (the Foxglove SDK, mcap decoders, rerun) load only when used, and the public names
+below on first use (:mod:`drivewm.lazy`), so ``drivewm --help`` stays fast.
 """
 
-from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, RoadLine, SceneInfo
+from drivewm.lazy import lazy_exports
 
-__all__ = ["AgentBox", "DriveLog", "ImageFrame", "RoadLine", "SceneInfo"]
+_EXPORTS = {name: "drivewm.logs.types" for name in ("AgentBox", "DriveLog", "ImageFrame", "RoadLine", "SceneInfo")}
+__all__ = sorted(_EXPORTS)
+__getattr__ = lazy_exports(__name__, _EXPORTS)
