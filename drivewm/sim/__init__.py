@@ -6,15 +6,11 @@ rendered from the scene state, written as MCAP drive logs (docs/DESIGN.md sectio
 - :mod:`drivewm.sim.render`: the renderer (ground texture + textured boxes, z-buffer, conditions);
 - :mod:`drivewm.sim.simulate`: ``simulate`` / ``simulate_many``; :mod:`drivewm.sim.recipe`: dataset recipes.
 
-The public names are imported on first use (:mod:`drivewm.lazy`), so ``drivewm --help`` stays fast.
+The names are imported here, not lazily (:mod:`drivewm.lazy`): the function ``simulate`` shares its
+name with the module ``drivewm.sim.simulate``, which would replace a lazily bound name on import.
 """
 
-from drivewm.lazy import lazy_exports
+from drivewm.sim.config import SimConfig
+from drivewm.sim.simulate import simulate, simulate_many
 
-_EXPORTS = {
-    "SimConfig": "drivewm.sim.config",
-    "simulate": "drivewm.sim.simulate",
-    "simulate_many": "drivewm.sim.simulate",
-}
-__all__ = sorted(_EXPORTS)
-__getattr__ = lazy_exports(__name__, _EXPORTS)
+__all__ = ["SimConfig", "simulate", "simulate_many"]
