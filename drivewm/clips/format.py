@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 
-from drivewm.clips.video import decode_mp4
+from drivewm.clips.video import decode_mp4, encode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
 
@@ -104,8 +104,6 @@ def clip_from_arrays(
     meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18
 ) -> Clip:
     """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta)."""
-    from drivewm.clips.video import encode_mp4
-
     validate_meta(meta)
     mp4 = {c: encode_mp4(frames[c], meta.fps, crf) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
