@@ -25,7 +25,7 @@ from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import DrivewmError
-from drivewm.geometry import Rig, invert_T
+from drivewm.geometry import Rig, invert_T, rig_from_dict
 from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
 from drivewm.multiview.config import MultiViewModelConfig
 from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
@@ -172,8 +172,6 @@ class MultiView:
 
     @property
     def training_rig(self) -> Rig:
-        from drivewm.geometry import rig_from_dict
-
         return rig_from_dict(self.latent.rig, "model rig")
 
     def token_grid(self) -> tuple[int, int, int]:
