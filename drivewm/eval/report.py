@@ -6,6 +6,7 @@ aggregate with the reference ("real") value beside it when a reference JSON is g
 a path, or the name of a packaged one in drivewm/references/). ``error_distributions.png``: per-pair
 TSE / CSE medians and per-clip trajectory errors. ``eval.rrd``: per clip, the first CSE pair's
 matches and the recovered vs reference trajectory.
+matplotlib and Rerun (seconds to import) load only when the pictures are drawn.
 """
 
 from __future__ import annotations
