@@ -9,7 +9,7 @@ import sys
 from drivewm.cli import build_parser
 
 #: Not imported by the parser. (The simulator package, with OpenCV and matplotlib, is: see drivewm/sim/__init__.py.)
-HEAVY = ("torch", "filterpy", "pycolmap", "highway_env", "libsumo", "rerun", "scenedetect", "mcap", "foxglove")
+HEAVY = ("torch", "filterpy", "pycolmap", "highway_env", "libsumo", "rerun", "scenedetect", "ray", "transformers")
 COMMANDS = (
     "simulate", "view", "curate", "import-video", "tokenizer", "pretrain", "generate", "posttrain", "rollout", "eval",
     "quickstart",
@@ -17,7 +17,7 @@ COMMANDS = (
 
 
 def test_help_imports_no_heavy_module():
-    """Building the parser and ``drivewm --help`` load no PyTorch, no traffic simulator and no MCAP/Rerun libraries."""
+    """Building the parser and ``drivewm --help`` load no PyTorch, traffic simulator, COLMAP, Rerun or Ray."""
     code = (
         "import json, sys; from drivewm.cli import build_parser; build_parser().format_help(); "
         f"print(json.dumps([m for m in {list(HEAVY)!r} if m in sys.modules]))"

@@ -2,6 +2,7 @@
 
 ``generate`` dispatches on the model folder's ``model_type`` through :data:`GENERATORS`, so the
 multi-view stage plugs its generator in by name (``drivewm.multiview.generate:generate``).
+The models are imported inside the handlers, so that ``drivewm --help`` imports no PyTorch.
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
 """``drivewm posttrain`` and ``drivewm rollout`` (thin: parse, build config, print it, call the library).
-Multi-view ``drivewm generate`` lives in drivewm.multiview.generate (dispatched on model_type)."""
+Multi-view ``drivewm generate`` lives in drivewm.multiview.generate (dispatched on model_type).
+The models are imported inside the handlers, so that ``drivewm --help`` imports no PyTorch."""
 
 from __future__ import annotations
 
