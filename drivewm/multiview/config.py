@@ -33,7 +33,7 @@ class MultiViewConfig:
     cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity
     reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
     it predicts the simulated clips' later frames no better than copying the first frame (see
-    tests/multiview/study_turned_following.py)."""
+    studies/turned_following.py)."""
     warp_ground_m: float = 100.0
     """The warp follows rays that meet the road within this distance (m) to the road plane and all
     others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""

@@ -2,7 +2,7 @@
 conditioned on? A study, not a pytest test: at debug scale the answer is "not measurably", and this
 script prints the numbers behind that statement (see the multiview report / drivewm/recipes/posttrain/README.md).
 
-    python tests/multiview/study_trajectory_following.py CLIPDIR [--pool 16] [--steps 300]
+    python studies/trajectory_following.py CLIPDIR [--pool 16] [--steps 300]
 
 Recipe: front camera of every simulated clip plus its mirror image (image flipped, trajectory
 y -> -y: doubles the data and pairs every left turn with a right one), coded by the pooling
@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from einops import rearrange
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "multiview"))  # the tests' helpers
 from mv_standin import PoolTokenizer  # noqa: E402
 
 from drivewm.clips import iter_clips  # noqa: E402

@@ -2,7 +2,7 @@
 conditioned on, judged by the eval stage's estimator? A study (prints numbers), not a pytest test:
 measured at debug scale on CPU the answer is "no better than chance" (see the numbers at the end).
 
-    python tests/multiview/study_turned_following.py CLIPDIR [--steps 300] [--lr 1e-3] [--batch-size 4]
+    python studies/turned_following.py CLIPDIR [--steps 300] [--lr 1e-3] [--batch-size 4]
 
 Set-up, and why each part is there:
 
@@ -70,7 +70,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "multiview"))  # the tests' helpers
 from yaw_augment import decode_bilinear, paired_agreement, recovered_yaw, trajectory_yaw, write_turned_cache  # noqa: E402
 
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss  # noqa: E402
