@@ -40,8 +40,8 @@ CLIP_SOURCES = (*LOG_SOURCES, "drivewm/curate", "drivewm/clips", "drivewm/recipe
 def _source_hash(*parts: str) -> str:
     digest = hashlib.sha256()
     for part in parts:
-        path = REPO / part
-        for path in sorted(path.rglob("*")) if path.is_dir() else [path]:
+        root = REPO / part
+        for path in sorted(root.rglob("*")) if root.is_dir() else [root]:
             if path.is_file() and path.suffix in {".py", ".yaml", ".yml"}:
                 digest.update(str(path.relative_to(REPO)).encode())
                 digest.update(path.read_bytes())
@@ -105,7 +105,7 @@ def sim_logs() -> Path:
 
 
 def sim_clips() -> Path:
-    """:func:`sim_logs` curated with the ``test`` recipe (drivewm/recipes/curate/test.yaml: 17-frame clips at 10 fps)."""
+    """:func:`sim_logs` curated with the ``test`` recipe (drivewm/recipes/curate/test.yaml: 17-frame clips, 10 fps)."""
     logs = sim_logs()
     return _cached("clips", CLIP_SOURCES, lambda out: _build_clips(out, logs))
 

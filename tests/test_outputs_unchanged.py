@@ -87,11 +87,12 @@ def clips_digest(clip_dir: Path) -> dict[str, str]:
 
 
 def metrics_digest(eval_dir: Path) -> dict:
-    """metrics.json without timings or paths: the aggregates (rounded to 9 digits) and a digest of the per-clip values."""
+    """metrics.json without timings or paths: the aggregates (rounded to 9 digits), a digest of the per-clip values."""
 
     def clean(obj):
         if isinstance(obj, dict):
-            return {k: clean(v) for k, v in obj.items() if not k.startswith("seconds") and k not in ("config", "location")}
+            dropped = ("config", "location")
+            return {k: clean(v) for k, v in obj.items() if not k.startswith("seconds") and k not in dropped}
         if isinstance(obj, list):
             return [clean(v) for v in obj]
         return float(f"{obj:.9g}") if isinstance(obj, float) else obj
