@@ -85,10 +85,12 @@ def main() -> None:
         print(f"raw decode (read_log + JPEG decode): {frames / t_decode:8.1f} camera-frames/s")
         print(f"H.264 encode only (encode_mp4):     {frames / t_encode:8.1f} camera-frames/s  (the other fixed cost)")
         print(
-            f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw decode"
+            f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw "
+            "decode"
         )
         print(
-            f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw decode"
+            f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw "
+            "decode"
         )
         print(f"speed-up 1 -> 2 workers: {t1 / t2:.2f} x (on {os.cpu_count()} CPUs)")
     finally:

@@ -62,7 +62,8 @@ def main() -> None:
     ideal = n / -(-n // 2)  # n clips in ceil(n / 2) rounds of 2 workers
     print(
         f"wall: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s -> speed-up {walls[1] / walls[2]:.2f}x "
-        f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load {os.getloadavg()[0]:.1f})"
+        f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load "
+        f"{os.getloadavg()[0]:.1f})"
     )
 
 

@@ -71,10 +71,10 @@ def throughput(frames: int, height: int, width: int, repeats: int) -> None:
     for ours_name, peer_name in (("small-4x8x8", "cogvideox"), ("small-8x8x8", "ltx")):
         torch.manual_seed(0)
         ours, other = Tokenizer(preset(ours_name)).eval(), peer(peer_name).eval()
-        t_enc, z = timed(lambda: ours.encode(video), repeats)
-        t_dec, _ = timed(lambda: ours.decode(z), repeats)
-        p_enc, pz = timed(lambda: other.encode(video).latent_dist.mode(), repeats)
-        p_dec, _ = timed(lambda: other.decode(pz).sample, repeats)
+        t_enc, z = timed(lambda ours=ours: ours.encode(video), repeats)
+        t_dec, _ = timed(lambda ours=ours, z=z: ours.decode(z), repeats)
+        p_enc, pz = timed(lambda other=other: other.encode(video).latent_dist.mode(), repeats)
+        p_dec, _ = timed(lambda other=other, pz=pz: other.decode(pz).sample, repeats)
         print(
             f"{ours_name} ({params_m(ours):.1f}M, latents {tuple(z.shape)}) vs {peer_name} ({params_m(other):.1f}M, "
             f"latents {tuple(pz.shape)})"
@@ -110,7 +110,8 @@ def score(name: str, tok: Tokenizer, video: torch.Tensor) -> None:
     ratio = video[0, :, : recon.shape[2]].numel() / latents[0].numel()
     print(
         f"  {name:22s} PSNR {ours['psnr']:6.2f} dB  SSIM {ours['ssim']:.3f}  temporal_l1 {ours['temporal_l1']:5.2f}  | "
-        f"block-mean codec PSNR {base['psnr']:6.2f} SSIM {base['ssim']:.3f}  (ours - it: {ours['psnr'] - base['psnr']:+.2f} dB)"
+        f"block-mean codec PSNR {base['psnr']:6.2f} SSIM {base['ssim']:.3f}  (ours - it: "
+        f"{ours['psnr'] - base['psnr']:+.2f} dB)"
         f"  | compression {ratio:.1f}x"
     )
 
