@@ -98,7 +98,8 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
         raise DrivewmError(
-            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)"
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance "
+            "(multi-view models do)"
         )
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device

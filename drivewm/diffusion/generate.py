@@ -125,7 +125,7 @@ def write_generated(
             write_bytes(out_dir / f"sample_{i:03d}.mp4", encode_mp4(video, fps))
             files.append(out_dir / f"sample_{i:03d}.mp4")
             rows.append({"key": meta.key, "caption": prompt, **extra})
-    for (shard, key), row in zip(writer.written, rows):
+    for (shard, _key), row in zip(writer.written, rows):
         row["shard"] = Path(shard).name
     files.append(write_manifest(out_dir, rows))
     files.append(write_grid_png(videos, out_dir / "contact_sheet.png", prompts))

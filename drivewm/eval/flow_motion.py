@@ -113,7 +113,8 @@ def flow_camera_poses(
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8 or len(frames) < 2:
         raise DrivewmError(
-            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} {frames.shape}"
+            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} "
+            f"{frames.shape}"
         )
     grey, K = working_frames(frames, camera, cfg)
     poses = np.full((len(grey), 4, 4), np.nan)

@@ -180,7 +180,8 @@ class LogWriter:
         image = np.asarray(image)
         if image.dtype != np.uint8 or image.shape != (cam.height, cam.width, 3):
             raise DrivewmError(
-                f"{self.path}: image for {camera} must be uint8 ({cam.height}, {cam.width}, 3), got {image.dtype} {image.shape}"
+                f"{self.path}: image for {camera} must be uint8 ({cam.height}, {cam.width}, 3), got {image.dtype} "
+                f"{image.shape}"
             )
         self.write_encoded_image(
             camera, timestamp_ns, encode_image(image, self.image_format, self.jpeg_quality), self.image_format

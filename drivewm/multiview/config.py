@@ -61,7 +61,8 @@ class MultiViewConfig:
     def validate(self) -> None:
         if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
             raise DrivewmError(
-                f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, {self.neighbors}"
+                f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, "
+                f"{self.neighbors}"
             )
         if (
             self.trajectory_waypoints < 0
@@ -71,7 +72,8 @@ class MultiViewConfig:
             or self.warp_ground_m < 0
         ):
             raise DrivewmError(
-                "multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= video2world_prob <= 1, 0 <= trajectory_dropout < 1, warp_ground_m >= 0"
+                "multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= "
+                "video2world_prob <= 1, 0 <= trajectory_dropout < 1, warp_ground_m >= 0"
             )
 
 
