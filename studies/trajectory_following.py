@@ -165,20 +165,23 @@ def main() -> None:
             )
         )
         print(
-            "%-28s heading %+.2f  real-clip yaw %+.2f  sample yaw (own %+.2f, mirrored %+.2f)  SfM registered %d, %d of %d"
-            % (ds.cache.rows[i]["key"], *rows[-1], tok.decode(zs[0][None]).shape[2])
+            "{:<28s} heading {:+.2f}  real-clip yaw {:+.2f}  sample yaw (own {:+.2f}, mirrored {:+.2f})  "
+            "SfM registered {}, {} of {}".format(ds.cache.rows[i]["key"], *rows[-1], tok.decode(zs[0][None]).shape[2])
         )
     r = np.array(rows)
     agree = np.concatenate(
         [np.abs(r[:, 2] - r[:, 0]) < np.abs(r[:, 2] + r[:, 0]), np.abs(r[:, 3] + r[:, 0]) < np.abs(r[:, 3] - r[:, 0])]
     )
     print(
-        f"phase-correlation yaw agrees with the conditioned (not the mirrored) trajectory: {agree.mean():.2f} of {len(agree)} (chance 0.5)"
+        f"phase-correlation yaw agrees with the conditioned (not the mirrored) trajectory: {agree.mean():.2f} of "
+        f"{len(agree)} (chance 0.5)"
     )
     losses = conditional_losses(model, ds)
     print(
-        "EDM loss own %.4f shuffled %.4f mirrored %.4f; own < shuffled in %.2f, own < mirrored in %.2f of %d clips"
-        % (*losses.mean(0), np.mean(losses[:, 0] < losses[:, 1]), np.mean(losses[:, 0] < losses[:, 2]), len(losses))
+        "EDM loss own {:.4f} shuffled {:.4f} mirrored {:.4f}; own < shuffled in {:.2f}, own < mirrored in {:.2f} "
+        "of {} clips".format(
+            *losses.mean(0), np.mean(losses[:, 0] < losses[:, 1]), np.mean(losses[:, 0] < losses[:, 2]), len(losses)
+        )
     )
     shutil.rmtree(root, ignore_errors=True)
 

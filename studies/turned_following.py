@@ -57,7 +57,7 @@ texture rushing past, which no warp of the first frame predicts, so conditioning
 the model's capacity and training time are. "Follows trajectories better than chance" stays
 undemonstrated on this machine; the run that should settle it is a GPU post-training of the
 ``small`` preset on a few hundred simulated clips, judged by this script.
-"""
+"""  # noqa: E501 (tables of measurements)
 
 from __future__ import annotations
 
@@ -153,7 +153,9 @@ def sampled_pairs(
             rec.append(recovered_yaw(decode_bilinear(z), s.rig.cameras[0]))
         out.append((trajectory_yaw(ds[pair[0]].trajectory), trajectory_yaw(ds[pair[1]].trajectory), *rec))
         print(
-            "%-28s conditioned yaw %+.2f / %+.2f  recovered %+.2f / %+.2f" % (ds.cache.rows[pair[0]]["key"], *out[-1])
+            "{:<28s} conditioned yaw {:+.2f} / {:+.2f}  recovered {:+.2f} / {:+.2f}".format(
+                ds.cache.rows[pair[0]]["key"], *out[-1]
+            )
         )
     return out
 
@@ -218,8 +220,10 @@ def main() -> None:
         pairs = sampled_pairs(model, ds, args.rate, steps, seeds=args.seeds, trajectory_guidance=w)
         hits = paired_agreement(pairs)
         print(
-            f"{steps} Heun steps, trajectory guidance {w}: pairs whose recovered yaws fit their own trajectories better than the swapped ones: {hits} of "
-            f"{len(pairs)} (random response 1/2; one-sided binomial p = {binomtest(hits, len(pairs), 0.5, alternative='greater').pvalue:.3f})"
+            f"{steps} Heun steps, trajectory guidance {w}: pairs whose recovered yaws fit their own trajectories "
+            f"better than the swapped ones: {hits} of "
+            f"{len(pairs)} (random response 1/2; one-sided binomial p = "
+            f"{binomtest(hits, len(pairs), 0.5, alternative='greater').pvalue:.3f})"
         )
     for sigma in (0.2, 1.0, 5.0):
         losses = conditional_losses(model, ds, args.rate, sigma)
