@@ -120,6 +120,7 @@ def _wait_for(pattern_dir: Path, proc: subprocess.Popen, timeout: float = 120.0)
         time.sleep(0.01)
 
 
+@pytest.mark.slow
 def test_sigkill_then_rerun_equals_uninterrupted(run, tmp_path):
     root, logs, cfg, report = run
     out = tmp_path / "out"
@@ -142,6 +143,7 @@ def test_sigkill_then_rerun_equals_uninterrupted(run, tmp_path):
     assert not list(out.glob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_ray_executor_matches_local(run, tmp_path):
     pytest.importorskip("ray")
     root, logs, cfg, report = run

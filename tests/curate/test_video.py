@@ -37,6 +37,7 @@ def _span_s(row):
     return t0, t0 + (row["num_frames"] - 1) / row["fps"]
 
 
+@pytest.mark.slow
 def test_sintel_loses_dark_runs(curated):
     report, rows = curated
     log = report["logs"]["test_clip_10s"]
@@ -50,6 +51,7 @@ def test_sintel_loses_dark_runs(curated):
         assert row["tags"]["ego_motion"] == "unknown"
 
 
+@pytest.mark.slow
 def test_sintel_clips_split_at_cuts(curated):
     report, rows = curated
     kept = _rows(rows, "test_video_30s")
@@ -63,6 +65,7 @@ def test_sintel_clips_split_at_cuts(curated):
     assert any(abs(s - 523 / 24) < 0.2 for s in starts)
 
 
+@pytest.mark.slow
 def test_dashcam_kept_as_consecutive_driving_clips(curated):
     report, rows = curated
     log = report["logs"]["solidWhiteRight"]

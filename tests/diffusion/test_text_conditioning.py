@@ -26,6 +26,8 @@ from drivewm.diffusion.pretrain import pretrain, pretrain_config
 from drivewm.diffusion.text2world import Text2World
 from drivewm.eval.adherence import condition_scores
 
+pytestmark = pytest.mark.slow  # trains a Text2World model
+
 DRIVES = {"clear": "highway_clear", "snow": "highway_snow"}
 
 

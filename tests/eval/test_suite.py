@@ -45,6 +45,7 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
     assert math.isnan(agg["tse"]) and agg["nan_clips"]["tse"] == 1 and agg["pose_success"] == 0.0
 
 
+@pytest.mark.slow
 def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path, capsys):
     out = tmp_path / "eval"
     rc = main(
@@ -73,6 +74,7 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
     assert (out / "eval.rrd").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_mp4_folder_and_grid_inputs_match_the_shard(shard_dir, synth_clip6, tmp_path):
     cfg = EvalConfig(metrics=["cse"])
     ref = evaluate(shard_dir, cfg=cfg, progress=False)["clips"]["corridor"]
@@ -122,6 +124,7 @@ def test_default_suite_yaml_pins_the_config_defaults():
     assert EVAL_RECIPES.resolve(recipe="quick", overrides=["match.ratio=0.75"]).match.ratio == 0.75
 
 
+@pytest.mark.slow
 def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
     import shutil
 

@@ -15,6 +15,7 @@ from drivewm.sim.config import ALL_SCENARIOS, SOURCES
 from drivewm.sim.recipe import RECIPES, load_recipe
 
 
+@pytest.mark.slow
 def test_simulate_command_writes_logs(tmp_path) -> None:
     rc = main(
         [
