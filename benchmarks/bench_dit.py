@@ -3,7 +3,8 @@
 Both models get the same width, depth, heads, text width and token count (LTX takes pre-patchified
 tokens, so it is fed our 2x2 patches as channels); both run one full training step (forward, EDM or
 MSE loss, backward, AdamW). Rounds alternate between the two so the shared machine's noise hits
-both alike, and the fastest step of each counts (the least disturbed by other processes). Prints latent tokens/s of each and the ratio (ours / peer); on CUDA also bf16 and MFU.
+both alike, and the fastest step of each counts (the least disturbed by other processes). Prints
+latent tokens/s of each and the ratio (ours / peer); on CUDA also bf16 and MFU.
 
     python benchmarks/bench_dit.py            # small: D=192, depth 4, 288 tokens (seconds)
     python benchmarks/bench_dit.py --full     # D=384, depth 12, 2,240 tokens (minutes on a CPU)
@@ -115,14 +116,16 @@ def main() -> None:
     c, t, h, w = size["latent"]
     tokens = size["batch"] * t * (h // 2) * (w // 2)
     print(
-        f"device {device}, {'bf16 autocast' if bf16 else 'fp32'}, batch {size['batch']} x {tokens // size['batch']} tokens, "
+        f"device {device}, {'bf16 autocast' if bf16 else 'fp32'}, batch {size['batch']} x {tokens // size['batch']} "
+        "tokens, "
         f"D={size['hidden_dim']} depth {size['depth']}"
     )
     rate = {}
     for name, (model, _) in runs.items():
         step_s = min(times[name])
         rate[name] = tokens / step_s
-        line = f"{name:14s} {count_parameters(model) / 1e6:6.1f}M params  {step_s * 1e3:8.1f} ms/step  {rate[name]:9.0f} tokens/s"
+        params_m = count_parameters(model) / 1e6
+        line = f"{name:14s} {params_m:6.1f}M params  {step_s * 1e3:8.1f} ms/step  {rate[name]:9.0f} tokens/s"
         if device.type == "cuda":
             mfu = (
                 train_flops(count_parameters(model), tokens, size["depth"], size["hidden_dim"])

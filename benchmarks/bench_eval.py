@@ -1,7 +1,7 @@
 """Seconds per 6-camera clip for each eval metric on the CPU, and the speed-up from parallel workers.
 
 Simulates one short nuscenes6 drive (highway-env, 320x192, 10 fps), curates it into 17-frame clips
-with datasets/curate/test.yaml, then runs the full protocol with 1 worker and with 2 workers on the
+with drivewm/recipes/curate/test.yaml, then runs the full protocol with 1 worker and with 2 workers on the
 same clips. Prints per-metric seconds per clip, the real-time factor (seconds of compute per second
 of 6-camera video) and the 2-vs-1-worker speed-up measured in the same run.
 
@@ -18,7 +18,6 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
-REPO = Path(__file__).resolve().parents[1]
 
 
 def make_clips(out: Path, clips: int) -> Path:
@@ -32,7 +31,7 @@ def make_clips(out: Path, clips: int) -> Path:
     curate(
         [log],
         out / "clips",
-        load_curate_config(REPO / "datasets" / "curate" / "test.yaml"),
+        load_curate_config("test"),
         executor="local",
         workers=1,
     )
@@ -63,7 +62,8 @@ def main() -> None:
     ideal = n / -(-n // 2)  # n clips in ceil(n / 2) rounds of 2 workers
     print(
         f"wall: 1 worker {walls[1]:.1f} s, 2 workers {walls[2]:.1f} s -> speed-up {walls[1] / walls[2]:.2f}x "
-        f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load {os.getloadavg()[0]:.1f})"
+        f"(ideal {ideal:.2f}x for {n} clips on 2 free cores; {os.cpu_count()} cores here, load "
+        f"{os.getloadavg()[0]:.1f})"
     )
 
 

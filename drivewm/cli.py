@@ -1,4 +1,4 @@
-"""The ``drivewm`` command: one sub-command per stage (DESIGN.md section 8).
+"""The ``drivewm`` command: one sub-command per stage (docs/DESIGN.md section 8).
 
 Each stage owns a small ``commands.py`` module with ``register(subparsers)``: it adds its
 sub-parser(s) and sets ``func(args) -> int | None``. Those modules import only argparse-level

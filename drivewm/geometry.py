@@ -1,6 +1,6 @@
 """Geometry shared by every stage: SE(3), quaternions, pinhole cameras, rigs, epipolar relations.
 
-Conventions (DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
+Conventions (docs/DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
 origin on the ground under the rear axle. Cameras are OpenCV (x right, y down, z forward).
 Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points are (..., 3).
 """
@@ -8,13 +8,16 @@ Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points
 from __future__ import annotations
 
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from drivewm import resources
 from drivewm.errors import DrivewmError
+
+RIGS_ENV = "DRIVEWM_RIGS"
+"""Environment variable: folders (os.pathsep-separated) of the user's own NAME.yaml rigs, searched first."""
 
 # Rotation taking OpenCV camera axes (x right, y down, z forward) to a z-up body frame looking
 # along its +x (x forward, y left, z up): columns are the camera axes written in body coordinates.
@@ -225,7 +228,7 @@ class Camera:
 
 @dataclasses.dataclass
 class Rig:
-    """An ordered list of cameras (DESIGN.md section 3). Order is the view order in models."""
+    """An ordered list of cameras (docs/DESIGN.md section 3). Order is the view order in models."""
 
     name: str
     cameras: list[Camera]
@@ -252,26 +255,9 @@ class Rig:
         return {"name": self.name, "cameras": [c.to_dict() for c in self.cameras]}
 
 
-def rig_search_dirs() -> list[Path]:
-    """Folders searched for ``NAME.yaml`` rigs: $DRIVEWM_RIGS (os.pathsep-separated), then the
-    repository's ``multiview/rigs`` next to the installed package (editable installs)."""
-    dirs = [Path(p) for p in os.environ.get("DRIVEWM_RIGS", "").split(os.pathsep) if p]
-    dirs.append(Path(__file__).resolve().parent.parent / "multiview" / "rigs")
-    return dirs
-
-
 def load_rig(name_or_path: str | Path) -> Rig:
-    """Load a rig by name (``nuscenes6``) or YAML path. See ``multiview/rigs/README.md``."""
-    path = Path(name_or_path)
-    if not path.is_file():
-        for d in rig_search_dirs():
-            if (d / f"{name_or_path}.yaml").is_file():
-                path = d / f"{name_or_path}.yaml"
-                break
-        else:
-            raise DrivewmError(
-                f"rig {name_or_path!r}: no such file or named rig in {[str(d) for d in rig_search_dirs()]}"
-            )
+    """Load a rig by name (``nuscenes6``) or YAML path. See ``drivewm/rigs/README.md``."""
+    path = resources.find("rigs", name_or_path, "rig", env=RIGS_ENV)
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError:
@@ -281,7 +267,7 @@ def load_rig(name_or_path: str | Path) -> Rig:
 
 def rig_from_dict(data: dict, where: str = "rig") -> Rig:
     """Build a rig from its dict form: explicit ``K``/``T_ego_from_cam`` or the compact form
-    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see multiview/rigs/README.md)."""
+    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see drivewm/rigs/README.md)."""
     if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
         raise DrivewmError(f"{where}: a rig needs a non-empty 'cameras' list")
     defaults = data.get("defaults", {})

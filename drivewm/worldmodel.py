@@ -4,8 +4,9 @@
 (printed before each runs), resumable by stage like the quickstart (``RUN/.stages/``) and inside
 each training stage by its own train state:
 
-1. simulate the training drives and the held-out drives (``datasets/scenarios/worldmodel*.yaml``);
-2. curate both (``datasets/curate/worldmodel.yaml``: 160x96 per camera, 17 frames at 10 fps);
+1. simulate the training drives and the held-out drives (packaged simulate recipes ``worldmodel``
+   and ``worldmodel_heldout``);
+2. curate both (curate recipe ``worldmodel``: 160x96 per camera, 17 frames at 10 fps);
 3. train the tokenizer, score it on the held-out drives, encode both clip sets;
 4. Text2World pretraining in Cosmos' progressive order: images (the first latent frame of every
    view), then video warm-started from the image model;
@@ -14,7 +15,7 @@ each training stage by its own train state:
 6. generate the benchmark clips (prompts and trajectories the training captions never use
    verbatim, fixed seeds) and score them next to the held-out clips with ``drivewm eval``.
 
-Profiles (``datasets/worldmodel.yaml``) change only sizes and steps: ``cpu`` is what the shipped
+Profiles (``drivewm/recipes/worldmodel.yaml``) change only sizes and steps: ``cpu`` is what the shipped
 weights were trained with on 2 cores; ``gpu`` is the same recipe sized for one GPU in about 25
 minutes (``scripts/gpu-recipe.sh``). ``drivewm worldmodel export RUN --out DIR`` writes the three
 model folders in fp16 safetensors with a model card (what ``drivewm/weights/`` ships).
@@ -26,9 +27,10 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+from drivewm import resources
 from drivewm.errors import DrivewmError
 
-PROFILES = Path(__file__).resolve().parent.parent / "datasets" / "worldmodel.yaml"
+PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
 
 
 @dataclasses.dataclass
@@ -77,9 +79,6 @@ def load_profile(name: str, path: Path = PROFILES) -> WorldModelProfile:
 
 def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]]]:
     """The recipe as (stage name, drivewm argv) in order."""
-    from drivewm.quickstart import recipe_args
-
-    p = recipe_args(p)
     logs, clips, tok = run / "logs", run / "clips", run / "tokenizer"
     img, vid, mv, gen, ev = (
         run / "text2world_image",

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
+from drivewm import resources
 from drivewm.cli import build_parser
 from drivewm.worldmodel import load_profile, stage_commands
 
@@ -26,5 +25,6 @@ def test_every_stage_parses_and_chains_its_outputs(profile, tmp_path):
     assert argv["posttrain"][argv["posttrain"].index("--init") + 1] == str(tmp_path / "text2world")
     generated = [n for n in names if n.startswith("generate-")]
     assert len(generated) * p.samples_per_benchmark >= 24  # the 24 generated clips at least
-    recipes = [a for _, a in stages for a in a if a.endswith(".yaml")]
-    assert recipes and all(Path(r).is_file() for r in recipes)  # recipe files resolved against the checkout
+    for _, argv in stages:  # packaged recipes, found by name for their stage
+        if "--recipe" in argv:
+            assert resources.find(f"recipes/{argv[0]}", argv[argv.index("--recipe") + 1], "recipe").is_file()

@@ -22,11 +22,14 @@ import numpy as np
 from drivewm.atomic import write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
+from drivewm.config import to_dict
 from drivewm.curate import dedup, filters, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
+from drivewm.curate.privacy import Anonymizer
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
+from drivewm.logs.reader import read_log
 from drivewm.logs.types import DriveLog, ImageFrame
 
 MARKER_DIR = "logs"
@@ -39,8 +42,6 @@ def log_name(path: str | Path) -> str:
 
 def config_fingerprint(cfg: CurateConfig) -> str:
     """Short hash of the recipe: a done-marker from another recipe does not count as done."""
-    from drivewm.config import to_dict
-
     return hashlib.sha256(json.dumps(to_dict(cfg), sort_keys=True).encode()).hexdigest()[:12]
 
 
@@ -63,8 +64,6 @@ def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
 def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None = None) -> dict:
     """Curate one log (skipping it when its done-marker exists). Never raises for bad input:
     a DrivewmError becomes ``{"status": "failed", "error": ...}``."""
-    from drivewm.logs.reader import read_log
-
     out, name = Path(out_dir), name or log_name(log_path)
     done = read_marker(out, name, cfg)
     if done is not None:
@@ -144,8 +143,6 @@ def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
     smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
     anonymizer = None
     if cfg.privacy.enabled:
-        from drivewm.curate.privacy import Anonymizer
-
         anonymizer = Anonymizer(cfg.privacy)
     return _LogContext(log, rig, table, frames, smooth, cfg, load_captioner(cfg.captioner), anonymizer)
 

@@ -2,6 +2,7 @@
 
 ``generate`` dispatches on the model folder's ``model_type`` through :data:`GENERATORS`, so the
 multi-view stage plugs its generator in by name (``drivewm.multiview.generate:generate``).
+The models are imported inside the handlers, so that ``drivewm --help`` imports no PyTorch.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import importlib
 import json
 from pathlib import Path
 
+from drivewm.choices import add_registry_argument
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -44,7 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
     g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=int, default=1, help="samples per prompt")
-    g.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    add_registry_argument(
+        g, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
+    )
     g.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to sample (auto: CUDA when available)"
     )
@@ -97,7 +101,8 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
         raise DrivewmError(
-            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)"
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance "
+            "(multi-view models do)"
         )
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device

@@ -58,13 +58,13 @@ class LatentDataset:
     def __len__(self) -> int:
         return len(self.cache) * self.num_views
 
-    @functools.lru_cache(maxsize=256)
+    @functools.lru_cache(maxsize=256)  # noqa: B019 (bounded; a dataset lives as long as its training run)
     def _clip(self, i: int):
         clip = self.cache[i]
         if tuple(clip.latents.shape[1:]) != self.clip_shape or clip.latents.shape[0] != self.num_views:
             raise DrivewmError(
-                f"{self.cache.dir}: clip {clip.meta.key} latents {tuple(clip.latents.shape)} differ from the first clip's "
-                f"({self.num_views}, {', '.join(map(str, self.clip_shape))}); re-encode at one resolution"
+                f"{self.cache.dir}: clip {clip.meta.key} latents {tuple(clip.latents.shape)} differ from the first "
+                f"clip's ({self.num_views}, {', '.join(map(str, self.clip_shape))}); re-encode at one resolution"
             )
         return clip
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from drivewm.clips.latents import LatentCache
+from drivewm.clips.latents import LatentCache, find_latent_cache
 from drivewm.config import to_dict
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
@@ -96,7 +96,7 @@ TRAIN_PRESETS: dict[str, dict] = {
 }
 
 
-RECIPES: RecipeBook[PretrainConfig] = RecipeBook(
+RECIPES: RecipeBook[PretrainConfig] = RecipeBook(  # no packaged recipes: presets and --set
     "pretrain",
     PretrainConfig,
     {name: {"model": dit_preset(name), "train": TRAIN_PRESETS[name]} for name in TRAIN_PRESETS},
@@ -107,20 +107,6 @@ RECIPES: RecipeBook[PretrainConfig] = RecipeBook(
 def pretrain_config(preset: str, overrides: list[str] | None = None) -> PretrainConfig:
     """The recipe for ``preset`` with ``KEY=VALUE`` overrides (unknown keys/bad values raise DrivewmError)."""
     return RECIPES.resolve(preset, None, overrides or [])
-
-
-def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | None) -> Path:
-    """``data_dir`` itself if it is a cache, else ``data_dir/latents/<name or tokenizer folder name>``."""
-    if (data_dir / "index.json").is_file():
-        return data_dir
-    if name is None and tokenizer_dir is None:
-        raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
-    cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
-    if not (cache / "index.json").is_file():
-        raise DrivewmError(
-            f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first"
-        )
-    return cache
 
 
 def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
@@ -138,7 +124,8 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
     if not same_config or not same_stats:
         raise DrivewmError(
-            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}"
+            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) "
+            f"than {tokenizer_dir}"
         )
 
 
@@ -227,7 +214,8 @@ def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainCon
     c, t, h, w = dataset.latent_shape
     if h % cfg.model.patch_size or w % cfg.model.patch_size or t % cfg.model.patch_t:
         raise DrivewmError(
-            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
+            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches "
+            f"{cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
         )
     model = dataclasses.replace(cfg.model, in_channels=c, text_dim=text_dim, cond_mask_channel=cfg.edm.cond_frames > 0)
     return dataclasses.replace(cfg, model=model)

@@ -1,6 +1,6 @@
 """The Text2World model: DiT + EDM denoiser + text encoder + what it needs to turn samples into video.
 
-Model folder (DESIGN.md section 4): ``config.json`` with ``model_type: "text2world"``, the
+Model folder (docs/DESIGN.md section 4): ``config.json`` with ``model_type: "text2world"``, the
 :class:`Text2WorldConfig` and the :class:`LatentInfo` (latent shape and statistics, frame rate,
 camera, tokenizer folder), and ``model.safetensors`` with the DiT's (EMA) weights.
 """

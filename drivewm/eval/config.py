@@ -1,15 +1,16 @@
-"""The evaluation protocol as one typed config: every constant of eval/protocol.md lives here.
+"""The evaluation protocol as one typed config: every constant of docs/eval-protocol.md lives here.
 
-Defaults are the pinned protocol; a suite YAML (eval/suites/*.yaml) may override them, and the
-resolved config is written next to every metrics.json so numbers can be traced to their settings.
+Defaults are the pinned protocol; a recipe (:data:`EVAL_RECIPES`: a packaged suite of
+drivewm/recipes/eval/ or a YAML path, then ``--set``) may override them, and the resolved config
+is written next to every metrics.json so numbers can be traced to their settings.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
+from drivewm.recipe import RecipeBook
 
 ALL_METRICS = ("tse", "cse", "pose", "traj", "adherence")
 
@@ -122,6 +123,6 @@ class EvalConfig:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
 
 
-def eval_config_from_dict(data: dict, where: str = "eval config") -> EvalConfig:
-    """Build and validate an :class:`EvalConfig` (unknown keys refused)."""
-    return from_dict(EvalConfig, data, where)
+EVAL_RECIPES = RecipeBook("eval", EvalConfig, {"default": {}}, "default", recipes="eval")
+"""How an eval config is made (docs/DESIGN.md section 10): the pinned protocol above, a suite recipe
+(``default``: the protocol written out, ``quick``: no structure from motion, or a YAML path), ``--set``."""

@@ -1,6 +1,6 @@
 """Temporal and cross-view Sampson errors (TSE, CSE) of a multi-camera clip.
 
-TSE (Cosmos paper, multi-view table; eval/protocol.md): per camera, frames t and t + frame_gap are
+TSE (Cosmos paper, multi-view table; docs/eval-protocol.md): per camera, frames t and t + frame_gap are
 matched, keypoints rectified to the canonical pinhole, an F fitted robustly, and the pair scored by
 the median Sampson error of its verified matches (within ``verify_threshold_px`` of the fitted F)
 under (a) that fitted F and (b), when ego poses are known, the F implied by the ego motion and the

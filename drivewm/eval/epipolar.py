@@ -1,6 +1,6 @@
 """Epipolar geometry for the benchmark: canonical rectification, robust F / E fits, Sampson error.
 
-All errors are reported in pixels of one canonical pinhole (eval/protocol.md): keypoints are
+All errors are reported in pixels of one canonical pinhole (docs/eval-protocol.md): keypoints are
 undistorted with their camera's K and distortion and re-projected with ``K_canonical`` (960x540,
 120 deg horizontal FOV, the target camera of NVIDIA's public Sampson code), so a 320x192 clip and a
 1920x1080 clip with another lens are scored on the same scale. The Sampson error of one match is
@@ -142,7 +142,7 @@ def verified_matches(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) 
 
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
     """Median Sampson error of the verified matches ``m`` under F -- the same set for the fitted
-    and the calibrated F (eval/protocol.md, 'Per-pair error')."""
+    and the calibrated F (docs/eval-protocol.md, 'Per-pair error')."""
     if len(m) < cfg.min_matches:
         return SampsonResult(np.zeros(0), float("nan"), len(m), TOO_FEW_MATCHES)
     if F is None:

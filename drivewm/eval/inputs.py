@@ -9,10 +9,12 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import av
 import numpy as np
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_shard, list_shards
+from drivewm.clips.video import decode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
 
@@ -69,8 +71,6 @@ class EvalItem:
 
 
 def _decode_file(path: str) -> np.ndarray:
-    from drivewm.clips.video import decode_mp4
-
     p = Path(path)
     if not p.is_file():
         raise DrivewmError(f"{p}: no such video file")
@@ -96,8 +96,6 @@ def _rig_for(rig: Rig, names: list[str], width: int, height: int) -> Rig:
 
 
 def _video_size(path: Path) -> tuple[int, int, float]:
-    import av
-
     try:
         with av.open(str(path)) as c:
             s = c.streams.video[0]

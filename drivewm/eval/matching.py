@@ -3,8 +3,9 @@
 The default matcher is SIFT (Lowe 2004): keypoints and 128-d descriptors per image, brute-force
 L2 k=2 nearest neighbours, a match kept when best/second < ``ratio`` (sec. 7.1) and, with
 ``mutual``, when the two keypoints are each other's nearest neighbour. A learned matcher can be
-plugged in from a local TorchScript file (``matcher='learned'``); nothing is downloaded.
-Keypoints are in pixels of the input image (OpenCV convention: pixel centres at integers).
+plugged in from a local TorchScript file (``matcher='learned'``); nothing is downloaded, and PyTorch
+is imported only for that matcher (SIFT scoring runs without it). Keypoints are in pixels of the
+input image (OpenCV convention: pixel centres at integers).
 """
 
 from __future__ import annotations

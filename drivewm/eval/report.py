@@ -3,9 +3,10 @@
 ``metrics.json``: aggregates at the top level (tse, cse, pose_success, ate, rpe_trans, rpe_rot, tfe,
 ...), per clip under ``clips``, the resolved protocol under ``config``. ``metrics.md``: one row per
 aggregate with the reference ("real") value beside it when a reference JSON is given (same keys;
-eval/reference/*.json). ``error_distributions.png``: per-pair TSE / CSE medians and per-clip
-trajectory errors. ``eval.rrd``: per clip, the first CSE pair's matches and the recovered vs
-reference trajectory.
+a path, or the name of a packaged one in drivewm/references/). ``error_distributions.png``: per-pair
+TSE / CSE medians and per-clip trajectory errors. ``eval.rrd``: per clip, the first CSE pair's
+matches and the recovered vs reference trajectory.
+matplotlib and Rerun (seconds to import) load only when the pictures are drawn.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drivewm import resources
 from drivewm.atomic import atomic_path, write_json, write_text
 from drivewm.errors import DrivewmError
 
@@ -37,10 +39,11 @@ TABLE_ROWS = (
 
 
 def load_reference(path: str | Path | None) -> dict:
-    """A reference metrics JSON (a metrics.json, or {"name": ..., "metrics": {key: value}})."""
+    """A reference metrics JSON (a metrics.json, or {"name": ..., "metrics": {key: value}}): a path, or
+    the name of a packaged reference (``cosmos_paper``, ``sim_clips``)."""
     if path is None:
         return {}
-    path = Path(path)
+    path = resources.find("references", path, "reference metrics", suffix=".json")
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:

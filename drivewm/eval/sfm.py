@@ -5,7 +5,8 @@ camera with that camera's pinhole intrinsics held fixed, frames are matched sequ
 (``sequential_overlap`` frames ahead, plus the other cameras of the same and nearby frames when the
 rig is known), and COLMAP's incremental mapper reconstructs. With a known rig the cameras are tied
 by a COLMAP rig config (``apply_rig_config``: each camera's ``cam_from_rig`` from the extrinsics,
-held fixed), so all views of one timestamp register together as one frame.
+held fixed), so all views of one timestamp register together as one frame. pycolmap is imported
+when a reconstruction runs, so evals without pose metrics do not load it.
 """
 
 from __future__ import annotations

@@ -15,14 +15,23 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+import cv2
 import numpy as np
+from tqdm import tqdm
 
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
+from drivewm.eval.adherence import adherence, condition_scores
 from drivewm.eval.config import EvalConfig
+from drivewm.eval.consistency import cross_sampson, overlapping_pairs, temporal_sampson
 from drivewm.eval.inputs import EvalItem, load_items
+from drivewm.eval.matching import FrameMatcher
+from drivewm.eval.report import write_report
+from drivewm.eval.sfm import run_sfm
+from drivewm.eval.trajectory import ego_from_sfm
+from drivewm.eval.trajectory_errors import ate, rpe, tfe
 
-#: Aggregate keys (DESIGN.md section 8) and the per-clip field each averages.
+#: Aggregate keys (docs/DESIGN.md section 8) and the per-clip field each averages.
 AGGREGATE_KEYS = (
     "tse",
     "tse_calibrated",
@@ -50,8 +59,6 @@ class ClipResult:
 
 def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
     """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised."""
-    import cv2
-
     cv2.setNumThreads(1)
     metrics: dict = {"status": {}, "seconds": {}}
     artifacts: dict = {}
@@ -59,7 +66,6 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
         videos = item.videos()
     except DrivewmError as exc:
         return ClipResult(item.key, {"error": str(exc)}, {})
-    from drivewm.eval.matching import FrameMatcher
 
     matcher = FrameMatcher(cfg.match)
     for name, fn in (("tse", _tse), ("cse", _cse), ("pose", _pose), ("traj", _traj), ("adherence", _adherence)):
@@ -71,15 +77,11 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
 
 
 def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.consistency import temporal_sampson
-
     r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher)
     _put_sampson(metrics, "tse", r)
 
 
 def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.consistency import cross_sampson, overlapping_pairs
-
     pairs = overlapping_pairs(item.rig, cfg.consistency)
     metrics["cse_pairs"] = [f"{a}~{b}" for a, b in pairs]
     if not pairs:
@@ -107,8 +109,6 @@ def _put_sampson(metrics: dict, name: str, r: dict) -> None:
 
 
 def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.sfm import run_sfm
-
     sfm = run_sfm(videos, item.rig, cfg.pose)
     metrics["pose_success"] = float(sfm.all_registered)
     metrics["registered_fraction"] = sfm.registered_fraction
@@ -116,9 +116,6 @@ def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 
 def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.trajectory import ego_from_sfm
-    from drivewm.eval.trajectory_errors import ate, rpe, tfe
-
     for k in ("ate", "rpe_trans", "rpe_rot", "tfe"):
         metrics[k] = math.nan
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
@@ -140,8 +137,6 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 
 def _adherence(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.adherence import adherence, condition_scores
-
     scores = condition_scores(np.stack([videos[c] for c in item.rig.names]))
     result = adherence(scores, item.tags)
     metrics["condition_scores"] = scores
@@ -175,8 +170,6 @@ def _mean_seconds(results: list[ClipResult]) -> dict[str, float]:
 
 def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress: bool = True) -> list[ClipResult]:
     """Evaluate items, in a process pool when ``workers`` > 1; results in input order."""
-    from tqdm import tqdm
-
     bar = tqdm(total=len(items), desc="eval clips", unit="clip", disable=not progress)
     results: dict[int, ClipResult] = {}
     if workers <= 1:
@@ -223,7 +216,5 @@ def evaluate(
     metrics["config"] = to_dict(cfg)
     metrics["location"] = str(location)
     if out_dir is not None:
-        from drivewm.eval.report import write_report
-
         write_report(Path(out_dir), metrics, results, reference, pictures)
     return metrics

@@ -1,5 +1,6 @@
 """``drivewm posttrain`` and ``drivewm rollout`` (thin: parse, build config, print it, call the library).
-Multi-view ``drivewm generate`` lives in drivewm.multiview.generate (dispatched on model_type)."""
+Multi-view ``drivewm generate`` lives in drivewm.multiview.generate (dispatched on model_type).
+The models are imported inside the handlers, so that ``drivewm --help`` imports no PyTorch."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import argparse
 import json
 from pathlib import Path
 
+from drivewm import resources
+from drivewm.choices import add_registry_argument
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -15,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model"
     )
-    add_recipe_arguments(p, DIT_PRESETS, "debug")
+    add_recipe_arguments(p, DIT_PRESETS, "debug", resources.names("recipes/posttrain"))
     p.add_argument(
         "--init", required=True, type=Path, help="Text2World folder to start from, or a multi-view folder to fine-tune"
     )
@@ -50,7 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
     r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
-    r.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    add_registry_argument(
+        r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
+    )
     r.set_defaults(func=rollout_command)
 
 

@@ -6,6 +6,8 @@ attend to all tokens (every latent frame) of the views ``view_neighbors[i]``: al
 ("joint", as Cosmos' multi-view model's joint attention) or view i and its nearest cameras by
 viewing direction ("neighbors", cost grows with V * K instead of V^2). Its output projection
 starts at zero (drivewm.diffusion.blocks), so inserting it leaves the pretrained model unchanged.
+The multi-view network registers it under ``cross_view_attn`` where it builds its DiT
+(drivewm.multiview.model.MultiViewNet).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import torch
 import torch.nn.functional as F
 from einops import rearrange
 
-from drivewm.diffusion.blocks import BlockContext, SelfAttention, register_sublayer
+from drivewm.diffusion.blocks import BlockContext, SelfAttention
 from drivewm.diffusion.rope import apply_rope
 from drivewm.geometry import Rig
 
@@ -71,6 +73,3 @@ def view_neighbors(rig: Rig, mode: str, neighbors: int) -> torch.Tensor:
     gap = np.abs(np.angle(np.exp(1j * (az[:, None] - az[None, :]))))  # (V, V) wrapped angle difference
     order = np.argsort(gap + np.eye(v) * -1.0, axis=1, kind="stable")  # itself (gap -1) first
     return torch.from_numpy(order[:, : neighbors + 1].copy()).long()
-
-
-register_sublayer(SUBLAYER_NAME, CrossViewAttention)

@@ -14,19 +14,20 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from drivewm.curate.captions import camera_direction
 from drivewm.diffusion.generate import GenerateOptions, decode_latents
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
 from drivewm.multiview.trajectories import resolve_trajectory
 from drivewm.multiview.writer import GeneratedSample, write_samples
+from drivewm.tokenizer import Tokenizer
 
 
 def view_captions(prompt: str, rig: Rig) -> list[str]:
     """Per-view captions in the curated clips' form ("The front-left camera view of ..."), unless
     the prompt already names a camera view."""
-    from drivewm.curate.captions import camera_direction
-
     if "camera view" in prompt:
         return [prompt] * len(rig.cameras)
     scene = prompt.strip().rstrip(".")
@@ -36,9 +37,6 @@ def view_captions(prompt: str, rig: Rig) -> list[str]:
 
 def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tuple[torch.Tensor, Rig, float]:
     """Raw latents (1, V, c, t, h, w) of a real clip's first frames (Video2World), its rig, its speed."""
-    from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
-    from drivewm.tokenizer import Tokenizer
-
     if not model.latent.tokenizer:
         raise DrivewmError(
             f"{clip_path}: conditioning on a clip needs the model's tokenizer (none recorded in the model folder)"

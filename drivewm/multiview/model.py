@@ -18,16 +18,17 @@ from einops import rearrange, repeat
 from torch import nn
 
 from drivewm.config import from_dict, to_dict
+from drivewm.diffusion.blocks import register_sublayer
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.errors import DrivewmError
-from drivewm.geometry import Rig, invert_T
-from drivewm.multiview import cross_view  # noqa: F401  (registers the cross_view_attn sub-layer)
+from drivewm.geometry import Rig, invert_T, rig_from_dict
 from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
 from drivewm.multiview.config import MultiViewModelConfig
+from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
@@ -77,6 +78,7 @@ class MultiViewNet(nn.Module):
         super().__init__()
         cfg.multiview.validate()
         self.cfg = cfg
+        register_sublayer(SUBLAYER_NAME, CrossViewAttention)  # the one sub-layer the multi-view DiT adds
         self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
         self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
@@ -170,8 +172,6 @@ class MultiView:
 
     @property
     def training_rig(self) -> Rig:
-        from drivewm.geometry import rig_from_dict
-
         return rig_from_dict(self.latent.rig, "model rig")
 
     def token_grid(self) -> tuple[int, int, int]:
@@ -240,8 +240,6 @@ def build_conditioning(
     model: MultiView, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float
 ) -> MultiViewConditioning:
     """Text, rays, waypoints and view neighbours of B clips of ``rig``, folded to (B V)."""
-    from drivewm.multiview.cross_view import view_neighbors
-
     b, v = len(view_captions), len(rig.cameras)
     if any(len(caps) != v for caps in view_captions):
         raise DrivewmError(f"need one caption per camera of rig {rig.name} ({v}) for every clip")

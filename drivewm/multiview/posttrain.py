@@ -13,9 +13,10 @@ from pathlib import Path
 
 import torch
 
+from drivewm.clips.latents import find_latent_cache
 from drivewm.config import to_dict
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
-from drivewm.diffusion.pretrain import DataConfig, find_latent_cache
+from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
@@ -91,7 +92,11 @@ POSTTRAIN_PRESETS: dict[str, dict] = {
 
 
 RECIPES: RecipeBook[PosttrainConfig] = RecipeBook(
-    "posttrain", PosttrainConfig, {name: {"train": train} for name, train in POSTTRAIN_PRESETS.items()}, "debug"
+    "posttrain",
+    PosttrainConfig,
+    {name: {"train": train} for name, train in POSTTRAIN_PRESETS.items()},
+    "debug",
+    recipes="posttrain",
 )
 
 

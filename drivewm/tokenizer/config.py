@@ -1,4 +1,4 @@
-"""Tokenizer configuration and named presets (DESIGN.md section 5).
+"""Tokenizer configuration and named presets (docs/DESIGN.md section 5).
 
 A preset name reads ``SIZE-TxHxW[-fsq]``: ``debug-4x8x8`` compresses 4x in time and 8x in
 height and width into 16 continuous channels; ``base-8x8x8-fsq`` quantizes with FSQ instead.

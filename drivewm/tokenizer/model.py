@@ -1,4 +1,4 @@
-"""The tokenizer: a causal video autoencoder with continuous or FSQ latents (DESIGN.md section 5).
+"""The tokenizer: a causal video autoencoder with continuous or FSQ latents (docs/DESIGN.md section 5).
 
 ``encode``: video (B, 3, T, H, W) in [-1, 1], T = 1 + k*f -> latents (B, c, 1 + k, H/s, W/s).
 ``decode`` inverts it. Frame 0 is coded alone and no latent frame depends on later frames, so a
@@ -97,7 +97,7 @@ class Tokenizer(nn.Module):
     # -- model folders ----------------------------------------------------------------------------
 
     def save_pretrained(self, path: str | Path, extra: dict | None = None) -> None:
-        """Write ``config.json`` + ``model.safetensors`` (DESIGN.md section 4)."""
+        """Write ``config.json`` + ``model.safetensors`` (docs/DESIGN.md section 4)."""
         stats = {"latent_mean": self.latent_mean.tolist(), "latent_std": self.latent_std.tolist()}
         save_model_folder(path, MODEL_TYPE, to_dict(self.config), self.state_dict(), {**stats, **(extra or {})})
 

@@ -1,4 +1,4 @@
-"""Model folders and resumable training state (DESIGN.md section 4).
+"""Model folders and resumable training state (docs/DESIGN.md section 4).
 
 A *model folder* is ``config.json`` + ``model.safetensors`` (Hugging Face style): the
 inference weights (EMA where there is one) and the config that rebuilds the network.

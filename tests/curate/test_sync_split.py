@@ -20,7 +20,7 @@ def test_sync_handles_drops_duplicates_late_start_and_skew():
     assert not table.valid[[5, 6]].any() and table.valid[7:].all() and table.valid[:5].all()
     assert table.worst_skew_ns == 12 * MS
     # every chosen frame is within tolerance, and no frame is used twice
-    for v, cam in enumerate(["A", "B", "C"]):
+    for v in range(3):
         idx = table.frame_index[table.valid, v]
         assert len(set(idx)) == len(idx)
 

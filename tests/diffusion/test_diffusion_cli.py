@@ -76,6 +76,7 @@ def _run(capsys, *argv: str) -> tuple[int, str, str]:
     return code, out.out, out.err
 
 
+@pytest.mark.slow
 def test_pretrain_then_generate_writes_clips_mp4_and_contact_sheet(clipdir, tmp_path, capsys):
     data, tok_dir = clipdir
     code, out, err = _run(

@@ -8,10 +8,12 @@ import pytest
 import torch
 from torch import nn
 
+from drivewm.cli import main
 from drivewm.diffusion.blocks import SUBLAYERS, register_sublayer
 from drivewm.diffusion.dit import DiT, count_parameters, patchify, unpatchify
 from drivewm.diffusion.dit_config import DIT_PRESETS, DiTConfig, dit_preset
 from drivewm.diffusion.rope import apply_rope, grid_positions, rope_angles
+from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.errors import DrivewmError
 
 CFG = DiTConfig(in_channels=4, hidden_dim=64, depth=2, num_heads=4, text_dim=16, adaln_lora_dim=8)
@@ -107,6 +109,16 @@ def test_inserting_a_sublayer_by_config_starts_as_the_original_model():
         assert torch.allclose(extended(*_inputs(), num_views=3), base(*_inputs()), atol=1e-6)
     finally:
         SUBLAYERS.pop("toy_view_attn")
+
+
+def test_unknown_sublayer_is_a_one_line_error(tmp_path, capsys):
+    with pytest.raises(DrivewmError, match="unknown block layer 'nope'.*registered: .*'self_attn'"):
+        DiT(dataclasses.replace(CFG, block_layers=["self_attn", "nope", "mlp"]))
+    cache = make_synthetic_latent_cache(tmp_path / "latents", clips_per_condition=1)
+    argv = ["pretrain", "--data", str(cache), "--out", str(tmp_path / "t2w"), "--set", "model.block_layers=[nope]"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "'nope'" in err
 
 
 def test_presets_span_debug_to_about_1b():

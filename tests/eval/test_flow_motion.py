@@ -58,6 +58,7 @@ def test_flow_motion_refuses_bad_frames(sim_clip_dir):
         flow_ego_trajectory(np.zeros((3, 8, 8, 3), np.float32), camera)
 
 
+@pytest.mark.slow
 def test_estimate_ego_trajectory_falls_back_to_flow(sim_clip_dir):
     """8x-pooled frames: COLMAP leaves some of them unregistered, ``method="auto"`` returns the dense-flow
     motion (the same as ``method="flow"``), which still gets the roundabout turn right."""

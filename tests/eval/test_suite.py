@@ -10,7 +10,8 @@ import pytest
 from drivewm.cli import main
 from drivewm.clips import ShardWriter
 from drivewm.clips.video import encode_mp4
-from drivewm.eval.config import EvalConfig
+from drivewm.config import load_yaml, to_dict
+from drivewm.eval.config import EVAL_RECIPES, EvalConfig
 from drivewm.eval.inputs import EvalItem
 from drivewm.eval.suite import aggregate, evaluate, evaluate_item
 from drivewm.geometry import load_rig
@@ -44,6 +45,7 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
     assert math.isnan(agg["tse"]) and agg["nan_clips"]["tse"] == 1 and agg["pose_success"] == 0.0
 
 
+@pytest.mark.slow
 def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path, capsys):
     out = tmp_path / "eval"
     rc = main(
@@ -57,7 +59,7 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
             "--workers",
             "2",
             "--reference",
-            "eval/reference/cosmos_paper.json",
+            "cosmos_paper",
         ]
     )
     assert rc == 0
@@ -72,6 +74,7 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
     assert (out / "eval.rrd").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_mp4_folder_and_grid_inputs_match_the_shard(shard_dir, synth_clip6, tmp_path):
     cfg = EvalConfig(metrics=["cse"])
     ref = evaluate(shard_dir, cfg=cfg, progress=False)["clips"]["corridor"]
@@ -113,15 +116,15 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
 
 
 def test_default_suite_yaml_pins_the_config_defaults():
-    from pathlib import Path
+    assert EVAL_RECIPES.recipe_names() == ["default", "quick"]
+    assert to_dict(EVAL_RECIPES.resolve(recipe="default")) == to_dict(EvalConfig())
+    written = load_yaml(EVAL_RECIPES.recipe_path("default"))["config"]
+    assert set(written) == set(to_dict(EvalConfig()))
+    assert all(set(v) == set(to_dict(EvalConfig())[k]) for k, v in written.items() if isinstance(v, dict))
+    assert EVAL_RECIPES.resolve(recipe="quick", overrides=["match.ratio=0.75"]).match.ratio == 0.75
 
-    from drivewm.config import load_yaml, to_dict
-    from drivewm.eval.config import eval_config_from_dict
 
-    suite = Path(__file__).resolve().parents[2] / "eval" / "suites" / "default.yaml"
-    assert to_dict(eval_config_from_dict(load_yaml(suite))) == to_dict(EvalConfig())
-
-
+@pytest.mark.slow
 def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
     import shutil
 

@@ -26,7 +26,7 @@ def test_rewrite_is_stable(synthetic_mcap, tmp_path, assert_same_log):
 
 
 def test_file_layout_is_the_contract(synthetic_mcap, synthetic_log):
-    """Topics, schemas, encodings and log times as apis.md states them."""
+    """Topics, schemas, encodings and log times as docs/DESIGN.md section 4 states them."""
     with open(synthetic_mcap, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()

@@ -19,6 +19,8 @@ from drivewm.multiview.model import MultiView
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
 
+pytestmark = pytest.mark.slow  # post-trains a multi-view model
+
 FRONT3 = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
 
 

@@ -4,6 +4,8 @@ trajectory / camera / Video2World conditioning reach the output."""
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -173,3 +175,13 @@ def test_plucker_rays_are_the_camera_rays_and_move_with_the_ego():
     rig_at_T = dc.replace(rig, cameras=[dc.replace(c, T_ego_from_cam=T @ c.T_ego_from_cam) for c in rig.cameras])
     torch.testing.assert_close(moved[:, 60:], plucker_rays(rig_at_T, (6, 10)).double(), atol=1e-6, rtol=1e-6)
     torch.testing.assert_close(moved[:, :60], rays)
+
+
+def test_importing_multiview_registers_no_sublayer():
+    """The cross-view sub-layer is registered where the multi-view network is built, not by an import."""
+    code = (
+        "from drivewm.diffusion.blocks import SUBLAYERS; import drivewm.multiview.model, drivewm.multiview.init; "
+        "print(sorted(SUBLAYERS))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "['cross_attn', 'mlp', 'self_attn']"

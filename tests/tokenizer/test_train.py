@@ -28,6 +28,8 @@ from drivewm.tokenizer.recipe import RECIPES, TokenizerTrainConfig
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
 from drivewm.tokenizer.train import tokenizer_train
 
+pytestmark = pytest.mark.slow  # trains tokenizers
+
 HOLDOUT = 25  # percent of clips held out by key hash: 3 of the 12 simulated clips
 VIEWS = 2  # cameras scored per held-out clip (evaluation at 192x320 dominates the test time)
 
