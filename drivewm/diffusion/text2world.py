@@ -16,7 +16,7 @@ from drivewm.config import from_dict, to_dict
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_fields
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
 from drivewm.errors import DrivewmError
 from drivewm.text import TextConfig, build_text_encoder
@@ -83,8 +83,9 @@ class Text2World:
     def from_pretrained(cls, path: str | Path) -> Text2World:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
+        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
         model = cls(
-            from_dict(Text2WorldConfig, info["config"], where),
+            from_dict(Text2WorldConfig, config, where),
             from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
         )
         load_weights(model.dit, state, path)

@@ -21,6 +21,7 @@ from drivewm.config import from_dict, to_dict
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
+from drivewm.diffusion.dit_config import upgrade_saved_fields
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import DrivewmError
@@ -161,8 +162,9 @@ class MultiView:
     def from_pretrained(cls, path: str | Path) -> MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
+        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
         model = cls(
-            from_dict(MultiViewModelConfig, info["config"], where),
+            from_dict(MultiViewModelConfig, config, where),
             from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
         )
         load_weights(model.net, state, path)
