@@ -97,6 +97,15 @@ class Conditioning:
         """The same conditioning without any caption (CFG's unconditional branch)."""
         return dataclasses.replace(self, text_mask=torch.zeros_like(self.text_mask))
 
+    def to(self, device: torch.device | str) -> Conditioning:
+        """A copy with every tensor field (of subclasses too) on ``device``."""
+        moved = {
+            f.name: getattr(self, f.name).to(device)
+            for f in dataclasses.fields(self)
+            if isinstance(getattr(self, f.name), torch.Tensor)
+        }
+        return dataclasses.replace(self, **moved)
+
 
 def edm_scalings(
     sigma: torch.Tensor, sigma_data: float

@@ -117,7 +117,8 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
     if not same_config or not same_stats:
         raise DrivewmError(
-            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}"
+            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) "
+            f"than {tokenizer_dir}"
         )
 
 
@@ -157,12 +158,7 @@ class Text2WorldTask:
         noise = torch.stack([torch.randn(x0.shape[1:], generator=g) for g in gens]).to(device)
         keep = torch.tensor([float(torch.rand(1, generator=g)) >= self.cfg.edm.text_dropout for g in gens])
         cond = self.bundle.conditioning([s.caption for s in samples])
-        cond = dataclasses.replace(
-            cond,
-            text_emb=cond.text_emb.to(device),
-            text_mask=cond.text_mask.to(device),
-            fps=torch.tensor([s.fps for s in samples], device=device),
-        )
+        cond = dataclasses.replace(cond, fps=torch.tensor([s.fps for s in samples])).to(device)
         return edm_loss(forward, self.cfg.edm, x0, cond, sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> tuple[Text2World, dict[str, torch.Tensor]]:
@@ -206,7 +202,8 @@ def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainCon
     c, t, h, w = dataset.latent_shape
     if h % cfg.model.patch_size or w % cfg.model.patch_size or t % cfg.model.patch_t:
         raise DrivewmError(
-            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
+            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches "
+            f"{cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
         )
     model = dataclasses.replace(cfg.model, in_channels=c, text_dim=text_dim, cond_mask_channel=cfg.edm.cond_frames > 0)
     return dataclasses.replace(cfg, model=model)

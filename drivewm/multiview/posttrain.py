@@ -153,7 +153,7 @@ class MultiViewTask:
             [build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples]
         )
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
-        return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
+        return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> MultiView:
         with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
@@ -195,15 +195,6 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
     return dataclasses.replace(first, **cat)
 
 
-def to_device(cond: MultiViewConditioning, device: torch.device) -> MultiViewConditioning:
-    moved = {
-        f.name: getattr(cond, f.name).to(device)
-        for f in dataclasses.fields(cond)
-        if isinstance(getattr(cond, f.name), torch.Tensor)
-    }
-    return dataclasses.replace(cond, **moved)
-
-
 def posttrain(
     cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, out_dir: str | Path, stop_after: int | None = None
 ) -> dict:
@@ -220,7 +211,8 @@ def posttrain(
     )
     if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
         raise DrivewmError(
-            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}"
+            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, "
+            f"{init_dir} was trained on {parent.cfg.dit.in_channels}"
         )
     torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
     mv = dataclasses.replace(
