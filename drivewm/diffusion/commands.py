@@ -35,6 +35,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="override, e.g. train.steps=100",
     )
     p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        help="where to train (sets train.device; default: the recipe's, auto)",
+    )
     p.set_defaults(func=pretrain_command)
 
     g = sub.add_parser("generate", help="generate clips from a Text2World or multi-view model")
@@ -65,7 +70,7 @@ def pretrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
     from drivewm.diffusion.pretrain import pretrain, pretrain_config
 
-    cfg = pretrain_config(args.preset, args.overrides)
+    cfg = pretrain_config(args.preset, [*args.overrides, *([f"train.device={args.device}"] if args.device else [])])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0
@@ -93,7 +98,8 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
         raise DrivewmError(
-            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)"
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance "
+            "(multi-view models do)"
         )
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device

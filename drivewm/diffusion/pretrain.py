@@ -15,6 +15,7 @@ import torch
 
 from drivewm.clips.latents import LatentCache
 from drivewm.config import apply_overrides, to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset
@@ -175,10 +176,10 @@ class Text2WorldTask:
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle, _ = self._ema_bundle(ema_state)
+        bundle = self._ema_bundle(ema_state)[0].to(next(self.model.parameters()).device)  # the training device
         prompts = self.dataset.captions()[:4]
         latents = bundle.sample_latents(prompts, list(range(len(prompts))), steps=self.cfg.sample_steps, guidance=3.0)
-        write_grid_png(decode_latents(latents, bundle.latent.tokenizer), path, prompts)
+        write_grid_png(decode_latents(latents, bundle.latent.tokenizer, bundle.device), path, prompts)
 
 
 def latent_info(dataset: LatentDataset, tokenizer_dir: Path | None) -> LatentInfo:
@@ -217,6 +218,7 @@ def pretrain(
     stop_after: int | None = None,
 ) -> dict:
     """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
     dataset = LatentDataset(find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents), cfg.edm.sigma_data)
     if tokenizer_dir is not None:

@@ -31,6 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="override, e.g. multiview.cross_view=joint or train.steps=100",
     )
     p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        help="where to train (sets train.device; default: the recipe's, auto)",
+    )
     p.set_defaults(func=posttrain_command)
 
     r = sub.add_parser("rollout", help="continue a real clip autoregressively under a chosen ego trajectory")
@@ -54,6 +59,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
     r.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    r.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
+    )
     r.set_defaults(func=rollout_command)
 
 
@@ -64,6 +72,7 @@ def posttrain_command(args: argparse.Namespace) -> int:
     recipe = load_recipe(args.recipe) if args.recipe else {}
     rig = args.rig if args.rig is not None else recipe.get("rig", "")
     overrides = [*recipe.get("overrides", []), *([f"rig={rig}"] if rig else []), *args.overrides]
+    overrides += [f"train.device={args.device}"] if args.device else []
     cfg = posttrain_config(args.preset or recipe.get("preset", "debug"), overrides)
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
@@ -91,12 +100,13 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.prompt,
         args.speed,
     )
-    model = MultiView.from_pretrained(args.model)
+    model = MultiView.from_pretrained(args.model).to(args.device)
     if not model.latent.tokenizer:
         raise DrivewmError(
             f"{args.model}: no tokenizer recorded in the model folder; a rollout needs one to encode the clip"
         )
-    sample = rollout(model, load_clip(args.clip, args.key), options, Tokenizer.from_pretrained(model.latent.tokenizer))
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
+    sample = rollout(model, load_clip(args.clip, args.key), options, tokenizer)
     files = write_samples(args.out, [sample], model.latent.fps, name="rollout")
     print(f"wrote {len(files)} files to {args.out} ({sample.videos.shape[1]} frames per view)")
     return 0

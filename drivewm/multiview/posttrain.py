@@ -14,6 +14,7 @@ from pathlib import Path
 import torch
 
 from drivewm.config import apply_overrides, to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig, find_latent_cache
 from drivewm.diffusion.text2world import Text2World
@@ -167,11 +168,12 @@ class MultiViewTask:
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle, s = self._ema_bundle(ema_state), self.dataset[0]
+        bundle = self._ema_bundle(ema_state).to(next(self.model.parameters()).device)  # the training device
+        s = self.dataset[0]
         z = bundle.sample_latents(
             s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0
         )
-        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer), path, s.rig.names)  # one row per view
+        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer, bundle.device), path, s.rig.names)
 
 
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
@@ -200,6 +202,7 @@ def posttrain(
 ) -> dict:
     """Post-train a multi-view model folder into ``out_dir`` from the Text2World folder ``init_dir``
     (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     parent = Text2World.from_pretrained(init_dir)
     tokenizer = Path(parent.latent.tokenizer) if parent.latent.tokenizer else None
     cameras = load_rig(cfg.rig).names if cfg.rig else None
