@@ -15,7 +15,8 @@ plus 12 x layers x tokens^2 x width (QK^T and PV, forward and backward) -- the P
 
     python benchmarks/bench_dit.py                 # small: D=192, depth 4, 2 x 288 tokens (a minute)
     python benchmarks/bench_dit.py --size full     # D=384, depth 12, 2,240 tokens (the issue-19 target)
-    python benchmarks/bench_dit.py --mfu-size base # also our DiT alone at the base preset (default on CUDA)
+    python benchmarks/bench_dit.py --mfu-size base # also our DiT alone at the base preset, fp32 on a CPU (on CUDA:
+                                                   # by default, bf16, batch 16 x 2,240 tokens)
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ SIZES = {
     "small": dict(hidden_dim=192, depth=4, num_heads=4, latent=(16, 3, 16, 24), batch=2),
     "full": dict(hidden_dim=384, depth=12, num_heads=6, latent=(16, 5, 32, 56), batch=1),
     "base": dict(
-        **{k: dit_preset("base")[k] for k in ("hidden_dim", "depth", "num_heads")}, latent=(16, 5, 32, 56), batch=4
+        **{k: dit_preset("base")[k] for k in ("hidden_dim", "depth", "num_heads")}, latent=(16, 5, 32, 56), batch=1
     ),
 }
 TEXT_DIM, TEXT_LEN = 256, 32
@@ -267,6 +268,9 @@ def main() -> None:
     parser.add_argument(
         "--mfu-size", choices=sorted(SIZES), help="also time our DiT alone at this size for MFU (default: base on CUDA)"
     )
+    parser.add_argument(
+        "--mfu-batch", type=int, help="samples per step of the MFU run (default: 16 on CUDA, the size's on the CPU)"
+    )
     args = parser.parse_args()
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     torch.set_num_threads(args.threads)
@@ -285,7 +289,7 @@ def main() -> None:
     report(compare(args.models, size, args.rounds, device, bf16), size, peak)
     mfu_size = args.mfu_size or ("base" if device.type == "cuda" else None)
     if mfu_size:
-        big = SIZES[mfu_size]
+        big = dict(SIZES[mfu_size], batch=args.mfu_batch or (16 if device.type == "cuda" else SIZES[mfu_size]["batch"]))
         print(
             f"MFU at {mfu_size}: batch {big['batch']} x {tokens_of(big) // big['batch']} tokens, D={big['hidden_dim']}"
         )
