@@ -65,7 +65,8 @@ class DiTConfig:
 
 
 #: Named sizes (DiT-paper style). Parameter counts at text_dim=256, in_channels=16, p=2:
-#: debug ~1.5M, small ~33M, base ~132M, large ~486M, xl ~1.2B.
+#: debug ~1.3M, small ~28M, base ~113M, large ~411M, xl ~1.0B (joint attention; the older self + cross
+#: attention layout: ~1.5M, 33M, 132M, 486M, 1.2B).
 DIT_PRESETS: dict[str, dict] = {
     "debug": dict(hidden_dim=128, depth=4, num_heads=4, adaln_lora_dim=32),
     "small": dict(hidden_dim=384, depth=12, num_heads=6, adaln_lora_dim=64),
