@@ -193,22 +193,22 @@ def train_flops(params: int, tokens: int, depth: int, dim: int, batch: int) -> f
     return 6 * params * tokens + 12 * depth * per_sample**2 * dim * batch
 
 
-def peak_flops(device: torch.device, bf16: bool, rounds: int = 5) -> float:
-    """FLOP/s of a large square matmul (bf16 on CUDA, fp32 otherwise): the device's practical peak."""
+def peak_flops(device: torch.device, bf16: bool) -> float:
+    """FLOP/s of one large square matmul (bf16 on CUDA, fp32 otherwise): the device's practical peak,
+    timed with the clock of :func:`timed_step` (one call after a warm-up; :func:`compare` repeats it
+    every round so the peak sees the same machine as the steps)."""
     n = 8192 if device.type == "cuda" else 2048
     dtype = torch.bfloat16 if bf16 else torch.float32
     a, b = torch.randn(n, n, device=device, dtype=dtype), torch.randn(n, n, device=device, dtype=dtype)
-    clock = time.perf_counter if device.type == "cuda" else time.process_time  # as timed_step
-    times = []
-    for _ in range(rounds + 1):
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        tic = clock()
-        a @ b
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        times.append(clock() - tic)
-    return 2 * n**3 / statistics.median(times[1:])
+    clock = time.perf_counter if device.type == "cuda" else time.process_time
+    a @ b
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    tic = clock()
+    a @ b
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    return 2 * n**3 / (clock() - tic)
 
 
 def tokens_of(size: dict) -> int:
@@ -216,23 +216,28 @@ def tokens_of(size: dict) -> int:
     return size["batch"] * t * (h // 2) * (w // 2)
 
 
-def compare(names: list[str], size: dict, rounds: int, device: torch.device, bf16: bool) -> dict[str, list[float]]:
-    """Interleaved training steps of ``names``; step seconds per model (the warm-up round dropped)."""
+def compare(
+    names: list[str], size: dict, rounds: int, device: torch.device, bf16: bool
+) -> tuple[dict[str, tuple[int, list[float]]], float]:
+    """Interleaved training steps of ``names`` -> ({name: (params, step seconds)}, median peak FLOP/s);
+    the warm-up round is dropped, and the matmul peak is measured once per round beside the steps."""
     torch.manual_seed(0)
     runs = {name: MODELS[name](size, device) for name in names}
     # The same optimizer for every model: fused AdamW (one kernel; the per-tensor loop costs ~6x more).
     opts = {name: torch.optim.AdamW(m.parameters(), lr=1e-4, fused=True) for name, (m, _) in runs.items()}
-    times = {name: [] for name in runs}
+    times, peaks = {name: [] for name in runs}, []
     for r in range(rounds + 1):  # round 0 warms up
         for name, (model, loss_fn) in runs.items():
             dt = timed_step(model, loss_fn, opts[name], bf16, device)
             if r:
                 times[name].append(dt)
+        peaks.append(peak_flops(device, bf16))
     params = {name: count_parameters(m) for name, (m, _) in runs.items()}
-    return {name: (params[name], times[name]) for name in runs}
+    return {name: (params[name], times[name]) for name in runs}, statistics.median(peaks)
 
 
-def report(results: dict, size: dict, peak: float) -> None:
+def report(results: dict, peak: float, size: dict) -> None:
+    print(f"peak by matmul {peak / 1e12:.3f} TFLOP/s (median over the rounds)")
     tokens = tokens_of(size)
     rate = {}
     for name, (params, times) in results.items():
@@ -276,24 +281,21 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     bf16 = device.type == "cuda"
     size = SIZES[args.size]
-    peak = peak_flops(device, bf16)
     print(
-        f"device {device} ({'bf16 autocast' if bf16 else 'fp32'}, {args.threads} thread(s), "
-        f"{load_note(args.threads)}); "
-        f"peak by matmul {peak / 1e12:.3f} TFLOP/s"
+        f"device {device} ({'bf16 autocast' if bf16 else 'fp32'}, {args.threads} thread(s), {load_note(args.threads)})"
     )
     print(
         f"size {args.size}: batch {size['batch']} x {tokens_of(size) // size['batch']} tokens, "
         f"D={size['hidden_dim']}, depth {size['depth']}, {size['num_heads']} heads"
     )
-    report(compare(args.models, size, args.rounds, device, bf16), size, peak)
+    report(*compare(args.models, size, args.rounds, device, bf16), size)
     mfu_size = args.mfu_size or ("base" if device.type == "cuda" else None)
     if mfu_size:
         big = dict(SIZES[mfu_size], batch=args.mfu_batch or (16 if device.type == "cuda" else SIZES[mfu_size]["batch"]))
         print(
             f"MFU at {mfu_size}: batch {big['batch']} x {tokens_of(big) // big['batch']} tokens, D={big['hidden_dim']}"
         )
-        report(compare(["drivewm DiT"], big, args.rounds, device, bf16), big, peak)
+        report(*compare(["drivewm DiT"], big, args.rounds, device, bf16), big)
     print(f"end: {load_note(args.threads)}")
 
 
