@@ -32,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--tokenizer", type=Path, help="tokenizer model folder that encoded the latents")
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        help="where to train (sets train.device; default: the recipe's, auto)",
+    )
     p.set_defaults(func=pretrain_command)
 
     g = sub.add_parser("generate", help="generate clips from a Text2World or multi-view model")
@@ -69,7 +74,8 @@ def pretrain_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.pretrain import RECIPES, pretrain
 
     init = [f"init={args.init.resolve()}"] if args.init else []
-    cfg = RECIPES.resolve(args.preset, args.recipe, [*init, *args.overrides])
+    device = [f"train.device={args.device}"] if args.device else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*init, *args.overrides, *device])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0

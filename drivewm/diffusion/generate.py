@@ -67,13 +67,14 @@ def video_to_uint8(video: torch.Tensor) -> np.ndarray:
 
 
 @torch.no_grad()
-def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None) -> np.ndarray:
-    """Raw latents (B, c, t, h, w) -> uint8 video (B, T, H, W, 3) with the tokenizer (preview if None)."""
+def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None, device: torch.device | str = "cpu") -> np.ndarray:
+    """Raw latents (B, c, t, h, w) -> uint8 video (B, T, H, W, 3) with the tokenizer on ``device``
+    (a preview of the latents themselves if None)."""
     if tokenizer_dir is None:
         return latents_preview(latents)
 
-    tokenizer = Tokenizer.from_pretrained(tokenizer_dir)
-    return np.concatenate([video_to_uint8(tokenizer.decode(z[None])) for z in latents])
+    tokenizer = Tokenizer.from_pretrained(tokenizer_dir).to(device)
+    return np.concatenate([video_to_uint8(tokenizer.decode(z[None].to(device))) for z in latents])
 
 
 def write_grid_png(
@@ -143,7 +144,7 @@ def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir
         latents.append(
             model.sample_latents(prompts[part], seeds[part], options.steps, options.guidance, options.sampler)
         )
-    videos = decode_latents(torch.cat(latents), model.latent.tokenizer)
+    videos = decode_latents(torch.cat(latents), model.latent.tokenizer, model.device)
     extras = [
         {
             "model": str(Path(model_dir).resolve()),

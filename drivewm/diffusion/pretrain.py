@@ -15,6 +15,7 @@ import torch
 
 from drivewm.clips.latents import LatentCache, find_latent_cache
 from drivewm.config import to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset
@@ -165,12 +166,7 @@ class Text2WorldTask(TrainTask):
         noise = torch.stack([torch.randn(x0.shape[1:], generator=g) for g in gens]).to(device)
         keep = torch.tensor([float(torch.rand(1, generator=g)) >= self.cfg.edm.text_dropout for g in gens])
         cond = self.bundle.conditioning([s.caption for s in samples])
-        cond = dataclasses.replace(
-            cond,
-            text_emb=cond.text_emb.to(device),
-            text_mask=cond.text_mask.to(device),
-            fps=torch.tensor([s.fps for s in samples], device=device),
-        )
+        cond = dataclasses.replace(cond, fps=torch.tensor([s.fps for s in samples])).to(device)
         return edm_loss(forward, self.cfg.edm, x0, cond, sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> tuple[Text2World, dict[str, torch.Tensor]]:
@@ -187,10 +183,10 @@ class Text2WorldTask(TrainTask):
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle, _ = self._ema_bundle(ema_state)
+        bundle = self._ema_bundle(ema_state)[0].to(next(self.model.parameters()).device)  # the training device
         prompts = self.dataset.captions()[:4]
         latents = bundle.sample_latents(prompts, list(range(len(prompts))), steps=self.cfg.sample_steps, guidance=3.0)
-        write_grid_png(decode_latents(latents, bundle.latent.tokenizer), path, prompts)
+        write_grid_png(decode_latents(latents, bundle.latent.tokenizer, bundle.device), path, prompts)
 
 
 def latent_info(dataset: LatentDataset, tokenizer_dir: Path | None) -> LatentInfo:
@@ -229,6 +225,7 @@ def pretrain(
     stop_after: int | None = None,
 ) -> dict:
     """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
     cache = find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents)
     dataset = LatentDataset(cache, cfg.edm.sigma_data, cfg.data.frames or None)

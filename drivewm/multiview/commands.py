@@ -29,6 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--rig", help="cameras to train on: rig name or YAML (default: the recipe's, else all cameras of the clips)"
     )
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    p.add_argument(
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        help="where to train (sets train.device; default: the recipe's, auto)",
+    )
     p.set_defaults(func=posttrain_command)
 
     r = sub.add_parser("rollout", help="continue a real clip autoregressively under a chosen ego trajectory")
@@ -56,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_registry_argument(
         r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
     )
+    r.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
+    )
     r.set_defaults(func=rollout_command)
 
 
@@ -63,7 +71,9 @@ def posttrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
     from drivewm.multiview.posttrain import RECIPES, posttrain
 
-    cfg = RECIPES.resolve(args.preset, args.recipe, [*([f"rig={args.rig}"] if args.rig else []), *args.overrides])
+    overrides = [*([f"rig={args.rig}"] if args.rig else []), *args.overrides]
+    overrides += [f"train.device={args.device}"] if args.device else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, overrides)
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0
@@ -94,12 +104,13 @@ def rollout_command(args: argparse.Namespace) -> int:
         from drivewm.release import shipped_model
 
         args.model = shipped_model("multiview")
-    model = MultiView.from_pretrained(args.model)
+    model = MultiView.from_pretrained(args.model).to(args.device)
     if not model.latent.tokenizer:
         raise DrivewmError(
             f"{args.model}: no tokenizer recorded in the model folder; a rollout needs one to encode the clip"
         )
-    sample = rollout(model, load_clip(args.clip, args.key), options, Tokenizer.from_pretrained(model.latent.tokenizer))
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
+    sample = rollout(model, load_clip(args.clip, args.key), options, tokenizer)
     files = write_samples(args.out, [sample], model.latent.fps, name="rollout")
     print(f"wrote {len(files)} files to {args.out} ({sample.videos.shape[1]} frames per view)")
     return 0

@@ -15,6 +15,7 @@ import torch
 
 from drivewm.clips.latents import find_latent_cache
 from drivewm.config import to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
@@ -149,7 +150,7 @@ class MultiViewTask(TrainTask):
             [build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples]
         )
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
-        return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
+        return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> MultiView:
         with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
@@ -163,11 +164,12 @@ class MultiViewTask(TrainTask):
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle, s = self._ema_bundle(ema_state), self.dataset[0]
+        bundle = self._ema_bundle(ema_state).to(next(self.model.parameters()).device)  # the training device
+        s = self.dataset[0]
         z = bundle.sample_latents(
             s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0
         )
-        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer), path, s.rig.names)  # one row per view
+        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer, bundle.device), path, s.rig.names)
 
 
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
@@ -191,15 +193,6 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
     return dataclasses.replace(first, **cat)
 
 
-def to_device(cond: MultiViewConditioning, device: torch.device) -> MultiViewConditioning:
-    moved = {
-        f.name: getattr(cond, f.name).to(device)
-        for f in dataclasses.fields(cond)
-        if isinstance(getattr(cond, f.name), torch.Tensor)
-    }
-    return dataclasses.replace(cond, **moved)
-
-
 def posttrain(
     cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, out_dir: str | Path, stop_after: int | None = None
 ) -> dict:
@@ -207,6 +200,7 @@ def posttrain(
     (the multi-view parts start at zero effect), or a multi-view folder to fine-tune (e.g. the
     shipped model on a fleet's logs). Resumes when ``out_dir`` holds a train state. Returns the
     last metrics row."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     init_dir = Path(init_dir)
     init = MultiView.from_pretrained(init_dir) if read_model_type(init_dir) == MV_MODEL_TYPE else None
     parent = Text2World.from_pretrained(init_dir) if init is None else None

@@ -13,8 +13,6 @@ from mv_standin import PoolTokenizer
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
-from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
@@ -187,32 +185,6 @@ def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(
         for name in ("left", "right")
     ]
     assert (z[0] - z[1]).abs().mean() > 1e-3  # same seed, other trajectory: another sample
-
-
-@pytest.fixture(scope="module")
-def mv_with_tokenizer(tmp_path_factory) -> Path:
-    """An (untrained) multi-view model whose folder records a real debug tokenizer (4x8x8), front camera
-    only, with the reprojected first frame (multiview.warp_condition) on."""
-    import dataclasses
-
-    from drivewm.geometry import load_rig
-    from drivewm.multiview.init import from_text2world
-    from drivewm.tokenizer import Tokenizer, preset
-
-    root = tmp_path_factory.mktemp("mv_tok")
-    torch.manual_seed(0)
-    tok = Tokenizer(preset("debug"))
-    tok.save_pretrained(root / "tok")
-    parent = Text2World(
-        Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
-        LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}),
-    )
-    from drivewm.multiview.config import MultiViewConfig
-
-    mv = from_text2world(parent, MultiViewConfig(warp_condition=True))
-    mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
-    mv.save_pretrained(root / "mv")
-    return root / "mv"
 
 
 def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_tokenizer, sim_clip_dir, tmp_path):

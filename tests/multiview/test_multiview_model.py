@@ -91,7 +91,7 @@ def test_trajectory_and_camera_conditioning_change_the_output(parent):
 def test_dropped_trajectory_is_no_trajectory_and_guidance_interpolates(parent):
     """A dropped trajectory (training dropout, guidance's free branch) is exactly the model given
     none: static rays, no waypoint embedding. Trajectory guidance w is D_free + w (D_traj - D_free)."""
-    from drivewm.multiview.model import TrajectoryGuidedDenoiser
+    from drivewm.diffusion.samplers import GuidedDenoiser
 
     mv = from_text2world(parent)
     rig = load_rig("front3")
@@ -107,7 +107,7 @@ def test_dropped_trajectory_is_no_trajectory_and_guidance_interpolates(parent):
         mixed = mv.net(x, sigma, cond.drop_trajectory(keep))
         torch.testing.assert_close(mixed[:3], with_traj[:3])
         torch.testing.assert_close(mixed[3:], free[3:])
-        guided = TrajectoryGuidedDenoiser(mv.net, 3.0)(x, sigma, cond)
+        guided = GuidedDenoiser(mv.net, 3.0, drop=lambda c: c.without_trajectory())(x, sigma, cond)
         torch.testing.assert_close(guided, free + 3.0 * (with_traj - free))
 
 
@@ -184,4 +184,4 @@ def test_importing_multiview_registers_no_sublayer():
         "print(sorted(SUBLAYERS))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "['cross_attn', 'mlp', 'self_attn']"
+    assert out.strip() == "['cross_attn', 'joint_attn', 'mlp', 'self_attn']"
