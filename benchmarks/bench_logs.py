@@ -56,7 +56,7 @@ def main() -> None:
     from drivewm.logs.writer import LogWriter, encode_image
 
     width, height, seconds = (640, 360, 20.0) if args.full else (320, 192, 3.0)
-    rig = load_rig("nuscenes6").scaled(width, height)
+    rig = load_rig("nuscenes6").scaled(width, height, fit="stretch")
     ticks = int(seconds * 10)
     frames = _frames(rig, ticks)
     n_images = ticks * len(rig.cameras)

@@ -136,7 +136,7 @@ def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
     """Sync the cameras and smooth the poses of one log."""
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
-        rig = rig.scaled(*cfg.resolution)
+        rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (_LogContext.image)
     raw = {c: log.images.get(c, []) for c in rig.names}
     times = {c: np.array([f.timestamp_ns for f in raw[c]], dtype=np.int64) for c in rig.names}
     table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6)

@@ -24,6 +24,13 @@ def register(subparsers) -> None:
         "--reference", default=None, help="reference metrics JSON shown beside the results (eval/reference/*.json)"
     )
     p.add_argument("--suite", default=None, help="suite YAML overriding protocol constants (eval/suites/*.yaml)")
+    p.add_argument(
+        "--rig-fit",
+        default="same",
+        choices=("same", "stretch", "crop"),
+        help="videos of another aspect ratio than the rig: were they stretched or centre-cropped from it? "
+        "(default: refuse them)",
+    )
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument(
@@ -58,6 +65,7 @@ def run_eval(args: argparse.Namespace) -> int:
         cameras=cameras,
         reference=args.reference,
         pictures=not args.no_pictures,
+        rig_fit=args.rig_fit,
     )
     summary = {k: v for k, v in metrics.items() if k not in ("clips", "config")}
     print(json.dumps(summary, indent=2, default=str))

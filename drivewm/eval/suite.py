@@ -206,15 +206,17 @@ def evaluate(
     reference: str | Path | None = None,
     progress: bool = True,
     pictures: bool = True,
+    rig_fit: str = "same",
 ) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
     Returns the metrics dict (aggregates at the top, per clip under ``clips``); with ``out_dir``
     also writes metrics.json, metrics.md (beside ``reference`` values), error-distribution plots
-    and a Rerun recording (eval.rrd).
+    and a Rerun recording (eval.rrd). ``rig_fit``: how videos of another aspect ratio than the rig
+    were resized from it ('same' refuses them, 'stretch', 'crop'; drivewm.geometry.Camera.scaled).
     """
     cfg = cfg or EvalConfig()
-    items = load_items(location, rig, grid, cameras)
+    items = load_items(location, rig, grid, cameras, rig_fit)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
     results = run_items(items, cfg, workers, progress)

@@ -83,7 +83,7 @@ def _sample(texture: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def ego_path(num_frames: int, fps: float, speed_mps: float = 8.0, curve: float = 0.04) -> np.ndarray:
-    """T_world_from_ego (T, 4, 4): forward at ``speed_mps`` with a slow left curve (yaw rate ``curve`` rad/s... per m)."""
+    """T_world_from_ego (T, 4, 4): forward at ``speed_mps`` on a slow left curve (curvature ``curve`` / 2 per m)."""
     s = np.arange(num_frames) * speed_mps / fps
     yaw = curve * s / 2.0
     y = 0.5 * curve * s**2 / 4.0
