@@ -49,6 +49,7 @@ def run_eval(args: argparse.Namespace) -> int:
 
     from drivewm.config import apply_overrides, load_yaml
     from drivewm.eval.config import EvalConfig
+    from drivewm.eval.report import json_safe
     from drivewm.eval.suite import evaluate
 
     base = load_yaml(args.suite) if args.suite else {}
@@ -67,7 +68,8 @@ def run_eval(args: argparse.Namespace) -> int:
         pictures=not args.no_pictures,
         rig_fit=args.rig_fit,
     )
-    summary = {k: v for k, v in metrics.items() if k not in ("clips", "config")}
-    print(json.dumps(summary, indent=2, default=str))
+    # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
+    summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})
+    print(json.dumps(summary, indent=2, allow_nan=False))
     print(f"wrote {args.out}/metrics.json and metrics.md")
     return 0

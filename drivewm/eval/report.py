@@ -143,11 +143,12 @@ def _log_clip(rec, rr, result) -> None:
         )
 
 
-def _json_safe(obj):
+def json_safe(obj):
+    """``obj`` with NaN / inf written as None and numpy scalars as Python numbers (strict JSON)."""
     if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
+        return [json_safe(v) for v in obj]
     if isinstance(obj, (np.floating, float)):
         return float(obj) if math.isfinite(obj) else None
     if isinstance(obj, np.integer):
@@ -161,7 +162,7 @@ def write_report(
     """metrics.json (NaN written as null), metrics.md, error_distributions.png and eval.rrd."""
     ref = load_reference(reference)
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "metrics.json", _json_safe(metrics))
+    write_json(out_dir / "metrics.json", json_safe(metrics))
     write_text(out_dir / "metrics.md", markdown_table(metrics, ref))
     if pictures:
         plot_distributions(out_dir / "error_distributions.png", metrics)

@@ -62,6 +62,10 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
     )
     assert rc == 0
     metrics = json.loads((out / "metrics.json").read_text())
+    # stdout's summary is strict JSON (no NaN) and equals metrics.json's top level.
+    stdout = capsys.readouterr().out
+    summary = json.loads(stdout[: stdout.rindex("}") + 1], parse_constant=lambda c: pytest.fail(f"{c} in stdout"))
+    assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
     assert metrics["num_clips"] == 2 and set(metrics["clips"]) == {"corridor", "corridor2"}
     assert 0 < metrics["tse"] < 0.3 and 0 < metrics["cse"] < 0.5
     # Same clip twice, scored in two processes: identical numbers.
@@ -133,3 +137,19 @@ def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
     assert metrics["num_clips"] == 3 and metrics["num_failed_clips"] == 1
     assert "broken-000000.tar" in metrics["clips"]["broken-000000"]["error"]
     assert metrics["clips"]["corridor"]["cse"] < 0.5
+
+
+def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
+    """A flat grey video has no TSE (NaN in Python): stdout says null, as metrics.json does."""
+    folder = tmp_path / "grey"
+    folder.mkdir()
+    (folder / "CAM_FRONT.mp4").write_bytes(encode_mp4(np.full((5, 192, 320, 3), 128, np.uint8), 10.0))
+    out = tmp_path / "eval"
+    rc = main(["eval", str(folder), "--rig", "front1", "--metrics", "tse", "--no-pictures", "--out", str(out)])
+    assert rc == 0
+    stdout = capsys.readouterr().out
+    assert "NaN" not in stdout
+    summary = json.loads(stdout[: stdout.rindex("}") + 1])
+    assert summary["tse"] is None and summary["nan_clips"]["tse"] == 1
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
