@@ -95,8 +95,29 @@ class TrajectoryConfig:
 
     camera: str = ""
     """Camera whose recovered motion is the ego trajectory; '' = the camera looking most along ego +x."""
-    rpe_delta_frames: int = 1
-    """RPE compares relative motion over this many frames."""
+    alignment: str = "sim3"
+    """Transform fitted onto the reference before ATE / RPE (Umeyama): 'sim3' (with scale: a video
+    fixes motion only up to scale; evo -as), 'se3' (evo -a) or 'none'."""
+    rpe_delta: float = 1.0
+    """RPE compares relative motion over this distance, in ``rpe_delta_unit``."""
+    rpe_delta_unit: str = "frames"
+    """'frames' or 'm' (travelled path of the reference; evo --delta_unit m, e.g. drift per 10 m)."""
+    rpe_all_pairs: bool = False
+    """False: consecutive pairs (0-d, d-2d, ...; evo's default); True: every frame starts a pair (evo --all_pairs)."""
+    rpe_pairs_from: str = "reference"
+    """Trajectory whose frames / path choose the pairs: 'reference' (evo --pairs_from_reference) or 'estimate'."""
+
+    def validate(self) -> None:
+        if self.alignment not in ("none", "se3", "sim3"):
+            raise DrivewmError(f"eval config: trajectory.alignment {self.alignment!r} is not none, se3 or sim3")
+        if self.rpe_delta_unit not in ("frames", "m") or self.rpe_delta <= 0:
+            raise DrivewmError(
+                f"eval config: RPE delta {self.rpe_delta} {self.rpe_delta_unit!r} must be > 0 frames or m"
+            )
+        if self.rpe_delta_unit == "frames" and self.rpe_delta != int(self.rpe_delta):
+            raise DrivewmError(f"eval config: trajectory.rpe_delta {self.rpe_delta} frames is not a whole number")
+        if self.rpe_pairs_from not in ("reference", "estimate"):
+            raise DrivewmError(f"eval config: trajectory.rpe_pairs_from {self.rpe_pairs_from!r}")
 
 
 @dataclasses.dataclass
@@ -120,6 +141,7 @@ class EvalConfig:
         unknown = sorted(set(self.metrics) - set(ALL_METRICS))
         if unknown:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
+        self.trajectory.validate()
 
 
 def eval_config_from_dict(data: dict, where: str = "eval config") -> EvalConfig:

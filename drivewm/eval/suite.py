@@ -33,6 +33,8 @@ AGGREGATE_KEYS = (
     "ate",
     "rpe_trans",
     "rpe_rot",
+    "rpe_trans_mean",
+    "rpe_rot_rmse",
     "tfe",
     "adherence_weather",
     "adherence_time_of_day",
@@ -117,9 +119,10 @@ def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     from drivewm.eval.trajectory import ego_from_sfm
-    from drivewm.eval.trajectory_errors import ate, rpe, tfe
+    from drivewm.eval.trajectory_errors import ate, relative_pose_errors, tfe
 
-    for k in ("ate", "rpe_trans", "rpe_rot", "tfe"):
+    tc = cfg.trajectory
+    for k in ("ate", "rpe_trans", "rpe_rot", "rpe_trans_mean", "rpe_rot_rmse", "tfe"):
         metrics[k] = math.nan
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
     reg = ego.registered
@@ -129,8 +132,16 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     est = ego.T_world_from_ego[reg]
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
-        metrics["ate"], sim = ate(est, ref)
-        metrics["rpe_trans"], metrics["rpe_rot"] = rpe(est, ref, cfg.trajectory.rpe_delta_frames, sim.scale)
+        metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
+        r = relative_pose_errors(
+            est, ref, tc.rpe_delta, tc.rpe_delta_unit, tc.rpe_all_pairs, sim.scale, tc.rpe_pairs_from
+        )
+        metrics["rpe_trans"], metrics["rpe_rot"] = r.trans_rmse, r.rot_mean
+        metrics["rpe_trans_mean"], metrics["rpe_rot_rmse"], metrics["rpe_pairs"] = (
+            r.trans_mean,
+            r.rot_rmse,
+            len(r.pairs),
+        )
         artifacts["trajectory"] = {"reference": ref[:, :3, 3], "recovered": sim.apply_points(est[:, :3, 3])}
     if item.trajectory_ego and reg.all():
         metrics["tfe"] = tfe(
