@@ -87,11 +87,16 @@ class CurateConfig:
     resolution: list[int] | None = None
     """Output [W, H] (even numbers); null keeps the log's image size."""
     topic_map: str | None = None
-    """Topic map (a name in datasets/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2, other Foxglove layouts)."""
+    """Topic map (a name in datasets/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2,
+    other Foxglove layouts)."""
     cameras: list[str] | None = None
     """Cameras to keep, in this order; null keeps the log's rig."""
     sync_tolerance_ms: float = 25.0
-    """A camera frame belongs to a tick when it is within this of the tick (must be < half a clip frame)."""
+    """A camera frame belongs to a tick when it is within this of the tick plus the camera's exposure
+    offset (must be < half a clip frame)."""
+    per_camera_offsets: bool = True
+    """Estimate each camera's steady exposure offset from the reference (first) camera (rigs that fire
+    cameras in turn) and apply the tolerance around it; false: around the tick for every camera."""
     trajectory_waypoints: int = 16
     """Future ego waypoints per clip (ClipMeta.trajectory_ego), from the 2nd to the last frame."""
     shot_threshold: float = 2.5
@@ -115,7 +120,8 @@ class CurateConfig:
             raise DrivewmError("curate config: need clip_frames >= 2, stride_frames >= 1 and fps > 0")
         if self.sync_tolerance_ms * 1e-3 >= 0.5 / self.fps:
             raise DrivewmError(
-                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame ({500 / self.fps:.1f} ms)"
+                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame "
+                f"({500 / self.fps:.1f} ms)"
             )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
