@@ -23,6 +23,7 @@ from drivewm.geometry import Camera, fundamental_from_T, make_T, sampson_distanc
 OK = "ok"
 TOO_FEW_MATCHES = "too_few_matches"
 FIT_FAILED = "fit_failed"
+NO_MOTION = "no_motion"
 
 
 def canonical_K(cfg: EpipolarConfig) -> np.ndarray:
@@ -143,11 +144,16 @@ class SampsonResult:
         return {"median_px": self.median_px, "num_matches": self.num_matches, "status": self.status}
 
 
+def verified_mask(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> np.ndarray:
+    """(N,) bool: the matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
+    if F_fit is None or len(m) == 0:
+        return np.zeros(len(m), bool)
+    return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+
+
 def verified_matches(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> Matches:
     """The matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
-    if F_fit is None or len(m) == 0:
-        return Matches.empty()
-    keep = sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+    keep = verified_mask(F_fit, m, cfg)
     return Matches(m.uv_a[keep], m.uv_b[keep])
 
 

@@ -52,6 +52,10 @@ class EvalItem:
     mp4_paths: dict[str, str] = dataclasses.field(default_factory=dict)
     grid_path: str = ""
     grid: GridLayout | None = None
+    timestamps_ns: list[int] = dataclasses.field(default_factory=list)
+    """Time of each frame (and of each ego pose), ns; empty for mp4 inputs."""
+    camera_timestamps_ns: dict[str, list[int]] = dataclasses.field(default_factory=dict)
+    """Per camera, its frames' own exposure times (ns) when they differ from ``timestamps_ns``."""
     error: str = ""
     """Set when the input could not be read (e.g. a corrupt shard): the item is reported, not scored."""
 
@@ -141,6 +145,8 @@ def _shard_items(shard: Path, rig: Rig | None, fit: str) -> list[EvalItem]:
                 list(m.trajectory_ego),
                 m.trajectory_dt_s,
                 clip=clip,
+                timestamps_ns=list(m.timestamps_ns),
+                camera_timestamps_ns=dict(m.camera_timestamps_ns),
             )
         )
     return items

@@ -21,10 +21,18 @@ from drivewm.errors import DrivewmError
 
 #: (key, unit, description) rows of the Markdown table, in order.
 TABLE_ROWS = (
-    ("tse", "px", "temporal Sampson error, F fitted per frame pair (lower is better)"),
+    ("tse", "px", "temporal Sampson error, F fitted per frame pair; failed pairs at 4 px (lower is better)"),
     ("tse_calibrated", "px", "temporal Sampson error under the F of the logged ego motion"),
+    ("tse_native", "px", "TSE in the cameras' own pixels"),
+    ("tse_counted", "px", "TSE over the pairs that count only (the Cosmos paper's figure)"),
+    ("tse_counted_fraction", "rate", "TSE frame pairs with enough verified matches and motion"),
+    ("tse_matches", "count", "verified matches per TSE frame pair"),
     ("cse", "px", "cross-view Sampson error, one F fitted per camera pair over all frames"),
     ("cse_calibrated", "px", "cross-view Sampson error under the rig's calibrated F"),
+    ("cse_native", "px", "CSE in the cameras' own pixels"),
+    ("cse_counted", "px", "CSE over the pairs that count only (the Cosmos paper's figure)"),
+    ("cse_counted_fraction", "rate", "CSE camera pairs with enough distinct verified matches"),
+    ("cse_matches", "count", "distinct verified matches per CSE camera pair (all frames)"),
     ("pose_success", "rate", "clips whose frames all register in COLMAP (higher is better)"),
     ("registered_fraction", "rate", "frames registered by COLMAP"),
     ("ate", "m", "absolute trajectory error after Sim(3) alignment"),

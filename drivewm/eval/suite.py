@@ -22,12 +22,15 @@ from drivewm.errors import DrivewmError
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.inputs import EvalItem, load_items
 
+#: Figures reported beside each Sampson metric (drivewm.eval.suite._put_sampson).
+SAMPSON_SUFFIXES = ("_native", "_counted", "_counted_fraction", "_matches")
 #: Aggregate keys (DESIGN.md section 8) and the per-clip field each averages.
 AGGREGATE_KEYS = (
     "tse",
     "tse_calibrated",
     "cse",
     "cse_calibrated",
+    *(f"{m}{suffix}" for m in ("tse", "tse_calibrated", "cse", "cse_calibrated") for suffix in SAMPSON_SUFFIXES),
     "pose_success",
     "registered_fraction",
     "ate",
@@ -73,10 +76,24 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
 
 
 def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.consistency import temporal_sampson
+    from drivewm.eval.consistency import native_px_per_canonical_px, temporal_sampson
+    from drivewm.eval.epipolar import canonical_K
 
-    r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher)
+    K_c = canonical_K(cfg.epipolar)
+    metrics["native_px_per_canonical_px"] = {c.name: native_px_per_canonical_px(c, K_c) for c in item.rig.cameras}
+
+    ego = _ego_at_cameras(item, cfg)
+    r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego)
     _put_sampson(metrics, "tse", r)
+
+
+def _ego_at_cameras(item, cfg) -> dict[str, np.ndarray] | None:
+    """Ego poses at each camera's exposure times, when the clip records its own times for any camera."""
+    if item.T_world_from_ego is None or not item.camera_timestamps_ns or not cfg.consistency.compensate_exposure:
+        return None
+    from drivewm.eval.exposure import ego_at_cameras
+
+    return ego_at_cameras(item.T_world_from_ego, item.timestamps_ns, item.camera_timestamps_ns, item.rig.names)
 
 
 def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
@@ -88,7 +105,9 @@ def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
         metrics["cse"] = metrics["cse_calibrated"] = math.nan
         metrics["status"]["cse"] = "no_overlapping_pairs"
         return
-    _put_sampson(metrics, "cse", cross_sampson(videos, item.rig, pairs, cfg.epipolar, matcher))
+    ego = _ego_at_cameras(item, cfg)
+    r = cross_sampson(videos, item.rig, pairs, cfg.epipolar, matcher, cfg=cfg.consistency, ego_at_camera=ego)
+    _put_sampson(metrics, "cse", r)
     a, b = pairs[0]
     m = matcher.match((a, 0), videos[a][0], (b, 0), videos[b][0])
     artifacts["cse_matches"] = {
@@ -100,18 +119,29 @@ def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 
 def _put_sampson(metrics: dict, name: str, r: dict) -> None:
+    """Clip keys of one Sampson metric: ``tse`` (canonical px, failed pairs counted), ``tse_native``
+    (the cameras' own px), ``tse_counted`` (mean over counted pairs only), ``tse_counted_fraction``,
+    ``tse_matches`` (verified matches per pair), per-pair lists; the same with ``_calibrated``."""
     for kind, key in (("fitted", name), ("calibrated", f"{name}_calibrated")):
         if kind in r:
-            metrics[key] = r[kind]["value_px"]
-            metrics["status"][key] = r[kind]["status_counts"]
-            metrics[f"{key}_per_group"] = r[kind]["per_group_px"]
-            metrics[f"{key}_pair_medians"] = r[kind]["pair_medians_px"]
+            k = r[kind]
+            metrics[key] = k["value_px"]
+            metrics[f"{key}_native"] = k["value_native_px"]
+            metrics[f"{key}_counted"] = k["counted_mean_px"]
+            metrics[f"{key}_counted_fraction"] = k["counted_fraction"]
+            metrics[f"{key}_matches"] = k["matches_per_pair"]
+            metrics["status"][key] = k["status_counts"]
+            metrics[f"{key}_per_group"] = k["per_group_px"]
+            metrics[f"{key}_pair_medians"] = k["pair_medians_px"]
+            metrics[f"{key}_pair_matches"] = k["pair_matches"]
 
 
 def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
+    from drivewm.eval.consistency import overlapping_pairs
     from drivewm.eval.sfm import run_sfm
 
-    sfm = run_sfm(videos, item.rig, cfg.pose)
+    pairs = overlapping_pairs(item.rig, cfg.consistency)
+    sfm = run_sfm(videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs)
     metrics["pose_success"] = float(sfm.all_registered)
     metrics["registered_fraction"] = sfm.registered_fraction
     artifacts["sfm"] = sfm

@@ -47,7 +47,12 @@ def render(
     for cam in rig.cameras:
         big = cam.scaled(cam.width * supersample, cam.height * supersample)
         vv, uu = np.mgrid[0 : big.height, 0 : big.width]
-        rays = pixel_rays(big.K, np.stack([uu.ravel(), vv.ravel()], 1).astype(np.float64))
+        uv = np.stack([uu.ravel(), vv.ravel()], 1).astype(np.float64)
+        if np.any(cam.distortion):  # the ray through each pixel of a lens with OpenCV distortion
+            xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), big.K, cam.distortion).reshape(-1, 2)
+            rays = np.concatenate([xy, np.ones((len(xy), 1))], 1)
+        else:
+            rays = pixel_rays(big.K, uv)
         T_wc = T_world_from_ego @ cam.T_ego_from_cam
         dirs, origin = rays @ T_wc[:3, :3].T, T_wc[:3, 3]
         color = _cast(origin, dirs, textures).reshape(big.height, big.width, 3)
