@@ -112,7 +112,10 @@ def _score_pair(
     elif fitted.status == OK and len(verified) < min_verified:
         fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
     elif fitted.status == OK and check_motion:
-        if np.median(np.linalg.norm(verified.uv_b - verified.uv_a, axis=1)) < cfg.min_parallax_px:
+        # Screen-fixed content (a snow overlay, a bonnet) is static in real clips too: what F needs is
+        # enough matches that moved, not a moving median.
+        moved = np.linalg.norm(verified.uv_b - verified.uv_a, axis=1) >= cfg.min_parallax_px
+        if moved.sum() < cfg.min_matches:
             fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), NO_MOTION)
     out = {"fitted": fitted}
     if T_b_from_a is not None:

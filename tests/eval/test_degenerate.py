@@ -42,6 +42,7 @@ def check(scores: dict[str, dict], keys: tuple[str, ...]) -> list[str]:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)
 def test_degraded_simulated_clip_scores_worse_on_every_headline_metric(sim_clip_dir):
     from drivewm.eval.inputs import load_items
 
@@ -60,6 +61,7 @@ def dashcam_camera() -> Camera:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)
 def test_degraded_real_dashcam_scores_worse_on_tse_and_pose(shared_data):
     """The first 48 frames (1.9 s at 25 fps) of the real highway dashcam video, at its native 960x540."""
     from drivewm.eval.inputs import load_items

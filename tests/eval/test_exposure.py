@@ -42,6 +42,7 @@ def synced_and_staggered(tmp_path_factory):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)
 def test_compensated_calibrated_cse_of_staggered_cameras_matches_synchronized(synced_and_staggered):
     """Same world, same drive: compensated, the staggered rig's calibrated CSE is within 1.2x of the
     synchronized rig's; uncompensated (the static rig F at the tick) it is far above."""

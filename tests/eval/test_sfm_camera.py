@@ -56,6 +56,7 @@ def test_unsupported_distortion_is_a_clear_error():
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)
 def test_distorted_rig_registers_with_its_lens_model():
     """The corridor seen through barrel-distorted front cameras: with the lens in the COLMAP model the
     clip registers and the trajectory is within 5 cm; treated as pinhole it is worse or breaks."""
