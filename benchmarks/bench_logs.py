@@ -92,7 +92,8 @@ def main() -> None:
         f" | ratio read_log/raw time {t_read / t_raw:.2f}"
     )
     print(
-        f"real-time factor at 10 fps x 6 cameras: write {n_images / t_write / 60:.1f}x, read {n_images / t_read / 60:.1f}x"
+        f"real-time factor at 10 fps x 6 cameras: write {n_images / t_write / 60:.1f}x, "
+        f"read {n_images / t_read / 60:.1f}x"
     )
 
 
