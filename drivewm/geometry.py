@@ -110,9 +110,21 @@ def R_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
     return q if q[3] >= 0 else -q
 
 
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """The rotation closest to a 3x3 matrix in the Frobenius norm: U diag(1, 1, det(U V^T)) V^T from
+    the SVD M = U S V^T (the orthogonal Procrustes solution, Higham 1988). Rotations read from text
+    (KITTI-style 3x4 poses with ~7 digits) are off orthonormal by ~1e-7; this puts them back."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
+    S = np.eye(3)
+    S[2, 2] = np.sign(np.linalg.det(U @ Vt))
+    return U @ S @ Vt
+
+
 def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle of a rotation matrix in degrees (geodesic distance to identity)."""
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    """Angle of a rotation matrix in degrees (geodesic distance to identity), taken on the nearest
+    rotation: arccos((tr R - 1) / 2) of a matrix off orthonormal by e is off by ~sqrt(e) rad near
+    identity (1e-7 -> 0.03 deg), which would swamp small relative-pose errors."""
+    c = np.clip((np.trace(nearest_rotation(R)) - 1.0) / 2.0, -1.0, 1.0)
     return float(np.degrees(np.arccos(c)))
 
 
@@ -206,12 +218,33 @@ class Camera:
     T_ego_from_cam: np.ndarray
     distortion: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
-    def scaled(self, width: int, height: int) -> Camera:
-        """The same camera at another image size (intrinsics scaled per axis)."""
+    def scaled(self, width: int, height: int, fit: str = "same") -> Camera:
+        """The same camera after its images were resized to ``width`` x ``height``.
+
+        Pixel centres are at integer coordinates, so a resize by s maps u to (u + 0.5) s - 0.5
+        (what cv2.resize does): fx' = s fx, cx' = (cx + 0.5) s - 0.5. ``fit`` says how the image
+        was resized when the aspect ratio changes: ``same`` (default) refuses an aspect change of
+        more than one pixel of rounding, ``stretch`` scales each axis by its own ratio (cv2.resize
+        to the new size; fx and fy then differ), ``crop`` scales both axes by the larger ratio and
+        cuts the overflow evenly from both sides (centre crop, square pixels kept)."""
         sx, sy = width / self.width, height / self.height
+        if fit == "same":
+            if abs(self.width * sy - width) > 1.0 and abs(self.height * sx - height) > 1.0:
+                raise DrivewmError(
+                    f"camera {self.name}: {self.width}x{self.height} -> {width}x{height} changes the aspect ratio; "
+                    "say whether the images were stretched or centre-cropped (fit='stretch' or 'crop')"
+                )
+        elif fit == "crop":
+            sx = sy = max(sx, sy)
+        elif fit != "stretch":
+            raise DrivewmError(f"camera {self.name}: fit {fit!r} is not 'same', 'stretch' or 'crop'")
+        # Centre crop: the scaled image is (W sx) x (H sy); (W sx - width) / 2 columns go on each side.
+        off_x, off_y = (self.width * sx - width) / 2, (self.height * sy - height) / 2
         K = self.K.copy()
-        K[0] *= sx
-        K[1] *= sy
+        K[0, :2] *= sx
+        K[1, :2] *= sy
+        K[0, 2] = (self.K[0, 2] + 0.5) * sx - 0.5 - off_x
+        K[1, 2] = (self.K[1, 2] + 0.5) * sy - 0.5 - off_y
         return dataclasses.replace(self, K=K, width=width, height=height)
 
     def to_dict(self) -> dict:
@@ -243,9 +276,9 @@ class Rig:
                 return c
         raise DrivewmError(f"rig {self.name}: no camera named {name!r} (has {self.names})")
 
-    def scaled(self, width: int, height: int) -> Rig:
-        """Every camera at a new image size."""
-        return Rig(self.name, [c.scaled(width, height) for c in self.cameras])
+    def scaled(self, width: int, height: int, fit: str = "same") -> Rig:
+        """Every camera at a new image size (``fit``: see :meth:`Camera.scaled`)."""
+        return Rig(self.name, [c.scaled(width, height, fit) for c in self.cameras])
 
     def subset(self, names: list[str]) -> Rig:
         """The cameras named, in that order."""

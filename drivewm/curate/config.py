@@ -92,7 +92,11 @@ class CurateConfig:
     cameras: list[str] | None = None
     """Cameras to keep, in this order; null keeps the log's rig."""
     sync_tolerance_ms: float = 25.0
-    """A camera frame belongs to a tick when it is within this of the tick (must be < half a clip frame)."""
+    """A camera frame belongs to a tick when it is within this of the tick plus the camera's exposure
+    offset (must be < half a clip frame)."""
+    per_camera_offsets: bool = True
+    """Estimate each camera's steady exposure offset from the reference (first) camera (rigs that fire
+    cameras in turn) and apply the tolerance around it; false: around the tick for every camera."""
     trajectory_waypoints: int = 16
     """Future ego waypoints per clip (ClipMeta.trajectory_ego), from the 2nd to the last frame."""
     shot_threshold: float = 2.5

@@ -135,10 +135,10 @@ def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
     """Sync the cameras and smooth the poses of one log."""
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
-        rig = rig.scaled(*cfg.resolution)
+        rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (_LogContext.image)
     raw = {c: log.images.get(c, []) for c in rig.names}
     times = {c: np.array([f.timestamp_ns for f in raw[c]], dtype=np.int64) for c in rig.names}
-    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6)
+    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6, cfg.per_camera_offsets)
     frames = {c: [raw[c][i] for i in sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
     smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
     anonymizer = None
@@ -232,6 +232,12 @@ def _meta(
         trajectory.future_waypoints(poses, t_ns, cfg.trajectory_waypoints) if known else (np.zeros((0, 3)), 0.0)
     )
     skew = int(ctx.table.skew_ns[start : start + len(t_ns)].max())
+    exposures = ctx.table.frame_ns[start : start + len(t_ns)]  # (T, V) each image's own timestamp
+    camera_times = (
+        {}
+        if (exposures == t_ns[:, None]).all()
+        else {c.name: [int(t) for t in exposures[:, v]] for v, c in enumerate(ctx.rig.cameras)}
+    )
     tags = {
         **{k: str(v) for k, v in ctx.log.scene.tags.items()},
         "ego_motion": "known" if known else "unknown",
@@ -249,6 +255,7 @@ def _meta(
         tags=tags,
         quality={k: round(float(v), 4) for k, v in scores.items()},
         sync_error_ns=skew,
+        camera_timestamps_ns=camera_times,
         trajectory_ego=np.round(waypoints, 4).tolist(),
         trajectory_dt_s=dt_s,
         extra={"speed_mps": motion["speed_mps"], "description": ctx.log.scene.description},

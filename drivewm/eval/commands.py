@@ -37,6 +37,13 @@ def register(subparsers) -> None:
         + ")",
     )
     EVAL_RECIPES.add_arguments(p)
+    p.add_argument(
+        "--rig-fit",
+        default="same",
+        choices=("same", "stretch", "crop"),
+        help="videos of another aspect ratio than the rig: were they stretched or centre-cropped from it? "
+        "(default: refuse them)",
+    )
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
@@ -44,6 +51,7 @@ def register(subparsers) -> None:
 
 
 def run_eval(args: argparse.Namespace) -> int:
+    from drivewm.eval.report import json_safe
     from drivewm.eval.suite import evaluate
 
     if args.metrics:
@@ -63,8 +71,10 @@ def run_eval(args: argparse.Namespace) -> int:
         cameras=cameras,
         reference=args.reference,
         pictures=not args.no_pictures,
+        rig_fit=args.rig_fit,
     )
-    summary = {k: v for k, v in metrics.items() if k not in ("clips", "config")}
-    print(json.dumps(summary, indent=2, default=str))
+    # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
+    summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})
+    print(json.dumps(summary, indent=2, allow_nan=False))
     print(f"wrote {args.out}/metrics.json and metrics.md")
     return 0

@@ -59,7 +59,7 @@ def working_frames(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig) ->
     for g in grey:
         g = cv2.resize(g, size, interpolation=cv2.INTER_AREA).astype(np.float32)
         out.append(cv2.GaussianBlur(g, (0, 0), cfg.blur_sigma_px) if cfg.blur_sigma_px > 0 else g)
-    K = camera.scaled(size[0], size[1]).K.astype(np.float64)
+    K = camera.scaled(size[0], size[1], fit="stretch").K.astype(np.float64)  # cv2.resize above
     return np.stack(out), K
 
 
@@ -113,8 +113,8 @@ def flow_camera_poses(
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8 or len(frames) < 2:
         raise DrivewmError(
-            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} "
-            f"{frames.shape}"
+            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), "
+            f"got {frames.dtype} {frames.shape}"
         )
     grey, K = working_frames(frames, camera, cfg)
     poses = np.full((len(grey), 4, 4), np.nan)

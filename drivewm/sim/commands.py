@@ -35,6 +35,12 @@ def register(subparsers) -> None:
     p.add_argument("--fps", type=float, default=None, help="frames per second (default 10)")
     p.add_argument("--width", type=int, default=None, help="image width (default: the rig's)")
     p.add_argument("--height", type=int, default=None, help="image height (default: the rig's)")
+    p.add_argument(
+        "--exposure-stagger-ms",
+        type=float,
+        default=None,
+        help="camera i exposes at tick + i x this (ms), like rigs that fire cameras in turn (default 0: together)",
+    )
     p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
     p.add_argument(
         "--drives",
@@ -66,6 +72,7 @@ FLAG_FIELDS = {
     "width": "width",
     "height": "height",
     "seed": "seed",
+    "exposure_stagger_ms": "exposure_stagger_ms",
 }
 
 

@@ -47,6 +47,10 @@ class SimConfig:
     """JPEG quality of the logged images."""
     max_range_m: float = 150.0
     """Objects and ground farther than this from a camera are not drawn (fog/haze hides the cut)."""
+    exposure_stagger_ms: float = 0.0
+    """Camera i of the rig exposes at tick + i x this (ms), as rigs that fire cameras in turn (nuScenes:
+    ~40 ms over the sweep); each image shows the world at its own exposure time and is logged with
+    that time. 0: every camera at the tick. (cameras - 1) x stagger must stay below a tick."""
 
     def __post_init__(self) -> None:
         if self.scenario is None and self.source in SCENARIOS:
@@ -67,6 +71,8 @@ class SimConfig:
                 f"sim config: scenario {self.scenario!r} is not one of {list(SCENARIOS[self.source])} "
                 f"for source {self.source}"
             )
+        if self.exposure_stagger_ms < 0:
+            raise DrivewmError(f"sim config: exposure_stagger_ms ({self.exposure_stagger_ms}) must be >= 0")
         if self.duration_s <= 0 or self.fps <= 0:
             raise DrivewmError(f"sim config: duration_s ({self.duration_s}) and fps ({self.fps}) must be positive")
         if (self.width is None) != (self.height is None) or (
@@ -80,6 +86,12 @@ class SimConfig:
     def num_ticks(self) -> int:
         """Logged frames in the drive (the first at t = 0)."""
         return int(round(self.duration_s * self.fps))
+
+    @property
+    def simulated_ticks(self) -> int:
+        """Ticks the traffic simulator records: one past the last logged tick when exposures are
+        staggered (the last tick's late exposures interpolate towards it)."""
+        return self.num_ticks + (1 if self.exposure_stagger_ms > 0 else 0)
 
     @property
     def road_type(self) -> str:

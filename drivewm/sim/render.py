@@ -60,8 +60,18 @@ class Renderer:
         self, T_world_from_ego: np.ndarray, agents: list[AgentBox], timestamp_ns: int = 0
     ) -> dict[str, np.ndarray]:
         """Images (H, W, 3) uint8 RGB per camera name for the ego at ``T_world_from_ego``."""
-        moving = BoxSet.from_boxes(agents, [self._agent_textures(a) for a in agents], self.cond.face_shade)
+        moving = self._moving(agents)
         return {v.name: self._render_view(v, T_world_from_ego, moving, timestamp_ns) for v in self.views}
+
+    def render_camera(
+        self, camera: str, T_world_from_ego: np.ndarray, agents: list[AgentBox], timestamp_ns: int
+    ) -> np.ndarray:
+        """One camera's image (H, W, 3) uint8 RGB, for a world state of its own (staggered exposures)."""
+        view = next(v for v in self.views if v.name == camera)
+        return self._render_view(view, T_world_from_ego, self._moving(agents), timestamp_ns)
+
+    def _moving(self, agents: list[AgentBox]) -> BoxSet:
+        return BoxSet.from_boxes(agents, [self._agent_textures(a) for a in agents], self.cond.face_shade)
 
     def _agent_textures(self, agent: AgentBox) -> FaceTextures:
         if agent.track_id not in self._agent_tex:

@@ -69,7 +69,7 @@ def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> Scene
     ids: dict[int, str] = {}
     ticks = []
     step_cpu_s = 0.0
-    for i in range(cfg.num_ticks):
+    for i in range(cfg.simulated_ticks):
         ticks.append(_tick(env, ego, int(round(i * 1e9 / cfg.fps)), ids, cfg.seed))
         t0 = time.process_time()
         for _ in range(substeps):

@@ -155,7 +155,7 @@ def _drive(traci, cfg: SimConfig, dt: float) -> tuple[list[SceneTick], float]:
         traci.simulationStep()
     _add_ego(traci, cfg.seed)
     ticks, step_cpu_s = [], 0.0
-    for i in range(cfg.num_ticks):
+    for i in range(cfg.simulated_ticks):
         _extend_route(traci, cfg.seed, i)
         ticks.append(_tick(traci, int(round(i * 1e9 / cfg.fps)), cfg.seed))
         t0 = time.process_time()

@@ -29,13 +29,15 @@ def _keys(d: dict, prefix: str = "") -> set[str]:
 
 
 def test_packaged_recipes_resolve_and_default_spells_out_the_defaults():
-    assert CURATE_RECIPES.recipe_names() == ["default", "quickstart", "test", "video"]
+    assert CURATE_RECIPES.recipe_names() == ["default", "quickstart", "test", "video", "worldmodel"]
     for name in CURATE_RECIPES.recipe_names():
         assert isinstance(CURATE_RECIPES.resolve(recipe=name), CurateConfig)
     assert to_dict(CURATE_RECIPES.resolve(recipe="default")) == to_dict(CurateConfig())
     written = load_yaml(CURATE_RECIPES.recipe_path("default"))["config"]
     assert _keys(written) == _field_names(CurateConfig)
     assert CURATE_RECIPES.resolve(recipe="video").filters.min_camera_motion_px == 0.5
+    worldmodel = CURATE_RECIPES.resolve(recipe="worldmodel")
+    assert (worldmodel.resolution, worldmodel.clip_frames, worldmodel.stride_frames) == ([160, 96], 17, 9)
 
 
 def test_cli_dry_run_prints_the_resolved_config(tmp_path, capsys):

@@ -39,7 +39,7 @@ def _save_tokenizer(path: Path, **changes) -> Tokenizer:
 
 def _write_cache(cache: Path, tok: Tokenizer, tok_dir: Path, n: int) -> None:
     """n clips of 5 frames at 16x32: latents (1, 16, 2, 2, 4) drawn at random."""
-    rig = load_rig("front1").scaled(32, 16).to_dict()
+    rig = load_rig("front1").scaled(32, 16, fit="stretch").to_dict()
     rows = []
     for i in range(n):
         meta = ClipMeta(
