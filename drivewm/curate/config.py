@@ -105,6 +105,12 @@ class CurateConfig:
     """Minimum shot length in clip frames for the detector."""
     crf: int = 18
     """H.264 constant rate factor of the clip videos."""
+    h264_preset: str = "veryfast"
+    """libx264 preset: encoding is most of curation's CPU time; "ultrafast" takes about a third of
+    "veryfast"'s at the same crf, with higher PSNR and ~1.5x larger files (benchmarks/bench_curate.py)."""
+    h264_threads: int = 0
+    """libx264 threads per clip video: 0 lets x264 choose (slices over the machine's cores: the bytes
+    depend on the machine, and workers oversubscribe the cores); 1: one core per worker, same bytes everywhere."""
     clips_per_shard: int = 32
     """Clips per tar shard."""
     filters: FilterConfig = dataclasses.field(default_factory=FilterConfig)
@@ -125,6 +131,13 @@ class CurateConfig:
             )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
+        from drivewm.clips.video import X264_PRESETS
+
+        if self.h264_preset not in X264_PRESETS or self.h264_threads < 0:
+            raise DrivewmError(
+                f"curate config: h264_preset {self.h264_preset!r} must be one of {list(X264_PRESETS)} "
+                f"and h264_threads ({self.h264_threads}) >= 0"
+            )
         if self.trajectory_waypoints < 1:
             raise DrivewmError("curate config: trajectory_waypoints must be >= 1")
 

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from drivewm.curate.config import CurateConfig
-from drivewm.curate.stage import curate_log
+from drivewm.curate.stage import curate_log, load_embeddings
 from drivewm.errors import DrivewmError
 
 Progress = Callable[[dict], None]
@@ -52,7 +52,7 @@ def run_local(
     if workers <= 1:
         results = []
         for log, name in jobs:
-            results.append(_safe_curate(log, out_dir, cfg, name))
+            results.append(load_embeddings(out_dir, _safe_curate(log, out_dir, cfg, name)))
             progress(results[-1])
         return results
     import multiprocessing
@@ -62,7 +62,7 @@ def run_local(
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread_per_worker) as pool:
         futures = {pool.submit(_safe_curate, log, out_dir, cfg, name): i for i, (log, name) in enumerate(jobs)}
         for fut in as_completed(futures):
-            by_index[futures[fut]] = fut.result()
+            by_index[futures[fut]] = load_embeddings(out_dir, fut.result())
             progress(by_index[futures[fut]])
     return [by_index[i] for i in range(len(jobs))]
 
@@ -97,7 +97,7 @@ def run_ray(
         )
         by_index = {}
         for row in mapped.iter_rows():
-            by_index[int(row["i"])] = json.loads(row["result"])
+            by_index[int(row["i"])] = load_embeddings(out_dir, json.loads(row["result"]))
             progress(by_index[int(row["i"])])
         return [by_index[i] for i in range(len(jobs))]
     finally:

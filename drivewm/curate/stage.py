@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import io
 import json
 import re
 from collections.abc import Callable, Iterator
@@ -23,7 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drivewm.atomic import write_json
+from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
 from drivewm.curate import dedup, filters, split, sync, trajectory
@@ -94,6 +95,20 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
     return result
 
 
+def embeddings_path(out_dir: Path, name: str) -> Path:
+    """Where a log's kept-clip embeddings live (float32 (N, D), beside its done-marker)."""
+    return Path(out_dir) / MARKER_DIR / f"{name}.emb.npy"
+
+
+def load_embeddings(out_dir: str | Path, result: dict) -> dict:
+    """``result`` with its "embeddings" file name replaced by the (N, D) float32 array, for the
+    cross-log de-duplication (results and markers carry the file name: an hour of clips is
+    ~20 MB of float32, not a JSON list)."""
+    if result.get("status") != "ok" or not isinstance(result.get("embeddings"), str):
+        return result
+    return {**result, "embeddings": np.load(Path(out_dir) / result["embeddings"], allow_pickle=False)}
+
+
 def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, clock: StepClock) -> dict:
     """Curate one streamed log into ``out`` (shards only; the caller writes the marker)."""
     with clock.step("index"):
@@ -114,7 +129,11 @@ def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, cl
     shard_of = dict((k, s) for s, k in writer.written)
     for row in kept_rows:
         row["shard"] = shard_of[row["key"]]
-    return _result(ctx, name, kept_rows, embeddings.rows(), dropped, clock)
+    rows = embeddings.rows()
+    buf = io.BytesIO()  # rounded as the JSON lists of earlier versions were: the same dedup decisions
+    np.save(buf, np.round(rows, 5) if rows is not None else np.zeros((0, 0), np.float32), allow_pickle=False)
+    write_bytes(embeddings_path(out, name), buf.getvalue())
+    return _result(ctx, name, kept_rows, dropped, clock)
 
 
 @dataclasses.dataclass
@@ -245,7 +264,8 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
             frames = np.stack([[ctx.anonymizer(f) for f in cam] for cam in frames])
     meta = _meta(ctx, name, start, t_ns, poses, scores, frames)
     with clock.step("encode"):
-        clip = clip_from_arrays(meta, {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}, poses, cfg.crf)
+        videos = {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}
+        clip = clip_from_arrays(meta, videos, poses, cfg.crf, cfg.h264_preset, cfg.h264_threads)
     return clip, None, emb
 
 
@@ -325,9 +345,7 @@ def _manifest_row(meta: ClipMeta) -> dict:
     }
 
 
-def _result(
-    ctx: _LogContext, name: str, rows: list[dict], embeddings: np.ndarray | None, dropped: dict, clock: StepClock
-) -> dict:
+def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock: StepClock) -> dict:
     """The per-log result (also the done-marker's content)."""
     table, smooth = ctx.table, ctx.smooth
     warnings = [
@@ -365,5 +383,5 @@ def _result(
         },
         "camera_frames": int(sum(len(ctx.log.image_timestamps_ns.get(c, ())) for c in ctx.rig.names)),
         "cpu_s": clock.totals(),
-        "embeddings": [] if embeddings is None else [np.round(e, 5).tolist() for e in embeddings],
+        "embeddings": embeddings_path(Path("."), name).as_posix(),
     }

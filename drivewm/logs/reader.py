@@ -36,6 +36,7 @@ from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, LogIndex, RoadLin
 _IMAGE_SCHEMAS = (fox.IMAGE,) + ros.COMPRESSED_IMAGE + ros.RAW_IMAGE
 _CALIBRATION_SCHEMAS = (fox.CALIBRATION,) + ros.CAMERA_INFO
 _TF_SCHEMAS = (fox.TRANSFORMS, fox.TRANSFORM) + ros.TF_MESSAGE
+_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; "agents", "road" on request
 
 
 @dataclasses.dataclass
@@ -49,10 +50,10 @@ class _Calibration:
 
 @dataclasses.dataclass
 class _Collected:
-    """Everything read from the messages, before assembly. ``keep``: the kinds whose payloads are
-    kept ("image", "agents"); image timestamps are always recorded."""
+    """Everything read from the messages, before assembly. ``keep``: the optional kinds whose
+    payloads are decoded and kept ("image", "agents", "road"); image timestamps are always recorded."""
 
-    keep: tuple[str, ...] = ("image", "agents")
+    keep: tuple[str, ...] = ("image", "agents", "road")
     image_stamps: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     images: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
     calibrations: dict[str, _Calibration] = dataclasses.field(default_factory=dict)
@@ -73,7 +74,7 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
     naming a topic the log lacks, and images of a camera without calibration.
     """
     reader = LogStream(path, topic_map)
-    col = reader.collect(keep=("image", "agents"))
+    col = reader.collect(keep=("image", "agents", "road"))
     index = reader.assemble(col)
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in index.rig.names}
     agents = sorted(col.agents, key=lambda a: a[0])
@@ -99,9 +100,10 @@ class LogStream:
         self.files = log_files(path)
         self._route = _router(self.tmap)
 
-    def index(self, require_images: bool = True) -> LogIndex:
-        """Calibration, poses, scene, road and every image's (camera, timestamp), without payloads."""
-        index = self.assemble(self.collect(keep=()))
+    def index(self, require_images: bool = True, road: bool = False) -> LogIndex:
+        """Calibration, poses, scene and every image's (camera, timestamp), without payloads; the
+        road polylines only if ``road`` (a viewer draws them; they cost as much as the poses)."""
+        index = self.assemble(self.collect(keep=("road",) if road else ()))
         if require_images:
             index.validate()
         return index
@@ -119,8 +121,9 @@ class LogStream:
         """One pass over every routed message (payloads kept for the kinds in ``keep``)."""
         channels = {c for f in self.files for c in list_channels(f)}
         col = _Collected(keep=keep)
+        kinds = set(_ALWAYS) | set(keep)  # other kinds' messages are not even decoded
         for f in self.files:
-            for msg in iter_messages(f, lambda info: self._route(info) is not None):
+            for msg in iter_messages(f, lambda info: (self._route(info) or ("",))[0] in kinds):
                 _handle(col, self._route(msg.channel), msg, self.tmap)
                 channels.add(msg.channel)
         _check_topics(self.path, self.tmap, {c.topic for c in channels})
@@ -196,7 +199,7 @@ def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap:
         col.scene = data if col.scene is None else col.scene
     elif kind == "agents" and "agents" in col.keep:
         col.agents.append(_agents(msg, tmap))
-    elif kind == "road":
+    elif kind == "road" and "road" in col.keep:
         col.road += fox.road_lines(data)
 
 

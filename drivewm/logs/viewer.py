@@ -113,7 +113,7 @@ def write_recording(stream: LogStream, out_path: str | Path) -> dict[str, int]:
     cameras, images, poses and agent ticks."""
     import rerun as rr
 
-    log = stream.index(require_images=False)
+    log = stream.index(require_images=False, road=True)
     out_path = Path(out_path)
     with atomic_path(out_path) as tmp:
         rec = rr.RecordingStream("drivewm", recording_id=Path(log.path).stem)
