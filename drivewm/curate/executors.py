@@ -8,6 +8,7 @@ a crash of the driver. ``workers=1`` runs in-process (easiest to debug); more wo
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import traceback
@@ -67,6 +68,16 @@ def run_local(
     return [by_index[i] for i in range(len(jobs))]
 
 
+#: Times Ray reruns a log's task whose worker process or node died (the stage's own errors are results).
+RAY_TASK_RETRIES = 3
+
+
+def _ray_row(row: dict, out_dir: str, cfg: CurateConfig) -> dict:
+    """One log on a Ray worker; the result travels as JSON text (Arrow would coerce its ragged dicts)."""
+    _one_thread_per_worker()
+    return {"i": row["i"], "result": json.dumps(_safe_curate(row["log"], out_dir, cfg, row["name"]))}
+
+
 def run_ray(
     jobs: list[tuple[str, str]],
     out_dir: str,
@@ -76,7 +87,13 @@ def run_ray(
     address: str | None = None,
 ) -> list[dict]:
     """The same stage as a Ray Data ``map`` (one log per row). ``address`` None starts a local Ray
-    with ``max(workers, 2)`` CPUs; otherwise connects to that cluster (e.g. "ray://head:10001" or "auto")."""
+    with ``max(workers, 2)`` CPUs; otherwise connects to that cluster ("HEAD_IP:6379" as printed by
+    ``ray start --head``, or "auto"). On a cluster, the logs and ``out_dir`` must be at the same
+    paths on every node (shared storage) and drivewm importable there.
+
+    A task whose worker dies (a node lost, a process killed) is run again by Ray (``max_retries``):
+    the stage rewrites that log's shards from scratch and writes its done-marker last, so the
+    result is the same clips once each."""
     os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     try:
@@ -91,10 +108,8 @@ def run_ray(
     try:
         rows = [{"i": i, "log": log, "name": name} for i, (log, name) in enumerate(jobs)]
         ds = ray.data.from_items(rows, override_num_blocks=max(1, len(rows)))
-        # results travel as JSON text: Arrow would coerce the nested, ragged result dicts
-        mapped = ds.map(
-            lambda r: {"i": r["i"], "result": json.dumps(_safe_curate(r["log"], out_dir, cfg, r["name"]))}, num_cpus=1
-        )
+        task = functools.partial(_ray_row, out_dir=out_dir, cfg=cfg)
+        mapped = ds.map(task, num_cpus=1, max_retries=RAY_TASK_RETRIES, retry_exceptions=False)
         by_index = {}
         for row in mapped.iter_rows():
             by_index[int(row["i"])] = load_embeddings(out_dir, json.loads(row["result"]))
