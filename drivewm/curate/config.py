@@ -94,6 +94,10 @@ class CurateConfig:
     sync_tolerance_ms: float = 25.0
     """A camera frame belongs to a tick when it is within this of the tick plus the camera's exposure
     offset (must be < half a clip frame)."""
+    max_gap_ms: float = 1000.0
+    """A camera's clock moving forward by more than this between frames (a recorder pause, a clock
+    jump) ends a span of ticks, the next starts afresh; moving back by more than this drops frames
+    until it passes its earlier maximum. Shorter gaps are dropped frames (invalid ticks)."""
     per_camera_offsets: bool = True
     """Estimate each camera's steady exposure offset from the reference (first) camera (rigs that fire
     cameras in turn) and apply the tolerance around it; false: around the tick for every camera."""
@@ -128,6 +132,10 @@ class CurateConfig:
             raise DrivewmError(
                 f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame "
                 f"({500 / self.fps:.1f} ms)"
+            )
+        if self.max_gap_ms <= 1000.0 / self.fps:
+            raise DrivewmError(
+                f"curate config: max_gap_ms {self.max_gap_ms} must exceed a clip frame ({1000 / self.fps:g} ms)"
             )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")

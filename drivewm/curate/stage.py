@@ -148,24 +148,72 @@ class _LogContext:
     cfg: CurateConfig
     captioner: Captioner
     anonymizer: Callable[[np.ndarray], np.ndarray] | None
+    clocks: _ClockReport
 
 
 def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
-    """Sync the cameras and smooth the poses of one log."""
+    """Sync the cameras and smooth the poses of one log, keeping what went wrong with its clocks."""
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
         rig = rig.scaled(*cfg.resolution)
-    empty = np.zeros(0, dtype=np.int64)
-    times = {c: np.sort(log.image_timestamps_ns.get(c, empty), kind="stable") for c in rig.names}
-    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6, cfg.per_camera_offsets)
+    empty, gap_ns, tol_ns = np.zeros(0, dtype=np.int64), cfg.max_gap_ms * 1e6, cfg.sync_tolerance_ms * 1e6
+    times, jumps, dropped = {}, {}, {}
+    for c in rig.names:
+        arrival = log.image_timestamps_ns.get(c, empty)
+        keep, jumps[c] = sync.clock_jumps_back(arrival, gap_ns)
+        times[c], dropped[c] = np.sort(arrival[keep], kind="stable"), int((~keep).sum())
+    twice = [(to, high) for c in rig.names for _, high, to in jumps[c]]  # times the clock went through twice
+    table = sync.synchronize(times, rig.names, cfg.period_ns, tol_ns, cfg.per_camera_offsets, gap_ns, twice)
     sorted_ns = {c: times[c][sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
     smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
+    no_pose = np.zeros(len(table.tick_ns), dtype=bool)
+    if smooth is not None:  # poses_at clamps at the ends: a tick beyond the poses has no ego motion
+        no_pose = (table.tick_ns < smooth.t_ns[0] - tol_ns) | (table.tick_ns > smooth.t_ns[-1] + tol_ns)
+        table.valid &= ~no_pose
     anonymizer = None
     if cfg.privacy.enabled:
         from drivewm.curate.privacy import Anonymizer
 
         anonymizer = Anonymizer(cfg.privacy)
-    return _LogContext(log, rig, table, sorted_ns, smooth, cfg, load_captioner(cfg.captioner), anonymizer)
+    clocks = _ClockReport(jumps, dropped, int(no_pose.sum()))
+    return _LogContext(log, rig, table, sorted_ns, smooth, cfg, load_captioner(cfg.captioner), anonymizer, clocks)
+
+
+@dataclasses.dataclass
+class _ClockReport:
+    """What the log's clocks did: per camera its backward jumps [(arrival index, from_ns, to_ns)]
+    and the frames dropped for them; ticks outside the ego-pose span."""
+
+    jumps_back: dict[str, list[tuple[int, int, int]]]
+    dropped_frames: dict[str, int]
+    ticks_without_pose: int
+
+    def warnings(self, table: sync.SyncResult, fps: float) -> list[str]:
+        """Reasons, one line each, for the clock troubles of a real rig."""
+        out = []
+        for cam, jumps in self.jumps_back.items():
+            if jumps:
+                _, high, to = jumps[0]
+                out.append(
+                    f"{cam}: timestamps jump back {len(jumps)} time(s) (first {(to - high) / 1e9:+.3f} s at "
+                    f"{high} ns); {self.dropped_frames[cam]} frames dropped until the clock passed its earlier "
+                    "maximum, ticks in the repeated time invalid"
+                )
+        for cam, st in table.stats.items():
+            if st.get("gaps"):
+                out.append(
+                    f"{cam}: {st['gaps']} gap(s) longer than max_gap_ms (recorder pause or clock jump): "
+                    "clips split, ticks re-anchored after each"
+                )
+            lo, hi = st.get("rate_p5_hz", 0.0), st.get("rate_p95_hz", 0.0)
+            if lo and hi > 1.2 * lo:
+                out.append(
+                    f"{cam}: variable frame rate ({lo:.2f}-{hi:.2f} Hz, 5th-95th percentile; median "
+                    f"{st['rate_hz']:.2f} Hz), resampled to {fps:g} fps by nearest frame"
+                )
+        if self.ticks_without_pose:
+            out.append(f"{self.ticks_without_pose} ticks outside the ego-pose time span: invalid (no ego motion there)")
+        return out
 
 
 def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> Iterator[tuple[int, list[TickImages]]]:
@@ -358,6 +406,7 @@ def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock:
         for c, s in table.stats.items()
         if s.get("duplicate_timestamps")
     ]
+    warnings += ctx.clocks.warnings(table, ctx.cfg.fps)
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")
     elif smooth.missing or smooth.rejected:
