@@ -14,6 +14,8 @@ from drivewm.geometry import T_from_xyz_yaw, load_rig
 from drivewm.logs.types import SceneInfo
 from drivewm.logs.writer import LogWriter
 
+pytestmark = pytest.mark.slow  # writes and curates three logs (~30 s on the shared 2-core machine)
+
 REPO = Path(__file__).resolve().parents[2]
 T0 = 1_700_000_000_000_000_000
 MS = 1_000_000
