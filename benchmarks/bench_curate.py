@@ -5,8 +5,8 @@ Everything is measured in this run on the same input, in interleaved rounds (med
 
 - raw decode: drivewm's image stream of every log (MCAP + protobuf) and one JPEG decode per
   image (``ImageFrame.decode``): the least any curation must do;
-- ``drivewm curate`` with the default recipe and with ``datasets/curate/fleet.yaml`` on one
-  local worker, and the fleet recipe on two;
+- ``drivewm curate`` with the packaged ``default`` and ``fleet`` recipes (drivewm/recipes/curate/) on
+  one local worker, and the fleet recipe on two;
 - per step CPU seconds per camera-frame (the stage's own StepClock: index, read, decode, resize,
   shots, filters, encode, write);
 - PSNR of the encoded clips against the log's frames at each camera's exposure times, with the
@@ -37,7 +37,7 @@ import numpy as np
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 REPO = Path(__file__).resolve().parents[1]
-RECIPES = {"default": REPO / "datasets/curate/default.yaml", "fleet": REPO / "datasets/curate/fleet.yaml"}
+RECIPES = ("default", "fleet")  # packaged curate recipes (drivewm/recipes/curate/)
 SCENARIOS = ["highway", "roundabout", "merge", "intersection"]
 
 
@@ -87,7 +87,7 @@ def curate_run(logs: list[Path], out: Path, recipe: str, workers: int, overrides
     from drivewm.curate import curate, load_curate_config
 
     shutil.rmtree(out, ignore_errors=True)
-    cfg = load_curate_config(RECIPES[recipe], list(overrides))
+    cfg = load_curate_config(recipe, list(overrides))
     return curate(logs, out, cfg, executor="local", workers=workers, progress=False)
 
 
@@ -174,7 +174,7 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
     from drivewm.curate import load_curate_config
 
     for recipe, run in (("default", "default, 1 worker"), ("fleet", "fleet, 1 worker")):
-        cfg = load_curate_config(RECIPES[recipe])
+        cfg = load_curate_config(recipe)
         mean, low, kb = clip_psnr(work / run.replace(", ", "_").replace(" ", ""), logs)
         threads = cfg.h264_threads or "x264 auto"
         print(
@@ -243,7 +243,7 @@ def hour(source: Path, work: Path, seconds: float, recipe: str) -> None:
     overrides = ["filters.dedup_cosine=1.0"]
     out = work / "hour_out"
     shutil.rmtree(out, ignore_errors=True)
-    cmd = [sys.executable, "-c", HOUR_SCRIPT, str(log), str(out), str(RECIPES[recipe]), *overrides]
+    cmd = [sys.executable, "-c", HOUR_SCRIPT, str(log), str(out), recipe, *overrides]
     proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
     if proc.returncode != 0:
         raise SystemExit(proc.stderr[-3000:])

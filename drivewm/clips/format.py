@@ -1,4 +1,4 @@
-"""The clip: synchronized multi-camera frames, ego poses and metadata (DESIGN.md section 4).
+"""The clip: synchronized multi-camera frames, ego poses and metadata (docs/DESIGN.md section 4).
 
 On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`) and
 ``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) inside a WebDataset tar.
@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 
-from drivewm.clips.video import decode_mp4
+from drivewm.clips.video import decode_mp4, encode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
 
@@ -122,8 +122,6 @@ def clip_from_arrays(
 ) -> Clip:
     """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta);
     ``crf``, ``preset``, ``threads``: the H.264 settings of :func:`drivewm.clips.video.encode_mp4`."""
-    from drivewm.clips.video import encode_mp4
-
     validate_meta(meta)
     mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))

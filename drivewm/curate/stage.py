@@ -27,9 +27,11 @@ import numpy as np
 from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
+from drivewm.config import to_dict
 from drivewm.curate import dedup, filters, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
+from drivewm.curate.privacy import Anonymizer
 from drivewm.curate.ticks import TickAssembler, TickImages
 from drivewm.curate.timing import StepClock
 from drivewm.curate.windows import WindowStream
@@ -48,8 +50,6 @@ def log_name(path: str | Path) -> str:
 
 def config_fingerprint(cfg: CurateConfig) -> str:
     """Short hash of the recipe: a done-marker from another recipe does not count as done."""
-    from drivewm.config import to_dict
-
     return hashlib.sha256(json.dumps(to_dict(cfg), sort_keys=True).encode()).hexdigest()[:12]
 
 
@@ -155,7 +155,7 @@ def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
     """Sync the cameras and smooth the poses of one log, keeping what went wrong with its clocks."""
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
-        rig = rig.scaled(*cfg.resolution)
+        rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (TickImages)
     empty, gap_ns, tol_ns = np.zeros(0, dtype=np.int64), cfg.max_gap_ms * 1e6, cfg.sync_tolerance_ms * 1e6
     times, jumps, dropped = {}, {}, {}
     for c in rig.names:
@@ -172,8 +172,6 @@ def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
         table.valid &= ~no_pose
     anonymizer = None
     if cfg.privacy.enabled:
-        from drivewm.curate.privacy import Anonymizer
-
         anonymizer = Anonymizer(cfg.privacy)
     clocks = _ClockReport(jumps, dropped, int(no_pose.sum()))
     return _LogContext(log, rig, table, sorted_ns, smooth, cfg, load_captioner(cfg.captioner), anonymizer, clocks)

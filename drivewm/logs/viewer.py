@@ -20,6 +20,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
 
 from drivewm.atomic import atomic_path
 from drivewm.logs.reader import LogStream
@@ -37,8 +38,6 @@ def _set_time(rec, timestamp_ns: int) -> None:
 
 def log_static(rec, log: LogIndex) -> None:
     """World axes, camera mounts and pinholes, ego trajectory, scene text."""
-    import rerun as rr
-
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for cam in log.rig.cameras:
         T = cam.T_ego_from_cam
@@ -75,8 +74,6 @@ def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:
 def log_ticks(rec, log: LogIndex, stream: LogStream) -> dict[str, int]:
     """Ego poses, then images and agent boxes as streamed, on the ``log_time`` timeline; returns
     how many images and agent ticks were logged."""
-    import rerun as rr
-
     for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
         if np.all(np.isfinite(T)):
             _set_time(rec, ts)
@@ -95,8 +92,6 @@ def log_ticks(rec, log: LogIndex, stream: LogStream) -> dict[str, int]:
 
 
 def _boxes(boxes):
-    import rerun as rr
-
     if not boxes:
         return rr.Boxes3D(centers=np.zeros((0, 3)), sizes=np.zeros((0, 3)))
     return rr.Boxes3D(
@@ -111,8 +106,6 @@ def _boxes(boxes):
 def write_recording(stream: LogStream, out_path: str | Path) -> dict[str, int]:
     """Write the streamed log as a Rerun recording at ``out_path`` (atomic); returns the counts of
     cameras, images, poses and agent ticks."""
-    import rerun as rr
-
     log = stream.index(require_images=False, road=True)
     out_path = Path(out_path)
     with atomic_path(out_path) as tmp:

@@ -8,7 +8,7 @@ Per pixel, the nearest of two kinds of surface wins (z-buffer on camera depth):
 Then the condition's per-frame effects: depth fog (Koschmieder), ego headlights, snow flakes
 or rain streaks. Same seed, same pixels: every random choice comes from the drive seed.
 
-Speed (benchmarks/bench_render.py, see datasets/README.md), CPU time of one core on the busy
+Speed (benchmarks/bench_render.py, see docs/simulator.md), CPU time of one core on the busy
 2-core development machine, nuscenes6 rig: 150-280 camera-frames/s at 320x192 and 70-125 at
 640x360. A 6-camera tick at 320x192 (22-35 ms) costs about 1.9x a highway-env step with 30
 vehicles and far more than a SUMO step: the renderer, not the traffic, sets the pace of a drive.

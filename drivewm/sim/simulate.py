@@ -1,4 +1,8 @@
-"""simulate / simulate_many: scenario source -> renderer -> MCAP drive log (through LogWriter)."""
+"""simulate / simulate_many: scenario source -> renderer -> MCAP drive log (through LogWriter).
+
+The traffic source is imported for the drive that needs it (highway-env takes seconds to import and
+brings pygame; libsumo is the other source), not at the top.
+"""
 
 from __future__ import annotations
 
@@ -8,10 +12,12 @@ import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from drivewm.logs.types import RoadLine, SceneInfo
+from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
 from drivewm.sim.exposure import exposure_offsets_ns, state_at
 from drivewm.sim.scene import SceneRecording
@@ -61,8 +67,6 @@ def describe(cfg: SimConfig, rec: SceneRecording) -> str:
 
 def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Path:
     """Simulate one drive and write it as an MCAP drive log at ``out_path`` (atomically)."""
-    from drivewm.logs.writer import LogWriter
-
     cfg.validate()
     rig = sim_rig(cfg)  # a bad rig fails before any simulation
     rec = record(cfg)
@@ -139,6 +143,4 @@ def simulate_many(
 
 
 def _worker_init() -> None:
-    import cv2
-
     cv2.setNumThreads(1)  # one process per core

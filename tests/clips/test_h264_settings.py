@@ -1,8 +1,6 @@
 """H.264 settings of the curation recipes: the fleet recipe's faster preset keeps (or beats) the
 default's PSNR against the source frames, and one encoder thread gives the same bytes every time."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -10,8 +8,6 @@ from drivewm.clips.video import decode_mp4, encode_mp4
 from drivewm.curate import load_curate_config
 from drivewm.errors import DrivewmError
 from drivewm.logs.reader import read_log
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def _psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -21,8 +17,8 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 def test_fleet_recipe_keeps_the_default_quality(sim_log_dir):
     log = read_log(sim_log_dir / "highway_clear.mcap")
     videos = [np.stack([f.decode() for f in log.images[cam][:17]]) for cam in ("CAM_FRONT", "CAM_BACK")]
-    default = load_curate_config(REPO / "datasets/curate/default.yaml")
-    fleet = load_curate_config(REPO / "datasets/curate/fleet.yaml")
+    default = load_curate_config("default")
+    fleet = load_curate_config("fleet")
     assert (fleet.h264_preset, fleet.h264_threads, fleet.crf) == ("ultrafast", 1, default.crf)
     for video in videos:
         psnr = {}
@@ -36,4 +32,4 @@ def test_fleet_recipe_keeps_the_default_quality(sim_log_dir):
 
 def test_unknown_preset_is_refused():
     with pytest.raises(DrivewmError, match="h264_preset 'turbo'"):
-        load_curate_config(REPO / "datasets/curate/default.yaml", ["h264_preset=turbo"])
+        load_curate_config("default", ["h264_preset=turbo"])

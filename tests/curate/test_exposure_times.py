@@ -27,7 +27,7 @@ def staggered(tmp_path_factory):
     root = tmp_path_factory.mktemp("staggered")
     cfg = SimConfig(source="highway", scenario="highway", duration_s=1.8, seed=2, exposure_stagger_ms=8.0)
     log_path = simulate(cfg, root / "staggered.mcap", progress=False)
-    report = curate([log_path], root / "out", load_curate_config(REPO / "datasets/curate/test.yaml"), progress=False)
+    report = curate([log_path], root / "out", load_curate_config("test"), progress=False)
     return read_log(log_path), list(iter_clips(root / "out")), report
 
 

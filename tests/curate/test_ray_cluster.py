@@ -20,7 +20,7 @@ from synth import write_synth_log  # noqa: E402
 from drivewm.curate import curate, load_curate_config  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "datasets" / "curate" / "test.yaml"
+RECIPE = "test"  # the packaged test recipe (drivewm/recipes/curate/test.yaml)
 
 
 def _tree(out: Path) -> dict[str, bytes]:
@@ -52,7 +52,7 @@ def test_ray_cluster_by_address_equals_local_even_after_a_killed_task(tmp_path):
     ]
     (tmp_path / "logs" / "broken.mcap").write_text("not a log")
     logs.append(tmp_path / "logs" / "broken.mcap")
-    local = curate(logs, tmp_path / "local", load_curate_config(CONFIG), progress=False)
+    local = curate(logs, tmp_path / "local", load_curate_config(RECIPE), progress=False)
     assert local["kept"] == 11 + 3 + 2 and local["logs_failed"] == 1
     env = {"PYTHONPATH": str(REPO), "PATH": os.environ["PATH"]}
     with LoopbackRayCluster(tmp_path / "cluster", cpus_per_node=1, env=env) as cluster:
@@ -60,7 +60,7 @@ def test_ray_cluster_by_address_equals_local_even_after_a_killed_task(tmp_path):
         runs = {}
         for run in ("clean", "killed"):
             cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(tmp_path / run)]
-            cmd += ["--config", str(CONFIG), "--executor", "ray", "--ray-address", cluster.address]
+            cmd += ["--recipe", RECIPE, "--executor", "ray", "--ray-address", cluster.address]
             proc = subprocess.Popen(
                 cmd, cwd=REPO, env={**cluster.env}, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
             )

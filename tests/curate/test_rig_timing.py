@@ -16,7 +16,6 @@ from drivewm.logs.writer import LogWriter
 
 pytestmark = pytest.mark.slow  # writes and curates three logs (~30 s on the shared 2-core machine)
 
-REPO = Path(__file__).resolve().parents[2]
 T0 = 1_700_000_000_000_000_000
 MS = 1_000_000
 RIG = load_rig("front3")
@@ -68,7 +67,7 @@ def curated(tmp_path_factory):
             seed=3,
         ),
     ]
-    cfg = load_curate_config(REPO / "datasets/curate/test.yaml")
+    cfg = load_curate_config("test")
     report = curate(logs, root / "out", cfg, progress=False)
     return report, {c.key: c for c in iter_clips(root / "out")}
 

@@ -102,7 +102,7 @@ def test_peak_memory_does_not_grow_with_log_length(tmp_path):
                 RSS_SCRIPT,
                 str(log),
                 str(tmp_path / f"out{seconds}"),
-                str(REPO / "datasets/curate/test.yaml"),
+                "test",
             ],
             capture_output=True,
             text=True,
