@@ -115,6 +115,10 @@ class CurateConfig:
     h264_threads: int = 0
     """libx264 threads per clip video: 0 lets x264 choose (slices over the machine's cores: the bytes
     depend on the machine, and workers oversubscribe the cores); 1: one core per worker, same bytes everywhere."""
+    h264_yuv_converter: str = "swscale"
+    """Who converts the RGB frames to the encoder's yuv420p: "swscale" (FFmpeg, through PyAV) or "opencv"
+    (cv2.cvtColor: the same BT.601 limited range within 1-3 levels, ~0.3 dB lower PSNR, ~18 % less encode CPU
+    with "ultrafast")."""
     clips_per_shard: int = 32
     """Clips per tar shard."""
     filters: FilterConfig = dataclasses.field(default_factory=FilterConfig)
@@ -139,12 +143,16 @@ class CurateConfig:
             )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
-        from drivewm.clips.video import X264_PRESETS
+        from drivewm.clips.video import X264_PRESETS, YUV_CONVERTERS
 
         if self.h264_preset not in X264_PRESETS or self.h264_threads < 0:
             raise DrivewmError(
                 f"curate config: h264_preset {self.h264_preset!r} must be one of {list(X264_PRESETS)} "
                 f"and h264_threads ({self.h264_threads}) >= 0"
+            )
+        if self.h264_yuv_converter not in YUV_CONVERTERS:
+            raise DrivewmError(
+                f"curate config: h264_yuv_converter {self.h264_yuv_converter!r} must be one of {list(YUV_CONVERTERS)}"
             )
         if self.trajectory_waypoints < 1:
             raise DrivewmError("curate config: trajectory_waypoints must be >= 1")

@@ -311,7 +311,7 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
     meta = _meta(ctx, name, start, t_ns, poses, scores, frames)
     with clock.step("encode"):
         videos = {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}
-        clip = clip_from_arrays(meta, videos, poses, cfg.crf, cfg.h264_preset, cfg.h264_threads)
+        clip = clip_from_arrays(meta, videos, poses, cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
     return clip, None, emb
 
 
