@@ -163,6 +163,11 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
         f"{os.getloadavg()[0]:.1f}); stage CPU ms per camera-frame per worker (StepClock, no process start-up): "
         f"{steady['fleet, 1 worker']:.3f} with 1 worker, {steady['fleet, 2 workers']:.3f} with 2"
     )
+    startup = worker_startup_cpu_s()
+    print(
+        f"a pool worker's start-up (spawn + importing the stage) costs {startup:.2f} CPU s, i.e. "
+        f"{1e3 * 2 * startup / frames:.3f} ms per camera-frame of this input for 2 workers (1 worker runs in-process)"
+    )
     print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock):")
     names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
     print(f"{'recipe':10s} " + " ".join(f"{k:>8s}" for k in names) + f" {'total':>8s}")
@@ -178,9 +183,17 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
         mean, low, kb = clip_psnr(work / run.replace(", ", "_").replace(" ", ""), logs)
         threads = cfg.h264_threads or "x264 auto"
         print(
-            f"  {recipe:8s} preset {cfg.h264_preset}, crf {cfg.crf}, threads {threads}: "
+            f"  {recipe:8s} preset {cfg.h264_preset}, crf {cfg.crf}, threads {threads}, RGB->YUV "
+            f"{cfg.h264_yuv_converter}: "
             f"PSNR mean {mean:.2f} dB, min {low:.2f} dB, {kb:.0f} kB per camera per {cfg.clip_frames}-frame clip"
         )
+
+
+def worker_startup_cpu_s() -> float:
+    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does."""
+    code = "import time; import drivewm.curate.executors; print(time.process_time())"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(proc.stdout.split()[-1])
 
 
 def _step_order(name: str) -> int:
