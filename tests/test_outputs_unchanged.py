@@ -31,7 +31,16 @@ SIMULATE = [
     "simulate", "--source", "highway", "--scenario", "merge", "--weather", "rain", "--time-of-day", "dusk",
     "--duration", "1.8", "--width", "160", "--height", "96", "--seed", "11", "--drives", "2",
 ]  # fmt: skip
-TOKENIZER = ["--preset", "debug", "--set", "train.steps=3", "--set", "train.batch_size=2", "--set", "data.stats_batches=1"]
+TOKENIZER = [
+    "--preset",
+    "debug",
+    "--set",
+    "train.steps=3",
+    "--set",
+    "train.batch_size=2",
+    "--set",
+    "data.stats_batches=1",
+]
 PRETRAIN = [
     "--preset", "debug", "--set", "model.hidden_dim=32", "--set", "model.depth=1", "--set", "model.num_heads=2",
     "--set", "model.adaln_lora_dim=8", "--set", "text.dim=16", "--set", "train.steps=3",
