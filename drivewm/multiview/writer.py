@@ -19,6 +19,7 @@ from drivewm.clips.format import clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
 from drivewm.diffusion.generate import clip_meta, write_grid_png
+from drivewm.text.conditions import caption_conditions
 from drivewm.geometry import Rig
 from drivewm.multiview.cross_view import viewing_azimuth_rad
 from drivewm.multiview.trajectories import poses_from_waypoints
@@ -93,6 +94,7 @@ def sample_clip(key: str, s: GeneratedSample, fps: float):
         view_captions=dict(zip(rig.names, s.view_captions)),
         trajectory_ego=np.asarray(s.trajectory_ego).tolist(),
         trajectory_dt_s=s.trajectory_dt_s,
+        tags={**meta.tags, **caption_conditions(s.caption)},  # what was asked for, for eval's adherence
     )
     poses = poses_from_waypoints(s.trajectory_ego, t, s.trajectory_dt_s, fps)
     return clip_from_arrays(meta, dict(zip(rig.names, s.videos)), poses)
