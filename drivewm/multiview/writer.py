@@ -19,10 +19,10 @@ from drivewm.clips.format import clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
 from drivewm.diffusion.generate import clip_meta, write_grid_png
-from drivewm.text.conditions import caption_conditions
 from drivewm.geometry import Rig
 from drivewm.multiview.cross_view import viewing_azimuth_rad
 from drivewm.multiview.trajectories import poses_from_waypoints
+from drivewm.text.conditions import caption_conditions
 
 
 @dataclasses.dataclass
