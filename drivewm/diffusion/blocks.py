@@ -22,6 +22,7 @@ from torch import nn
 
 from drivewm.diffusion.dit_config import DiTConfig
 from drivewm.diffusion.rope import apply_rope
+from drivewm.errors import DrivewmError
 
 
 @dataclasses.dataclass
@@ -121,7 +122,7 @@ class ModulatedSublayer(nn.Module):
     def __init__(self, name: str, cfg: DiTConfig):
         super().__init__()
         if name not in SUBLAYERS:
-            raise ValueError(f"unknown block layer {name!r}; registered: {sorted(SUBLAYERS)}")
+            raise DrivewmError(f"dit.block_layers: unknown layer {name!r}; registered: {sorted(SUBLAYERS)}")
         self.norm = nn.LayerNorm(cfg.hidden_dim, elementwise_affine=False, eps=1e-6)
         self.layer = SUBLAYERS[name](cfg)
         self.adaln = nn.Sequential(

@@ -15,6 +15,8 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
+from drivewm.config import above, at_least, in_range
+
 
 @dataclasses.dataclass
 class EDMConfig:
@@ -30,6 +32,11 @@ class EDMConfig:
     """Probability of dropping a sample's caption during training (classifier-free guidance)."""
     cond_frames: int = 0
     """Video2World: clean first latent frames given as conditioning (loss on the rest); 0 = Text2World."""
+
+    def validate(self) -> None:
+        above(self, 0, "sigma_data", "p_std")
+        in_range(self, "text_dropout", 0, 1)
+        at_least(self, 0, "cond_frames")
 
 
 @dataclasses.dataclass

@@ -14,12 +14,13 @@ from pathlib import Path
 import torch
 
 from drivewm.clips.latents import LatentCache
-from drivewm.config import apply_overrides, to_dict
+from drivewm.config import apply_overrides, at_least, to_dict
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name
 from drivewm.text import TextConfig
 from drivewm.train.loop import TrainConfig, train
 
@@ -30,6 +31,10 @@ class DataConfig:
 
     latents: str | None = None
     """Cache name under CLIPDIR/latents/ (default: the tokenizer folder's name)."""
+
+    def validate(self) -> None:
+        if self.latents is not None:
+            check_name(self.latents, "latents (cache name)")
 
 
 @dataclasses.dataclass
@@ -50,6 +55,9 @@ class PretrainConfig:
     """Latent cache selection."""
     sample_steps: int = 12
     """Sampler steps for the sample grids written during training."""
+
+    def validate(self) -> None:
+        at_least(self, 1, "sample_steps")
 
 
 #: Per-preset training defaults (copy-and-change of the base TrainConfig).
@@ -117,7 +125,8 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
     if not same_config or not same_stats:
         raise DrivewmError(
-            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}"
+            f"{cache.dir}: latents were encoded by another tokenizer "
+            f"({cache.tokenizer.get('path')}) than {tokenizer_dir}"
         )
 
 
@@ -206,7 +215,8 @@ def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainCon
     c, t, h, w = dataset.latent_shape
     if h % cfg.model.patch_size or w % cfg.model.patch_size or t % cfg.model.patch_t:
         raise DrivewmError(
-            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
+            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches "
+            f"{cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
         )
     model = dataclasses.replace(cfg.model, in_channels=c, text_dim=text_dim, cond_mask_channel=cfg.edm.cond_frames > 0)
     return dataclasses.replace(cfg, model=model)

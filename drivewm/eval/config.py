@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from drivewm.config import from_dict
+from drivewm.config import above, at_least, from_dict, in_range, require
 from drivewm.errors import DrivewmError
 
 ALL_METRICS = ("tse", "cse", "pose", "traj", "adherence")
@@ -28,6 +28,17 @@ class MatchConfig:
     """Lowe's ratio test: keep a match when best/second-best descriptor distance < ratio (Lowe 2004, sec. 7.1)."""
     mutual: bool = True
     """Keep only matches that are each other's nearest neighbour in both directions."""
+
+    def validate(self) -> None:
+        require(self.matcher in ("sift", "learned"), "matcher", self.matcher, "'sift' or 'learned'")
+        require(
+            self.matcher != "learned" or bool(self.learned_weights),
+            "learned_weights",
+            self.learned_weights,
+            "a local file for matcher='learned'",
+        )
+        at_least(self, 1, "max_features")
+        require(0 < self.ratio <= 1, "ratio", self.ratio, "in (0, 1]")
 
 
 @dataclasses.dataclass
@@ -52,6 +63,14 @@ class EpipolarConfig:
     min_matches: int = 16
     """Fewer matches than this in a pair: status 'too_few_matches', error NaN (never 0)."""
 
+    def validate(self) -> None:
+        at_least(self, 16, "canonical_width", "canonical_height")
+        require(0 < self.canonical_hfov_deg < 180, "canonical_hfov_deg", self.canonical_hfov_deg, "in (0, 180)")
+        above(self, 0, "ransac_threshold_px", "verify_threshold_px")
+        require(0 < self.ransac_confidence < 1, "ransac_confidence", self.ransac_confidence, "in (0, 1)")
+        at_least(self, 1, "ransac_max_iters")
+        at_least(self, 8, "min_matches")  # the fundamental matrix needs 8 correspondences (H&Z 11.1)
+
 
 @dataclasses.dataclass
 class ConsistencyConfig:
@@ -65,6 +84,17 @@ class ConsistencyConfig:
     """Depths (m) at which frustum sample points are placed for the overlap test."""
     overlap_grid: int = 24
     """Sample points per image axis for the overlap test."""
+
+    def validate(self) -> None:
+        at_least(self, 1, "frame_gap")
+        at_least(self, 2, "overlap_grid")
+        in_range(self, "overlap_min_fraction", 0, 1)
+        require(
+            len(self.overlap_depths_m) > 0 and min(self.overlap_depths_m) > 0,
+            "overlap_depths_m",
+            self.overlap_depths_m,
+            "a non-empty list of depths > 0",
+        )
 
 
 @dataclasses.dataclass
@@ -88,6 +118,14 @@ class PoseConfig:
     seed: int = 0
     """pycolmap random seed (deterministic RANSAC)."""
 
+    def validate(self) -> None:
+        at_least(self, 1, "max_features", "sequential_overlap", "min_model_size", "abs_pose_min_num_inliers")
+        in_range(self, "abs_pose_min_inlier_ratio", 0, 1)
+        require(
+            0 < self.init_min_tri_angle_deg < 180, "init_min_tri_angle_deg", self.init_min_tri_angle_deg, "in (0, 180)"
+        )
+        in_range(self, "seed", 0, 2**31 - 1)
+
 
 @dataclasses.dataclass
 class TrajectoryConfig:
@@ -97,6 +135,9 @@ class TrajectoryConfig:
     """Camera whose recovered motion is the ego trajectory; '' = the camera looking most along ego +x."""
     rpe_delta_frames: int = 1
     """RPE compares relative motion over this many frames."""
+
+    def validate(self) -> None:
+        at_least(self, 1, "rpe_delta_frames")
 
 
 @dataclasses.dataclass
@@ -120,6 +161,7 @@ class EvalConfig:
         unknown = sorted(set(self.metrics) - set(ALL_METRICS))
         if unknown:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
+        require(len(self.metrics) > 0, "metrics", self.metrics, f"a non-empty subset of {list(ALL_METRICS)}")
 
 
 def eval_config_from_dict(data: dict, where: str = "eval config") -> EvalConfig:

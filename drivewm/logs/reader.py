@@ -195,7 +195,10 @@ def _camera(path: str | Path, name: str, col: _Collected, tmap: TopicMap, ego: s
     T_ego_from_cam = col.frames.static_transform(ego, frame)
     if T_ego_from_cam is None:
         raise DrivewmError(f"{path}: camera {name!r}: no transform from {ego!r} to its frame {frame!r} in the log")
-    return Camera(name, cal.K.reshape(3, 3), cal.width, cal.height, T_ego_from_cam, cal.D)
+    try:
+        return Camera(name, cal.K.reshape(3, 3), cal.width, cal.height, T_ego_from_cam, cal.D)
+    except DrivewmError as exc:  # a singular K, an unusable camera name, ...
+        raise DrivewmError(f"{path}: {exc}") from None
 
 
 def _ego_poses(col: _Collected, world: str, ego: str) -> tuple[np.ndarray, np.ndarray]:

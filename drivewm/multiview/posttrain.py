@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from drivewm.config import apply_overrides, to_dict
+from drivewm.config import apply_overrides, at_least, to_dict
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig, find_latent_cache
 from drivewm.diffusion.text2world import Text2World
@@ -45,6 +45,10 @@ class PosttrainConfig:
     """Latent cache selection."""
     sample_steps: int = 12
     """Sampler steps for the sample grids written during training."""
+
+    def validate(self) -> None:
+        at_least(self, 0, "cond_frames")
+        at_least(self, 1, "sample_steps")
 
 
 #: Per-preset training defaults. Batches are clips of V views, so they are V times the tokens of
@@ -220,7 +224,8 @@ def posttrain(
     )
     if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
         raise DrivewmError(
-            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}"
+            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, "
+            f"{init_dir} was trained on {parent.cfg.dit.in_channels}"
         )
     torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
     mv = dataclasses.replace(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+from drivewm.config import above, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
 
@@ -64,8 +65,10 @@ class SimConfig:
         ):
             if value not in allowed:
                 raise DrivewmError(f"sim config: {name} {value!r} is not one of {list(allowed)}")
-        if self.duration_s <= 0 or self.fps <= 0:
-            raise DrivewmError(f"sim config: duration_s ({self.duration_s}) and fps ({self.fps}) must be positive")
+        above(self, 0, "duration_s", "fps", "max_range_m")
+        require(self.num_ticks >= 1, "duration_s * fps", self.duration_s * self.fps, ">= 0.5 (at least one frame)")
+        in_range(self, "jpeg_quality", 1, 100)
+        in_range(self, "seed", 0, 2**31 - 1)  # SUMO takes a 32-bit signed seed
         if (self.width is None) != (self.height is None) or (
             self.width is not None and min(self.width, self.height) < 16
         ):

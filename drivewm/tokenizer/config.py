@@ -12,6 +12,7 @@ import dataclasses
 import math
 from typing import Literal
 
+from drivewm.config import at_least, require
 from drivewm.errors import DrivewmError
 
 
@@ -76,8 +77,9 @@ class TokenizerConfig:
             raise DrivewmError("tokenizer config: more temporal than spatial downsampling steps is not supported")
         if self.quantizer == "fsq" and (not self.fsq_levels or min(self.fsq_levels) < 2):
             raise DrivewmError(f"tokenizer config: fsq_levels must be integers >= 2, got {self.fsq_levels}")
-        if self.temporal_kernel < 1:
-            raise DrivewmError(f"tokenizer config: temporal_kernel must be >= 1, got {self.temporal_kernel}")
+        at_least(self, 1, "base_channels", "temporal_kernel", "latent_channels")
+        at_least(self, 0, "num_res_blocks")
+        require(min(self.channel_multipliers) >= 1, "channel_multipliers", self.channel_multipliers, "integers >= 1")
 
 
 #: Network sizes; the compression and quantizer variants are derived from these.

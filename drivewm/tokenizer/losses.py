@@ -13,6 +13,7 @@ import torch.nn.functional as F
 from einops import rearrange
 from torch import nn
 
+from drivewm.config import at_least
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer.metrics import ssim
 
@@ -39,6 +40,7 @@ class LossConfig:
     """Optional local discriminator state dict (.safetensors) to start from; empty = from scratch."""
 
     def validate(self) -> None:
+        at_least(self, 0, "l1", "ssim", "temporal", "perceptual", "adversarial", "adversarial_start")
         if self.perceptual > 0 and not self.perceptual_weights:
             raise DrivewmError(
                 "loss.perceptual > 0 needs loss.perceptual_weights: a local VGG16 state dict "

@@ -29,6 +29,7 @@ from torch import nn
 from tqdm import tqdm
 
 from drivewm.atomic import write_text
+from drivewm.config import above, at_least, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import load_train_state, save_train_state
 from drivewm.train.distributed import DistInfo, barrier, init_distributed, shutdown_distributed
@@ -78,10 +79,13 @@ class TrainConfig:
     """Under torchrun: ``ddp`` (= auto) or ``fsdp`` (FSDP2, for large presets)."""
 
     def validate(self) -> None:
-        if self.steps < 1 or self.batch_size < 1:
-            raise DrivewmError("train: steps and batch_size must be >= 1")
-        if len(self.betas) != 2:
-            raise DrivewmError(f"train.betas: expected two numbers, got {self.betas}")
+        at_least(self, 1, "steps", "batch_size", "log_every", "checkpoint_every")
+        at_least(self, 0, "warmup_steps", "weight_decay", "grad_clip", "sample_every")
+        above(self, 0, "lr")
+        in_range(self, "ema_decay", 0, 1, high_open=True)
+        require(
+            len(self.betas) == 2 and all(0 <= b < 1 for b in self.betas), "betas", self.betas, "two numbers in [0, 1)"
+        )
 
 
 class TrainTask(Protocol):
