@@ -53,6 +53,18 @@ def sanitize_name(text: str, fallback: str = "item") -> str:
     return name
 
 
+def distinct_paths(paths: list[str | Path]) -> tuple[list[Path], list[str]]:
+    """``paths`` with each file (by resolved path) once, in first-seen order, and a warning per repeat."""
+    seen: dict[Path, Path] = {}
+    warnings = []
+    for p in map(Path, paths):
+        if p.resolve() in seen:
+            warnings.append(f"{p}: given twice (as {seen[p.resolve()]}); used once")
+        else:
+            seen[p.resolve()] = p
+    return list(seen.values()), warnings
+
+
 def unique_names(texts: list[str], keys: list[str], fallback: str = "item") -> list[str]:
     """Safe, pairwise distinct names for items described by ``texts`` (e.g. file stems) and identified
     by ``keys`` (e.g. resolved paths, all distinct): the sanitized text, plus a short hash of the key

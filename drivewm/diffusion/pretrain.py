@@ -13,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from drivewm.clips.latents import LatentCache
+from drivewm.clips.latents import LatentCache, latent_cache_dir
 from drivewm.config import apply_overrides, at_least, to_dict
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
@@ -102,7 +102,7 @@ def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | No
         return data_dir
     if name is None and tokenizer_dir is None:
         raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
-    cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
+    cache = latent_cache_dir(data_dir, name, tokenizer_dir)
     if not (cache / "index.json").is_file():
         raise DrivewmError(
             f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first"
