@@ -121,8 +121,8 @@ class BadClip:
 
 def read_shard(shard: Path) -> Iterator[Clip | BadClip]:
     """Clips of one tar in order, a :class:`BadClip` in place of each one that cannot be read. A
-    truncated or corrupt tar yields the clips complete before the damage, then one BadClip for the rest;
-    an unsafe member path refuses the whole shard."""
+    truncated or corrupt tar yields the clips before the damage, then one BadClip (named after the
+    shard's stem) for the rest; an unsafe member path refuses the whole shard."""
     groups: dict[str, dict[str, bytes]] = {}
     damage = None
     try:
@@ -132,9 +132,11 @@ def read_shard(shard: Path) -> Iterator[Clip | BadClip]:
                     key, _, suffix = _safe_member(member.name, shard).partition(".")
                     groups.setdefault(key, {})[suffix] = tar.extractfile(member).read()
     except (tarfile.TarError, OSError, EOFError) as exc:
-        damage = BadClip(shard.name, f"{shard}: corrupt or truncated shard ({exc})")
+        damage = BadClip(shard.stem, f"{shard}: corrupt or truncated shard ({exc})")
+        if groups:
+            groups.popitem()  # the clip being read when the damage came is part of the damage
     except DrivewmError as exc:
-        yield BadClip(shard.name, str(exc))
+        yield BadClip(shard.stem, str(exc))
         return
     for key, members in groups.items():
         try:

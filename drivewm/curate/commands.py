@@ -57,9 +57,11 @@ def _expand(paths: list[Path]) -> list[Path]:
 
 def _curate(args: argparse.Namespace) -> int:
     import json
+    import sys
 
     from drivewm.config import to_dict
     from drivewm.curate import curate, load_curate_config
+    from drivewm.errors import BatchError
 
     cfg = load_curate_config(args.config, args.overrides)
     print(json.dumps(to_dict(cfg)))
@@ -67,16 +69,29 @@ def _curate(args: argparse.Namespace) -> int:
         _expand(args.logs), args.out, cfg, executor=args.executor, workers=args.workers, ray_address=args.ray_address
     )
     print(
-        f"kept {report['kept']} clips, dropped {report['dropped']}; logs ok {report['logs_ok']}, failed {report['logs_failed']}"
+        f"kept {report['kept']} clips, dropped {report['dropped']}; "
+        f"logs ok {report['logs_ok']}, failed {report['logs_failed']}; report: {args.out / 'report.json'}"
     )
+    failed = [f"{name}: {log['error']}" for name, log in report["logs"].items() if log["status"] == "failed"]
+    if not report["kept"]:
+        lines = [f"{name}: {_why_nothing(log)}" for name, log in report["logs"].items()]
+        raise BatchError(f"curate: no clip kept from {len(report['logs'])} log(s)", lines)
+    for line in report["warnings"] + failed:
+        print(f"warning: {line}", file=sys.stderr)
     for name, log in report["logs"].items():
-        if log["status"] == "failed":
-            print(f"  {name}: {log['error']}")
-    print(f"report: {args.out / 'report.json'}")
-    return 0 if report["logs_ok"] else 2
+        for warning in log.get("warnings", []):
+            print(f"warning: {name}: {warning}", file=sys.stderr)
+    return 0
+
+
+def _why_nothing(log: dict) -> str:
+    """Why a log of report.json gave no clip: its error, or what the filters dropped."""
+    return log["error"] if log["status"] == "failed" else f"no clip kept (dropped {log['dropped']})"
 
 
 def _import_video(args: argparse.Namespace) -> int:
+    import sys
+
     from drivewm.curate.import_video import import_videos
     from drivewm.errors import DrivewmError
 
@@ -86,6 +101,9 @@ def _import_video(args: argparse.Namespace) -> int:
             raise DrivewmError(f"--tag {t!r}: expected KEY=VALUE")
         k, val = t.split("=", 1)
         tags[k] = val
-    for path in import_videos(args.videos, args.calibration, args.out, tags):
+    report = import_videos(args.videos, args.calibration, args.out, tags)
+    for path in report.logs:
         print(path)
+    for line in report.warnings + [f"skipped {reason}" for reason in report.failed]:
+        print(f"warning: {line}", file=sys.stderr)
     return 0

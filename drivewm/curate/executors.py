@@ -3,7 +3,8 @@
 Both call :func:`drivewm.curate.stage.curate_log` once per log and return its results in input
 order; each log's shards and done-marker are written by the worker itself, so results survive
 a crash of the driver. ``workers=1`` runs in-process (easiest to debug); more workers use a
-``spawn`` process pool. Ray runs the same function as a ``map`` over a dataset of log paths.
+``spawn`` process pool (drivewm.workers) whose workers exit when the driver dies. Ray runs the
+same function as a ``map`` over a dataset of log paths.
 """
 
 from __future__ import annotations
@@ -12,11 +13,12 @@ import json
 import os
 import traceback
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.stage import curate_log
 from drivewm.errors import DrivewmError
+from drivewm.workers import process_pool
 
 Progress = Callable[[dict], None]
 
@@ -55,11 +57,8 @@ def run_local(
             results.append(_safe_curate(log, out_dir, cfg, name))
             progress(results[-1])
         return results
-    import multiprocessing
-
     by_index: dict[int, dict] = {}
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread_per_worker) as pool:
+    with process_pool(workers, _one_thread_per_worker) as pool:
         futures = {pool.submit(_safe_curate, log, out_dir, cfg, name): i for i, (log, name) in enumerate(jobs)}
         for fut in as_completed(futures):
             by_index[futures[fut]] = fut.result()

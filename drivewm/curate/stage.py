@@ -28,13 +28,14 @@ from drivewm.curate.config import CurateConfig
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.logs.types import DriveLog, ImageFrame
+from drivewm.paths import child_path, sanitize_name
 
 MARKER_DIR = "logs"
 
 
 def log_name(path: str | Path) -> str:
-    """Shard/marker name of a log: its file stem with anything but [A-Za-z0-9_-] replaced by '_'."""
-    return re.sub(r"[^A-Za-z0-9_\-]", "_", Path(path).stem) or "log"
+    """Shard/marker name of a log: its file stem made a safe name (drivewm.paths.sanitize_name)."""
+    return sanitize_name(Path(path).stem, "log")
 
 
 def config_fingerprint(cfg: CurateConfig) -> str:
@@ -45,7 +46,7 @@ def config_fingerprint(cfg: CurateConfig) -> str:
 
 
 def marker_path(out_dir: Path, name: str) -> Path:
-    return Path(out_dir) / MARKER_DIR / f"{name}.json"
+    return child_path(Path(out_dir) / MARKER_DIR, name, ext="json", what="log name")
 
 
 def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
@@ -55,9 +56,17 @@ def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
         return None
     try:
         result = json.loads(path.read_text())
-    except json.JSONDecodeError:
+    except ValueError:  # a marker that is not JSON: redo the log
         return None
-    return result if result.get("config") == config_fingerprint(cfg) else None
+    if not isinstance(result, dict) or result.get("config") != config_fingerprint(cfg):
+        return None
+    shard = re.compile(rf"{re.escape(name)}-\d{{6}}\.tar")  # a marker only ever names this log's shards
+    rows = result.get("rows")
+    if not isinstance(rows, list) or not all(
+        isinstance(r, dict) and shard.fullmatch(str(r.get("shard"))) for r in rows
+    ):
+        return None
+    return result
 
 
 def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None = None) -> dict:
@@ -138,6 +147,11 @@ def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
     if cfg.resolution:
         rig = rig.scaled(*cfg.resolution)
     raw = {c: log.images.get(c, []) for c in rig.names}
+    empty = [c for c in rig.names if not raw[c]]
+    if empty:
+        raise DrivewmError(
+            f"{log.path}: camera(s) {empty} have a calibration but no images; curate the others with cameras=[...]"
+        )
     times = {c: np.array([f.timestamp_ns for f in raw[c]], dtype=np.int64) for c in rig.names}
     table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6)
     frames = {c: [raw[c][i] for i in sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
@@ -286,12 +300,25 @@ def _manifest_row(meta: ClipMeta) -> dict:
     }
 
 
+def _span_warnings(ctx: _LogContext) -> list[str]:
+    """Cameras that start late or stop early by more than a clip frame: clips only cover the span where
+    every camera runs, so a camera whose clock jumped (or that died) silently shortens the drive."""
+    starts = {c: f[0].timestamp_ns for c, f in ctx.frames.items() if f}
+    ends = {c: f[-1].timestamp_ns for c, f in ctx.frames.items() if f}
+    out = []
+    for c in starts:
+        late, early = (starts[c] - min(starts.values())) * 1e-9, (max(ends.values()) - ends[c]) * 1e-9
+        if max(late, early) * ctx.cfg.fps > 1:
+            out.append(f"{c}: starts {late:.2f} s late and stops {early:.2f} s early; clips cover only the common span")
+    return out
+
+
 def _result(
     log: DriveLog, name: str, cfg: CurateConfig, ctx: _LogContext, rows: list[dict], embeddings: list, dropped: dict
 ) -> dict:
     """The per-log result (also the done-marker's content)."""
     table, smooth = ctx.table, ctx.smooth
-    warnings = [
+    warnings = list(log.warnings) + [
         f"{c}: {s['missing_ticks']} of {len(table.tick_ns)} ticks without a frame within tolerance"
         for c, s in table.stats.items()
         if s["missing_ticks"]
@@ -301,6 +328,7 @@ def _result(
         for c, s in table.stats.items()
         if s.get("duplicate_timestamps")
     ]
+    warnings += _span_warnings(ctx)
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")
     elif smooth.missing or smooth.rejected:

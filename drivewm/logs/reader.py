@@ -168,17 +168,35 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
     order = _camera_order(meta, tmap, col)
     cameras = [_camera(path, name, col, tmap, ego) for name in order]
     rig = Rig(meta.get("rig") or tmap.rig_name or Path(path).stem, cameras)
+    warnings = _order_warnings(col, order)
+    listed = [n for n in meta.get("cameras", "").split(",") if n and n not in col.calibrations]
+    if listed:
+        warnings.append(f"the log's metadata lists camera(s) {listed} but it has no calibration or images for them")
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in order}
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
     agents = sorted(col.agents, key=lambda a: a[0])
-    return DriveLog(str(path), rig, images, pose_ts, T_world_from_ego, _scene(col, tmap), agents, col.road)
+    scene = _scene(col, tmap)
+    return DriveLog(str(path), rig, images, pose_ts, T_world_from_ego, scene, agents, col.road, warnings)
+
+
+def _order_warnings(col: _Collected, cameras: list[str]) -> list[str]:
+    """One line per camera (and the ego poses) whose timestamps go backwards in log order: the reader
+    sorts them by time, which mends swapped stamps but interleaves a clock that jumped back."""
+    series = {f"camera {c}": [f.timestamp_ns for f in col.images.get(c, [])] for c in cameras}
+    series["ego poses"] = [t for t, _ in col.poses]
+    out = []
+    for what, stamps in series.items():
+        back = int((np.diff(np.asarray(stamps, dtype=np.int64)) < 0).sum()) if len(stamps) > 1 else 0
+        if back:
+            out.append(f"{what}: timestamps go backwards {back} time(s) in log order; sorted by time")
+    return out
 
 
 def _camera_order(meta: dict, tmap: TopicMap, col: _Collected) -> list[str]:
     """Rig order: the file's own record, else the topic map's, else first calibration seen."""
     listed = [n for n in meta.get("cameras", "").split(",") if n]
-    if listed and set(listed) == set(col.calibrations):
-        return listed
+    if listed and set(col.calibrations) <= set(listed):  # cameras listed but absent are warned about
+        return [n for n in listed if n in col.calibrations]
     if tmap.cameras:
         return [n for n in tmap.cameras if n in col.calibrations]
     return list(col.calibrations)
@@ -188,7 +206,8 @@ def _camera(path: str | Path, name: str, col: _Collected, tmap: TopicMap, ego: s
     cal = col.calibrations[name]
     if cal.K.size != 9 or not np.all(np.isfinite(cal.K)) or cal.width <= 0 or cal.height <= 0:
         raise DrivewmError(
-            f"{path}: calibration of camera {name!r} is incomplete (K has {cal.K.size} values, size {cal.width}x{cal.height})"
+            f"{path}: calibration of camera {name!r} is incomplete "
+            f"(K has {cal.K.size} values, size {cal.width}x{cal.height})"
         )
     mapped = tmap.cameras.get(name)
     frame = (mapped.frame if mapped else None) or cal.frame_id or name

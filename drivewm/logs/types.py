@@ -84,6 +84,8 @@ class DriveLog:
     ``pose_timestamps_ns`` (N,) int64 and ``T_world_from_ego`` (N, 4, 4): the per-tick ego pose.
     ``agents``: optional (timestamp_ns, boxes) per tick, for viewers (simulated logs have them).
     ``road``: optional static road polylines (lane centres, boundaries, edges), for viewers.
+    ``warnings``: what the reader repaired or left out (e.g. frames sorted back into time order), one
+    line each; curation reports them per log.
     """
 
     path: str
@@ -94,6 +96,7 @@ class DriveLog:
     scene: SceneInfo
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     road: list[RoadLine] = dataclasses.field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def camera_names(self) -> list[str]:
