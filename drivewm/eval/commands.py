@@ -39,8 +39,10 @@ def register(subparsers) -> None:
 
 def run_eval(args: argparse.Namespace) -> int:
     import json
+    import sys
 
     from drivewm.config import apply_overrides, load_yaml
+    from drivewm.errors import BatchError
     from drivewm.eval.config import EvalConfig
     from drivewm.eval.suite import evaluate
 
@@ -62,4 +64,12 @@ def run_eval(args: argparse.Namespace) -> int:
     summary = {k: v for k, v in metrics.items() if k not in ("clips", "config")}
     print(json.dumps(summary, indent=2, default=str))
     print(f"wrote {args.out}/metrics.json and metrics.md")
+    failed = [m["error"] for m in metrics["clips"].values() if "error" in m]
+    if len(failed) == metrics["num_clips"]:
+        raise BatchError(f"eval: every input failed ({len(failed)} of {metrics['num_clips']})", failed)
+    for line in failed:
+        print(f"warning: failed {line}", file=sys.stderr)
+    for key, m in metrics["clips"].items():
+        for line in m.get("warnings", []):
+            print(f"warning: {key}: {line}", file=sys.stderr)
     return 0

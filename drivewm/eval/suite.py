@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import traceback
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +21,7 @@ from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.inputs import EvalItem, load_items
+from drivewm.workers import process_pool
 
 #: Aggregate keys (DESIGN.md section 8) and the per-clip field each averages.
 AGGREGATE_KEYS = (
@@ -49,16 +50,24 @@ class ClipResult:
 
 
 def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
-    """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised."""
+    """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised;
+    so is an unexpected exception (a bug or an input no check foresaw): the batch goes on."""
+    try:
+        return _evaluate_item(item, cfg)
+    except DrivewmError as exc:
+        return ClipResult(item.key, {"error": str(exc)}, {})
+    except Exception as exc:  # noqa: BLE001 - one clip's failure must not end the batch
+        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return ClipResult(item.key, {"error": f"{item.key}: unexpected error: {detail}"}, {})
+
+
+def _evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
     import cv2
 
     cv2.setNumThreads(1)
     metrics: dict = {"status": {}, "seconds": {}}
     artifacts: dict = {}
-    try:
-        videos = item.videos()
-    except DrivewmError as exc:
-        return ClipResult(item.key, {"error": str(exc)}, {})
+    videos = item.videos()
     from drivewm.eval.matching import FrameMatcher
 
     matcher = FrameMatcher(cfg.match)
@@ -73,6 +82,14 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
 def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
     from drivewm.eval.consistency import temporal_sampson
 
+    frames = min(len(v) for v in videos.values())
+    if frames <= cfg.consistency.frame_gap:  # no frame pair to score: say so, do not leave a silent gap
+        metrics["tse"] = metrics["tse_calibrated"] = math.nan
+        metrics["status"]["tse"] = "too_few_frames"
+        metrics.setdefault("warnings", []).append(
+            f"tse: {frames} frame(s), needs {cfg.consistency.frame_gap + 1} (frame_gap {cfg.consistency.frame_gap})"
+        )
+        return
     r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher)
     _put_sampson(metrics, "tse", r)
 
@@ -184,9 +201,7 @@ def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress
             results[i] = evaluate_item(item, cfg)
             bar.update()
     else:
-        # spawn, not fork: a caller that already ran torch or OpenCV (quickstart runs every stage in
-        # one process) holds thread-pool locks a forked child inherits locked, and the child hangs.
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with process_pool(workers) as pool:  # spawned workers that exit if this process is killed
             futures = {pool.submit(evaluate_item, item, cfg): i for i, item in enumerate(items)}
             for fut in as_completed(futures):
                 results[futures[fut]] = fut.result()
