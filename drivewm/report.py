@@ -18,7 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from drivewm.atomic import write_text  # noqa: E402
+from drivewm.atomic import read_jsonl, write_text  # noqa: E402
 
 #: Eval metrics shown in the real-vs-generated table, with their meaning and unit.
 EVAL_ROWS = {
@@ -36,10 +36,6 @@ def _read_json(path: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def _read_jsonl(path: Path) -> list[dict]:
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.is_file() else []
-
-
 def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.3f}"
@@ -48,7 +44,7 @@ def _fmt(value) -> str:
 
 def training_curves(out: Path, dest: Path) -> Path | None:
     """Plot loss against step for every stage that wrote metrics.jsonl; None if there are none."""
-    runs = {name: _read_jsonl(out / name / "metrics.jsonl") for name in ("tokenizer", "text2world", "multiview")}
+    runs = {name: read_jsonl(out / name / "metrics.jsonl") for name in ("tokenizer", "text2world", "multiview")}
     runs = {k: v for k, v in runs.items() if v}
     if not runs:
         return None
@@ -67,9 +63,8 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
     """Every number and figure the report shows, from the stage outputs in ``out``."""
     curate = _read_json(out / "clips" / "report.json")
     figures = {"Simulated clips (curated, all views)": out / "clips" / "contact_sheet.png"}
-    figures.update(
-        {"Tokenizer reconstruction (input | output)": p for p in sorted((out / "tokenizer_eval").glob("*.png"))[:1]}
-    )
+    for png in sorted((out / "tokenizer_eval").glob("*.png"))[:1]:
+        figures["Tokenizer reconstruction (input | output)"] = png
     curves = training_curves(out, out / "training_curves.png")
     if curves:
         figures["Training curves"] = curves
@@ -192,7 +187,8 @@ def to_html(facts: dict, stages: list[tuple[str, list[str]]], out: Path) -> str:
 <html lang="en"><head><meta charset="utf-8"><title>drivewm quickstart report</title>
 <style>body{{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}}
 table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;text-align:left}}
-figure{{margin:1.5em 0}}img{{max-width:100%;border:1px solid #ddd}}pre{{background:#f6f6f6;padding:1em;overflow:auto}}</style></head>
+figure{{margin:1.5em 0}}img{{max-width:100%;border:1px solid #ddd}}
+pre{{background:#f6f6f6;padding:1em;overflow:auto}}</style></head>
 <body data-figures="{len(facts["figures"])}">
 <h1>drivewm quickstart report</h1>
 <p>Rig <code>{e(facts["rig"])}</code>. <span id="figure-status">loading figures...</span></p>

@@ -76,11 +76,9 @@ def pretrain_command(args: argparse.Namespace) -> int:
 
 def generate_command(args: argparse.Namespace) -> int | None:
     from drivewm.errors import DrivewmError
+    from drivewm.train.checkpoint import read_model_config
 
-    cfg_path = args.model / "config.json"
-    if not cfg_path.is_file():
-        raise DrivewmError(f"{args.model}: not a drivewm model folder (no config.json)")
-    model_type = json.loads(cfg_path.read_text()).get("model_type")
+    model_type = read_model_config(args.model).get("model_type")
     if model_type not in GENERATORS:
         raise DrivewmError(f"{args.model}: cannot generate from model_type {model_type!r}; known: {sorted(GENERATORS)}")
     module, func = GENERATORS[model_type].split(":")
@@ -93,7 +91,8 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
         raise DrivewmError(
-            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)"
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance "
+            "(multi-view models do)"
         )
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device

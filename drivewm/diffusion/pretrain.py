@@ -8,7 +8,6 @@ on the latent cache ``CLIPDIR/latents/NAME`` written by ``drivewm tokenizer enco
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import torch
@@ -22,6 +21,7 @@ from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfi
 from drivewm.errors import DrivewmError
 from drivewm.paths import check_name
 from drivewm.text import TextConfig
+from drivewm.train.checkpoint import read_model_config
 from drivewm.train.loop import TrainConfig, train
 
 
@@ -112,14 +112,9 @@ def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | No
 
 def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     """The cache must have been encoded by ``tokenizer_dir`` (same config and latent statistics)."""
-    cfg_path = tokenizer_dir / "config.json"
-    if not cfg_path.is_file():
-        raise DrivewmError(f"{tokenizer_dir}: not a tokenizer model folder (no config.json)")
     from drivewm.tokenizer.model import MODEL_TYPE
 
-    info = json.loads(cfg_path.read_text())
-    if info.get("model_type") != MODEL_TYPE:
-        raise DrivewmError(f"{tokenizer_dir}: model_type is {info.get('model_type')!r}, expected {MODEL_TYPE!r}")
+    info = read_model_config(tokenizer_dir, MODEL_TYPE)
     recorded = cache.tokenizer
     same_config = "config" not in recorded or info.get("config") == recorded["config"]
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))

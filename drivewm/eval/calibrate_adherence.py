@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drivewm.atomic import write_text
 from drivewm.eval.adherence import FEATURES, classify_condition, condition_scores, fit_calibration
 
 SOURCES = (("highway", "highway"), ("sumo", "grid"))
@@ -64,7 +65,8 @@ def main(argv: list[str] | None = None) -> int:
         f'Training accuracy: weather {acc_w:.3f}, time of day {acc_t:.3f}. Regenerate; do not edit by hand."""\n\n'
     )
     rows = [[w, t] + [round(s[k], 6) for k in FEATURES] for s, w, t in samples]
-    Path(args.out).write_text(
+    write_text(
+        args.out,
         header
         + "CALIBRATION = "
         + pprint.pformat(table, width=110, sort_dicts=False)
@@ -72,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         + "#: The renders' scores [weather, time_of_day, *FEATURES], kept so the tables can be refitted.\n"
         + "SAMPLES = "
         + pprint.pformat(rows, width=110)
-        + "\n"
+        + "\n",
     )
     print(f"wrote {args.out}: weather accuracy {acc_w:.3f}, time-of-day accuracy {acc_t:.3f}")
     return 0

@@ -4,16 +4,24 @@ A *model folder* is ``config.json`` + ``model.safetensors`` (Hugging Face style)
 inference weights (EMA where there is one) and the config that rebuilds the network.
 The *training state* (``train_state.pt``: model, EMA, optimizer, step, data position, RNG,
 resolved config) is separate and loads with ``torch.load(weights_only=True)``. Nothing here
-unpickles code. All writes are atomic.
+unpickles code. All writes are atomic and fsynced (drivewm.atomic).
+
+Weights and config are two files, so they are two renames: a reader between them would pair new
+weights with the old config. Both therefore carry the same ``revision`` (a digest of weights and
+config; in ``config.json`` and in the safetensors header), and :func:`load_model_folder` reads
+until the two agree, so a reader never uses a mix.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import time
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors import safe_open
+from safetensors.torch import save_file
 
 from drivewm import __version__
 from drivewm.atomic import atomic_path, write_json
@@ -22,21 +30,34 @@ from drivewm.errors import DrivewmError
 CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
 TRAIN_STATE_NAME = "train_state.pt"
+REVISION_KEY = "drivewm_revision"
+#: A reader that finds config and weights of different saves waits for the writer's second rename.
+READ_ATTEMPTS, READ_WAIT_S = 20, 0.1
 
 
 def save_model_folder(
     path: str | Path, model_type: str, config: dict, state_dict: dict[str, torch.Tensor], extra: dict | None = None
 ) -> None:
-    """Write ``config.json`` ({"model_type", "drivewm_version", "config", **extra}) and weights."""
+    """Write ``config.json`` ({"model_type", "drivewm_version", "config", **extra, "revision"}) and
+    weights (the weights first: see the module docstring)."""
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().contiguous().cpu() for k, v in state_dict.items()}
+    info = {"model_type": model_type, "drivewm_version": __version__, "config": config, **(extra or {})}
+    info["revision"] = _revision(tensors, info)
     with atomic_path(path / WEIGHTS_NAME) as tmp:
-        save_file(tensors, str(tmp))
-    write_json(
-        path / CONFIG_NAME,
-        {"model_type": model_type, "drivewm_version": __version__, "config": config, **(extra or {})},
-    )
+        save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"]})
+    write_json(path / CONFIG_NAME, info)
+
+
+def _revision(tensors: dict[str, torch.Tensor], info: dict) -> str:
+    """Digest of the weights and the config: equal saves give equal bytes (deterministic runs stay byte-identical)."""
+    digest = hashlib.blake2b(json.dumps(info, sort_keys=True, default=str).encode(), digest_size=16)
+    for name in sorted(tensors):
+        t = tensors[name]
+        digest.update(f"{name}:{t.dtype}:{tuple(t.shape)}".encode())
+        digest.update(t.reshape(-1).view(torch.uint8).numpy().data)
+    return digest.hexdigest()
 
 
 def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tuple[dict, dict[str, torch.Tensor]]:
@@ -45,21 +66,45 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
     A missing folder/file or another ``model_type`` raises DrivewmError naming the folder.
     """
     path = Path(path)
+    if not (path / WEIGHTS_NAME).is_file():
+        raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
+    for _ in range(READ_ATTEMPTS):
+        info = read_model_config(path, model_type)
+        state, revision = _read_weights(path / WEIGHTS_NAME)
+        if info.get("revision") in (None, revision):  # None: written before revisions, or by hand
+            return info, state
+        time.sleep(READ_WAIT_S)
+    raise DrivewmError(
+        f"{path}: {CONFIG_NAME} (revision {info.get('revision')}) and {WEIGHTS_NAME} (revision {revision}) "
+        "come from different saves: a run may still be writing it"
+    )
+
+
+def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None = None) -> dict:
+    """``config.json`` of a model folder, checked to be a JSON object of ``model_type`` (one of several;
+    None: any)."""
+    cfg_path = Path(path) / CONFIG_NAME
     types = (model_type,) if isinstance(model_type, str) else model_type
-    cfg_path, weights_path = path / CONFIG_NAME, path / WEIGHTS_NAME
-    if not cfg_path.is_file() or not weights_path.is_file():
+    if not cfg_path.is_file():
         raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
     try:
         info = json.loads(cfg_path.read_text())
-    except json.JSONDecodeError:
+    except ValueError:
         raise DrivewmError(f"{cfg_path}: not valid JSON") from None
-    if info.get("model_type") not in types:
-        raise DrivewmError(f"{path}: model_type is {info.get('model_type')!r}, expected {' or '.join(types)}")
+    if not isinstance(info, dict) or (types is not None and info.get("model_type") not in types):
+        model = info.get("model_type") if isinstance(info, dict) else None
+        raise DrivewmError(f"{path}: model_type is {model!r}, expected {' or '.join(types)}")
+    return info
+
+
+def _read_weights(weights_path: Path) -> tuple[dict[str, torch.Tensor], str | None]:
+    """The tensors of a safetensors file and the revision in its header (None when it has none)."""
     try:
-        state = load_file(str(weights_path))
+        with safe_open(str(weights_path), framework="pt") as f:
+            revision = (f.metadata() or {}).get(REVISION_KEY)
+            return {k: f.get_tensor(k) for k in f.keys()}, revision
     except Exception as exc:  # safetensors raises several types for bad files
         raise DrivewmError(f"{weights_path}: cannot read weights ({exc.__class__.__name__})") from None
-    return info, state
 
 
 def load_weights(module: torch.nn.Module, state: dict[str, torch.Tensor], path: str | Path) -> None:
