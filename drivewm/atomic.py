@@ -1,4 +1,4 @@
-"""Atomic, durable writes: the one helper every writer uses (DESIGN.md section 7).
+"""Atomic, durable writes: the one helper every writer uses (docs/DESIGN.md section 7).
 
 - :func:`atomic_path` (and :func:`write_bytes`, :func:`write_text`, :func:`write_json`): write to a
   temporary name in the same folder, flush it to disk (``fsync``), rename it onto the target, and

@@ -1,4 +1,4 @@
-"""The error types the CLI turns into clear messages without a traceback (DESIGN.md section 7)."""
+"""The error types the CLI turns into clear messages without a traceback (docs/DESIGN.md section 7)."""
 
 
 class DrivewmError(Exception):

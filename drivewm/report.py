@@ -63,8 +63,8 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
     """Every number and figure the report shows, from the stage outputs in ``out``."""
     curate = _read_json(out / "clips" / "report.json")
     figures = {"Simulated clips (curated, all views)": out / "clips" / "contact_sheet.png"}
-    for png in sorted((out / "tokenizer_eval").glob("*.png"))[:1]:
-        figures["Tokenizer reconstruction (input | output)"] = png
+    for first in sorted((out / "tokenizer_eval").glob("*.png"))[:1]:
+        figures["Tokenizer reconstruction (input | output)"] = first
     curves = training_curves(out, out / "training_curves.png")
     if curves:
         figures["Training curves"] = curves

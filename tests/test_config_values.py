@@ -52,7 +52,7 @@ def test_pretrain_refuses_a_negative_learning_rate():
     "cls,override,message",
     [
         (TokenizerConfig, "base_channels=0", "base_channels must be >= 1"),
-        (TokenizerConfig, "channel_multipliers=[1,0,2]", "channel_multipliers must be integers >= 1"),
+        (TokenizerConfig, "channel_multipliers=[1,0]", "channel_multipliers must be integers >= 1"),
         (LossConfig, "ssim=-0.5", "ssim must be >= 0"),
         (LossConfig, "l1=-.inf", "expected a finite number"),
     ],

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).parent / "curate"))
 from hostile_shards import members, write_members, write_shard  # noqa: E402
 from synth import write_synth_log  # noqa: E402
 
-CONFIG = Path(__file__).resolve().parents[1] / "datasets" / "curate" / "test.yaml"
+CONFIG = "test"  # the packaged curation recipe drivewm/recipes/curate/test.yaml
 HOSTILE_VALUES = [
     None, -1, 0, 1e308, float("nan"), "abc", "../../evil", "/tmp/evil", [], {}, True, 10**30, "x" * 300,
     [[0, 0, 0], [0, 0, 0], [0, 0, 1]], [[1, 2], [3]], {"cameras": []}, [1, "a", None],
@@ -147,7 +147,7 @@ def _log_batch(root: Path, count: int, seed: int) -> tuple[list[Path], Path]:
 def _fuzz(root: Path, capsys, tokenizer_dir: Path, count: int, seed: int) -> None:
     logs, good = _log_batch(root, count, seed)
     rc, err = run_cli(
-        capsys, ["curate", *map(str, logs), "--out", str(root / "out"), "--config", str(CONFIG)], root, [root / "out"]
+        capsys, ["curate", *map(str, logs), "--out", str(root / "out"), "--recipe", CONFIG], root, [root / "out"]
     )
     report = json.loads((root / "out" / "report.json").read_text())
     assert rc == 0 and report["logs"]["good"]["status"] == "ok" and report["logs"]["good"]["kept"] == 1

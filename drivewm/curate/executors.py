@@ -3,8 +3,9 @@
 Both call :func:`drivewm.curate.stage.curate_log` once per log and return its results in input
 order; each log's shards and done-marker are written by the worker itself, so results survive
 a crash of the driver. ``workers=1`` runs in-process (easiest to debug); more workers use a
-``spawn`` process pool (drivewm.workers) whose workers exit when the driver dies. Ray runs the
-same function as a ``map`` over a dataset of log paths.
+``spawn`` process pool (drivewm.workers) whose workers exit when the driver dies. Ray runs the same
+function as a ``map`` over a dataset of log paths; Ray (the optional ``ray`` extra, seconds to import) is
+imported only when the Ray executor runs.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import os
 import traceback
 from collections.abc import Callable
 from concurrent.futures import as_completed
+
+import cv2
 
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.stage import curate_log
@@ -42,8 +45,6 @@ def _safe_curate(log: str, out_dir: str, cfg: CurateConfig, name: str) -> dict:
 
 def _one_thread_per_worker() -> None:
     """Parallelism comes from the pool: keep OpenCV in each worker on one thread (no oversubscription)."""
-    import cv2
-
     cv2.setNumThreads(1)
 
 
@@ -57,6 +58,7 @@ def run_local(
             results.append(_safe_curate(log, out_dir, cfg, name))
             progress(results[-1])
         return results
+
     by_index: dict[int, dict] = {}
     with process_pool(workers, _one_thread_per_worker) as pool:
         futures = {pool.submit(_safe_curate, log, out_dir, cfg, name): i for i, (log, name) in enumerate(jobs)}

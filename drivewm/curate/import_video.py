@@ -15,10 +15,12 @@ from pathlib import Path
 import av
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from drivewm.errors import BatchError, DrivewmError
 from drivewm.geometry import Rig, load_rig
 from drivewm.logs.types import SceneInfo
+from drivewm.logs.writer import LogWriter
 from drivewm.paths import child_path, distinct_paths, unique_names
 
 UNKNOWN_TAGS = {
@@ -49,8 +51,6 @@ def import_video(
     video: Path, calibration: str | Path, out_path: Path, tags: dict[str, str] | None = None, description: str = ""
 ) -> tuple[Path, list[str]]:
     """Write one video as a single-camera drive log; returns ``out_path`` and warnings (one line each)."""
-    from drivewm.logs.writer import LogWriter
-
     rig = calibration_rig(calibration)
     cam = rig.cameras[0]
     scene = SceneInfo({**UNKNOWN_TAGS, **(tags or {})}, description or f"imported from {Path(video).name}")
@@ -107,8 +107,6 @@ def import_videos(
     """Import every mp4 of ``inputs`` (files or folders) into ``out_dir/NAME.mcap`` (NAME: the file stem
     made a safe name, distinct per video). A video that cannot be imported is skipped and reported;
     when none is, :class:`BatchError` lists them all."""
-    from tqdm import tqdm
-
     calibration_rig(calibration)  # a bad calibration fails the whole batch, before any video
     videos, warnings = distinct_paths(list_videos(inputs))
     names = unique_names([v.stem for v in videos], [str(v.resolve()) for v in videos], "video")

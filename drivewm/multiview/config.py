@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-from drivewm.config import above, at_least, in_range
+from drivewm.config import above, at_least, in_range, require
 from drivewm.diffusion.denoiser import EDMConfig
 from drivewm.diffusion.dit_config import DiTConfig
 from drivewm.text import TextConfig
@@ -33,7 +33,7 @@ class MultiViewConfig:
     cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity
     reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
     it predicts the simulated clips' later frames no better than copying the first frame (see
-    tests/multiview/study_turned_following.py)."""
+    studies/turned_following.py)."""
     warp_ground_m: float = 100.0
     """The warp follows rays that meet the road within this distance (m) to the road plane and all
     others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""
@@ -59,6 +59,7 @@ class MultiViewConfig:
     (the rest are plain text-to-multi-view steps, so one model does both)."""
 
     def validate(self) -> None:
+        require(self.cross_view in ("joint", "neighbors"), "cross_view", self.cross_view, "'joint' or 'neighbors'")
         at_least(self, 0, "neighbors", "trajectory_waypoints", "warp_ground_m", "speed_mps")
         at_least(self, 1, "camera_width", "trajectory_width", "temporal_compression")
         above(self, 0, "trajectory_scale_m", "trajectory_dt_s", "ray_scale_m")

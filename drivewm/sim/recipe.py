@@ -1,4 +1,4 @@
-"""Dataset recipes (datasets/scenarios/*.yaml): several kinds of drives in one file.
+"""Dataset recipes (drivewm/recipes/simulate/*.yaml): several kinds of drives in one file.
 
 Layout::
 
@@ -8,20 +8,37 @@ Layout::
       - {source: sumo, scenario: grid, time_of_day: night, seed: 100}
 
 ``count`` (default 1) drives per entry, seeds seed, seed + 1, ...; every other key is a
-SimConfig field, checked like any config (unknown keys and bad values are errors).
+SimConfig field. A dataset is a list of runs rather than one run, so this is not a
+:class:`drivewm.recipe.RecipeBook` recipe, but it resolves the same way: ``--recipe`` takes a
+path or a packaged name, and the command line's fields and ``--set KEY=VALUE`` overrides apply to
+every entry through :func:`drivewm.config.apply_overrides` (unknown keys and bad values are
+one-line errors naming the file and the entry).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from drivewm.config import from_dict, load_yaml
+from drivewm import resources
+from drivewm.config import apply_overrides, load_yaml
 from drivewm.errors import DrivewmError
 from drivewm.sim.config import SimConfig
 
+#: Where packaged dataset recipes live: drivewm/recipes/simulate/NAME.yaml.
+RECIPES = "recipes/simulate"
 
-def load_recipe(path: str | Path, overrides: dict | None = None) -> list[tuple[SimConfig, int]]:
-    """(config, drive count) per entry of the recipe at ``path``; ``overrides`` replace fields in all."""
+
+def plan_drives(fields: dict, overrides: list[str] = (), drives: int = 1) -> list[tuple[SimConfig, int]]:
+    """One kind of drive (SimConfig ``fields`` with ``KEY=VALUE`` overrides), ``drives`` of it."""
+    return [(apply_overrides(SimConfig, fields, list(overrides), "drivewm simulate"), drives)]
+
+
+def load_recipe(
+    name_or_path: str | Path, fields: dict | None = None, overrides: list[str] = ()
+) -> list[tuple[SimConfig, int]]:
+    """(config, drive count) per entry of a dataset recipe (a path or a packaged name); ``fields``
+    (e.g. the command line's flags) and then ``overrides`` replace fields in every entry."""
+    path = resources.find(RECIPES, name_or_path, "simulate recipe")
     data = load_yaml(path)
     unknown = sorted(str(k) for k in data if k not in ("common", "drives"))
     common = data.get("common") or {}
@@ -33,9 +50,9 @@ def load_recipe(path: str | Path, overrides: dict | None = None) -> list[tuple[S
     for i, entry in enumerate(data["drives"]):
         if not isinstance(entry, dict):
             raise DrivewmError(f"{path}: drives[{i}] must be a mapping")
-        fields = {**common, **entry, **(overrides or {})}
-        count = fields.pop("count", 1)
+        entry = {**common, **entry, **(fields or {})}
+        count = entry.pop("count", 1)
         if not isinstance(count, int) or isinstance(count, bool) or count < 1:
             raise DrivewmError(f"{path}: drives[{i}].count must be a positive integer, got {count!r}")
-        out.append((from_dict(SimConfig, fields, f"{path}: drives[{i}]"), count))
+        out.append((apply_overrides(SimConfig, entry, list(overrides), f"{path}: drives[{i}]"), count))
     return out

@@ -20,7 +20,7 @@ Member = tuple[str, bytes]
 def tiny_clip(key: str, T: int = 9, W: int = 64, H: int = 48, cameras: int = 2, seed: int = 0):
     """A clip of smooth moving gradients, ``cameras`` views of the front3 rig at W x H (tokenizer-friendly:
     T = 1 + 4k frames, sizes multiples of 8)."""
-    rig = load_rig("front3").scaled(W, H).subset(load_rig("front3").names[:cameras])
+    rig = load_rig("front3").scaled(W, H, "stretch").subset(load_rig("front3").names[:cameras])
     yy, xx = np.mgrid[0:H, 0:W]
     frames = {}
     for v, cam in enumerate(rig.names):

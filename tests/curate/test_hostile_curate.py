@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from synth import make_log, write_synth_log  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "datasets" / "curate" / "test.yaml"
+CONFIG = "test"
 CODE = Path(drivewm.__file__).resolve().parents[1]  # subprocesses run the drivewm under test
 ENV = {**os.environ, "PYTHONPATH": str(CODE)}
 
@@ -76,7 +76,7 @@ def test_same_log_twice_and_colliding_stems_keep_every_shard(tmp_path):
 def test_a_second_run_on_the_same_folder_is_refused_and_the_first_completes(tmp_path):
     logs = [write_synth_log(tmp_path / "logs" / f"d{i}.mcap", seed=10 + i, n_frames=36) for i in range(3)]
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--config", str(CONFIG)]
+    cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--recipe", CONFIG]
     first = subprocess.Popen(cmd, cwd=CODE, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         start = time.time()
@@ -113,7 +113,7 @@ def test_pool_workers_exit_when_the_parent_is_killed(tmp_path):
 
     logs = [write_synth_log(tmp_path / "logs" / f"w{i}.mcap", seed=20 + i, n_frames=36) for i in range(4)]
     cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(tmp_path / "out")]
-    parent = subprocess.Popen([*cmd, "--config", str(CONFIG), "--workers", "2"], cwd=CODE, env=ENV)
+    parent = subprocess.Popen([*cmd, "--recipe", CONFIG, "--workers", "2"], cwd=CODE, env=ENV)
     workers: list[int] = []
     try:
         start = time.time()
@@ -174,7 +174,7 @@ def test_camera_problems_are_named_and_the_good_log_is_kept(tmp_path, monkeypatc
         folder / "singular.mcap", make_log("x", 33, n_frames=36), monkeypatch, singular="CAM_FRONT"
     )
     rc = main(
-        ["curate", str(no_images), str(phantom), str(singular), "--out", str(tmp_path / "out"), "--config", str(CONFIG)]
+        ["curate", str(no_images), str(phantom), str(singular), "--out", str(tmp_path / "out"), "--recipe", CONFIG]
     )
     err = capsys.readouterr().err
     assert rc == 0
@@ -211,9 +211,7 @@ def load_report(out: Path) -> dict:
 def test_nothing_kept_is_a_batch_error_with_a_line_per_log(tmp_path, capsys):
     (tmp_path / "bad.mcap").write_text("not a log")
     short = write_synth_log(tmp_path / "short.mcap", seed=40, n_frames=10)  # shorter than one clip
-    rc = main(
-        ["curate", str(tmp_path / "bad.mcap"), str(short), "--out", str(tmp_path / "out"), "--config", str(CONFIG)]
-    )
+    rc = main(["curate", str(tmp_path / "bad.mcap"), str(short), "--out", str(tmp_path / "out"), "--recipe", CONFIG])
     err = capsys.readouterr().err.splitlines()
     err = err[next(i for i, line in enumerate(err) if line.startswith("error:")) :]
     assert rc == 2 and err[0] == "error: curate: no clip kept from 2 log(s)"
@@ -281,7 +279,7 @@ def test_clock_jumping_back_is_warned_on_the_console(tmp_path, capsys):
     jump = frames[20].timestamp_ns - frames[5].timestamp_ns  # from frame 20 on, the clock reads 1.5 s earlier
     log.images[cam] = frames[:20] + [dataclasses.replace(f, timestamp_ns=f.timestamp_ns - jump) for f in frames[20:]]
     path = _write_in_order(tmp_path / "jump.mcap", log)
-    rc = main(["curate", str(path), "--out", str(tmp_path / "out"), "--config", str(CONFIG)])
+    rc = main(["curate", str(path), "--out", str(tmp_path / "out"), "--recipe", CONFIG])
     err = capsys.readouterr().err
     assert rc == 0
     warnings = load_report(tmp_path / "out")["logs"]["jump"]["warnings"]
