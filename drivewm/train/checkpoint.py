@@ -9,13 +9,23 @@ unpickles code. All writes are atomic and fsynced (drivewm.atomic).
 Weights and config are two files, so they are two renames: a reader between them would pair new
 weights with the old config. Both therefore carry the same ``revision`` (a digest of weights and
 config; in ``config.json`` and in the safetensors header), and :func:`load_model_folder` reads
-until the two agree, so a reader never uses a mix.
+until the two agree, so a reader never uses a mix; it then recomputes the digest, so weights whose
+bytes changed on disk are refused instead of loaded.
+
+The training state carries a digest of its own content (``digest``), and each save keeps the state
+it replaces as ``train_state.prev.pt``. A resume whose ``train_state.pt`` is missing, truncated or
+changed (torch.load reads flipped tensor bytes without complaint) sets it aside as
+``train_state.pt.damaged``, says so on stderr, and resumes from the previous state; only when no
+intact state is left is it a one-line error. Everything a task keeps (``TrainTask.extra_state``,
+e.g. the tokenizer's discriminator) is inside the same file, so it is covered the same way.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
+import sys
 import time
 from pathlib import Path
 
@@ -30,6 +40,11 @@ from drivewm.errors import DrivewmError
 CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
 TRAIN_STATE_NAME = "train_state.pt"
+PREVIOUS_STATE_NAME = "train_state.prev.pt"
+DAMAGED_SUFFIX = ".damaged"
+DIGEST_KEY = "digest"
+#: Entries every training state has (drivewm.train.loop._checkpoint).
+STATE_KEYS = ("model", "ema", "optimizer", "step", "rng")
 REVISION_KEY = "drivewm_revision"
 #: A reader that finds config and weights of different saves waits for the writer's second rename.
 READ_ATTEMPTS, READ_WAIT_S = 20, 0.1
@@ -43,7 +58,8 @@ def save_model_folder(
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().contiguous().cpu() for k, v in state_dict.items()}
-    info = {"model_type": model_type, "drivewm_version": __version__, "config": config, **(extra or {})}
+    extra = {k: v for k, v in (extra or {}).items() if k != "revision"}  # e.g. a re-export's old revision
+    info = {"model_type": model_type, "drivewm_version": __version__, "config": config, **extra}
     info["revision"] = _revision(tensors, info)
     with atomic_path(path / WEIGHTS_NAME) as tmp:
         save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"]})
@@ -54,10 +70,42 @@ def _revision(tensors: dict[str, torch.Tensor], info: dict) -> str:
     """Digest of the weights and the config: equal saves give equal bytes (deterministic runs stay byte-identical)."""
     digest = hashlib.blake2b(json.dumps(info, sort_keys=True, default=str).encode(), digest_size=16)
     for name in sorted(tensors):
-        t = tensors[name]
-        digest.update(f"{name}:{t.dtype}:{tuple(t.shape)}".encode())
-        digest.update(t.reshape(-1).view(torch.uint8).numpy().data)
+        digest.update(f"{name}:".encode())
+        _update_tensor(digest, tensors[name])
     return digest.hexdigest()
+
+
+def _update_tensor(digest, t: torch.Tensor) -> None:
+    """Feed a tensor's dtype, shape and bytes to a hashlib digest."""
+    t = t.detach().cpu().contiguous()
+    digest.update(f"{t.dtype}:{tuple(t.shape)}".encode())
+    digest.update(t.reshape(-1).view(torch.uint8).numpy().data)
+
+
+def state_digest(obj: object) -> str:
+    """Digest of a training state (nested dicts, lists and tuples of tensors and plain values), independent
+    of dict order; equal content gives the equal digest after a torch.save / torch.load round trip."""
+    digest = hashlib.blake2b(digest_size=16)
+    _update_state(digest, obj)
+    return digest.hexdigest()
+
+
+def _update_state(digest, obj: object) -> None:
+    if isinstance(obj, torch.Tensor):
+        _update_tensor(digest, obj)
+    elif isinstance(obj, dict):
+        digest.update(b"{")
+        for key in sorted(obj, key=repr):
+            digest.update(repr(key).encode() + b":")
+            _update_state(digest, obj[key])
+        digest.update(b"}")
+    elif isinstance(obj, (list, tuple)):
+        digest.update(b"[")
+        for item in obj:
+            _update_state(digest, item)
+        digest.update(b"]")
+    else:
+        digest.update(repr(obj).encode() + b",")
 
 
 def read_model_type(path: str | Path) -> str | None:
@@ -86,12 +134,24 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
         info = read_model_config(path, model_type)
         state, revision = _read_weights(path / WEIGHTS_NAME)
         if info.get("revision") in (None, revision):  # None: written before revisions, or by hand
+            _check_revision(path, info, state)
             return info, state
         time.sleep(READ_WAIT_S)
     raise DrivewmError(
         f"{path}: {CONFIG_NAME} (revision {info.get('revision')}) and {WEIGHTS_NAME} (revision {revision}) "
         "come from different saves: a run may still be writing it"
     )
+
+
+def _check_revision(path: Path, info: dict, state: dict[str, torch.Tensor]) -> None:
+    """The weights and config still hash to the revision they were saved with (no byte changed on disk)."""
+    if info.get("revision") is None:
+        return
+    if _revision(state, {k: v for k, v in info.items() if k != "revision"}) != info["revision"]:
+        raise DrivewmError(
+            f"{path}: {WEIGHTS_NAME} or {CONFIG_NAME} changed after it was saved (revision {info['revision']} "
+            "does not match the content): a damaged copy"
+        )
 
 
 def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None = None) -> dict:
@@ -135,17 +195,52 @@ def load_weights(module: torch.nn.Module, state: dict[str, torch.Tensor], path: 
 
 
 def save_train_state(path: str | Path, state: dict) -> None:
-    """Atomically write the training state (tensors, numbers, strings, lists and dicts only)."""
-    with atomic_path(Path(path) / TRAIN_STATE_NAME) as tmp:
-        torch.save(state, tmp)
+    """Atomically write the training state (tensors, numbers, strings, lists and dicts only) with its
+    digest; the state it replaces becomes ``train_state.prev.pt`` (see the module docstring)."""
+    folder = Path(path)
+    current = folder / TRAIN_STATE_NAME
+    record = {**state, DIGEST_KEY: state_digest(state)}
+    if current.is_file():
+        os.replace(current, folder / PREVIOUS_STATE_NAME)  # a kill right here leaves the previous one to resume
+    with atomic_path(current) as tmp:
+        torch.save(record, tmp)
 
 
 def load_train_state(path: str | Path) -> dict | None:
-    """The training state in folder ``path``, or None when there is none (fresh run)."""
-    file = Path(path) / TRAIN_STATE_NAME
-    if not file.is_file():
-        return None
+    """The newest intact training state in folder ``path``, or None when there is none (fresh run).
+    A damaged ``train_state.pt`` is renamed ``train_state.pt.damaged`` (so the next save keeps the
+    intact previous state) and the previous state is used, with a warning on stderr."""
+    folder = Path(path)
+    problems = []
+    for file in (folder / TRAIN_STATE_NAME, folder / PREVIOUS_STATE_NAME):
+        if not file.is_file():
+            continue
+        try:
+            state = _read_state(file)
+        except DrivewmError as exc:
+            problems.append(str(exc))
+            continue
+        if file.name != TRAIN_STATE_NAME:
+            why = "; ".join(problems) or f"{folder / TRAIN_STATE_NAME}: missing (a save was cut off)"
+            print(f"warning: {why}; resuming from {file.name} (step {state['step']})", file=sys.stderr)
+            if (folder / TRAIN_STATE_NAME).is_file():  # set aside, so the next save keeps the intact one
+                os.replace(folder / TRAIN_STATE_NAME, folder / (TRAIN_STATE_NAME + DAMAGED_SUFFIX))
+        return state
+    if problems:
+        raise DrivewmError(f"{'; '.join(problems)}; no intact training state left (move the folder away to restart)")
+    return None
+
+
+def _read_state(file: Path) -> dict:
+    """One training-state file, checked: loadable without unpickling code, complete, and equal to its digest."""
     try:
-        return torch.load(file, map_location="cpu", weights_only=True)
-    except Exception as exc:  # a truncated or foreign file
-        raise DrivewmError(f"{file}: cannot load training state ({exc.__class__.__name__}: {exc})") from None
+        state = torch.load(file, map_location="cpu", weights_only=True)
+    except Exception as exc:  # a truncated or foreign file: torch raises several types
+        raise DrivewmError(f"{file}: cannot load training state ({exc.__class__.__name__})") from None
+    missing = [k for k in STATE_KEYS if not isinstance(state, dict) or k not in state]
+    if missing:
+        raise DrivewmError(f"{file}: not a drivewm training state (missing {missing})")
+    digest = state.pop(DIGEST_KEY, None)  # None: written before digests
+    if digest is not None and state_digest(state) != digest:
+        raise DrivewmError(f"{file}: training state does not match its digest (bytes changed on disk)")
+    return state
