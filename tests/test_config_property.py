@@ -24,9 +24,9 @@ from drivewm.multiview.posttrain import PosttrainConfig
 from drivewm.recipe import RecipeBook
 from drivewm.sim.config import SimConfig
 from drivewm.sim.recipe import load_recipe
-from drivewm.tokenizer.config import TokenizerConfig
-from drivewm.tokenizer.losses import LossConfig
-from drivewm.train.loop import TrainConfig
+from drivewm.tokenizer.config import LossConfig, TokenizerConfig
+from drivewm.tokenizer.recipe import TokenizerTrainConfig
+from drivewm.train.config import TrainConfig
 
 CONFIGS = (
     PretrainConfig,
@@ -37,8 +37,9 @@ CONFIGS = (
     TrainConfig,
     TokenizerConfig,
     LossConfig,
+    TokenizerTrainConfig,
 )
-SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def field_paths(cls: type, prefix: str = "") -> list[str]:

@@ -98,6 +98,8 @@ def test_changed_bytes_resume_from_the_previous_state(uninterrupted, tmp_path, c
     out = tmp_path / "run"
     _run(out, stop_after=4)  # checkpoints at steps 2 (now train_state.prev.pt) and 4
     _flip_tensor_byte(out / "train_state.pt")
+    with (out / "metrics.jsonl").open("a") as f:
+        f.write('{"step": 5, "loss": 0.1')  # and killed in the middle of a metrics row
     loaded = torch.load(out / "train_state.pt", weights_only=True)  # torch does not notice
     assert loaded["step"] == 4
     task = _run(out)

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
+
 from drivewm.diffusion.pretrain import pretrain, pretrain_config
 from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 
@@ -14,6 +16,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from test_loop import TINY  # noqa: E402
 
 
+@pytest.mark.slow  # trains a tiny DiT twice
 def test_resume_after_a_torn_metrics_row(tmp_path: Path):
     latents = make_synthetic_latent_cache(tmp_path / "latents", clips_per_condition=2)
     cfg = pretrain_config("debug", [*TINY, "train.steps=5"])
