@@ -18,7 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from drivewm.atomic import read_jsonl, write_text  # noqa: E402
+from drivewm.atomic import atomic_path, read_jsonl, write_text  # noqa: E402
 
 #: Eval metrics shown in the real-vs-generated table, with their meaning and unit.
 EVAL_ROWS = {
@@ -54,7 +54,8 @@ def training_curves(out: Path, dest: Path) -> Path | None:
         ax.set(title=name, xlabel="step", ylabel="training loss", yscale="log")
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(dest, dpi=110)
+    with atomic_path(dest) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return dest
 
