@@ -9,8 +9,9 @@ unpickles code. All writes are atomic and fsynced (drivewm.atomic).
 Weights and config are two files, so they are two renames: a reader between them would pair new
 weights with the old config. Both therefore carry the same ``revision`` (a digest of weights and
 config; in ``config.json`` and in the safetensors header), and :func:`load_model_folder` reads
-until the two agree, so a reader never uses a mix; it then recomputes the digest, so weights whose
-bytes changed on disk are refused instead of loaded.
+until the two agree, so a reader never uses a mix. The header also holds a digest of the weights
+alone (``drivewm_weights_digest``), which loading recomputes: weights whose bytes changed on disk
+are refused instead of loaded (config.json stays editable by hand).
 
 The training state carries a digest of its own content (``digest``), and each save keeps the state
 it replaces as ``train_state.prev.pt``. A resume whose ``train_state.pt`` is missing, truncated or
@@ -46,6 +47,7 @@ DIGEST_KEY = "digest"
 #: Entries every training state has (drivewm.train.loop._checkpoint).
 STATE_KEYS = ("model", "ema", "optimizer", "step", "rng")
 REVISION_KEY = "drivewm_revision"
+WEIGHTS_DIGEST_KEY = "drivewm_weights_digest"
 #: A reader that finds config and weights of different saves waits for the writer's second rename.
 READ_ATTEMPTS, READ_WAIT_S = 20, 0.1
 
@@ -60,15 +62,23 @@ def save_model_folder(
     tensors = {k: v.detach().contiguous().cpu() for k, v in state_dict.items()}
     extra = {k: v for k, v in (extra or {}).items() if k != "revision"}  # e.g. a re-export's old revision
     info = {"model_type": model_type, "drivewm_version": __version__, "config": config, **extra}
-    info["revision"] = _revision(tensors, info)
+    weights_digest = _weights_digest(tensors)
+    info["revision"] = _revision(weights_digest, info)
     with atomic_path(path / WEIGHTS_NAME) as tmp:
-        save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"]})
+        save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"], WEIGHTS_DIGEST_KEY: weights_digest})
     write_json(path / CONFIG_NAME, info)
 
 
-def _revision(tensors: dict[str, torch.Tensor], info: dict) -> str:
+def _revision(weights_digest: str, info: dict) -> str:
     """Digest of the weights and the config: equal saves give equal bytes (deterministic runs stay byte-identical)."""
     digest = hashlib.blake2b(json.dumps(info, sort_keys=True, default=str).encode(), digest_size=16)
+    digest.update(weights_digest.encode())
+    return digest.hexdigest()
+
+
+def _weights_digest(tensors: dict[str, torch.Tensor]) -> str:
+    """Digest of named tensors (names, dtypes, shapes and bytes)."""
+    digest = hashlib.blake2b(digest_size=16)
     for name in sorted(tensors):
         digest.update(f"{name}:".encode())
         _update_tensor(digest, tensors[name])
@@ -132,9 +142,10 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
         raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
     for _ in range(READ_ATTEMPTS):
         info = read_model_config(path, model_type)
-        state, revision = _read_weights(path / WEIGHTS_NAME)
+        state, header = _read_weights(path / WEIGHTS_NAME)
+        revision = header.get(REVISION_KEY)
         if info.get("revision") in (None, revision):  # None: written before revisions, or by hand
-            _check_revision(path, info, state)
+            _check_weights(path, header, state)
             return info, state
         time.sleep(READ_WAIT_S)
     raise DrivewmError(
@@ -143,14 +154,13 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
     )
 
 
-def _check_revision(path: Path, info: dict, state: dict[str, torch.Tensor]) -> None:
-    """The weights and config still hash to the revision they were saved with (no byte changed on disk)."""
-    if info.get("revision") is None:
-        return
-    if _revision(state, {k: v for k, v in info.items() if k != "revision"}) != info["revision"]:
+def _check_weights(path: Path, header: dict[str, str], state: dict[str, torch.Tensor]) -> None:
+    """The weights still hash to the digest written beside them (no byte changed on disk)."""
+    expected = header.get(WEIGHTS_DIGEST_KEY)
+    if expected is not None and _weights_digest(state) != expected:
         raise DrivewmError(
-            f"{path}: {WEIGHTS_NAME} or {CONFIG_NAME} changed after it was saved (revision {info['revision']} "
-            "does not match the content): a damaged copy"
+            f"{path}: {WEIGHTS_NAME} changed after it was saved (its tensors no longer match the digest in its "
+            "header): a damaged copy"
         )
 
 
@@ -171,12 +181,11 @@ def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None
     return info
 
 
-def _read_weights(weights_path: Path) -> tuple[dict[str, torch.Tensor], str | None]:
-    """The tensors of a safetensors file and the revision in its header (None when it has none)."""
+def _read_weights(weights_path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """The tensors of a safetensors file and its header's metadata (revision, weights digest)."""
     try:
         with safe_open(str(weights_path), framework="pt") as f:
-            revision = (f.metadata() or {}).get(REVISION_KEY)
-            return {k: f.get_tensor(k) for k in f.keys()}, revision
+            return {k: f.get_tensor(k) for k in f.keys()}, f.metadata() or {}
     except Exception as exc:  # safetensors raises several types for bad files
         raise DrivewmError(f"{weights_path}: cannot read weights ({exc.__class__.__name__})") from None
 
