@@ -9,9 +9,10 @@ unpickles code. All writes are atomic and fsynced (drivewm.atomic).
 Weights and config are two files, so they are two renames: a reader between them would pair new
 weights with the old config. Both therefore carry the same ``revision`` (a digest of weights and
 config; in ``config.json`` and in the safetensors header), and :func:`load_model_folder` reads
-until the two agree, so a reader never uses a mix. The header also holds a digest of the weights
-alone (``drivewm_weights_digest``), which loading recomputes: weights whose bytes changed on disk
-are refused instead of loaded (config.json stays editable by hand).
+until the two agree, so a reader never uses a mix. ``config.json`` also holds a digest of the
+weights alone (``weights_digest``), which loading recomputes: weights whose bytes changed on disk
+are refused instead of loaded, while the rest of config.json stays editable by hand. (One header
+key only: safetensors writes its metadata map in no fixed order, and equal saves must be equal bytes.)
 
 The training state carries a digest of its own content (``digest``), and each save keeps the state
 it replaces as ``train_state.prev.pt``. A resume whose ``train_state.pt`` is missing, truncated or
@@ -47,7 +48,8 @@ DIGEST_KEY = "digest"
 #: Entries every training state has (drivewm.train.loop._checkpoint).
 STATE_KEYS = ("model", "ema", "optimizer", "step", "rng")
 REVISION_KEY = "drivewm_revision"
-WEIGHTS_DIGEST_KEY = "drivewm_weights_digest"
+#: config.json entries written by save_model_folder itself (never taken from ``extra``).
+SAVE_KEYS = ("revision", "weights_digest")
 #: A reader that finds config and weights of different saves waits for the writer's second rename.
 READ_ATTEMPTS, READ_WAIT_S = 20, 0.1
 
@@ -60,20 +62,18 @@ def save_model_folder(
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().contiguous().cpu() for k, v in state_dict.items()}
-    extra = {k: v for k, v in (extra or {}).items() if k != "revision"}  # e.g. a re-export's old revision
+    extra = {k: v for k, v in (extra or {}).items() if k not in SAVE_KEYS}  # e.g. a re-export's old digests
     info = {"model_type": model_type, "drivewm_version": __version__, "config": config, **extra}
-    weights_digest = _weights_digest(tensors)
-    info["revision"] = _revision(weights_digest, info)
+    info["weights_digest"] = _weights_digest(tensors)
+    info["revision"] = _revision(info)
     with atomic_path(path / WEIGHTS_NAME) as tmp:
-        save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"], WEIGHTS_DIGEST_KEY: weights_digest})
+        save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"]})
     write_json(path / CONFIG_NAME, info)
 
 
-def _revision(weights_digest: str, info: dict) -> str:
-    """Digest of the weights and the config: equal saves give equal bytes (deterministic runs stay byte-identical)."""
-    digest = hashlib.blake2b(json.dumps(info, sort_keys=True, default=str).encode(), digest_size=16)
-    digest.update(weights_digest.encode())
-    return digest.hexdigest()
+def _revision(info: dict) -> str:
+    """Digest of config.json's content, weights digest included: equal saves give equal bytes."""
+    return hashlib.blake2b(json.dumps(info, sort_keys=True, default=str).encode(), digest_size=16).hexdigest()
 
 
 def _weights_digest(tensors: dict[str, torch.Tensor]) -> str:
@@ -142,10 +142,9 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
         raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
     for _ in range(READ_ATTEMPTS):
         info = read_model_config(path, model_type)
-        state, header = _read_weights(path / WEIGHTS_NAME)
-        revision = header.get(REVISION_KEY)
+        state, revision = _read_weights(path / WEIGHTS_NAME)
         if info.get("revision") in (None, revision):  # None: written before revisions, or by hand
-            _check_weights(path, header, state)
+            _check_weights(path, info, state)
             return info, state
         time.sleep(READ_WAIT_S)
     raise DrivewmError(
@@ -154,13 +153,13 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
     )
 
 
-def _check_weights(path: Path, header: dict[str, str], state: dict[str, torch.Tensor]) -> None:
-    """The weights still hash to the digest written beside them (no byte changed on disk)."""
-    expected = header.get(WEIGHTS_DIGEST_KEY)
+def _check_weights(path: Path, info: dict, state: dict[str, torch.Tensor]) -> None:
+    """The weights still hash to the digest saved in config.json (no byte changed on disk)."""
+    expected = info.get("weights_digest")
     if expected is not None and _weights_digest(state) != expected:
         raise DrivewmError(
-            f"{path}: {WEIGHTS_NAME} changed after it was saved (its tensors no longer match the digest in its "
-            "header): a damaged copy"
+            f"{path}: {WEIGHTS_NAME} does not match {CONFIG_NAME}'s weights_digest: the weights changed after the "
+            "save (a damaged copy) or come from another save"
         )
 
 
@@ -181,11 +180,11 @@ def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None
     return info
 
 
-def _read_weights(weights_path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
-    """The tensors of a safetensors file and its header's metadata (revision, weights digest)."""
+def _read_weights(weights_path: Path) -> tuple[dict[str, torch.Tensor], str | None]:
+    """The tensors of a safetensors file and the revision in its header (None when it has none)."""
     try:
         with safe_open(str(weights_path), framework="pt") as f:
-            return {k: f.get_tensor(k) for k in f.keys()}, f.metadata() or {}
+            return {k: f.get_tensor(k) for k in f.keys()}, (f.metadata() or {}).get(REVISION_KEY)
     except Exception as exc:  # safetensors raises several types for bad files
         raise DrivewmError(f"{weights_path}: cannot read weights ({exc.__class__.__name__})") from None
 

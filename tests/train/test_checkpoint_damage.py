@@ -142,5 +142,7 @@ def test_model_folder_with_changed_weights_is_refused(tmp_path):
     save_model_folder(tmp_path / "m", "linear", {"width": 64}, {"w": torch.arange(4096, dtype=torch.float32)})
     assert load_model_folder(tmp_path / "m", "linear")[1]["w"][7] == 7
     _flip_tensor_byte(tmp_path / "m" / "model.safetensors")
-    with pytest.raises(DrivewmError, match=r"model\.safetensors changed after it was saved"):
+    with pytest.raises(
+        DrivewmError, match=r"model\.safetensors does not match config\.json's weights_digest: the weights changed"
+    ):
         load_model_folder(tmp_path / "m", "linear")
