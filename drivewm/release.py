@@ -53,11 +53,15 @@ def export_folder(src: Path, dst: Path) -> dict:
     saved = load_train_state(src)
     if saved is None:
         return {}
-    return {"steps": int(saved["step"]), "train_seconds": float(saved.get("train_seconds", 0.0))}
+    seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock
+    return {"steps": int(saved["step"]), "train_seconds": None if seconds is None else float(seconds)}
 
 
-def export_run(run: str | Path, out: str | Path) -> list[Path]:
-    """Export the three model folders of ``run`` into ``out`` and write the manifest; returns the files."""
+def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
+    """Export the three model folders of ``run`` into ``out``, write the manifest and the model card
+    (drivewm.model_card, with ``notes`` as its last section); returns the files."""
+    from drivewm.model_card import write_model_card
+
     run, out = Path(run), Path(out)
     records = {name: export_folder(run / folder, out / name) for name, folder in RUN_FOLDERS.items()}
     files = sorted(p for name in RUN_FOLDERS for p in (out / name).iterdir() if p.is_file())
@@ -70,7 +74,7 @@ def export_run(run: str | Path, out: str | Path) -> list[Path]:
         "training": records,
     }
     write_json(out / "MANIFEST.json", manifest)
-    return [*files, out / "MANIFEST.json"]
+    return [*files, out / "MANIFEST.json", write_model_card(run, out, manifest, notes)]
 
 
 def check_manifest(root: Path = WEIGHTS_DIR) -> dict:

@@ -116,11 +116,19 @@ class Clip:
 
 
 def clip_from_arrays(
-    meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18
+    meta: ClipMeta,
+    frames: dict[str, np.ndarray],
+    T_world_from_ego: np.ndarray,
+    crf: int = 18,
+    preset: str = "veryfast",
+    threads: int = 0,
+    yuv_converter: str = "swscale",
 ) -> Clip:
-    """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta)."""
+    """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta);
+    ``crf``, ``preset``, ``threads``, ``yuv_converter``: the H.264 settings of
+    :func:`drivewm.clips.video.encode_mp4`."""
     validate_meta(meta)
-    mp4 = {c: encode_mp4(frames[c], meta.fps, crf) for c in meta.cameras}
+    mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads, yuv_converter) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
     clip._decoded.update({c: frames[c] for c in meta.cameras})
     return clip

@@ -11,6 +11,7 @@ downstream, so it must be a safe name: drivewm.paths) and never unpickle
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
 import json
@@ -31,8 +32,10 @@ MANIFEST_NAME = "manifest.jsonl"
 class ShardWriter:
     """Write clips into ``OUT/NAME-000000.tar``, ``NAME-000001.tar``, ... (``max_clips`` per tar).
 
-    Use as a context manager; each shard appears atomically when it is full or on close.
-    ``written`` lists (shard path, clip key) for the manifest.
+    Use as a context manager. Each clip's members are appended to the open shard as it is
+    written (nothing is held per clip), and the shard appears atomically when it is full or on
+    close; leaving on an exception discards the open shard. ``written`` lists (shard path, clip
+    key) of the shards that appeared, for the manifest.
     """
 
     def __init__(self, out_dir: str | Path, name: str, max_clips: int = 64):
@@ -40,7 +43,8 @@ class ShardWriter:
         self.name = check_name(name, "shard name")
         self.max_clips = max_clips
         self.written: list[tuple[str, str]] = []
-        self._pending: list[Clip] = []
+        self._open: tuple[contextlib.ExitStack, tarfile.TarFile, Path] | None = None
+        self._keys: list[str] = []
         self._index = 0
 
     def __enter__(self) -> ShardWriter:
@@ -49,25 +53,36 @@ class ShardWriter:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
             self.flush()
+        elif self._open is not None:
+            stack, tar, _ = self._open
+            tar.close()
+            stack.__exit__(exc_type, exc, tb)  # atomic_path removes the temporary
+            self._open = None
 
     def write(self, clip: Clip) -> None:
         validate_meta(clip.meta)
         missing = [c for c in clip.meta.cameras if c not in clip.mp4]
         if missing:
             raise DrivewmError(f"clip {clip.key}: no video for cameras {missing}")
-        self._pending.append(clip)
-        if len(self._pending) >= self.max_clips:
+        if self._open is None:
+            path = child_path(self.out_dir, f"{self.name}-{self._index:06d}", ext="tar")
+            stack = contextlib.ExitStack()
+            tmp = stack.enter_context(atomic_path(path))
+            self._open = (stack, tarfile.open(tmp, "w"), path)
+        _add_clip(self._open[1], clip)
+        self._keys.append(clip.key)
+        if len(self._keys) >= self.max_clips:
             self.flush()
 
     def flush(self) -> None:
-        if not self._pending:
+        """Close the open shard (renaming it into place)."""
+        if self._open is None:
             return
-        path = child_path(self.out_dir, f"{self.name}-{self._index:06d}", ext="tar")
-        with atomic_path(path) as tmp, tarfile.open(tmp, "w") as tar:
-            for clip in self._pending:
-                _add_clip(tar, clip)
-        self.written += [(path.name, c.key) for c in self._pending]
-        self._pending = []
+        stack, tar, path = self._open
+        tar.close()
+        stack.close()
+        self.written += [(path.name, key) for key in self._keys]
+        self._open, self._keys = None, []
         self._index += 1
 
 

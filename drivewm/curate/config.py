@@ -109,6 +109,10 @@ class CurateConfig:
     sync_tolerance_ms: float = 25.0
     """A camera frame belongs to a tick when it is within this of the tick plus the camera's exposure
     offset (must be < half a clip frame)."""
+    max_gap_ms: float = 1000.0
+    """A camera's clock moving forward by more than this between frames (a recorder pause, a clock
+    jump) ends a span of ticks, the next starts afresh; moving back by more than this drops frames
+    until it passes its earlier maximum. Shorter gaps are dropped frames (invalid ticks)."""
     per_camera_offsets: bool = True
     """Estimate each camera's steady exposure offset from the reference (first) camera (rigs that fire
     cameras in turn) and apply the tolerance around it; false: around the tick for every camera."""
@@ -120,6 +124,16 @@ class CurateConfig:
     """Minimum shot length in clip frames for the detector."""
     crf: int = 18
     """H.264 constant rate factor of the clip videos."""
+    h264_preset: str = "veryfast"
+    """libx264 preset: encoding is most of curation's CPU time; "ultrafast" takes about a third of
+    "veryfast"'s at the same crf, with higher PSNR and ~1.5x larger files (benchmarks/bench_curate.py)."""
+    h264_threads: int = 0
+    """libx264 threads per clip video: 0 lets x264 choose (slices over the machine's cores: the bytes
+    depend on the machine, and workers oversubscribe the cores); 1: one core per worker, same bytes everywhere."""
+    h264_yuv_converter: str = "swscale"
+    """Who converts the RGB frames to the encoder's yuv420p: "swscale" (FFmpeg, through PyAV) or "opencv"
+    (cv2.cvtColor: the same BT.601 limited range within 1-3 levels, ~0.3 dB lower PSNR, ~18 % less encode CPU
+    with "ultrafast")."""
     clips_per_shard: int = 32
     """Clips per tar shard."""
     filters: FilterConfig = dataclasses.field(default_factory=FilterConfig)
@@ -149,8 +163,23 @@ class CurateConfig:
             raise DrivewmError(
                 f"sync_tolerance_ms must be below half a frame ({500 / self.fps:.1f} ms), got {self.sync_tolerance_ms}"
             )
+        if self.max_gap_ms <= 1000.0 / self.fps:
+            raise DrivewmError(
+                f"curate config: max_gap_ms {self.max_gap_ms} must exceed a clip frame ({1000 / self.fps:g} ms)"
+            )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
+        from drivewm.clips.video import X264_PRESETS, YUV_CONVERTERS
+
+        if self.h264_preset not in X264_PRESETS or self.h264_threads < 0:
+            raise DrivewmError(
+                f"curate config: h264_preset {self.h264_preset!r} must be one of {list(X264_PRESETS)} "
+                f"and h264_threads ({self.h264_threads}) >= 0"
+            )
+        if self.h264_yuv_converter not in YUV_CONVERTERS:
+            raise DrivewmError(
+                f"curate config: h264_yuv_converter {self.h264_yuv_converter!r} must be one of {list(YUV_CONVERTERS)}"
+            )
 
     @property
     def period_ns(self) -> float:

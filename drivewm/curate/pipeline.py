@@ -57,6 +57,7 @@ def curate(
         remove_leftovers(out_dir)
         jobs = [(str(p), n) for p, n in zip(logs, name_logs(logs))]
         results = _run(jobs, out_dir, cfg, executor, workers, ray_address, progress)
+        remove_leftovers(out_dir)  # a worker killed mid-log (then retried) left its temporary shard
         rows, cross = dedup_across_logs(results, cfg.filters.dedup_cosine)
         prune_shards(out_dir, results, set(cross))
         check_manifest(out_dir, rows)

@@ -49,6 +49,7 @@ def register(subparsers) -> None:
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
+    p.add_argument("--max-clips", type=int, default=None, help="score N clips spread evenly over the input")
     p.set_defaults(func=run_eval)
 
 
@@ -74,6 +75,7 @@ def run_eval(args: argparse.Namespace) -> int:
         reference=args.reference,
         pictures=not args.no_pictures,
         rig_fit=args.rig_fit,
+        max_clips=args.max_clips,
     )
     # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
     summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})

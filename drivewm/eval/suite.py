@@ -30,7 +30,7 @@ from drivewm.eval.matching import FrameMatcher
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
 from drivewm.eval.trajectory import ego_from_sfm
-from drivewm.eval.trajectory_errors import ate, relative_pose_errors, tfe
+from drivewm.eval.trajectory_errors import ate, heading_change_deg, relative_pose_errors, tfe, waypoint_heading_deg
 from drivewm.workers import process_pool
 
 #: Figures reported beside each Sampson metric (drivewm.eval.suite._put_sampson).
@@ -173,6 +173,9 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         metrics["status"]["traj"] = "not_registered"
         return
     est = ego.T_world_from_ego[reg]
+    metrics["yaw_change_deg"] = heading_change_deg(est)  # the turn the video shows (first to last registered)
+    if item.trajectory_ego:
+        metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
         metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
@@ -243,6 +246,15 @@ def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress
     return [results[i] for i in range(len(items))]
 
 
+def spread(items: list, n: int | None) -> list:
+    """``n`` items evenly spaced over ``items`` (all of them when n is None or not smaller)."""
+    if n is None or n >= len(items):
+        return items
+    if n < 1:
+        raise DrivewmError(f"max_clips must be >= 1, got {n}")
+    return [items[i * len(items) // n] for i in range(n)]
+
+
 def evaluate(
     location: str | Path,
     rig=None,
@@ -255,6 +267,7 @@ def evaluate(
     progress: bool = True,
     pictures: bool = True,
     rig_fit: str = "same",
+    max_clips: int | None = None,
 ) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
@@ -262,9 +275,11 @@ def evaluate(
     also writes metrics.json, metrics.md (beside ``reference`` values), error-distribution plots
     and a Rerun recording (eval.rrd). ``rig_fit``: how videos of another aspect ratio than the rig
     were resized from it ('same' refuses them, 'stretch', 'crop'; drivewm.geometry.Camera.scaled).
+    ``max_clips``: score that many clips spread evenly over the (sorted) input, e.g. a reference
+    subset of a large held-out set.
     """
     cfg = cfg or EvalConfig()
-    items = load_items(location, rig, grid, cameras, rig_fit)
+    items = spread(load_items(location, rig, grid, cameras, rig_fit), max_clips)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
     results = run_items(items, cfg, workers, progress)

@@ -11,6 +11,7 @@ from drivewm.cli import main
 from drivewm.clips import ShardWriter
 from drivewm.clips.video import encode_mp4
 from drivewm.config import load_yaml, to_dict
+from drivewm.errors import DrivewmError
 from drivewm.eval.config import EVAL_RECIPES, EvalConfig
 from drivewm.eval.inputs import EvalItem
 from drivewm.eval.suite import aggregate, evaluate, evaluate_item
@@ -163,3 +164,13 @@ def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
     assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1 and summary["tse_counted"] is None
     metrics = json.loads((out / "metrics.json").read_text())
     assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
+
+
+def test_max_clips_spreads_the_subset_over_the_input():
+    from drivewm.eval.suite import spread
+
+    items = list(range(10))
+    assert spread(items, 3) == [0, 3, 6] and spread(items, 5) == [0, 2, 4, 6, 8]
+    assert spread(items, None) == items and spread(items, 12) == items
+    with pytest.raises(DrivewmError, match="max_clips"):
+        spread(items, 0)
