@@ -15,11 +15,9 @@ import hashlib
 import json
 from pathlib import Path
 
-import torch
-
 from drivewm.atomic import write_json
 from drivewm.errors import DrivewmError
-from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, save_model_folder
+from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, load_train_state, save_model_folder
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 #: Model folders of a run, by the name they ship under.
@@ -52,13 +50,11 @@ def export_folder(src: Path, dst: Path) -> dict:
     if "latent" in extra and extra["latent"].get("tokenizer"):
         extra["latent"] = {**extra["latent"], "tokenizer": "../tokenizer"}
     save_model_folder(dst, info["model_type"], info["config"], half, extra)
-    train_state = src / "train_state.pt"
-    record = {}
-    if train_state.is_file():
-        saved = torch.load(train_state, map_location="cpu", weights_only=True)
-        seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock
-        record = {"steps": int(saved["step"]), "train_seconds": None if seconds is None else float(seconds)}
-    return record
+    saved = load_train_state(src)
+    if saved is None:
+        return {}
+    seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock
+    return {"steps": int(saved["step"]), "train_seconds": None if seconds is None else float(seconds)}
 
 
 def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:

@@ -18,7 +18,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from drivewm.atomic import write_text  # noqa: E402
+from drivewm.atomic import atomic_path, read_jsonl, write_text  # noqa: E402
 
 #: Eval metrics shown in the real-vs-generated table, with their meaning and unit.
 EVAL_ROWS = {
@@ -36,10 +36,6 @@ def _read_json(path: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def _read_jsonl(path: Path) -> list[dict]:
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.is_file() else []
-
-
 def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.3f}"
@@ -48,7 +44,7 @@ def _fmt(value) -> str:
 
 def training_curves(out: Path, dest: Path) -> Path | None:
     """Plot loss against step for every stage that wrote metrics.jsonl; None if there are none."""
-    runs = {name: _read_jsonl(out / name / "metrics.jsonl") for name in ("tokenizer", "text2world", "multiview")}
+    runs = {name: read_jsonl(out / name / "metrics.jsonl") for name in ("tokenizer", "text2world", "multiview")}
     runs = {k: v for k, v in runs.items() if v}
     if not runs:
         return None
@@ -58,7 +54,8 @@ def training_curves(out: Path, dest: Path) -> Path | None:
         ax.set(title=name, xlabel="step", ylabel="training loss", yscale="log")
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(dest, dpi=110)
+    with atomic_path(dest) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return dest
 

@@ -8,16 +8,16 @@ Generated samples use the same format, so the benchmark scores real and generate
 from __future__ import annotations
 
 import dataclasses
-import re
 
 import numpy as np
 
 from drivewm.clips.video import decode_mp4, encode_mp4
+from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
+from drivewm.paths import check_name
 
 CLIP_FORMAT_VERSION = 1
-KEY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
 
 
 @dataclasses.dataclass
@@ -61,6 +61,7 @@ class ClipMeta:
         return [c["name"] for c in self.rig["cameras"]]
 
     def get_rig(self) -> Rig:
+        """The rig, checked (camera names, finite invertible K, rigid poses)."""
         return rig_from_dict(self.rig, f"clip {self.key}")
 
     def camera_times_ns(self, camera: str) -> list[int]:
@@ -75,14 +76,16 @@ class ClipMeta:
 
     @classmethod
     def from_json(cls, data: dict, where: str) -> ClipMeta:
+        """Parse and check ``KEY.json`` (types, key, cameras, rig); fields of newer writers are ignored."""
+        if not isinstance(data, dict):
+            raise DrivewmError(f"{where}: clip metadata is not a JSON object")
         version = data.get("format_version")
         if version != CLIP_FORMAT_VERSION:
             raise DrivewmError(f"{where}: clip format_version {version!r}, this drivewm reads {CLIP_FORMAT_VERSION}")
         names = {f.name for f in dataclasses.fields(cls)}
-        try:
-            return cls(**{k: v for k, v in data.items() if k in names})
-        except TypeError as exc:
-            raise DrivewmError(f"{where}: bad clip metadata ({exc})") from None
+        meta = from_dict(cls, {k: v for k, v in data.items() if k in names}, f"{where} metadata", finite=False)
+        validate_meta(meta, where)
+        return meta
 
 
 @dataclasses.dataclass
@@ -131,12 +134,13 @@ def clip_from_arrays(
     return clip
 
 
-def validate_meta(meta: ClipMeta) -> None:
-    """Raise DrivewmError if the metadata breaks the contract."""
-    if not KEY_PATTERN.match(meta.key):
-        raise DrivewmError(f"clip key {meta.key!r}: use only letters, digits, '_' and '-' (no dots)")
-    if meta.fps <= 0 or meta.num_frames == 0:
-        raise DrivewmError(f"clip {meta.key}: needs fps > 0 and at least one timestamp")
+def validate_meta(meta: ClipMeta, where: str = "") -> None:
+    """Raise DrivewmError if the metadata breaks the contract: the key and camera names become file
+    names (``KEY.CAMERA.mp4``), so both must be safe names (drivewm.paths); the rig must load."""
+    prefix = f"{where}: " if where else ""
+    check_name(meta.key, f"{prefix}clip key")
+    if not meta.fps > 0 or not np.isfinite(meta.fps) or meta.num_frames == 0:
+        raise DrivewmError(f"{prefix}clip {meta.key}: needs a finite fps > 0 and at least one timestamp")
     meta.get_rig()
     for camera, times in meta.camera_timestamps_ns.items():
         if camera not in meta.cameras or len(times) != meta.num_frames:

@@ -9,7 +9,9 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from drivewm.config import above, at_least, in_range, require
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
 
 
@@ -39,6 +41,12 @@ class FilterConfig:
     dedup_cosine: float = 0.985
     """Near-duplicate clips: cosine similarity of clip embeddings at or above this drops the later clip. 1 disables."""
 
+    def validate(self) -> None:
+        at_least(self, 0, "min_ego_distance_m", "min_sharpness", "dark_luma", "dark_highlight", "frozen_diff")
+        at_least(self, 0, "min_camera_motion_px")
+        for name in ("bright_fraction", "max_bad_exposure_fraction", "max_frozen_fraction", "dedup_cosine"):
+            in_range(self, name, 0, 1)
+
 
 @dataclasses.dataclass
 class PrivacyConfig:
@@ -57,6 +65,10 @@ class PrivacyConfig:
     blur_kernel_frac: float = 0.5
     """Gaussian kernel size as a fraction of the box's shorter side."""
 
+    def validate(self) -> None:
+        in_range(self, "face_score", 0, 1)
+        above(self, 0, "blur_kernel_frac")
+
 
 @dataclasses.dataclass
 class TrajectoryConfig:
@@ -72,6 +84,9 @@ class TrajectoryConfig:
     """Process noise: white yaw acceleration (rad/s^2)."""
     gate_chi2: float = 25.0
     """Innovation gate: a measurement whose squared Mahalanobis distance exceeds this is rejected as jitter."""
+
+    def validate(self) -> None:
+        above(self, 0, "position_sigma_m", "yaw_sigma_rad", "accel_sigma_mps2", "yaw_accel_sigma_radps2", "gate_chi2")
 
 
 @dataclasses.dataclass
@@ -130,12 +145,23 @@ class CurateConfig:
     """Sample clips shown in contact_sheet.png."""
 
     def validate(self) -> None:
-        if self.clip_frames < 2 or self.stride_frames < 1 or self.fps <= 0:
-            raise DrivewmError("curate config: need clip_frames >= 2, stride_frames >= 1 and fps > 0")
+        at_least(self, 2, "clip_frames")
+        at_least(self, 1, "stride_frames", "trajectory_waypoints", "shot_min_frames", "clips_per_shard")
+        at_least(self, 0, "shot_threshold", "sync_tolerance_ms", "contact_sheet_clips")
+        above(self, 0, "fps")
+        in_range(self, "crf", 0, 51)  # libx264's range
+        if self.cameras is not None:
+            require(
+                len(self.cameras) > 0 and len(set(self.cameras)) == len(self.cameras),
+                "cameras",
+                self.cameras,
+                "a non-empty list of distinct names",
+            )
+            for name in self.cameras:
+                check_name(name, "cameras: camera name")
         if self.sync_tolerance_ms * 1e-3 >= 0.5 / self.fps:
             raise DrivewmError(
-                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame "
-                f"({500 / self.fps:.1f} ms)"
+                f"sync_tolerance_ms must be below half a frame ({500 / self.fps:.1f} ms), got {self.sync_tolerance_ms}"
             )
         if self.max_gap_ms <= 1000.0 / self.fps:
             raise DrivewmError(
@@ -154,8 +180,6 @@ class CurateConfig:
             raise DrivewmError(
                 f"curate config: h264_yuv_converter {self.h264_yuv_converter!r} must be one of {list(YUV_CONVERTERS)}"
             )
-        if self.trajectory_waypoints < 1:
-            raise DrivewmError("curate config: trajectory_waypoints must be >= 1")
 
     @property
     def period_ns(self) -> float:

@@ -3,25 +3,26 @@
 Both call :func:`drivewm.curate.stage.curate_log` once per log and return its results in input
 order; each log's shards and done-marker are written by the worker itself, so results survive
 a crash of the driver. ``workers=1`` runs in-process (easiest to debug); more workers use a
-``spawn`` process pool. Ray runs the same function as a ``map`` over a dataset of log paths; Ray (the
-optional ``ray`` extra, seconds to import) is imported only when the Ray executor runs.
+``spawn`` process pool (drivewm.workers) whose workers exit when the driver dies. Ray runs the same
+function as a ``map`` over a dataset of log paths; Ray (the optional ``ray`` extra, seconds to import) is
+imported only when the Ray executor runs.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import multiprocessing
 import os
 import traceback
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 
 import cv2
 
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.stage import curate_log, load_embeddings
 from drivewm.errors import DrivewmError
+from drivewm.workers import process_pool
 
 Progress = Callable[[dict], None]
 
@@ -60,8 +61,7 @@ def run_local(
         return results
 
     by_index: dict[int, dict] = {}
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread_per_worker) as pool:
+    with process_pool(workers, _one_thread_per_worker) as pool:
         futures = {pool.submit(_safe_curate, log, out_dir, cfg, name): i for i, (log, name) in enumerate(jobs)}
         for fut in as_completed(futures):
             by_index[futures[fut]] = load_embeddings(out_dir, fut.result())

@@ -39,13 +39,14 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.logs.reader import LogStream
 from drivewm.logs.types import LogIndex
+from drivewm.paths import child_path, sanitize_name
 
 MARKER_DIR = "logs"
 
 
 def log_name(path: str | Path) -> str:
-    """Shard/marker name of a log: its file stem with anything but [A-Za-z0-9_-] replaced by '_'."""
-    return re.sub(r"[^A-Za-z0-9_\-]", "_", Path(path).stem) or "log"
+    """Shard/marker name of a log: its file stem made a safe name (drivewm.paths.sanitize_name)."""
+    return sanitize_name(Path(path).stem, "log")
 
 
 def config_fingerprint(cfg: CurateConfig) -> str:
@@ -54,7 +55,7 @@ def config_fingerprint(cfg: CurateConfig) -> str:
 
 
 def marker_path(out_dir: Path, name: str) -> Path:
-    return Path(out_dir) / MARKER_DIR / f"{name}.json"
+    return child_path(Path(out_dir) / MARKER_DIR, name, ext="json", what="log name")
 
 
 def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
@@ -64,9 +65,17 @@ def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
         return None
     try:
         result = json.loads(path.read_text())
-    except json.JSONDecodeError:
+    except ValueError:  # a marker that is not JSON: redo the log
         return None
-    return result if result.get("config") == config_fingerprint(cfg) else None
+    if not isinstance(result, dict) or result.get("config") != config_fingerprint(cfg):
+        return None
+    shard = re.compile(rf"{re.escape(name)}-\d{{6}}\.tar")  # a marker only ever names this log's shards
+    rows = result.get("rows")
+    if not isinstance(rows, list) or not all(
+        isinstance(r, dict) and shard.fullmatch(str(r.get("shard"))) for r in rows
+    ):
+        return None
+    return result
 
 
 def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None = None) -> dict:
@@ -156,7 +165,13 @@ def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
         rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (TickImages)
-    empty, gap_ns, tol_ns = np.zeros(0, dtype=np.int64), cfg.max_gap_ms * 1e6, cfg.sync_tolerance_ms * 1e6
+    empty = np.zeros(0, dtype=np.int64)
+    silent = [c for c in rig.names if not len(log.image_timestamps_ns.get(c, empty))]
+    if silent:
+        raise DrivewmError(
+            f"{log.path}: camera(s) {silent} have a calibration but no images; curate the others with cameras=[...]"
+        )
+    gap_ns, tol_ns = cfg.max_gap_ms * 1e6, cfg.sync_tolerance_ms * 1e6
     times, jumps, dropped = {}, {}, {}
     for c in rig.names:
         arrival = log.image_timestamps_ns.get(c, empty)
@@ -391,10 +406,23 @@ def _manifest_row(meta: ClipMeta) -> dict:
     }
 
 
+def _span_warnings(ctx: _LogContext) -> list[str]:
+    """Cameras that start late or stop early by more than a clip frame: clips only cover the span where
+    every camera runs, so a camera whose clock jumped (or that died) silently shortens the drive."""
+    starts = {c: int(t[0]) for c, t in ctx.sorted_ns.items() if len(t)}
+    ends = {c: int(t[-1]) for c, t in ctx.sorted_ns.items() if len(t)}
+    out = []
+    for c in starts:
+        late, early = (starts[c] - min(starts.values())) * 1e-9, (max(ends.values()) - ends[c]) * 1e-9
+        if max(late, early) * ctx.cfg.fps > 1:
+            out.append(f"{c}: starts {late:.2f} s late and stops {early:.2f} s early; clips cover only the common span")
+    return out
+
+
 def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock: StepClock) -> dict:
     """The per-log result (also the done-marker's content)."""
     table, smooth = ctx.table, ctx.smooth
-    warnings = [
+    warnings = list(ctx.log.warnings) + [
         f"{c}: {s['missing_ticks']} of {len(table.tick_ns)} ticks without a frame within tolerance"
         for c, s in table.stats.items()
         if s["missing_ticks"]
@@ -404,6 +432,7 @@ def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock:
         for c, s in table.stats.items()
         if s.get("duplicate_timestamps")
     ]
+    warnings += _span_warnings(ctx)
     warnings += ctx.clocks.warnings(table, ctx.cfg.fps)
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")

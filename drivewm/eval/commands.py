@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from drivewm import resources
 from drivewm.config import to_dict
+from drivewm.errors import BatchError
 from drivewm.eval.config import ALL_METRICS, EVAL_RECIPES
 
 
@@ -79,4 +81,12 @@ def run_eval(args: argparse.Namespace) -> int:
     summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})
     print(json.dumps(summary, indent=2, allow_nan=False))
     print(f"wrote {args.out}/metrics.json and metrics.md")
+    failed = [m["error"] for m in metrics["clips"].values() if "error" in m]
+    if len(failed) == metrics["num_clips"]:
+        raise BatchError(f"eval: every input failed ({len(failed)} of {metrics['num_clips']})", failed)
+    for line in failed:
+        print(f"warning: failed {line}", file=sys.stderr)
+    for key, m in metrics["clips"].items():
+        for line in m.get("warnings", []):
+            print(f"warning: {key}: {line}", file=sys.stderr)
     return 0

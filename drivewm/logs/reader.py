@@ -79,7 +79,15 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in index.rig.names}
     agents = sorted(col.agents, key=lambda a: a[0])
     log = DriveLog(
-        index.path, index.rig, images, index.pose_timestamps_ns, index.T_world_from_ego, index.scene, agents, index.road
+        index.path,
+        index.rig,
+        images,
+        index.pose_timestamps_ns,
+        index.T_world_from_ego,
+        index.scene,
+        agents,
+        index.road,
+        index.warnings,
     )
     if require_images:
         log.validate()
@@ -239,16 +247,33 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
     order = _camera_order(meta, tmap, col)
     cameras = [_camera(path, name, col, tmap, ego) for name in order]
     rig = Rig(meta.get("rig") or tmap.rig_name or Path(path).stem, cameras)
+    warnings = _order_warnings(col, order)
+    listed = [n for n in meta.get("cameras", "").split(",") if n and n not in col.calibrations]
+    if listed:
+        warnings.append(f"the log's metadata lists camera(s) {listed} but it has no calibration or images for them")
     stamps = {name: np.asarray(col.image_stamps.get(name, []), dtype=np.int64) for name in order}
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
-    return LogIndex(str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road)
+    return LogIndex(str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road, warnings)
+
+
+def _order_warnings(col: _Collected, cameras: list[str]) -> list[str]:
+    """One line per camera (and the ego poses) whose timestamps go backwards in log order: the reader
+    sorts them by time, which mends swapped stamps but interleaves a clock that jumped back."""
+    series = {f"camera {c}": col.image_stamps.get(c, []) for c in cameras}
+    series["ego poses"] = [t for t, _ in col.poses]
+    out = []
+    for what, stamps in series.items():
+        back = int((np.diff(np.asarray(stamps, dtype=np.int64)) < 0).sum()) if len(stamps) > 1 else 0
+        if back:
+            out.append(f"{what}: timestamps go backwards {back} time(s) in log order; sorted by time")
+    return out
 
 
 def _camera_order(meta: dict, tmap: TopicMap, col: _Collected) -> list[str]:
     """Rig order: the file's own record, else the topic map's, else first calibration seen."""
     listed = [n for n in meta.get("cameras", "").split(",") if n]
-    if listed and set(listed) == set(col.calibrations):
-        return listed
+    if listed and set(col.calibrations) <= set(listed):  # cameras listed but absent are warned about
+        return [n for n in listed if n in col.calibrations]
     if tmap.cameras:
         return [n for n in tmap.cameras if n in col.calibrations]
     return list(col.calibrations)
@@ -266,7 +291,10 @@ def _camera(path: str | Path, name: str, col: _Collected, tmap: TopicMap, ego: s
     T_ego_from_cam = col.frames.static_transform(ego, frame)
     if T_ego_from_cam is None:
         raise DrivewmError(f"{path}: camera {name!r}: no transform from {ego!r} to its frame {frame!r} in the log")
-    return Camera(name, cal.K.reshape(3, 3), cal.width, cal.height, T_ego_from_cam, cal.D)
+    try:
+        return Camera(name, cal.K.reshape(3, 3), cal.width, cal.height, T_ego_from_cam, cal.D)
+    except DrivewmError as exc:  # a singular K, an unusable camera name, ...
+        raise DrivewmError(f"{path}: {exc}") from None
 
 
 def _ego_poses(col: _Collected, world: str, ego: str) -> tuple[np.ndarray, np.ndarray]:

@@ -85,6 +85,8 @@ class DriveLog:
     ``pose_timestamps_ns`` (N,) int64 and ``T_world_from_ego`` (N, 4, 4): the per-tick ego pose.
     ``agents``: optional (timestamp_ns, boxes) per tick, for viewers (simulated logs have them).
     ``road``: optional static road polylines (lane centres, boundaries, edges), for viewers.
+    ``warnings``: what the reader repaired or left out (e.g. frames sorted back into time order), one
+    line each; curation reports them per log.
     """
 
     path: str
@@ -95,6 +97,7 @@ class DriveLog:
     scene: SceneInfo
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     road: list[RoadLine] = dataclasses.field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def camera_names(self) -> list[str]:
@@ -121,6 +124,8 @@ class LogIndex:
     T_world_from_ego: np.ndarray
     scene: SceneInfo
     road: list[RoadLine] = dataclasses.field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    """What the reader repaired or left out, one line each (as :class:`DriveLog`)."""
 
     def validate(self) -> None:
         """Raise DrivewmError naming the file if the log breaks the contract."""

@@ -78,10 +78,13 @@ FLAG_FIELDS = {
 
 def run_simulate(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
+    from drivewm.errors import DrivewmError
     from drivewm.sim import simulate_many
     from drivewm.sim.recipe import load_recipe, plan_drives
     from drivewm.sim.world import sim_rig
 
+    if args.drives < 1:
+        raise DrivewmError(f"--drives must be >= 1, got {args.drives}")
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
         plan = load_recipe(args.recipe, given, args.overrides)

@@ -40,19 +40,19 @@ def load_recipe(
     (e.g. the command line's flags) and then ``overrides`` replace fields in every entry."""
     path = resources.find(RECIPES, name_or_path, "simulate recipe")
     data = load_yaml(path)
-    unknown = sorted(set(data) - {"common", "drives"})
-    if unknown or not isinstance(data.get("drives"), list) or not data["drives"]:
-        raise DrivewmError(
-            f"{path}: a recipe has 'common' (optional) and a non-empty 'drives' list; unknown keys {unknown}"
-        )
+    unknown = sorted(str(k) for k in data if k not in ("common", "drives"))
     common = data.get("common") or {}
+    if unknown or not isinstance(data.get("drives"), list) or not data["drives"] or not isinstance(common, dict):
+        raise DrivewmError(
+            f"{path}: a recipe has 'common' (optional mapping) and a non-empty 'drives' list; unknown keys {unknown}"
+        )
     out = []
     for i, entry in enumerate(data["drives"]):
         if not isinstance(entry, dict):
             raise DrivewmError(f"{path}: drives[{i}] must be a mapping")
         entry = {**common, **entry, **(fields or {})}
         count = entry.pop("count", 1)
-        if not isinstance(count, int) or count < 1:
+        if not isinstance(count, int) or isinstance(count, bool) or count < 1:
             raise DrivewmError(f"{path}: drives[{i}].count must be a positive integer, got {count!r}")
         out.append((apply_overrides(SimConfig, entry, list(overrides), f"{path}: drives[{i}]"), count))
     return out

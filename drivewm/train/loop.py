@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -27,7 +26,7 @@ import torch.distributed as dist
 from torch import nn
 from tqdm import tqdm
 
-from drivewm.atomic import write_text
+from drivewm.atomic import JsonlAppender
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import load_train_state, save_train_state
 from drivewm.train.config import TrainConfig
@@ -206,14 +205,15 @@ def _checkpoint(run: _Run, task: TrainTask, out_dir: Path, config_record: dict) 
     barrier(run.info)
 
 
-def _metrics_file(out_dir: Path, start_step: int):
-    """metrics.jsonl opened for appending, without rows past ``start_step`` (a resumed run rewrites them)."""
-    path = out_dir / METRICS_NAME
-    out_dir.mkdir(parents=True, exist_ok=True)
-    if path.is_file():
-        rows = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] <= start_step]
-        write_text(path, "".join(r + "\n" for r in rows))
-    return path.open("a")
+def _metrics_file(out_dir: Path, start_step: int) -> JsonlAppender:
+    """metrics.jsonl opened for appending, without rows past ``start_step`` (a resumed run rewrites them)
+    and without a torn last row (a kill mid-append)."""
+    return JsonlAppender(out_dir / METRICS_NAME, keep=lambda row: _row_step(row) <= start_step)
+
+
+def _row_step(row: dict) -> float:
+    step = row.get("step")
+    return step if isinstance(step, int) else float("inf")
 
 
 def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, float, dict[str, float]]:
@@ -284,8 +284,7 @@ def train(
             }
             busy_s, busy_steps = 0.0, 0
             if metrics:
-                metrics.write(json.dumps(last) + "\n")
-                metrics.flush()
+                metrics.write(last)
             bar.set_postfix(loss=f"{loss:.4f}")
         if run.step % cfg.checkpoint_every == 0 or run.step == end:
             _checkpoint(run, task, out_dir, config_record or {})
