@@ -29,6 +29,8 @@ class ClipMeta:
     starting one step after the first frame. ``quality``: filter scores by filter name.
     ``sync_error_ns``: worst camera skew against the reference clock over the clip.
     ``extra``: anything else (generated clips record model, prompt, seed, trajectory name).
+    ``pair_id``: the same drive window in other conditions has the same id (simulated drives:
+    ``<drive_id>-t<start tick>``, see drivewm.sim.paired); "" = no known partner.
     """
 
     key: str
@@ -45,6 +47,7 @@ class ClipMeta:
     trajectory_ego: list[list[float]] = dataclasses.field(default_factory=list)
     trajectory_dt_s: float = 0.0
     extra: dict = dataclasses.field(default_factory=dict)
+    pair_id: str = ""
     format_version: int = CLIP_FORMAT_VERSION
 
     @property

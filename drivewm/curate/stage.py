@@ -255,7 +255,15 @@ def _meta(
         trajectory_ego=np.round(waypoints, 4).tolist(),
         trajectory_dt_s=dt_s,
         extra={"speed_mps": motion["speed_mps"], "description": ctx.log.scene.description},
+        pair_id=pair_id(ctx.log.scene.tags, start),
     )
+
+
+def pair_id(scene_tags: dict[str, str], start_tick: int) -> str:
+    """``<drive_id>-t<start tick>``: the clip of the same window of the same drive in every condition
+    (the scene tag ``drive_id`` of simulated logs, drivewm.sim.paired); "" when the log has none."""
+    drive = scene_tags.get("drive_id", "")
+    return f"{drive}-t{start_tick:06d}" if drive else ""
 
 
 def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
@@ -283,6 +291,7 @@ def _manifest_row(meta: ClipMeta) -> dict:
         "quality": meta.quality,
         "caption": meta.caption,
         "sync_error_ns": meta.sync_error_ns,
+        "pair_id": meta.pair_id,
     }
 
 

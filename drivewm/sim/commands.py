@@ -16,6 +16,11 @@ def register(subparsers) -> None:
     p.add_argument("--rig", default=None, help="rig name (multiview/rigs/) or YAML path (default nuscenes6)")
     p.add_argument("--weather", choices=["clear", "overcast", "rain", "snow", "fog"], default=None)
     p.add_argument("--time-of-day", choices=["day", "dusk", "night"], default=None)
+    p.add_argument(
+        "--conditions",
+        default=None,
+        help="render every drive once per WEATHER:TIME (e.g. clear:day,snow:day,clear:night): same traffic, geometry",
+    )
     p.add_argument("--traffic", choices=["low", "medium", "high"], default=None, help="traffic density")
     p.add_argument("--duration", type=float, default=None, help="seconds per drive (default 10)")
     p.add_argument("--fps", type=float, default=None, help="frames per second (default 10)")
@@ -52,14 +57,17 @@ FLAG_FIELDS = {
 def run_simulate(args: argparse.Namespace) -> int:
     from drivewm.config import from_dict, to_dict
     from drivewm.sim import SimConfig, simulate_many
+    from drivewm.sim.paired import in_conditions, parse_conditions
     from drivewm.sim.recipe import load_recipe
     from drivewm.sim.world import sim_rig
 
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
-        plan = load_recipe(args.recipe, given)
+        plan = load_recipe(args.recipe, given | ({"conditions": args.conditions} if args.conditions else {}))
     else:
-        plan = [(from_dict(SimConfig, given, "drivewm simulate"), args.drives)]
+        cfg = from_dict(SimConfig, given, "drivewm simulate")
+        configs = in_conditions(cfg, parse_conditions(args.conditions)) if args.conditions else [cfg]
+        plan = [(c, args.drives) for c in configs]
     for cfg, _ in plan:
         sim_rig(cfg)  # every rig loads before the first drive starts
     paths = []

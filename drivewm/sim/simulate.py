@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from drivewm.logs.types import RoadLine, SceneInfo
 from drivewm.sim.config import SimConfig
+from drivewm.sim.paired import drive_id
 from drivewm.sim.scene import SceneRecording
 from drivewm.sim.world import build_renderer, sim_rig
 
@@ -29,7 +30,9 @@ def record(cfg: SimConfig) -> SceneRecording:
         from drivewm.sim.source_sumo import record_sumo
 
         rec = record_sumo(cfg)
-    rec.tags.update(weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density)
+    rec.tags.update(
+        weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density, drive_id=drive_id(cfg)
+    )
     rec.description = describe(cfg, rec)
     return rec
 
