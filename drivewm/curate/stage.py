@@ -103,7 +103,7 @@ def curate_drive_log(log: DriveLog, out: Path, name: str, cfg: CurateConfig) -> 
                 continue
             writer.write(clip)
             embeddings.append(emb)
-            kept_rows.append(_manifest_row(clip.meta))
+            kept_rows.append(manifest_row(clip.meta))
     shard_of = dict((k, s) for s, k in writer.written)
     for row in kept_rows:
         row["shard"] = shard_of[row["key"]]
@@ -276,7 +276,7 @@ def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
     return {"manoeuvre": classify_manoeuvre(xyz_ego0, yaw, speed), "speed_mps": round(float(speed.mean()), 3)}
 
 
-def _manifest_row(meta: ClipMeta) -> dict:
+def manifest_row(meta: ClipMeta) -> dict:
     """One manifest.jsonl row: enough to filter and balance without opening shards."""
     return {
         "key": meta.key,
