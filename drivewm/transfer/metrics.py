@@ -47,15 +47,17 @@ def sift_shift_px(source: np.ndarray, transferred: np.ndarray, cfg: EvalConfig |
     return {"median_px": float(np.median(d)) if len(d) else float("nan"), "matches": int(len(d))}
 
 
-def cross_view_error(videos: np.ndarray, rig: Rig, cfg: EvalConfig | None = None) -> float:
-    """CSE (px, fitted F; NaN without enough matches) of a clip, as ``drivewm eval`` scores it."""
+def cross_view_error(videos: np.ndarray, rig: Rig, cfg: EvalConfig | None = None) -> dict[str, float]:
+    """CSE of a clip as ``drivewm eval`` scores it (px; NaN without enough matches): ``cse`` under the
+    F fitted to the matches (the benchmark's headline) and ``cse_calibrated`` under the F of the
+    rig's calibration (which also catches views that moved against each other)."""
     cfg = cfg or EvalConfig()
     pairs = overlapping_pairs(rig, cfg.consistency)
     if not pairs:
-        return float("nan")
+        return {"cse": float("nan"), "cse_calibrated": float("nan")}
     named = {name: videos[i] for i, name in enumerate(rig.names)}
     result = cross_sampson(named, rig, pairs, cfg.epipolar, FrameMatcher(cfg.match))
-    return float(result["fitted"]["value_px"])
+    return {"cse": float(result["fitted"]["value_px"]), "cse_calibrated": float(result["calibrated"]["value_px"])}
 
 
 def adherent(videos: np.ndarray, target: TargetCondition) -> dict:
