@@ -109,3 +109,36 @@ def test_a_missing_model_is_one_clear_error(inputs, tmp_path, capsys) -> None:
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: ") and "nope" in err[0]
+
+
+DASHCAM_CALIBRATION = """name: dashcam
+cameras:
+  - {name: CAM_FRONT, width: 320, height: 180, hfov_deg: 60, xyz: [1.5, 0.0, 1.3], yaw_deg: 0}
+"""
+
+
+@pytest.mark.slow
+def test_transfer_of_a_real_dashcam_video(models, shared_data, tmp_path) -> None:
+    """The shared dashcam video (udacity solidWhiteRight, 221 frames at 25 fps) through import-video and
+    curate, then transfer: one camera, unknown weather and ego motion, labels kept all the same."""
+    (tmp_path / "cam.yaml").write_text(DASHCAM_CALIBRATION)
+    video = shared_data / "video/dashcam_highway/solidWhiteRight.mp4"
+    logs, clips, out = tmp_path / "logs", tmp_path / "clips", tmp_path / "out"
+    assert main(["import-video", str(video), "--calibration", str(tmp_path / "cam.yaml"), "--out", str(logs)]) == 0
+    assert main(["curate", str(logs), "--out", str(clips), "--config", str(REPO / "datasets/curate/video.yaml")]) == 0
+    argv = ["transfer", str(clips), "--model", str(models["transfer"]), "--to", "snow", "--steps", "1"]
+    assert main([*argv, "--out", str(out)]) == 0
+    sources = {c.key: c for c in iter_clips(clips)}
+    done = list(iter_clips(out))
+    assert len(done) == len(sources) == 5  # 8.8 s of video -> five 17-frame clips at 10 fps
+    for clip in done:
+        src = sources[clip.meta.extra["transfer"]["source"]["key"]]
+        assert clip.meta.extra["transfer"]["source"]["weather"] == "unknown"
+        assert clip.meta.tags["weather"] == "snow" and clip.meta.tags["time_of_day"] == "day"  # unknown -> day
+        assert clip.meta.timestamps_ns == src.meta.timestamps_ns and clip.meta.pair_id == ""
+        assert clip.meta.tags["ego_motion"] == "unknown"
+        np.testing.assert_array_equal(clip.T_world_from_ego, src.T_world_from_ego)
+        assert clip.videos().shape == (1, 17, 96, 160, 3)
+        assert clip.meta.get_rig().camera("CAM_FRONT").K[0, 0] == pytest.approx(
+            src.meta.get_rig().camera("CAM_FRONT").K[0, 0] / 2
+        )
