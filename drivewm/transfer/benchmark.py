@@ -104,17 +104,16 @@ def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
         groups[("all", r["method"])].append(r)
     out: dict = defaultdict(dict)
     for (target, method), rs in sorted(groups.items()):
-        ok = [r for r in rs if math.isfinite(r["cse"]) and math.isfinite(r["source_cse"])]
         shifts = [r["sift_shift_px"] for r in rs if math.isfinite(r["sift_shift_px"])]
         out[target][method] = {
             "clips": len(rs),
             "psnr": float(np.mean([r["psnr"] for r in rs])),
             "ssim": float(np.mean([r["ssim"] for r in rs])),
             "sift_shift_px": float(np.median(shifts)) if shifts else math.nan,
-            "cse_ratio": float(np.mean([r["cse"] for r in ok]) / np.mean([r["source_cse"] for r in ok]))
-            if ok
-            else math.nan,
-            "cse_nan_clips": len(rs) - len(ok),
             "adherence": float(np.mean([r["adherence"] for r in rs])),
         }
+        for key in ("cse", "cse_calibrated"):
+            ok = [r for r in rs if math.isfinite(r[key]) and math.isfinite(r[f"source_{key}"])]
+            ratio = np.mean([r[key] for r in ok]) / np.mean([r[f"source_{key}"] for r in ok]) if ok else math.nan
+            out[target][method] |= {f"{key}_ratio": float(ratio), f"{key}_nan_clips": len(rs) - len(ok)}
     return dict(out)
