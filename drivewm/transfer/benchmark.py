@@ -58,9 +58,14 @@ def paired_cases(
     return cases
 
 
-def score_output(case: PairCase, out: np.ndarray) -> dict:
-    """Every measure of one output uint8 (V, T, H, W, 3) of ``case``."""
-    row = {**image_scores(out, case.target.videos()), **cross_view_error(out, case.source.meta.get_rig())}
+def score_output(case: PairCase, out: np.ndarray, cse: bool = True) -> dict:
+    """Every measure of one output uint8 (V, T, H, W, 3) of ``case``; ``cse`` False skips the costly CSE
+    (NaN: seconds per clip, where everything else is a fraction of a second)."""
+    no_cse = {"cse": math.nan, "cse_calibrated": math.nan}
+    row = {
+        **image_scores(out, case.target.videos()),
+        **(cross_view_error(out, case.source.meta.get_rig()) if cse else no_cse),
+    }
     shift = sift_shift_px(case.source.videos(), out)
     row |= {"sift_shift_px": shift["median_px"], "sift_matches": shift["matches"]}
     adh = adherent(out, case.condition)
@@ -68,8 +73,16 @@ def score_output(case: PairCase, out: np.ndarray) -> dict:
 
 
 @torch.no_grad()
-def run_cases(cases: list[PairCase], methods: dict[str, Method], tokenizer, seed: int = 0, progress=None) -> list[dict]:
-    """One row per (case, method, or reference) with its scores."""
+def run_cases(
+    cases: list[PairCase],
+    methods: dict[str, Method],
+    tokenizer,
+    seed: int = 0,
+    progress=None,
+    cse_for: set[str] | None = None,
+) -> list[dict]:
+    """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
+    ``cse_for`` (None: all)."""
     rows = []
     for case in cases:
         src = case.source.videos()
@@ -84,7 +97,7 @@ def run_cases(cases: list[PairCase], methods: dict[str, Method], tokenizer, seed
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()}
-            rows.append(row | score_output(case, out))
+            rows.append(row | score_output(case, out, cse_for is None or name in cse_for))
         if progress is not None:
             progress(case, rows[-len(outputs) :])
     return rows

@@ -157,7 +157,7 @@ class TransferTask:
         )
         target = denormalize_latents(torch.stack([s.target for s in samples]), *stats)
         rows = torch.stack([source, out, target], dim=1).flatten(0, 1)  # (3B, c, t, h, w)
-        labels = [f"{kind}: {s.condition.name}" for s in samples for kind in ("source", "transferred", "target")]
+        labels = [f"{kind} {s.condition.name}" for s in samples for kind in ("source, to", "transferred to", "true")]
         write_grid_png(decode_latents(rows, bundle.latent.tokenizer), path, labels)
 
 

@@ -60,7 +60,7 @@ def trained(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_transfer_beats_sdedit_and_keeps_the_drive(trained) -> None:
+def test_transfer_beats_sdedit_against_the_truth(trained) -> None:
     model, parent, test_clips = trained
     cases = paired_cases(test_clips, CLEAR, [SNOW])
     assert len(cases) == 1 and cases[0].source.meta.pair_id == cases[0].target.meta.pair_id
