@@ -130,7 +130,11 @@ def main(argv=None) -> int:
     )
     t0 = time.perf_counter()
     cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
-    progress = lambda c, r: print(f"  {c.pair_id} -> {c.condition.name}", flush=True)  # noqa: E731
+
+    def progress(case, rows):
+        cells = " ".join(f"{r['method']} {r['psnr']:.1f}dB/{r['adherence']:.0f}" for r in rows)
+        print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
+
     rows = run_cases(cases, methods, tokenizer, progress=progress, cse_for=cse_for)
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
