@@ -18,8 +18,6 @@ from pathlib import Path
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 
-REPO = Path(__file__).resolve().parents[1]
-
 
 def simulate_logs(out: Path, drives: int, duration_s: float) -> list[Path]:
     from drivewm.sim import SimConfig, simulate
@@ -60,7 +58,7 @@ def decode_rate(logs: list[Path]) -> tuple[int, float, float]:
 def curate_time(logs: list[Path], out: Path, workers: int) -> tuple[float, int]:
     from drivewm.curate import curate, load_curate_config
 
-    cfg = load_curate_config(REPO / "datasets/curate/default.yaml")
+    cfg = load_curate_config("default")
     start = time.perf_counter()
     report = curate(logs, out, cfg, executor="local", workers=workers, progress=False)
     return time.perf_counter() - start, report["kept"]
@@ -87,10 +85,12 @@ def main() -> None:
         print(f"raw decode (read_log + JPEG decode): {frames / t_decode:8.1f} camera-frames/s")
         print(f"H.264 encode only (encode_mp4):     {frames / t_encode:8.1f} camera-frames/s  (the other fixed cost)")
         print(
-            f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw decode"
+            f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw "
+            "decode"
         )
         print(
-            f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw decode"
+            f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw "
+            "decode"
         )
         print(f"speed-up 1 -> 2 workers: {t1 / t2:.2f} x (on {os.cpu_count()} CPUs)")
     finally:

@@ -56,7 +56,7 @@ def main() -> None:
     from drivewm.logs.writer import LogWriter, encode_image
 
     width, height, seconds = (640, 360, 20.0) if args.full else (320, 192, 3.0)
-    rig = load_rig("nuscenes6").scaled(width, height)
+    rig = load_rig("nuscenes6").scaled(width, height, fit="stretch")
     ticks = int(seconds * 10)
     frames = _frames(rig, ticks)
     n_images = ticks * len(rig.cameras)
@@ -92,7 +92,8 @@ def main() -> None:
         f" | ratio read_log/raw time {t_read / t_raw:.2f}"
     )
     print(
-        f"real-time factor at 10 fps x 6 cameras: write {n_images / t_write / 60:.1f}x, read {n_images / t_read / 60:.1f}x"
+        f"real-time factor at 10 fps x 6 cameras: write {n_images / t_write / 60:.1f}x, "
+        f"read {n_images / t_read / 60:.1f}x"
     )
 
 

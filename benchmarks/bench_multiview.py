@@ -76,7 +76,7 @@ def child(args: argparse.Namespace) -> dict:
     x0 = torch.randn(args.views, *args.latent)
     base = rss_mb()
     times = []
-    for step in range(args.steps + 1):
+    for _ in range(args.steps + 1):
         tic = time.perf_counter()
         loss = edm_loss(
             net,
@@ -146,7 +146,8 @@ def main() -> None:
     steps = 3
     print(f"debug DiT, latents {latent} per view, 1 thread, median of {steps} training steps (batch = 1 clip)")
     print(
-        f"{'views':>5} {'mode':>16} {'tokens':>6} {'tok/s':>8} {'t2w tok/s':>9} {'ratio':>6} {'peak MB':>8} {'t2w MB':>7} {'ratio':>6}"
+        f"{'views':>5} {'mode':>16} {'tokens':>6} {'tok/s':>8} {'t2w tok/s':>9} {'ratio':>6} {'peak MB':>8} "
+        f"{'t2w MB':>7} {'ratio':>6}"
     )
     for views, cross_view, ckpt in [
         (1, "neighbors", False),
@@ -159,14 +160,16 @@ def main() -> None:
         t2w = run("t2w", "train", views, latent, steps, checkpointing=ckpt)
         label = cross_view + ("+ckpt" if ckpt else "")
         print(
-            f"{views:>5} {label:>16} {mv['tokens']:>6} {mv['tokens_per_s']:>8.0f} {t2w['tokens_per_s']:>9.0f} {mv['tokens_per_s'] / t2w['tokens_per_s']:>6.2f} "
+            f"{views:>5} {label:>16} {mv['tokens']:>6} {mv['tokens_per_s']:>8.0f} {t2w['tokens_per_s']:>9.0f} "
+            f"{mv['tokens_per_s'] / t2w['tokens_per_s']:>6.2f} "
             f"{mv['peak_mb']:>8.0f} {t2w['peak_mb']:>7.0f} {mv['peak_mb'] / max(t2w['peak_mb'], 1):>6.2f}"
         )
     gen_steps = 10
     mv = run("mv", "generate", 6, latent, gen_steps)
     t2w = run("t2w", "generate", 6, latent, gen_steps)
     print(
-        f"generation, one 6-view clip, {gen_steps} Euler steps: {mv['seconds']:.2f} s (Text2World, the same 6 views independently: "
+        f"generation, one 6-view clip, {gen_steps} Euler steps: {mv['seconds']:.2f} s (Text2World, the same 6 views "
+        "independently: "
         f"{t2w['seconds']:.2f} s; ratio {mv['seconds'] / t2w['seconds']:.2f})"
     )
 

@@ -85,7 +85,8 @@ def main() -> None:
         step_s = rec.step_cpu_s / len(rec.ticks)
         agents = np.mean([len(t.agents) for t in rec.ticks])
         print(
-            f"{source}/{scenario}: simulator {1 / step_s:8.1f} ticks/s ({step_s * 1e3:.2f} ms/tick, {agents:.0f} vehicles)"
+            f"{source}/{scenario}: simulator {1 / step_s:8.1f} ticks/s ({step_s * 1e3:.2f} ms/tick, {agents:.0f} "
+            "vehicles)"
         )
         for w, h in sizes:
             cfg = dataclasses.replace(base, width=w, height=h)
@@ -93,7 +94,8 @@ def main() -> None:
             per_tick = render_cpu_s_per_tick(renderer, rec, min(len(rec.ticks), 20))
             cams = len(renderer.views)
             print(
-                f"  render {w}x{h}: {cams / per_tick:7.1f} camera-frames/s ({per_tick * 1e3:6.1f} ms per {cams}-camera tick); "
+                f"  render {w}x{h}: {cams / per_tick:7.1f} camera-frames/s ({per_tick * 1e3:6.1f} ms per {cams}-camera "
+                "tick); "
                 f"render/sim step time ratio {per_tick / step_s:6.2f}"
             )
         sheet = Path(f"{args.sheet}_{source}.png")

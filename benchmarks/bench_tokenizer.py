@@ -1,153 +1,235 @@
-"""Tokenizer benchmark: speed against diffusers peers, reconstruction on simulated and real video.
+"""Tokenizer benchmark: speed against the fastest peers at matched size, and quality at equal compute.
 
-1. Throughput: encode and decode frames/s of drivewm's tokenizer and a diffusers video
-   autoencoder of similar size and the same compression, randomly initialized from a config
-   (speed does not depend on the weights), same input, same process: 4x8x8 against
-   AutoencoderKLCogVideoX, 8x8x8 against AutoencoderKLLTXVideo. Prints ours/peer ratios.
-2. Reconstruction: debug-4x8x8 and debug-8x8x8 trained ``--steps`` steps on simulated clips,
-   scored on held-out simulated clips and on the real dashcam video (never trained on: a
-   generalization check), next to the block-mean codec (8x8 mean per frame, bilinear
-   upsampling) measured on the same frames; prints PSNR/SSIM, their difference to it, and the
-   compression rate.
+1. Throughput (``--throughput``, default on): encode and decode frames/s of drivewm's tokenizer and
+   diffusers' video autoencoders built from configs of matched parameter count (randomly
+   initialized: speed does not depend on the weights), same input, interleaved repeats, medians:
+   - 8x8x8 against ``AutoencoderKLCosmos`` (the Cosmos tokenizer architecture: Haar patch 4,
+     factorized causal convolutions, attention at the bottleneck) at two sizes;
+   - 4x8x8 against ``AutoencoderKLCogVideoX``.
+   Parameter counts and ours/peer ratios are printed beside every figure. On CUDA (when present)
+   the same models run in bf16 autocast; on the CPU in fp32.
+2. Quality at equal compute (``--data CLIPDIR``): drivewm ``tiny-8x8x8`` and the matched Cosmos
+   architecture trained by the same loop (drivewm.train, the tokenizer task), loss, data and
+   budget of CPU seconds (each model's step cost is measured first, interleaved, and its step
+   count set to fill the budget), then scored on held-out simulated clips (PSNR, SSIM) and on the
+   real dashcam video that neither saw.
 
-    python benchmarks/bench_tokenizer.py --data CLIPDIR            # small, CPU, a few minutes
-    python benchmarks/bench_tokenizer.py --data CLIPDIR --full     # bigger input, more steps
+    python benchmarks/bench_tokenizer.py                                   # throughput, ~2 min
+    python benchmarks/bench_tokenizer.py --data CLIPDIR --budget-s 1800    # + equal-compute quality
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import torch
 import torch.nn.functional as F
+from torch import nn
 
 from drivewm.clips.video import decode_mp4
 from drivewm.tokenizer import Tokenizer, preset
-from drivewm.tokenizer.data import load_clips, to_model_range
-from drivewm.tokenizer.evaluate import reconstruct, video_metrics
+from drivewm.tokenizer.data import CameraVideos, load_clips, to_model_range
+from drivewm.tokenizer.evaluate import video_metrics
 from drivewm.tokenizer.latent_cache import clip_video
-from drivewm.tokenizer.train import TokenizerTrainConfig, train
+from drivewm.tokenizer.recipe import RECIPES
+from drivewm.tokenizer.train import CropDataset, TokenizerTask
+from drivewm.train.loop import train
 
 REPO = Path(__file__).resolve().parents[1]
 DASHCAM = REPO / ".." / "shared" / "data" / "video" / "dashcam_highway" / "solidWhiteRight.mp4"
 
 
-def params_m(model: torch.nn.Module) -> float:
+def params_m(model: nn.Module) -> float:
     return sum(p.numel() for p in model.parameters()) / 1e6
 
 
-def timed(fn, repeats: int) -> tuple[float, object]:
-    out = fn()  # warm-up
-    t0 = time.perf_counter()
+class CosmosPeer(nn.Module):
+    """diffusers' AutoencoderKLCosmos behind drivewm's tokenizer interface (deterministic latents:
+    the posterior mode, as a drivewm tokenizer's latents are deterministic)."""
+
+    def __init__(self, size: str):
+        super().__init__()
+        from diffusers import AutoencoderKLCosmos
+
+        enc, dec = {"tiny": ((32, 64, 64, 64), (64, 64, 64, 64)), "small": ((32, 64, 128, 128), (64, 128, 128, 128))}[
+            size
+        ]
+        self.net = AutoencoderKLCosmos(
+            encoder_block_out_channels=enc, decode_block_out_channels=dec, num_layers=1, attention_resolutions=()
+        )
+
+    def encode(self, video: torch.Tensor) -> torch.Tensor:
+        return self.net.encode(video).latent_dist.mode()
+
+    def decode(self, latents: torch.Tensor) -> torch.Tensor:
+        return self.net.decode(latents).sample
+
+    def forward(self, video: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        latents = self.encode(video)
+        return self.decode(latents), latents
+
+
+def cogvideox_peer() -> nn.Module:
+    """AutoencoderKLCogVideoX at 4x8x8 with 16 latent channels, as CogVideoX ships it but narrower."""
+    from diffusers import AutoencoderKLCogVideoX
+
+    class Peer(nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.net = AutoencoderKLCogVideoX(
+                block_out_channels=(32, 64, 64, 128), layers_per_block=1, latent_channels=16
+            )
+
+        def encode(self, video):
+            return self.net.encode(video).latent_dist.mode()
+
+        def decode(self, latents):
+            return self.net.decode(latents).sample
+
+    return Peer()
+
+
+def _seconds(fn) -> float:
+    tic = time.perf_counter()
+    fn()
+    return time.perf_counter() - tic
+
+
+def interleaved_medians(ours: nn.Module, other: nn.Module, video: torch.Tensor, repeats: int) -> dict[str, float]:
+    """Median seconds of encode and decode of both models, runs interleaved (load drifts hit both alike)."""
+    z = {"ours": ours.encode(video), "peer": other.encode(video)}  # also the warm-up
+    models = {"ours": ours, "peer": other}
+    runs: dict[str, list[float]] = {f"{who} {part}": [] for who in models for part in ("enc", "dec")}
     for _ in range(repeats):
-        out = fn()
-    return (time.perf_counter() - t0) / repeats, out
-
-
-def peer(kind: str) -> torch.nn.Module:
-    from diffusers import AutoencoderKLCogVideoX, AutoencoderKLLTXVideo
-
-    if kind == "cogvideox":  # 4x8x8, 16 channels
-        return AutoencoderKLCogVideoX(block_out_channels=(32, 64, 64, 128), layers_per_block=2, latent_channels=16)
-    boc = (32, 64, 128, 128)  # LTX-Video with patch size 1 and three 2x2x2 stages: 8x8x8, 16 channels
-    return AutoencoderKLLTXVideo(
-        latent_channels=16,
-        block_out_channels=boc,
-        decoder_block_out_channels=boc,
-        layers_per_block=(1, 1, 1, 1, 1),
-        decoder_layers_per_block=(1, 1, 1, 1, 1),
-        patch_size=1,
-        patch_size_t=1,
-    )
+        for who, model in models.items():
+            runs[f"{who} enc"].append(_seconds(lambda m=model: m.encode(video)))
+            runs[f"{who} dec"].append(_seconds(lambda m=model, w=who: m.decode(z[w])))
+    return {k: statistics.median(v) for k, v in runs.items()}
 
 
 @torch.no_grad()
-def throughput(frames: int, height: int, width: int, repeats: int) -> None:
-    print(f"== throughput: 1 x 3 x {frames} x {height} x {width}, {torch.get_num_threads()} threads, fp32 CPU ==")
-    video = torch.rand(1, 3, frames, height, width) * 2 - 1
-    for ours_name, peer_name in (("small-4x8x8", "cogvideox"), ("small-8x8x8", "ltx")):
+def throughput(frames: int, height: int, width: int, repeats: int, device: torch.device) -> None:
+    dtype = torch.bfloat16 if device.type == "cuda" else torch.float32
+    threads = torch.get_num_threads()
+    print(f"== throughput: 1 x 3 x {frames} x {height} x {width} on {device} ({dtype}), {threads} threads ==")
+    video = (torch.rand(1, 3, frames, height, width, device=device) * 2 - 1).to(dtype)
+    pairs = [
+        ("tiny-8x8x8", CosmosPeer("tiny")),
+        ("small-8x8x8", CosmosPeer("small")),
+        ("small-4x8x8", cogvideox_peer()),
+    ]
+    for ours_name, other in pairs:
         torch.manual_seed(0)
-        ours, other = Tokenizer(preset(ours_name)).eval(), peer(peer_name).eval()
-        t_enc, z = timed(lambda: ours.encode(video), repeats)
-        t_dec, _ = timed(lambda: ours.decode(z), repeats)
-        p_enc, pz = timed(lambda: other.encode(video).latent_dist.mode(), repeats)
-        p_dec, _ = timed(lambda: other.decode(pz).sample, repeats)
+        ours = Tokenizer(preset(ours_name)).eval().to(device, dtype)
+        med = interleaved_medians(ours, other.eval().to(device, dtype), video, repeats)
         print(
-            f"{ours_name} ({params_m(ours):.1f}M, latents {tuple(z.shape)}) vs {peer_name} ({params_m(other):.1f}M, "
-            f"latents {tuple(pz.shape)})"
+            f"{ours_name}: drivewm {params_m(ours):.2f}M | {type(other.net).__name__} {params_m(other):.2f}M | "
+            f"params ratio peer/ours {params_m(other) / params_m(ours):.2f}"
         )
-        print(f"  encode frames/s: ours {frames / t_enc:7.2f}  peer {frames / p_enc:7.2f}  ratio {p_enc / t_enc:5.2f}x")
-        print(f"  decode frames/s: ours {frames / t_dec:7.2f}  peer {frames / p_dec:7.2f}  ratio {p_dec / t_dec:5.2f}x")
+        for part in ("enc", "dec"):
+            ours_fps, peer_fps = frames / med[f"ours {part}"], frames / med[f"peer {part}"]
+            print(
+                f"  {part}ode frames/s: ours {ours_fps:8.1f}  peer {peer_fps:8.1f}  ratio {ours_fps / peer_fps:5.2f}x"
+            )
 
 
-def block_mean_codec(video: torch.Tensor) -> torch.Tensor:
-    """(B, 3, T, H, W): 8x8 mean per frame, bilinear back up (3 values per 8x8 block of every frame)."""
-    b, _, t, h, w = video.shape
-    frames = video.transpose(1, 2).flatten(0, 1)
-    up = F.interpolate(F.avg_pool2d(frames, 8), size=(h, w), mode="bilinear", align_corners=False)
-    return up.view(b, t, 3, h, w).transpose(1, 2)
+class PeerTask(TokenizerTask):
+    """The tokenizer task with the Cosmos architecture as the model: same loop, loss and data."""
+
+    def __init__(self, cfg, dataset, size: str):
+        super().__init__(cfg, dataset)
+        torch.manual_seed(cfg.train.seed)
+        self.model = CosmosPeer(size).train()
+
+    def blocks(self) -> list[nn.Module]:
+        return []
+
+    def save_model(self, ema_state, out_dir: Path) -> None:
+        torch.save(ema_state, out_dir / "peer_ema.pt")
+
+    def sample_grid(self, ema_state, path: Path) -> None:
+        pass
 
 
 def dashcam_video(frames: int, stride: int, size_hw: tuple[int, int]) -> torch.Tensor:
-    """The real dashcam clip: every ``stride``-th frame (25 fps -> 12.5), resized to ``size_hw``: (1, 3, T, H, W)."""
+    """The real dashcam clip: every ``stride``-th frame, area-resized, centre-cropped: (1, 3, T, H, W)."""
     raw = decode_mp4(DASHCAM.read_bytes(), None, str(DASHCAM))[: frames * stride : stride]
     video = to_model_range(raw).unsqueeze(0)  # (1, 3, T, 540, 960)
     h, w = size_hw
-    scaled = F.interpolate(
-        video.transpose(1, 2).flatten(0, 1), size=(h * 2, int(round(h * 2 * 960 / 540))), mode="area"
-    )
-    top, left = (scaled.shape[-2] - h) // 2, (scaled.shape[-1] - w) // 2
-    return scaled[..., top : top + h, left : left + w].unsqueeze(0).transpose(1, 2).clamp(-1, 1)
+    scaled = F.interpolate(video[0].transpose(0, 1), size=(h, int(round(h * 960 / 540))), mode="area")
+    left = (scaled.shape[-1] - w) // 2
+    return scaled[..., left : left + w].transpose(0, 1).unsqueeze(0).clamp(-1, 1)
 
 
-def score(name: str, tok: Tokenizer, video: torch.Tensor) -> None:
-    recon, latents = reconstruct(tok, video)
-    ours = video_metrics(recon, video)
-    base = video_metrics(block_mean_codec(video[:, :, : recon.shape[2]]), video)
-    ratio = video[0, :, : recon.shape[2]].numel() / latents[0].numel()
-    print(
-        f"  {name:22s} PSNR {ours['psnr']:6.2f} dB  SSIM {ours['ssim']:.3f}  temporal_l1 {ours['temporal_l1']:5.2f}  | "
-        f"block-mean codec PSNR {base['psnr']:6.2f} SSIM {base['ssim']:.3f}  (ours - it: {ours['psnr'] - base['psnr']:+.2f} dB)"
-        f"  | compression {ratio:.1f}x"
-    )
+@torch.no_grad()
+def score(model: nn.Module, video: torch.Tensor) -> dict[str, float]:
+    """PSNR/SSIM of ``model`` on (N, 3, T, H, W), one video at a time."""
+    recons = torch.cat([model.decode(model.encode(v[None])).clamp(-1, 1) for v in video])
+    return video_metrics(recons, video)
 
 
-def reconstruction(data: Path, steps: int, crop: list[int], work: Path, holdout: int) -> None:
-    print(f"== reconstruction: debug presets trained {steps} steps on {data} (held out: {holdout}% of clips by key) ==")
-    heldout = torch.cat([clip_video(c) for c in load_clips(data, "holdout", holdout)])  # (N*V, 3, T, H, W)
-    dashcam = dashcam_video(33, 2, (176, 320))
-    for name, frames in (("debug-4x8x8", 9), ("debug-8x8x8", 17)):
-        cfg = TokenizerTrainConfig(model=preset(name), steps=steps, frames=frames, crop=crop, holdout_percent=holdout)
-        t0 = time.perf_counter()
-        train(data, work / name, cfg, progress=False)
-        print(f"{name}: trained in {time.perf_counter() - t0:.0f} s")
-        tok = Tokenizer.from_pretrained(work / name)
-        score("held-out simulated", tok, heldout)
-        score("real dashcam (unseen)", tok, dashcam)
+def step_cpu_seconds(task: TokenizerTask, batch_size: int, repeats: int = 3) -> float:
+    """Median thread CPU seconds of one training step (forward, backward, AdamW) of ``task.model``."""
+    opt = torch.optim.AdamW(task.model.parameters(), lr=0.0)
+    times = []
+    for i in range(repeats + 1):
+        tic = time.thread_time()
+        loss, _ = task.loss(task.model, list(range(batch_size)), [i * batch_size + j for j in range(batch_size)], "cpu")
+        loss.backward()
+        opt.step()
+        opt.zero_grad()
+        times.append(time.thread_time() - tic)
+    return statistics.median(times[1:])
+
+
+def equal_compute(data: Path, budget_s: float, work: Path, holdout: int) -> None:
+    overrides = ["train.batch_size=4", "data.frames=17", "data.crop=[64,96]", f"data.holdout_percent={holdout}"]
+    overrides += ["train.lr=5e-4", "train.warmup_steps=50", "train.log_every=50", "train.ema_decay=0.99"]
+    base = RECIPES.resolve("tiny-8x8x8", None, overrides)
+    videos = CameraVideos(load_clips(data, "train", holdout))
+    dataset = CropDataset(videos, base.data.frames, tuple(base.data.crop))
+    tasks = {"drivewm tiny-8x8x8": TokenizerTask(base, dataset), "Cosmos tiny": PeerTask(base, dataset, "tiny")}
+    costs = {name: step_cpu_seconds(task, 4) for name, task in tasks.items()}
+    heldout = torch.cat([clip_video(c) for c in load_clips(data, "holdout", holdout)])[:, :, :17]
+    dashcam = dashcam_video(17, 2, (96, 160))
+    print(f"== quality at equal compute: {budget_s:.0f} CPU-s each, same loop, loss, data ({len(heldout)} held-out) ==")
+    for name, task in tasks.items():
+        steps = max(1, int(budget_s / costs[name]))
+        cfg = RECIPES.resolve(
+            "tiny-8x8x8", None, [*overrides, f"train.steps={steps}", f"train.checkpoint_every={steps}"]
+        )
+        task.cfg = cfg
+        tic = time.thread_time()
+        train(task, cfg.train, work / name.replace(" ", "_"))
+        model = task.model.eval()
+        sim, real = score(model, heldout), score(model, dashcam)
+        print(
+            f"{name:20s} {params_m(model):5.2f}M  {costs[name]:6.2f} CPU-s/step x {steps:5d} steps "
+            f"({time.thread_time() - tic:.0f} CPU-s) | held-out sim PSNR {sim['psnr']:6.2f} SSIM {sim['ssim']:.3f} "
+            f"| dashcam PSNR {real['psnr']:6.2f} SSIM {real['ssim']:.3f}"
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument(
-        "--data", type=Path, help="simulated clip folder (e.g. curated sim drives); omit to skip part 2"
-    )
-    parser.add_argument("--full", action="store_true", help="bigger input and longer training")
-    parser.add_argument("--steps", type=int, default=None, help="training steps per preset (default 150, --full 2000)")
+    parser.add_argument("--data", type=Path, help="simulated clip folder for the equal-compute comparison")
+    parser.add_argument("--budget-s", type=float, default=600.0, help="CPU seconds of training per model")
     parser.add_argument("--holdout-percent", type=int, default=25)
-    parser.add_argument("--threads", type=int, default=0)
-    parser.add_argument("--skip-throughput", action="store_true")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--no-throughput", action="store_true")
     args = parser.parse_args()
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    if not args.skip_throughput:
-        throughput(*((33, 256, 448, 2) if args.full else (17, 128, 224, 1)))
+    torch.set_num_threads(args.threads)
+    device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if not args.no_throughput:
+        throughput(17, 128, 224, args.repeats, device)
     if args.data:
-        steps = args.steps or (2000 if args.full else 150)
         with tempfile.TemporaryDirectory() as work:
-            reconstruction(args.data, steps, [128, 192] if args.full else [64, 96], Path(work), args.holdout_percent)
+            equal_compute(args.data, args.budget_s, Path(work), args.holdout_percent)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Weather / time-of-day transfer on held-out simulated drives, against SDEdit at the same network evaluations.
 
 Every held-out drive is rendered by the simulator in the source and in each target condition
-(datasets/scenarios/transfer_heldout.yaml), so each transferred clip is scored against the truth:
+(drivewm/recipes/simulate/transfer_heldout.yaml), so each transferred clip is scored against the truth:
 
     python benchmarks/bench_transfer.py --model runs/transfer --data data/transfer_heldout_clips \
         [--source clear:day] [--targets snow:day,clear:night] [--steps 8] [--sdedit-sigmas 0.5,1,2,4,8]

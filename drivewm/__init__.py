@@ -1,6 +1,6 @@
 """drivewm: multi-camera driving world models.
 
-Stages (each a sub-package, each reading and writing the formats of DESIGN.md section 4):
+Stages (each a sub-package, each reading and writing the formats of docs/DESIGN.md section 4):
 ``sim`` -> ``logs`` (MCAP) -> ``curate`` -> ``clips`` -> ``tokenizer`` -> ``diffusion`` -> ``multiview`` -> ``eval``.
 """
 

@@ -1,4 +1,4 @@
-"""Atomic writes: write to a temporary name in the same folder, then rename (DESIGN.md section 7).
+"""Atomic writes: write to a temporary name in the same folder, then rename (docs/DESIGN.md section 7).
 
 A killed run leaves either the old file or the new one, never half of one.
 """

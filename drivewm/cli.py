@@ -1,4 +1,4 @@
-"""The ``drivewm`` command: one sub-command per stage (DESIGN.md section 8).
+"""The ``drivewm`` command: one sub-command per stage (docs/DESIGN.md section 8).
 
 Each stage owns a small ``commands.py`` module with ``register(subparsers)``: it adds its
 sub-parser(s) and sets ``func(args) -> int | None``. Those modules import only argparse-level
@@ -26,11 +26,20 @@ COMMAND_MODULES = (
     "drivewm.eval.commands",  # eval
     "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.quickstart",  # quickstart
+    "drivewm.worldmodel",  # worldmodel train|export
 )
 
 
+class OneLineErrors(argparse.ArgumentParser):
+    """argparse that reports a bad flag like every other bad input: one ``error: ...`` line, exit 2."""
+
+    def error(self, message: str):
+        print(f"error: {self.prog}: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="drivewm", description="Multi-camera driving world models.")
+    parser = OneLineErrors(prog="drivewm", description="Multi-camera driving world models.")
     parser.add_argument("--version", action="version", version=f"drivewm {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMAND_MODULES:
@@ -46,7 +55,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version and bad flags end here; hand back the status
+        return int(exc.code or 0)
     if not getattr(args, "func", None):
         parser.print_help()
         return 1

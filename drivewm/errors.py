@@ -1,4 +1,4 @@
-"""The one error type the CLI turns into a clear one-line message (DESIGN.md section 7)."""
+"""The one error type the CLI turns into a clear one-line message (docs/DESIGN.md section 7)."""
 
 
 class DrivewmError(Exception):

@@ -1,6 +1,6 @@
 """Geometry shared by every stage: SE(3), quaternions, pinhole cameras, rigs, epipolar relations.
 
-Conventions (DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
+Conventions (docs/DESIGN.md section 3): world and ego are right-handed, z up; ego is x forward, y left,
 origin on the ground under the rear axle. Cameras are OpenCV (x right, y down, z forward).
 Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points are (..., 3).
 """
@@ -8,13 +8,16 @@ Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points
 from __future__ import annotations
 
 import dataclasses
-import os
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from drivewm import resources
 from drivewm.errors import DrivewmError
+
+RIGS_ENV = "DRIVEWM_RIGS"
+"""Environment variable: folders (os.pathsep-separated) of the user's own NAME.yaml rigs, searched first."""
 
 # Rotation taking OpenCV camera axes (x right, y down, z forward) to a z-up body frame looking
 # along its +x (x forward, y left, z up): columns are the camera axes written in body coordinates.
@@ -107,9 +110,21 @@ def R_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
     return q if q[3] >= 0 else -q
 
 
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    """The rotation closest to a 3x3 matrix in the Frobenius norm: U diag(1, 1, det(U V^T)) V^T from
+    the SVD M = U S V^T (the orthogonal Procrustes solution, Higham 1988). Rotations read from text
+    (KITTI-style 3x4 poses with ~7 digits) are off orthonormal by ~1e-7; this puts them back."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
+    S = np.eye(3)
+    S[2, 2] = np.sign(np.linalg.det(U @ Vt))
+    return U @ S @ Vt
+
+
 def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle of a rotation matrix in degrees (geodesic distance to identity)."""
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    """Angle of a rotation matrix in degrees (geodesic distance to identity), taken on the nearest
+    rotation: arccos((tr R - 1) / 2) of a matrix off orthonormal by e is off by ~sqrt(e) rad near
+    identity (1e-7 -> 0.03 deg), which would swamp small relative-pose errors."""
+    c = np.clip((np.trace(nearest_rotation(R)) - 1.0) / 2.0, -1.0, 1.0)
     return float(np.degrees(np.arccos(c)))
 
 
@@ -203,12 +218,33 @@ class Camera:
     T_ego_from_cam: np.ndarray
     distortion: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
-    def scaled(self, width: int, height: int) -> Camera:
-        """The same camera at another image size (intrinsics scaled per axis)."""
+    def scaled(self, width: int, height: int, fit: str = "same") -> Camera:
+        """The same camera after its images were resized to ``width`` x ``height``.
+
+        Pixel centres are at integer coordinates, so a resize by s maps u to (u + 0.5) s - 0.5
+        (what cv2.resize does): fx' = s fx, cx' = (cx + 0.5) s - 0.5. ``fit`` says how the image
+        was resized when the aspect ratio changes: ``same`` (default) refuses an aspect change of
+        more than one pixel of rounding, ``stretch`` scales each axis by its own ratio (cv2.resize
+        to the new size; fx and fy then differ), ``crop`` scales both axes by the larger ratio and
+        cuts the overflow evenly from both sides (centre crop, square pixels kept)."""
         sx, sy = width / self.width, height / self.height
+        if fit == "same":
+            if abs(self.width * sy - width) > 1.0 and abs(self.height * sx - height) > 1.0:
+                raise DrivewmError(
+                    f"camera {self.name}: {self.width}x{self.height} -> {width}x{height} changes the aspect ratio; "
+                    "say whether the images were stretched or centre-cropped (fit='stretch' or 'crop')"
+                )
+        elif fit == "crop":
+            sx = sy = max(sx, sy)
+        elif fit != "stretch":
+            raise DrivewmError(f"camera {self.name}: fit {fit!r} is not 'same', 'stretch' or 'crop'")
+        # Centre crop: the scaled image is (W sx) x (H sy); (W sx - width) / 2 columns go on each side.
+        off_x, off_y = (self.width * sx - width) / 2, (self.height * sy - height) / 2
         K = self.K.copy()
-        K[0] *= sx
-        K[1] *= sy
+        K[0, :2] *= sx
+        K[1, :2] *= sy
+        K[0, 2] = (self.K[0, 2] + 0.5) * sx - 0.5 - off_x
+        K[1, 2] = (self.K[1, 2] + 0.5) * sy - 0.5 - off_y
         return dataclasses.replace(self, K=K, width=width, height=height)
 
     def to_dict(self) -> dict:
@@ -225,7 +261,7 @@ class Camera:
 
 @dataclasses.dataclass
 class Rig:
-    """An ordered list of cameras (DESIGN.md section 3). Order is the view order in models."""
+    """An ordered list of cameras (docs/DESIGN.md section 3). Order is the view order in models."""
 
     name: str
     cameras: list[Camera]
@@ -240,9 +276,9 @@ class Rig:
                 return c
         raise DrivewmError(f"rig {self.name}: no camera named {name!r} (has {self.names})")
 
-    def scaled(self, width: int, height: int) -> Rig:
-        """Every camera at a new image size."""
-        return Rig(self.name, [c.scaled(width, height) for c in self.cameras])
+    def scaled(self, width: int, height: int, fit: str = "same") -> Rig:
+        """Every camera at a new image size (``fit``: see :meth:`Camera.scaled`)."""
+        return Rig(self.name, [c.scaled(width, height, fit) for c in self.cameras])
 
     def subset(self, names: list[str]) -> Rig:
         """The cameras named, in that order."""
@@ -252,26 +288,9 @@ class Rig:
         return {"name": self.name, "cameras": [c.to_dict() for c in self.cameras]}
 
 
-def rig_search_dirs() -> list[Path]:
-    """Folders searched for ``NAME.yaml`` rigs: $DRIVEWM_RIGS (os.pathsep-separated), then the
-    repository's ``multiview/rigs`` next to the installed package (editable installs)."""
-    dirs = [Path(p) for p in os.environ.get("DRIVEWM_RIGS", "").split(os.pathsep) if p]
-    dirs.append(Path(__file__).resolve().parent.parent / "multiview" / "rigs")
-    return dirs
-
-
 def load_rig(name_or_path: str | Path) -> Rig:
-    """Load a rig by name (``nuscenes6``) or YAML path. See ``multiview/rigs/README.md``."""
-    path = Path(name_or_path)
-    if not path.is_file():
-        for d in rig_search_dirs():
-            if (d / f"{name_or_path}.yaml").is_file():
-                path = d / f"{name_or_path}.yaml"
-                break
-        else:
-            raise DrivewmError(
-                f"rig {name_or_path!r}: no such file or named rig in {[str(d) for d in rig_search_dirs()]}"
-            )
+    """Load a rig by name (``nuscenes6``) or YAML path. See ``drivewm/rigs/README.md``."""
+    path = resources.find("rigs", name_or_path, "rig", env=RIGS_ENV)
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError:
@@ -281,7 +300,7 @@ def load_rig(name_or_path: str | Path) -> Rig:
 
 def rig_from_dict(data: dict, where: str = "rig") -> Rig:
     """Build a rig from its dict form: explicit ``K``/``T_ego_from_cam`` or the compact form
-    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see multiview/rigs/README.md)."""
+    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see drivewm/rigs/README.md)."""
     if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
         raise DrivewmError(f"{where}: a rig needs a non-empty 'cameras' list")
     defaults = data.get("defaults", {})

@@ -1,10 +1,12 @@
 """``drivewm quickstart``: the whole pipeline on simulated data, through the public commands.
 
 Each stage is the exact ``drivewm ...`` command a user would type (printed before it runs), with
-the stage recipes of ``datasets/``, ``multiview/`` and ``eval/``. A stage that finished leaves a
-marker in ``OUT/.stages/`` holding its command; a rerun skips it (and a changed command reruns
-it), so a killed quickstart resumes where it stopped. The profile (``datasets/quickstart.yaml``)
-gives each stage's arguments and expected time; ``smoke`` is the few-minute version the tests run.
+the packaged recipes of each stage (``--recipe quickstart``). A stage that finished leaves a marker
+in ``OUT/.stages/`` holding its command; a rerun skips it (and a changed command reruns it), so a
+killed quickstart resumes where it stopped. The profile (package data,
+``drivewm/recipes/quickstart.yaml``) gives each stage's arguments and expected time; ``smoke`` is
+the few-minute version the tests run. The report (matplotlib) is imported when it is written, so
+that ``drivewm --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -16,10 +18,13 @@ import shlex
 import time
 from pathlib import Path
 
+from drivewm import resources
+from drivewm.atomic import write_json
+from drivewm.cli import main
+from drivewm.config import from_dict, load_yaml
 from drivewm.errors import DrivewmError
 
-REPO = Path(__file__).resolve().parent.parent
-RECIPE = REPO / "datasets" / "quickstart.yaml"
+RECIPE = resources.package_dir("recipes") / "quickstart.yaml"
 FIRST_LOG = "{first_log}"  # stands for the first simulated log, known once simulate has run
 
 
@@ -56,30 +61,15 @@ class Profile:
 
 
 def load_profile(name: str, recipe: Path = RECIPE) -> Profile:
-    from drivewm.config import from_dict, load_yaml
-
+    """A quickstart profile by name (``full``, ``smoke``)."""
     profiles = load_yaml(recipe)
     if name not in profiles:
         raise DrivewmError(f"{recipe}: no quickstart profile {name!r} (has {sorted(profiles)})")
     return from_dict(Profile, profiles[name], f"{recipe}:{name}")
 
 
-def _recipe_path(arg: str) -> str:
-    """A profile argument naming a recipe file of the checkout (``datasets/...``), made absolute so
-    quickstart runs from any working directory; other arguments are returned unchanged."""
-    path = REPO / arg
-    return str(path) if not Path(arg).is_absolute() and "/" in arg and path.is_file() else arg
-
-
 def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     """The pipeline as (stage name, drivewm argv) in order."""
-    p = dataclasses.replace(
-        p,
-        **{
-            f: [_recipe_path(a) for a in getattr(p, f)]
-            for f in ("simulate", "curate", "tokenizer_train", "pretrain", "posttrain", "generate", "eval")
-        },
-    )
     logs, clips, tok, t2w, mv, gen = (
         out / n for n in ("logs", "clips", "tokenizer", "text2world", "multiview", "generated")
     )
@@ -149,22 +139,19 @@ def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     return stages
 
 
-def run_stage(name: str, argv: list[str], out: Path) -> float:
+def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") -> float:
     """Run one stage unless its marker says the same command finished; returns seconds spent."""
-    from drivewm.atomic import write_json
-    from drivewm.cli import main
-
     logs = sorted((out / "logs").glob("*.mcap"))
     argv = [str(logs[0]) if a == FIRST_LOG and logs else a for a in argv]
     marker = out / ".stages" / f"{name}.json"
     if marker.is_file() and json.loads(marker.read_text()).get("argv") == argv:
-        print(f"[quickstart] {name}: done before, skipped")
+        print(f"[{label}] {name}: done before, skipped")
         return 0.0
-    print(f"[quickstart] {name}: drivewm {shlex.join(argv)}", flush=True)
+    print(f"[{label}] {name}: drivewm {shlex.join(argv)}", flush=True)
     tic = time.perf_counter()
     code = main(argv)
     if code:
-        raise DrivewmError(f"quickstart stage {name!r} failed (exit {code}); rerun quickstart to resume from it")
+        raise DrivewmError(f"{label} stage {name!r} failed (exit {code}); rerun {label} to resume from it")
     seconds = time.perf_counter() - tic
     write_json(marker, {"argv": argv, "seconds": seconds})
     return seconds
@@ -192,5 +179,10 @@ def quickstart(out: Path, profile_name: str = "full") -> Path:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("quickstart", help="simulate, curate, train every model, generate and evaluate; write a report")
     p.add_argument("--out", default="quickstart", help="output folder (a rerun resumes in it)")
-    p.add_argument("--profile", default="full", help="full (about 20 min on 2 cores) or smoke (a few minutes)")
+    p.add_argument(
+        "--profile",
+        default="full",
+        choices=sorted(load_yaml(RECIPE)),
+        help="a profile of drivewm/recipes/quickstart.yaml: full (about 15 min on 2 cores) or smoke (a few minutes)",
+    )
     p.set_defaults(func=lambda args: quickstart(Path(args.out), args.profile) and 0)

@@ -6,7 +6,8 @@ preset. A run's config is resolved in one order, later wins::
 
     dataclass defaults  <-  preset  <-  recipe file "config"  <-  recipe file "overrides"  <-  --set
 
-A recipe file is YAML with three optional keys::
+A recipe file is YAML with three optional keys (``--recipe`` takes its path, or the name of one of
+the stage's packaged recipes, ``drivewm/recipes/<stage>/NAME.yaml``)::
 
     preset: small                       # a preset name of the stage
     config: {train: {steps: 2000}}      # nested field values
@@ -15,17 +16,19 @@ A recipe file is YAML with three optional keys::
 The result is validated once, by :func:`drivewm.config.from_dict` (unknown keys, wrong types and
 each config's ``validate()`` give a :class:`DrivewmError` naming the field), and printed by
 ``--dry-run``. Command modules add the same flags through :meth:`RecipeBook.add_arguments`, with
-``--preset`` choices read from the book, so the CLI never repeats a registry by hand.
+``--preset`` choices read from the book (and no ``--preset`` where a stage has one preset) and the
+packaged recipe names in ``--recipe``'s help, so the CLI never repeats a registry by hand.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
+from drivewm import resources
 from drivewm.config import apply_overrides, load_yaml, to_dict
 from drivewm.errors import DrivewmError
 
@@ -45,15 +48,19 @@ class RecipeBook(Generic[C]):
     """Preset name -> nested field values applied over the dataclass defaults."""
     default: str
     """Preset used when neither the command line nor the recipe names one."""
+    recipes: str = ""
+    """Folder of the stage's packaged recipes, ``drivewm/recipes/<recipes>/NAME.yaml`` ('' = none)."""
 
     def resolve(self, preset: str | None = None, recipe: str | Path | None = None, overrides: list[str] = ()) -> C:
         """The validated config of a run (see the module docstring for the order)."""
-        data = load_recipe(recipe) if recipe is not None else {}
+        path = self.recipe_path(recipe) if recipe is not None else None
+        data = load_recipe(path) if path is not None else {}
         name = preset or data.get("preset") or self.default
         if name not in self.presets:
             raise DrivewmError(f"{self.stage}: unknown preset {name!r}; known: {sorted(self.presets)}")
         base = deep_merge(self.preset_fields(name), data.get("config", {}))
-        return apply_overrides(self.config, base, [*data.get("overrides", []), *overrides], self.stage)
+        where = f"{self.stage} recipe {path}" if path is not None else self.stage
+        return apply_overrides(self.config, base, [*data.get("overrides", []), *overrides], where)
 
     def preset_fields(self, name: str) -> dict:
         """The preset's field values (a deep copy), with ``preset`` recorded when the config has that field."""
@@ -62,20 +69,49 @@ class RecipeBook(Generic[C]):
             fields["preset"] = name
         return fields
 
+    def recipe_path(self, recipe: str | Path) -> Path:
+        """The recipe file: a path as given, else a packaged recipe of the stage by name."""
+        if not self.recipes:
+            return Path(recipe)
+        return resources.find(f"recipes/{self.recipes}", recipe, f"{self.stage} recipe")
+
+    def recipe_names(self) -> list[str]:
+        """Names of the stage's packaged recipes."""
+        return resources.names(f"recipes/{self.recipes}") if self.recipes else []
+
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
-        """``--preset`` (choices from the book), ``--recipe``, ``--set KEY=VALUE`` and ``--dry-run``."""
-        parser.add_argument(
-            "--preset", choices=sorted(self.presets), help=f"named preset (default: the recipe's, else {self.default})"
-        )
-        parser.add_argument("--recipe", type=Path, help="recipe YAML (keys: preset, config, overrides)")
-        parser.add_argument(
-            "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a config field"
-        )
-        parser.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+        """``--preset`` (choices from the book, if several), ``--recipe``, ``--set KEY=VALUE`` and ``--dry-run``."""
+        add_recipe_arguments(parser, self.presets, self.default, self.recipe_names() if self.recipes else None)
 
     def from_args(self, args: argparse.Namespace) -> C:
         """The config named by the flags of :meth:`add_arguments`."""
-        return self.resolve(args.preset, args.recipe, args.overrides)
+        return self.resolve(getattr(args, "preset", None), args.recipe, args.overrides)
+
+
+def add_override_arguments(parser: argparse.ArgumentParser, what: str = "a config field", run: str = "run") -> None:
+    """``--set KEY=VALUE`` (repeatable, into ``args.overrides``) and ``--dry-run``: the same in every stage."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=f"override {what}"
+    )
+    parser.add_argument("--dry-run", action="store_true", help=f"print the resolved config of the {run} and exit")
+
+
+def add_recipe_arguments(
+    parser: argparse.ArgumentParser, presets: Iterable[str], default: str, packaged: list[str] | None = None
+) -> None:
+    """The recipe flags with ``--preset`` choices ``presets`` (omitted when there is only one) and the
+    stage's ``packaged`` recipe names in the help. Command modules that must not import a stage's
+    (heavy) config classes to build the parser call it with the preset names; handlers resolve
+    through the book."""
+    presets = sorted(presets)
+    if len(presets) > 1:
+        help_text = f"named preset (default: the recipe's, else {default})"
+        parser.add_argument("--preset", choices=presets, help=help_text)
+    names = f"; packaged: {', '.join(packaged)}" if packaged else ""
+    parser.add_argument(
+        "--recipe", help=f"recipe YAML (keys: preset, config, overrides) or a packaged recipe's name{names}"
+    )
+    add_override_arguments(parser)
 
 
 def load_recipe(path: str | Path) -> dict:
@@ -83,7 +119,10 @@ def load_recipe(path: str | Path) -> dict:
     data = load_yaml(path)
     unknown = sorted(set(data) - set(RECIPE_KEYS))
     if unknown:
-        raise DrivewmError(f"{path}: unknown recipe key(s) {unknown}; a recipe has {list(RECIPE_KEYS)}")
+        raise DrivewmError(
+            f"{path}: unknown recipe key(s) {unknown}; a recipe has {list(RECIPE_KEYS)} "
+            "(config fields go under 'config:')"
+        )
     if "preset" in data and not isinstance(data["preset"], str):
         raise DrivewmError(f"{path}: 'preset' must be a preset name")
     if not isinstance(data.get("config", {}), dict):

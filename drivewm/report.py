@@ -67,9 +67,8 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
     """Every number and figure the report shows, from the stage outputs in ``out``."""
     curate = _read_json(out / "clips" / "report.json")
     figures = {"Simulated clips (curated, all views)": out / "clips" / "contact_sheet.png"}
-    figures.update(
-        {"Tokenizer reconstruction (input | output)": p for p in sorted((out / "tokenizer_eval").glob("*.png"))[:1]}
-    )
+    for first in sorted((out / "tokenizer_eval").glob("*.png"))[:1]:
+        figures["Tokenizer reconstruction (input | output)"] = first
     curves = training_curves(out, out / "training_curves.png")
     if curves:
         figures["Training curves"] = curves
@@ -192,7 +191,8 @@ def to_html(facts: dict, stages: list[tuple[str, list[str]]], out: Path) -> str:
 <html lang="en"><head><meta charset="utf-8"><title>drivewm quickstart report</title>
 <style>body{{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222}}
 table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;text-align:left}}
-figure{{margin:1.5em 0}}img{{max-width:100%;border:1px solid #ddd}}pre{{background:#f6f6f6;padding:1em;overflow:auto}}</style></head>
+figure{{margin:1.5em 0}}img{{max-width:100%;border:1px solid #ddd}}
+pre{{background:#f6f6f6;padding:1em;overflow:auto}}</style></head>
 <body data-figures="{len(facts["figures"])}">
 <h1>drivewm quickstart report</h1>
 <p>Rig <code>{e(facts["rig"])}</code>. <span id="figure-status">loading figures...</span></p>

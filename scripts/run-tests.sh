@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Install drivewm with its test extras into .venv and run the whole test suite (CPU only).
+# Install drivewm with its test extras into .venv, check lint and formatting (ruff), and run the whole
+# test suite (CPU only). Arguments go to pytest, e.g. -m "not slow" for the fast tier.
 # PyTorch is pinned first: a bare torch requirement would pull the CUDA build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -11,5 +12,7 @@ python -m pip install -q -e ".[test]"
 if ! command -v chromium >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
   (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || echo "chromium not installed: the report browser test will say so"
 fi
+ruff check .
+ruff format --check .
 export RAY_AUTH_MODE=disabled RAY_USAGE_STATS_ENABLED=0 SDL_VIDEODRIVER=offscreen
 python -m pytest -q "$@"

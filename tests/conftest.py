@@ -32,10 +32,16 @@ SIM_DRIVES = {
 SIM_COMMON = dict(rig="nuscenes6", duration_s=6.0, fps=10.0)
 
 
+#: What each cached data set is made from: a change in any of these files rebuilds it.
+LOG_SOURCES = ("drivewm/sim", "drivewm/logs", "drivewm/geometry.py", "drivewm/rigs")
+CLIP_SOURCES = (*LOG_SOURCES, "drivewm/curate", "drivewm/clips", "drivewm/recipes/curate")
+
+
 def _source_hash(*parts: str) -> str:
     digest = hashlib.sha256()
     for part in parts:
-        for path in sorted((REPO / part).rglob("*")):
+        root = REPO / part
+        for path in sorted(root.rglob("*")) if root.is_dir() else [root]:
             if path.is_file() and path.suffix in {".py", ".yaml", ".yml"}:
                 digest.update(str(path.relative_to(REPO)).encode())
                 digest.update(path.read_bytes())
@@ -69,7 +75,7 @@ def _build_logs(out: Path) -> None:
 def _build_clips(out: Path, log_dir: Path) -> None:
     from drivewm.curate import curate, load_curate_config
 
-    cfg = load_curate_config(REPO / "datasets" / "curate" / "test.yaml")
+    cfg = load_curate_config("test")
     curate(sorted(log_dir.glob("*.mcap")), out, cfg, executor="local", workers=1)
 
 
@@ -93,14 +99,24 @@ def shared_data() -> Path:
     return SHARED_DATA
 
 
+def sim_logs() -> Path:
+    """Four simulated nuscenes6 drives (320x192, 10 fps, 6 s): highway clear/snow, roundabout, SUMO grid at night."""
+    return _cached("logs", LOG_SOURCES, _build_logs)
+
+
+def sim_clips() -> Path:
+    """:func:`sim_logs` curated with the ``test`` recipe (drivewm/recipes/curate/test.yaml: 17-frame clips, 10 fps)."""
+    logs = sim_logs()
+    return _cached("clips", CLIP_SOURCES, lambda out: _build_clips(out, logs))
+
+
 @pytest.fixture(scope="session")
 def sim_log_dir() -> Path:
-    """Four simulated nuscenes6 drives (320x192, 10 fps, 6 s): highway clear/snow, roundabout, SUMO grid at night."""
-    return _cached("logs", ("drivewm/sim", "drivewm/logs", "datasets/scenarios", "multiview/rigs"), _build_logs)
+    """:func:`sim_logs`, built once per source version."""
+    return sim_logs()
 
 
 @pytest.fixture(scope="session")
 def sim_clip_dir(sim_log_dir: Path) -> Path:
-    """``sim_log_dir`` curated with datasets/curate/test.yaml (17-frame clips at 10 fps)."""
-    sources = ("drivewm/sim", "drivewm/logs", "drivewm/curate", "drivewm/clips", "datasets", "multiview/rigs")
-    return _cached("clips", sources, lambda out: _build_clips(out, sim_log_dir))
+    """:func:`sim_clips`, built once per source version."""
+    return sim_clips()

@@ -11,9 +11,12 @@ from drivewm.geometry import (
     invert_T,
     load_rig,
     make_T,
+    nearest_rotation,
     project,
     quat_xyzw_to_R,
     rig_from_dict,
+    rot_z,
+    rotation_angle_deg,
     sampson_distance_sq,
     transform_points,
 )
@@ -83,3 +86,72 @@ def test_bad_rig_is_a_clear_error(tmp_path):
         rig_from_dict({"cameras": [{"name": "a", "width": 10, "height": 10, "xyz": [0, 0, 0]}]})
     with pytest.raises(DrivewmError, match="no such file or named rig"):
         load_rig("no_such_rig")
+
+
+def test_rotation_angle_of_a_rotation_read_from_text():
+    """KITTI-style poses are printed with ~7 significant digits: a 0.001 deg rotation read back is
+    off orthonormal by ~1e-7, and arccos((tr R - 1) / 2) of that raw matrix would say ~0.03 deg."""
+    from scipy.spatial.transform import Rotation
+
+    R = rot_z(np.radians(0.001))
+    rng = np.random.default_rng(3)
+    R_text = R + rng.uniform(-1, 1, (3, 3)) * 1e-7  # what "%.7e" round-off leaves
+    raw = np.degrees(np.arccos(np.clip((np.trace(R_text) - 1) / 2, -1, 1)))
+    assert raw > 0.01  # the naive formula is off by an order of magnitude
+    assert rotation_angle_deg(R_text) == pytest.approx(0.001, abs=2e-5)
+    assert rotation_angle_deg(R_text) == pytest.approx(np.degrees(Rotation.from_matrix(R_text).magnitude()), abs=2e-5)
+    Q = nearest_rotation(R_text)
+    assert np.allclose(Q @ Q.T, np.eye(3), atol=1e-14) and np.linalg.det(Q) == pytest.approx(1.0)
+    big = euler_to_R(0.3, -1.1, 2.5)
+    assert rotation_angle_deg(big) == pytest.approx(np.degrees(Rotation.from_matrix(big).magnitude()), rel=1e-12)
+
+
+def _ray_hits(cam_from, cam_to, uv_to):
+    """Pixels of ``cam_from`` seen along the rays of pixels ``uv_to`` (N, 2) of ``cam_to`` (same pose)."""
+    from drivewm.geometry import pixel_rays
+
+    uv, _ = project(cam_from.K, pixel_rays(cam_to.K, uv_to))
+    return uv
+
+
+@pytest.mark.parametrize(
+    "size,fit,crop_px",
+    [
+        ((160, 96), "same", (0, 0)),  # /2
+        ((640, 384), "same", (0, 0)),  # x2
+        ((240, 144), "same", (0, 0)),  # x0.75
+        ((160, 120), "stretch", (0, 0)),  # another aspect, stretched
+        ((160, 80), "crop", (0, 8)),  # resized to 160x96, 8 rows cut top and bottom
+        ((128, 96), "crop", (16, 0)),  # resized to 160x96, 16 columns cut left and right
+    ],
+)
+def test_scaled_camera_maps_pixel_centres_like_cv2_resize(size, fit, crop_px):
+    """An image that is linear in (u, v) stays linear under cv2.resize (bilinear, pixel centres at
+    integers): the value at each new pixel names the old pixel position it was sampled at, which must
+    be where the scaled camera's ray through that pixel hits the original camera."""
+    cam = load_rig("front1").camera("CAM_FRONT")  # 320x192, cx = 159.5
+    vv, uu = np.mgrid[0 : cam.height, 0 : cam.width].astype(np.float32)
+    w, h = size
+    if fit == "crop":
+        s = max(w / cam.width, h / cam.height)
+        full = (round(cam.width * s), round(cam.height * s))
+    else:
+        full = (w, h)
+    ox, oy = crop_px
+    resized = [cv2.resize(c, full, interpolation=cv2.INTER_LINEAR)[oy : oy + h, ox : ox + w] for c in (uu, vv)]
+    new = cam.scaled(w, h, fit)
+    assert (new.width, new.height) == (w, h)
+    # Interior pixels only: bilinear sampling clamps at the border.
+    v2, u2 = np.mgrid[4 : h - 4, 4 : w - 4]
+    uv_new = np.stack([u2.ravel(), v2.ravel()], 1).astype(np.float64)
+    expected = np.stack([resized[0][v2, u2].ravel(), resized[1][v2, u2].ravel()], 1)
+    np.testing.assert_allclose(_ray_hits(cam, new, uv_new), expected, atol=2e-3)  # float32 images
+
+
+def test_scaled_refuses_a_silent_aspect_change():
+    cam = load_rig("front1").camera("CAM_FRONT")
+    with pytest.raises(DrivewmError, match="aspect ratio"):
+        cam.scaled(160, 120)
+    with pytest.raises(DrivewmError, match="not 'same'"):
+        cam.scaled(160, 96, "squash")
+    assert cam.scaled(161, 96).width == 161  # one pixel of rounding is not an aspect change

@@ -15,6 +15,8 @@ import pytest
 from drivewm.clips import iter_clips
 from drivewm.quickstart import load_profile
 
+pytestmark = pytest.mark.slow  # runs every stage of the pipeline (minutes)
+
 CHROMIUM_FLAGS = [
     "--headless",
     "--no-sandbox",

@@ -78,3 +78,18 @@ def test_deep_merge_copies():
     merged = deep_merge(base, {"a": {"c": 2}})
     merged["a"]["b"] = 5
     assert base == {"a": {"b": 1}} and merged == {"a": {"b": 5, "c": 2}}
+
+
+def test_one_preset_shows_no_preset_flag_and_recipes_resolve_by_packaged_name():
+    book = RecipeBook("demo", Run, {"default": {}}, "default", recipes="eval")
+    parser = argparse.ArgumentParser()
+    book.add_arguments(parser)
+    assert "--preset" not in parser.format_help() and "packaged: default, quick" in " ".join(
+        parser.format_help().split()
+    )
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--preset", "default"])
+    assert book.from_args(parser.parse_args(["--set", "width=5"])).width == 5
+    assert book.recipe_path("quick").name == "quick.yaml" and book.recipe_path("quick").is_file()
+    with pytest.raises(DrivewmError, match="demo recipe 'nope'.*packaged: default, quick"):
+        book.recipe_path("nope")

@@ -1,4 +1,4 @@
-"""The clip: synchronized multi-camera frames, ego poses and metadata (DESIGN.md section 4).
+"""The clip: synchronized multi-camera frames, ego poses and metadata (docs/DESIGN.md section 4).
 
 On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`) and
 ``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) inside a WebDataset tar.
@@ -12,7 +12,7 @@ import re
 
 import numpy as np
 
-from drivewm.clips.video import decode_mp4
+from drivewm.clips.video import decode_mp4, encode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
 
@@ -28,6 +28,10 @@ class ClipMeta:
     (N, 3) waypoints (m) in the first frame's ego frame, spaced ``trajectory_dt_s`` apart
     starting one step after the first frame. ``quality``: filter scores by filter name.
     ``sync_error_ns``: worst camera skew against the reference clock over the clip.
+    ``camera_timestamps_ns``: camera name -> the exposure time (ns) of each of its frames, as
+    logged, for rigs whose cameras do not fire at the tick (staggered exposures, jitter); empty
+    (and omitted from the JSON) when every camera's frames are exactly at ``timestamps_ns``. Read
+    it through :meth:`camera_times_ns`, which falls back to ``timestamps_ns``.
     ``extra``: anything else (generated clips record model, prompt, seed, trajectory name).
     ``pair_id``: the same drive window in other conditions has the same id (simulated drives:
     ``<drive_id>-t<start tick>``, see drivewm.sim.paired); "" = no known partner.
@@ -44,6 +48,7 @@ class ClipMeta:
     tags: dict[str, str] = dataclasses.field(default_factory=dict)
     quality: dict[str, float] = dataclasses.field(default_factory=dict)
     sync_error_ns: int = 0
+    camera_timestamps_ns: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     trajectory_ego: list[list[float]] = dataclasses.field(default_factory=list)
     trajectory_dt_s: float = 0.0
     extra: dict = dataclasses.field(default_factory=dict)
@@ -61,8 +66,15 @@ class ClipMeta:
     def get_rig(self) -> Rig:
         return rig_from_dict(self.rig, f"clip {self.key}")
 
+    def camera_times_ns(self, camera: str) -> list[int]:
+        """Exposure time (ns) of each frame of ``camera``: its own if recorded, else the clip's."""
+        return self.camera_timestamps_ns.get(camera, self.timestamps_ns)
+
     def to_json(self) -> dict:
-        return dataclasses.asdict(self)
+        data = dataclasses.asdict(self)
+        if not self.camera_timestamps_ns:  # synchronized rigs: clips stay as they were before the field
+            del data["camera_timestamps_ns"]
+        return data
 
     @classmethod
     def from_json(cls, data: dict, where: str) -> ClipMeta:
@@ -107,8 +119,6 @@ def clip_from_arrays(
     meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18
 ) -> Clip:
     """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta)."""
-    from drivewm.clips.video import encode_mp4
-
     validate_meta(meta)
     mp4 = {c: encode_mp4(frames[c], meta.fps, crf) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
@@ -123,3 +133,9 @@ def validate_meta(meta: ClipMeta) -> None:
     if meta.fps <= 0 or meta.num_frames == 0:
         raise DrivewmError(f"clip {meta.key}: needs fps > 0 and at least one timestamp")
     meta.get_rig()
+    for camera, times in meta.camera_timestamps_ns.items():
+        if camera not in meta.cameras or len(times) != meta.num_frames:
+            raise DrivewmError(
+                f"clip {meta.key}: camera_timestamps_ns[{camera!r}] must name a rig camera and have "
+                f"{meta.num_frames} times, got {len(times)}"
+            )

@@ -62,6 +62,20 @@ def write_latent_index(cache_dir: str | Path, tokenizer_info: dict, rows: list[d
     )
 
 
+def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | None) -> Path:
+    """``data_dir`` itself if it is a cache, else ``data_dir/latents/<name or tokenizer folder name>``."""
+    if (data_dir / "index.json").is_file():
+        return data_dir
+    if name is None and tokenizer_dir is None:
+        raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
+    cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
+    if not (cache / "index.json").is_file():
+        raise DrivewmError(
+            f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first"
+        )
+    return cache
+
+
 class LatentCache:
     """Read a latent cache folder. ``len(cache)``, ``cache[i]`` -> :class:`LatentClip`."""
 

@@ -1,6 +1,6 @@
 """H.264 mp4 in memory: encode with PyAV (libx264), decode with PyAV.
 
-OpenCV cannot write H.264 (DESIGN.md section 9), so PyAV does both directions here; the
+OpenCV cannot write H.264 (docs/DESIGN.md section 9), so PyAV does both directions here; the
 decoder checks the frame count so a truncated video is an error, not a short clip.
 """
 

@@ -2,8 +2,13 @@
 
 ``curate(log_paths, out_dir, cfg, executor="local"|"ray", workers=1, ray_address=None)`` runs
 the per-log stage (:mod:`drivewm.curate.stage`) on an executor and writes shards, manifest.jsonl,
-report.json and contact_sheet.png (see ``datasets/curate/README.md``).
+report.json and contact_sheet.png (see ``drivewm/recipes/curate/README.md``).
+
+The public names are imported on first use (:mod:`drivewm.lazy`): ``drivewm --help`` imports this
+package for its commands and must not pay for filterpy, scipy and OpenCV.
 """
+
+from drivewm.lazy import lazy_exports
 
 _EXPORTS = {
     "CurateConfig": "drivewm.curate.config",
@@ -13,13 +18,4 @@ _EXPORTS = {
 }
 
 __all__ = ["CurateConfig", "balanced_sample", "curate", "load_curate_config"]
-
-
-def __getattr__(name: str):
-    """Import the public names on first use: ``drivewm --help`` imports this package for its
-    commands and must not pay for filterpy, scipy and OpenCV (PEP 562)."""
-    if name in _EXPORTS:
-        import importlib
-
-        return getattr(importlib.import_module(_EXPORTS[name]), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

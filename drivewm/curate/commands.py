@@ -1,11 +1,19 @@
-"""``drivewm curate`` and ``drivewm import-video`` (heavy imports inside the handlers)."""
+"""``drivewm curate`` and ``drivewm import-video``.
+
+Thin: parse, build the config, print it, call the library; the curation stage (OpenCV, filterpy,
+scenedetect) is imported inside the handlers so that ``drivewm --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "datasets" / "curate" / "default.yaml"
+from drivewm.choices import add_registry_argument
+from drivewm.config import to_dict
+from drivewm.curate.config import CURATE_RECIPES
+from drivewm.errors import DrivewmError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -16,16 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png"
     )
-    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="curation recipe (datasets/curate/*.yaml)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config field, e.g. filters.dedup_cosine=0.99",
+    CURATE_RECIPES.add_arguments(p)
+    add_registry_argument(
+        p, "--executor", "drivewm.curate.pipeline:EXECUTORS", "where logs run (default local)", default="local"
     )
-    p.add_argument("--executor", choices=("local", "ray"), default="local")
     p.add_argument(
         "--workers", type=int, default=1, help="parallel logs (local processes, or Ray CPUs when starting Ray locally)"
     )
@@ -56,19 +58,17 @@ def _expand(paths: list[Path]) -> list[Path]:
 
 
 def _curate(args: argparse.Namespace) -> int:
-    import json
+    from drivewm.curate import curate
 
-    from drivewm.config import to_dict
-    from drivewm.curate import curate, load_curate_config
-
-    cfg = load_curate_config(args.config, args.overrides)
+    cfg = CURATE_RECIPES.from_args(args)
     print(json.dumps(to_dict(cfg)))
+    if args.dry_run:
+        return 0
     report = curate(
         _expand(args.logs), args.out, cfg, executor=args.executor, workers=args.workers, ray_address=args.ray_address
     )
-    print(
-        f"kept {report['kept']} clips, dropped {report['dropped']}; logs ok {report['logs_ok']}, failed {report['logs_failed']}"
-    )
+    print(f"kept {report['kept']} clips, dropped {report['dropped']}; ", end="")
+    print(f"logs ok {report['logs_ok']}, failed {report['logs_failed']}")
     for name, log in report["logs"].items():
         if log["status"] == "failed":
             print(f"  {name}: {log['error']}")
@@ -78,7 +78,6 @@ def _curate(args: argparse.Namespace) -> int:
 
 def _import_video(args: argparse.Namespace) -> int:
     from drivewm.curate.import_video import import_videos
-    from drivewm.errors import DrivewmError
 
     tags = {}
     for t in args.tag:

@@ -1,7 +1,7 @@
-"""Curation configuration: typed dataclasses loaded from ``datasets/curate/*.yaml``.
+"""Curation configuration: typed dataclasses, built by :data:`CURATE_RECIPES` from a recipe.
 
-Every field has a default, so a recipe names only what it changes; unknown keys and wrong
-types are refused by :func:`drivewm.config.from_dict` with the key named.
+Every field has a default, so a recipe (``drivewm/recipes/curate/*.yaml``) names only what it
+changes; unknown keys and wrong types are refused with the key and the file named.
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from drivewm.config import from_dict, load_yaml
 from drivewm.errors import DrivewmError
+from drivewm.recipe import RecipeBook
 
 
 @dataclasses.dataclass
@@ -76,7 +76,7 @@ class TrajectoryConfig:
 
 @dataclasses.dataclass
 class CurateConfig:
-    """One curation recipe (``datasets/curate/*.yaml``)."""
+    """One curation recipe (``drivewm/recipes/curate/*.yaml``)."""
 
     clip_frames: int = 17
     """Frames per clip (T = 1 + 4k suits the 4x and 8x temporal tokenizers)."""
@@ -87,11 +87,16 @@ class CurateConfig:
     resolution: list[int] | None = None
     """Output [W, H] (even numbers); null keeps the log's image size."""
     topic_map: str | None = None
-    """Topic map (a name in datasets/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2, other Foxglove layouts)."""
+    """Topic map (a name in drivewm/topicmaps/ or a YAML path) for logs not written by drivewm (ROS 2, other
+    Foxglove layouts)."""
     cameras: list[str] | None = None
     """Cameras to keep, in this order; null keeps the log's rig."""
     sync_tolerance_ms: float = 25.0
-    """A camera frame belongs to a tick when it is within this of the tick (must be < half a clip frame)."""
+    """A camera frame belongs to a tick when it is within this of the tick plus the camera's exposure
+    offset (must be < half a clip frame)."""
+    per_camera_offsets: bool = True
+    """Estimate each camera's steady exposure offset from the reference (first) camera (rigs that fire
+    cameras in turn) and apply the tolerance around it; false: around the tick for every camera."""
     trajectory_waypoints: int = 16
     """Future ego waypoints per clip (ClipMeta.trajectory_ego), from the 2nd to the last frame."""
     shot_threshold: float = 2.5
@@ -115,7 +120,8 @@ class CurateConfig:
             raise DrivewmError("curate config: need clip_frames >= 2, stride_frames >= 1 and fps > 0")
         if self.sync_tolerance_ms * 1e-3 >= 0.5 / self.fps:
             raise DrivewmError(
-                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame ({500 / self.fps:.1f} ms)"
+                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame "
+                f"({500 / self.fps:.1f} ms)"
             )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
@@ -128,11 +134,11 @@ class CurateConfig:
         return 1e9 / self.fps
 
 
-def load_curate_config(path: str | Path, overrides: list[str] | None = None) -> CurateConfig:
-    """Read a curation recipe (YAML), applying ``KEY=VALUE`` overrides."""
-    from drivewm.config import apply_overrides
+CURATE_RECIPES = RecipeBook("curate", CurateConfig, {"default": {}}, "default", recipes="curate")
+"""How a curation config is made (docs/DESIGN.md section 10): the defaults above, a recipe (a packaged
+name such as ``test`` or a YAML path, ``drivewm/recipes/curate/``) and ``--set KEY=VALUE``."""
 
-    data = load_yaml(path)
-    if overrides:
-        return apply_overrides(CurateConfig, data, overrides, str(path))
-    return from_dict(CurateConfig, data, str(path))
+
+def load_curate_config(recipe: str | Path | None = None, overrides: list[str] = ()) -> CurateConfig:
+    """The config of a curation ``recipe`` (a packaged name or a path; None: the defaults) with overrides."""
+    return CURATE_RECIPES.resolve(None, recipe, list(overrides))

@@ -3,16 +3,20 @@
 Both call :func:`drivewm.curate.stage.curate_log` once per log and return its results in input
 order; each log's shards and done-marker are written by the worker itself, so results survive
 a crash of the driver. ``workers=1`` runs in-process (easiest to debug); more workers use a
-``spawn`` process pool. Ray runs the same function as a ``map`` over a dataset of log paths.
+``spawn`` process pool. Ray runs the same function as a ``map`` over a dataset of log paths; Ray (the
+optional ``ray`` extra, seconds to import) is imported only when the Ray executor runs.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import traceback
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
+
+import cv2
 
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.stage import curate_log
@@ -40,8 +44,6 @@ def _safe_curate(log: str, out_dir: str, cfg: CurateConfig, name: str) -> dict:
 
 def _one_thread_per_worker() -> None:
     """Parallelism comes from the pool: keep OpenCV in each worker on one thread (no oversubscription)."""
-    import cv2
-
     cv2.setNumThreads(1)
 
 
@@ -55,7 +57,6 @@ def run_local(
             results.append(_safe_curate(log, out_dir, cfg, name))
             progress(results[-1])
         return results
-    import multiprocessing
 
     by_index: dict[int, dict] = {}
     ctx = multiprocessing.get_context("spawn")

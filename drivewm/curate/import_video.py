@@ -14,10 +14,12 @@ from pathlib import Path
 import av
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.logs.types import SceneInfo
+from drivewm.logs.writer import LogWriter
 
 UNKNOWN_TAGS = {
     "weather": "unknown",
@@ -47,8 +49,6 @@ def import_video(
     video: Path, calibration: str | Path, out_path: Path, tags: dict[str, str] | None = None, description: str = ""
 ) -> Path:
     """Write one video as a single-camera drive log; returns ``out_path``."""
-    from drivewm.logs.writer import LogWriter
-
     rig = load_rig(calibration)
     if len(rig.cameras) != 1:
         raise DrivewmError(f"{calibration}: a video calibration has exactly one camera, found {rig.names}")
@@ -84,8 +84,6 @@ def import_videos(
     inputs: list[Path], calibration: str | Path, out_dir: Path, tags: dict[str, str] | None = None
 ) -> list[Path]:
     """Import every mp4 of ``inputs`` (files or folders) into ``out_dir/NAME.mcap``."""
-    from tqdm import tqdm
-
     out_dir = Path(out_dir)
     return [
         import_video(v, calibration, out_dir / f"{v.stem}.mcap", tags)

@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import hashlib
 import io
+import shutil
 import tarfile
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from drivewm.atomic import atomic_path, write_json
 from drivewm.clips.shards import write_manifest
 from drivewm.config import to_dict
+from drivewm.curate import executors
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.contact_sheet import write_contact_sheet
 from drivewm.curate.dedup import near_duplicates
@@ -65,8 +68,6 @@ def curate(
 
 def remove_leftovers(out_dir: Path) -> None:
     """Delete temporaries of a killed run (atomic_path's ``.NAME.XXXX.tmp`` folders); finished files stay."""
-    import shutil
-
     for folder in (out_dir, out_dir / "logs"):
         for tmp in folder.glob(".*.tmp"):
             if tmp.is_dir():
@@ -76,10 +77,6 @@ def remove_leftovers(out_dir: Path) -> None:
 def _run(
     jobs, out_dir: Path, cfg: CurateConfig, executor: str, workers: int, ray_address: str | None, progress: bool
 ) -> list[dict]:
-    from tqdm import tqdm
-
-    from drivewm.curate import executors
-
     bar = tqdm(
         total=len(jobs),
         desc=f"curate ({executor}, {workers} worker{'s' * (workers != 1)})",

@@ -81,7 +81,8 @@ class Anonymizer:
     def __init__(self, cfg: PrivacyConfig):
         if cfg.faces and not cfg.face_model:
             raise DrivewmError(
-                "privacy.faces needs privacy.face_model (a YuNet ONNX file; OpenCV 5 bundles no face detector) or privacy.faces: false"
+                "privacy.faces needs privacy.face_model (a YuNet ONNX file; OpenCV 5 bundles no face detector) or "
+                "privacy.faces: false"
             )
         self.cfg = cfg
         self.faces = YuNetFaces(cfg.face_model, cfg.face_score) if cfg.faces else None

@@ -13,6 +13,7 @@ from collections.abc import Iterable
 
 import cv2
 import numpy as np
+from scenedetect import AdaptiveDetector, FrameTimecode
 
 
 def valid_runs(valid: np.ndarray) -> list[tuple[int, int]]:
@@ -27,8 +28,6 @@ def shot_boundaries(frames_rgb: Iterable[np.ndarray], fps: float, threshold: flo
 
     ``threshold``: AdaptiveDetector's ratio of a frame's change score to its neighbours' average.
     """
-    from scenedetect import AdaptiveDetector, FrameTimecode
-
     detector = AdaptiveDetector(adaptive_threshold=threshold, min_scene_len=min_frames)
     cuts: list[int] = []
     n = 0

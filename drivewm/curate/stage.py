@@ -22,11 +22,14 @@ import numpy as np
 from drivewm.atomic import write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
+from drivewm.config import to_dict
 from drivewm.curate import dedup, filters, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
+from drivewm.curate.privacy import Anonymizer
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
+from drivewm.logs.reader import read_log
 from drivewm.logs.types import DriveLog, ImageFrame
 
 MARKER_DIR = "logs"
@@ -39,8 +42,6 @@ def log_name(path: str | Path) -> str:
 
 def config_fingerprint(cfg: CurateConfig) -> str:
     """Short hash of the recipe: a done-marker from another recipe does not count as done."""
-    from drivewm.config import to_dict
-
     return hashlib.sha256(json.dumps(to_dict(cfg), sort_keys=True).encode()).hexdigest()[:12]
 
 
@@ -63,8 +64,6 @@ def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
 def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None = None) -> dict:
     """Curate one log (skipping it when its done-marker exists). Never raises for bad input:
     a DrivewmError becomes ``{"status": "failed", "error": ...}``."""
-    from drivewm.logs.reader import read_log
-
     out, name = Path(out_dir), name or log_name(log_path)
     done = read_marker(out, name, cfg)
     if done is not None:
@@ -136,16 +135,14 @@ def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
     """Sync the cameras and smooth the poses of one log."""
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
-        rig = rig.scaled(*cfg.resolution)
+        rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (_LogContext.image)
     raw = {c: log.images.get(c, []) for c in rig.names}
     times = {c: np.array([f.timestamp_ns for f in raw[c]], dtype=np.int64) for c in rig.names}
-    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6)
+    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6, cfg.per_camera_offsets)
     frames = {c: [raw[c][i] for i in sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
     smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
     anonymizer = None
     if cfg.privacy.enabled:
-        from drivewm.curate.privacy import Anonymizer
-
         anonymizer = Anonymizer(cfg.privacy)
     return _LogContext(log, rig, table, frames, smooth, cfg, load_captioner(cfg.captioner), anonymizer)
 
@@ -235,6 +232,12 @@ def _meta(
         trajectory.future_waypoints(poses, t_ns, cfg.trajectory_waypoints) if known else (np.zeros((0, 3)), 0.0)
     )
     skew = int(ctx.table.skew_ns[start : start + len(t_ns)].max())
+    exposures = ctx.table.frame_ns[start : start + len(t_ns)]  # (T, V) each image's own timestamp
+    camera_times = (
+        {}
+        if (exposures == t_ns[:, None]).all()
+        else {c.name: [int(t) for t in exposures[:, v]] for v, c in enumerate(ctx.rig.cameras)}
+    )
     tags = {
         **{k: str(v) for k, v in ctx.log.scene.tags.items()},
         "ego_motion": "known" if known else "unknown",
@@ -252,6 +255,7 @@ def _meta(
         tags=tags,
         quality={k: round(float(v), 4) for k, v in scores.items()},
         sync_error_ns=skew,
+        camera_timestamps_ns=camera_times,
         trajectory_ego=np.round(waypoints, 4).tolist(),
         trajectory_dt_s=dt_s,
         extra={"speed_mps": motion["speed_mps"], "description": ctx.log.scene.description},

@@ -2,10 +2,16 @@
 
 The reference clock is a uniform grid at the clip rate, anchored at the first frame of the first
 camera once every camera has started (so cameras that start late just shorten the usable span).
-A tick keeps a camera's frame only within ``tolerance_ns`` of it; ticks where any camera has no
-such frame (a dropped frame, a camera that stopped) are invalid and later split clips apart.
-Duplicated timestamps keep their first frame. With a tolerance below half a tick, two ticks can
-never pick the same frame, so resampling never repeats frames.
+Rigs that fire their cameras in turn (nuScenes: as the lidar sweeps past, up to ~40 ms apart)
+give each camera a constant exposure offset from the reference camera; it is estimated per camera
+(the median time to the reference camera's nearest frame, kept when the interquartile spread is
+within the tolerance, i.e. the offset is steady) and the tolerance is applied around
+``tick + offset``: camera c keeps its frame at tick k only within ``tolerance_ns`` of
+``tick_k + offset_c``. Ticks where any camera has no such frame (a dropped frame, a camera that
+stopped) are invalid and later split clips apart. Each kept frame's own timestamp is recorded
+(``frame_ns``), so a clip states when every image was exposed. Duplicated timestamps keep their
+first frame. With a tolerance below half a tick, two ticks can never pick the same frame, so
+resampling never repeats frames.
 """
 
 from __future__ import annotations
@@ -20,15 +26,19 @@ class SyncResult:
     """The synchronized tick table of one log.
 
     ``tick_ns`` (N,) reference times; ``frame_index`` (N, V) index into each camera's de-duplicated
-    frame list (-1 where missing); ``valid`` (N,) every camera present; ``skew_ns`` (N,) worst
-    |camera time - tick| per tick; ``stats`` per camera: duplicates, late start, missing ticks.
+    frame list (-1 where missing); ``frame_ns`` (N, V) that frame's own timestamp (-1 where
+    missing); ``valid`` (N,) every camera present; ``skew_ns`` (N,) worst |camera time - tick| per
+    tick (exposure offsets included); ``offsets_ns`` each camera's estimated exposure offset from
+    the reference camera; ``stats`` per camera: duplicates, late start, offset, missing ticks.
     """
 
     cameras: list[str]
     tick_ns: np.ndarray
     frame_index: np.ndarray
+    frame_ns: np.ndarray
     valid: np.ndarray
     skew_ns: np.ndarray
+    offsets_ns: dict[str, int]
     stats: dict[str, dict[str, int]]
 
     @property
@@ -72,13 +82,30 @@ def reference_ticks(
     return start + np.round(np.arange(count) * period_ns).astype(np.int64)
 
 
+def exposure_offset_ns(frame_ns: np.ndarray, reference_ns: np.ndarray, tolerance_ns: float) -> int:
+    """A camera's steady exposure offset from the reference camera (ns): the median time from each
+    reference frame to the camera's nearest frame, or 0 when those times spread (interquartile
+    range) beyond the tolerance (another frame rate, no fixed phase). Both inputs sorted, unique."""
+    if len(frame_ns) == 0 or len(reference_ns) == 0:
+        return 0
+    idx, _ = nearest_frames(frame_ns, reference_ns, np.inf)
+    dt = frame_ns[idx] - reference_ns
+    q25, q50, q75 = np.percentile(dt, [25, 50, 75])
+    return int(round(q50)) if q75 - q25 <= tolerance_ns else 0
+
+
 def synchronize(
-    camera_timestamps_ns: dict[str, np.ndarray], cameras: list[str], period_ns: float, tolerance_ns: float
+    camera_timestamps_ns: dict[str, np.ndarray],
+    cameras: list[str],
+    period_ns: float,
+    tolerance_ns: float,
+    per_camera_offsets: bool = True,
 ) -> SyncResult:
     """Build the tick table for ``cameras`` (the first is the reference) from each camera's sorted frame times.
 
-    ``frame_index`` refers to the de-duplicated frame order: use :func:`dedupe_timestamps` on the
-    same arrays to map back to the log's frames.
+    ``per_camera_offsets``: apply the tolerance around each camera's estimated exposure offset
+    (False: around the tick for every camera). ``frame_index`` refers to the de-duplicated frame
+    order: use :func:`dedupe_timestamps` on the same arrays to map back to the log's frames.
     """
     unique = {
         c: np.asarray(camera_timestamps_ns[c], dtype=np.int64)[
@@ -89,24 +116,29 @@ def synchronize(
     if any(len(unique[c]) == 0 for c in cameras):
         empty = [c for c in cameras if len(unique[c]) == 0]
         return _empty(cameras, {c: {"frames": len(unique[c]), "missing_camera": int(c in empty)} for c in cameras})
+    ref = unique[cameras[0]]
+    offsets = {c: exposure_offset_ns(unique[c], ref, tolerance_ns) if per_camera_offsets else 0 for c in cameras}
+    shifted = {c: unique[c] - offsets[c] for c in cameras}  # each camera's frames on the reference clock
     ticks = reference_ticks(
-        [int(unique[c][0]) for c in cameras],
-        [int(unique[c][-1]) for c in cameras],
-        unique[cameras[0]],
-        period_ns,
-        tolerance_ns,
+        [int(shifted[c][0]) for c in cameras], [int(shifted[c][-1]) for c in cameras], ref, period_ns, tolerance_ns
     )
     index = np.full((len(ticks), len(cameras)), -1, dtype=np.int64)
-    dts = np.zeros((len(ticks), len(cameras)), dtype=np.int64)
     for v, cam in enumerate(cameras):
-        index[:, v], dts[:, v] = nearest_frames(unique[cam], ticks, tolerance_ns)
+        index[:, v] = nearest_frames(shifted[cam], ticks, tolerance_ns)[0]
+    frame_ns = np.stack([np.where(index[:, v] >= 0, unique[c][index[:, v]], -1) for v, c in enumerate(cameras)], 1)
     valid = (index >= 0).all(axis=1)
+    dts = np.abs(frame_ns - ticks[:, None])
     skew = np.where(index >= 0, dts, 0).max(axis=1) if len(ticks) else np.zeros(0, dtype=np.int64)
-    return SyncResult(list(cameras), ticks, index, valid, skew, _stats(camera_timestamps_ns, cameras, unique, index))
+    stats = _stats(camera_timestamps_ns, cameras, unique, index, offsets)
+    return SyncResult(list(cameras), ticks, index, frame_ns.reshape(len(ticks), -1), valid, skew, offsets, stats)
 
 
 def _stats(
-    raw: dict[str, np.ndarray], cameras: list[str], unique: dict[str, np.ndarray], index: np.ndarray
+    raw: dict[str, np.ndarray],
+    cameras: list[str],
+    unique: dict[str, np.ndarray],
+    index: np.ndarray,
+    offsets: dict[str, int],
 ) -> dict[str, dict[str, int]]:
     start = min(int(unique[c][0]) for c in cameras)
     return {
@@ -114,6 +146,7 @@ def _stats(
             "frames": int(len(raw[cam])),
             "duplicate_timestamps": int(len(raw[cam]) - len(unique[cam])),
             "late_start_ns": int(unique[cam][0] - start),
+            "exposure_offset_ns": int(offsets[cam]),
             "missing_ticks": int((index[:, v] < 0).sum()),
         }
         for v, cam in enumerate(cameras)
@@ -121,5 +154,5 @@ def _stats(
 
 
 def _empty(cameras: list[str], stats: dict) -> SyncResult:
-    z = np.zeros(0, dtype=np.int64)
-    return SyncResult(list(cameras), z, np.zeros((0, len(cameras)), dtype=np.int64), np.zeros(0, dtype=bool), z, stats)
+    z, table = np.zeros(0, dtype=np.int64), np.zeros((0, len(cameras)), dtype=np.int64)
+    return SyncResult(list(cameras), z, table, table, np.zeros(0, dtype=bool), z, dict.fromkeys(cameras, 0), stats)

@@ -108,7 +108,7 @@ def smooth_poses(t_ns: np.ndarray, T_world_from_ego: np.ndarray, cfg: Trajectory
 
 def future_waypoints(T_world_from_ego: np.ndarray, t_ns: np.ndarray, n: int) -> tuple[np.ndarray, float]:
     """``n`` waypoints [x, y, z] (m) in the first frame's ego frame, uniform in time from the 2nd frame
-    to the last (apis.md), interpolated from per-frame poses (T, 4, 4); and their spacing in s."""
+    to the last (ClipMeta.trajectory_ego), interpolated from per-frame poses (T, 4, 4); and their spacing in s."""
     t = np.asarray(t_ns, dtype=np.float64)
     ts = np.linspace(t[1], t[-1], n)
     xyz = np.stack([np.interp(ts, t, T_world_from_ego[:, i, 3]) for i in range(3)], axis=1)

@@ -1,4 +1,4 @@
-"""DiT blocks: a list of AdaLN-modulated sub-layers (self-attention, cross-attention, MLP, ...).
+"""DiT blocks: a list of AdaLN-modulated sub-layers (attention, MLP, ...).
 
 Each sub-layer reads the tokens and a :class:`BlockContext`; a block is the ordered list named by
 ``DiTConfig.block_layers``, so a new kind of attention (e.g. across camera views) is one small
@@ -8,28 +8,41 @@ Modulation is AdaLN-LoRA (Cosmos, arXiv 2501.03575 sec. 5.1): the timestep embed
 shared ``adaln_lora`` (B, 3D) term and each sub-layer adds its own low-rank projection of the
 embedding, producing (shift, scale, gate). Every sub-layer's output projection starts at zero, so
 a freshly inserted sub-layer is the identity and the block starts as the network it extends.
+
+Text enters either through ``joint_attn`` (the default: the video tokens' self-attention also reads
+the caption tokens as extra keys and values, one softmax over both, as CogVideoX's full attention
+over concatenated text and video, arXiv 2408.06072 sec. 2.2, and SD3's MM-DiT, arXiv 2403.03206
+sec. 5.1) or through a separate ``cross_attn`` sub-layer after ``self_attn`` (PixArt / Cosmos; the
+layout of model folders written before joint attention). Joint attention spares the cross-attention's
+query and output projections (2 D^2 of 14 D^2 multiply-adds per token and block) and one modulated
+sub-layer; see benchmarks/bench_dit.py.
+
+Layouts: attention works on (B, N, heads, head_dim) views of the fused projections, so neither the
+heads split nor their merge copies memory (SDPA returns (B, N, heads, head_dim) storage for inputs
+laid out so).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 
 import torch
 import torch.nn.functional as F
-from einops import rearrange
 from torch import nn
 
 from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.rope import apply_rope
+from drivewm.diffusion.rope import rotate
+from drivewm.errors import DrivewmError
 
 
 @dataclasses.dataclass
 class BlockContext:
     """What sub-layers read besides the tokens (B, N, D)."""
 
-    rope_angles: torch.Tensor
-    """(B, N, head_dim // 2) 3D RoPE angles of the tokens."""
+    rope: torch.Tensor
+    """(B or 1, N, 1, head_dim // 2) complex64 3D RoPE rotations of the tokens (drivewm.diffusion.rope)."""
     text: torch.Tensor
     """(B, L, D) projected text tokens (a learned null token first)."""
     text_mask: torch.Tensor
@@ -41,12 +54,37 @@ class BlockContext:
     view_neighbors: torch.Tensor | None = None
     """(V, K) long: the views each view reads in cross-view sub-layers (itself included); None = all."""
 
+    @functools.cached_property
+    def joint_mask(self) -> torch.Tensor:
+        """(B, 1, 1, N + L) bool: every video token, then the caption tokens ``text_mask`` allows."""
+        b, n = self.text_mask.shape[0], self.grid_thw[0] * self.grid_thw[1] * self.grid_thw[2]
+        video = torch.ones(b, n, dtype=torch.bool, device=self.text_mask.device)
+        return torch.cat([video, self.text_mask.bool()], dim=1)[:, None, None]
+
 
 def _zero(linear: nn.Linear) -> nn.Linear:
     nn.init.zeros_(linear.weight)
     if linear.bias is not None:
         nn.init.zeros_(linear.bias)
     return linear
+
+
+def split_heads(x: torch.Tensor, parts: int, num_heads: int) -> torch.Tensor:
+    """A fused projection (B, N, parts * D) -> (B, N, parts, heads, head_dim), a view."""
+    return x.unflatten(-1, (parts, num_heads, -1))
+
+
+def attend(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """SDPA of q (B, N, heads, hd) over k, v (B, M, heads, hd) -> (B, N, heads * hd); ``mask`` (B, 1, 1|N, M)."""
+    out = F.scaled_dot_product_attention(q.transpose(1, 2), k.transpose(1, 2), v.transpose(1, 2), attn_mask=mask)
+    return out.transpose(1, 2).flatten(2)  # (B, N, heads * hd); no copy for (B, N, heads, hd) inputs
+
+
+def rms_norm_pair(x: torch.Tensor, first: nn.RMSNorm, second: nn.RMSNorm) -> torch.Tensor:
+    """QK-norm of queries and keys in one pass: ``x`` (..., 2, heads, hd) -> RMSNorm with ``first``'s
+    weight on index 0 and ``second``'s on index 1 of the pair axis."""
+    weight = torch.stack([first.weight, second.weight])[:, None]  # (2, 1, hd)
+    return F.rms_norm(x, x.shape[-1:], eps=first.eps) * weight
 
 
 class SelfAttention(nn.Module):
@@ -60,12 +98,34 @@ class SelfAttention(nn.Module):
         self.k_norm = nn.RMSNorm(cfg.head_dim, eps=1e-6)
         self.out = _zero(nn.Linear(cfg.hidden_dim, cfg.hidden_dim))
 
+    def heads(self, x: torch.Tensor, ctx: BlockContext) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Tokens (B, N, D) -> q, k, v (B, N, heads, hd): q and k normalised and rotated by the 3D RoPE."""
+        d = x.shape[-1]
+        qk, v = self.qkv(x).split([2 * d, d], dim=-1)  # (B, N, 2D), (B, N, D); backward: one concatenation
+        qk = split_heads(qk, 2, self.num_heads)  # (B, N, 2, heads, hd)
+        qk = rotate(rms_norm_pair(qk, self.q_norm, self.k_norm), ctx.rope.unsqueeze(2))
+        q, k = qk.unbind(2)  # (B, N, heads, hd) each
+        return q, k, v.unflatten(-1, (self.num_heads, -1))
+
     def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
-        q, k, v = rearrange(self.qkv(x), "b n (three h d) -> three b h n d", three=3, h=self.num_heads)
-        q = apply_rope(self.q_norm(q), ctx.rope_angles)  # (B, heads, N, head_dim)
-        k = apply_rope(self.k_norm(k), ctx.rope_angles)
-        out = F.scaled_dot_product_attention(q, k, v)  # (B, heads, N, head_dim)
-        return self.out(rearrange(out, "b h n d -> b n (h d)"))
+        return self.out(attend(*self.heads(x, ctx)))  # (B, N, D)
+
+
+class JointAttention(SelfAttention):
+    """Self-attention whose keys and values are the video tokens' and the caption tokens' together
+    (one softmax; caption keys QK-normed, no RoPE, masked by ``ctx.text_mask``)."""
+
+    def __init__(self, cfg: DiTConfig):
+        super().__init__(cfg)
+        self.text_kv = nn.Linear(cfg.hidden_dim, 2 * cfg.hidden_dim)
+        self.text_k_norm = nn.RMSNorm(cfg.head_dim, eps=1e-6)
+
+    def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
+        q, k, v = self.heads(x, ctx)  # (B, N, heads, hd) each
+        text_k, text_v = split_heads(self.text_kv(ctx.text), 2, self.num_heads).unbind(2)  # (B, L, heads, hd)
+        k = torch.cat([k, self.text_k_norm(text_k)], dim=1)  # (B, N + L, heads, hd)
+        v = torch.cat([v, text_v], dim=1)
+        return self.out(attend(q, k, v, ctx.joint_mask))  # (B, N, D)
 
 
 class CrossAttention(nn.Module):
@@ -81,28 +141,28 @@ class CrossAttention(nn.Module):
         self.out = _zero(nn.Linear(cfg.hidden_dim, cfg.hidden_dim))
 
     def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
-        q = self.q_norm(rearrange(self.q(x), "b n (h d) -> b h n d", h=self.num_heads))  # (B, heads, N, hd)
-        k, v = rearrange(self.kv(ctx.text), "b l (two h d) -> two b h l d", two=2, h=self.num_heads)
-        mask = rearrange(ctx.text_mask, "b l -> b 1 1 l")
-        out = F.scaled_dot_product_attention(q, self.k_norm(k), v, attn_mask=mask)  # (B, heads, N, hd)
-        return self.out(rearrange(out, "b h n d -> b n (h d)"))
+        q = self.q_norm(split_heads(self.q(x), 1, self.num_heads)[:, :, 0])  # (B, N, heads, hd)
+        k, v = split_heads(self.kv(ctx.text), 2, self.num_heads).unbind(2)  # (B, L, heads, hd)
+        return self.out(attend(q, self.k_norm(k), v, ctx.text_mask[:, None, None]))  # (B, N, D)
 
 
 class MLP(nn.Module):
-    """Pointwise feed-forward: Linear -> GELU(tanh) -> Linear."""
+    """Pointwise feed-forward: Linear -> GELU (exact, or tanh-approximated) -> Linear."""
 
     def __init__(self, cfg: DiTConfig):
         super().__init__()
+        self.approximate = "tanh" if cfg.mlp_activation == "gelu_tanh" else "none"
         hidden = int(cfg.hidden_dim * cfg.mlp_ratio)
         self.fc1 = nn.Linear(cfg.hidden_dim, hidden)
         self.fc2 = _zero(nn.Linear(hidden, cfg.hidden_dim))
 
     def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
-        return self.fc2(F.gelu(self.fc1(x), approximate="tanh"))
+        return self.fc2(F.gelu(self.fc1(x), approximate=self.approximate))
 
 
 #: Sub-layer builders by the name used in ``DiTConfig.block_layers``.
 SUBLAYERS: dict[str, Callable[[DiTConfig], nn.Module]] = {
+    "joint_attn": JointAttention,
     "self_attn": SelfAttention,
     "cross_attn": CrossAttention,
     "mlp": MLP,
@@ -121,7 +181,7 @@ class ModulatedSublayer(nn.Module):
     def __init__(self, name: str, cfg: DiTConfig):
         super().__init__()
         if name not in SUBLAYERS:
-            raise ValueError(f"unknown block layer {name!r}; registered: {sorted(SUBLAYERS)}")
+            raise DrivewmError(f"dit: unknown block layer {name!r} in block_layers; registered: {sorted(SUBLAYERS)}")
         self.norm = nn.LayerNorm(cfg.hidden_dim, elementwise_affine=False, eps=1e-6)
         self.layer = SUBLAYERS[name](cfg)
         self.adaln = nn.Sequential(
@@ -132,7 +192,8 @@ class ModulatedSublayer(nn.Module):
 
     def forward(self, x: torch.Tensor, emb: torch.Tensor, adaln_lora: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
         shift, scale, gate = (self.adaln(emb) + adaln_lora).unsqueeze(1).chunk(3, dim=-1)  # each (B, 1, D)
-        return x + gate * self.layer(self.norm(x) * (1 + scale) + shift, ctx)
+        h = torch.addcmul(shift, self.norm(x), 1 + scale)  # one pass instead of a multiply and an add
+        return torch.addcmul(x, gate, self.layer(h, ctx))  # (B, N, D)
 
 
 class DiTBlock(nn.Module):

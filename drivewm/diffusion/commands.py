@@ -2,6 +2,7 @@
 
 ``generate`` dispatches on the model folder's ``model_type`` through :data:`GENERATORS`, so the
 multi-view stage plugs its generator in by name (``drivewm.multiview.generate:generate``).
+The models are imported inside the handlers, so that ``drivewm --help`` imports no PyTorch.
 """
 
 from __future__ import annotations
@@ -10,6 +11,10 @@ import argparse
 import importlib
 import json
 from pathlib import Path
+
+from drivewm.choices import add_registry_argument
+from drivewm.diffusion.dit_config import DIT_PRESETS
+from drivewm.recipe import add_recipe_arguments
 
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
 GENERATORS = {
@@ -20,32 +25,35 @@ GENERATORS = {
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("pretrain", help="train a Text2World diffusion model on tokenizer latents")
-    p.add_argument("--preset", default="debug", help="size recipe: debug, small, base, large, xl")
+    add_recipe_arguments(p, DIT_PRESETS, "debug")
+    p.add_argument("--init", type=Path, help="Text2World folder whose weights start the run (warm start, fine-tuning)")
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
     )
     p.add_argument("--tokenizer", type=Path, help="tokenizer model folder that encoded the latents")
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
     p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override, e.g. train.steps=100",
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        help="where to train (sets train.device; default: the recipe's, auto)",
     )
-    p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
     p.set_defaults(func=pretrain_command)
 
     g = sub.add_parser("generate", help="generate clips from a Text2World or multi-view model")
-    g.add_argument("--model", required=True, type=Path, help="model folder (config.json + model.safetensors)")
+    g.add_argument(
+        "--model",
+        type=Path,
+        help="model folder (config.json + model.safetensors); default: the shipped multi-view model",
+    )
     g.add_argument("--prompt", required=True, action="append", help="caption (repeat for several)")
     g.add_argument("--out", required=True, type=Path, help="output folder: clip shards, mp4s, contact_sheet.png")
     g.add_argument("--steps", type=int, default=35, help="sampler steps")
     g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
     g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=int, default=1, help="samples per prompt")
-    g.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    add_registry_argument(
+        g, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
+    )
     g.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to sample (auto: CUDA when available)"
     )
@@ -63,9 +71,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def pretrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
-    from drivewm.diffusion.pretrain import pretrain, pretrain_config
+    from drivewm.diffusion.pretrain import RECIPES, pretrain
 
-    cfg = pretrain_config(args.preset, args.overrides)
+    init = [f"init={args.init.resolve()}"] if args.init else []
+    device = [f"train.device={args.device}"] if args.device else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*init, *args.overrides, *device])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0
@@ -77,6 +87,10 @@ def pretrain_command(args: argparse.Namespace) -> int:
 def generate_command(args: argparse.Namespace) -> int | None:
     from drivewm.errors import DrivewmError
 
+    if args.model is None:
+        from drivewm.release import shipped_model
+
+        args.model = shipped_model("multiview")
     cfg_path = args.model / "config.json"
     if not cfg_path.is_file():
         raise DrivewmError(f"{args.model}: not a drivewm model folder (no config.json)")
@@ -93,7 +107,8 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
         raise DrivewmError(
-            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance (multi-view models do)"
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance "
+            "(multi-view models do)"
         )
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device

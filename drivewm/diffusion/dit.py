@@ -16,7 +16,10 @@ from torch import nn
 
 from drivewm.diffusion.blocks import BlockContext, DiTBlock
 from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.rope import grid_positions, rope_angles
+from drivewm.diffusion.rope import grid_positions, rope_angles, rope_rotation
+
+#: Token grids whose RoPE rotations a DiT keeps (one per latent shape and frame rate in use).
+ROPE_CACHE_SIZE = 8
 
 
 def patchify(x: torch.Tensor, p: int, pt: int) -> torch.Tensor:
@@ -68,7 +71,7 @@ class FinalLayer(nn.Module):
 
     def forward(self, x: torch.Tensor, emb: torch.Tensor) -> torch.Tensor:
         shift, scale = self.adaln(emb).unsqueeze(1).chunk(2, dim=-1)  # (B, 1, D) each
-        return self.proj(self.norm(x) * (1 + scale) + shift)
+        return self.proj(torch.addcmul(shift, self.norm(x), 1 + scale))
 
 
 class DiT(nn.Module):
@@ -90,6 +93,26 @@ class DiT(nn.Module):
         self.null_text = nn.Parameter(torch.zeros(1, 1, cfg.hidden_dim))
         self.blocks = nn.ModuleList(DiTBlock(cfg) for _ in range(cfg.depth))
         self.final = FinalLayer(cfg)
+        self._rope_cache: dict[tuple, torch.Tensor] = {}
+
+    def rope(self, grid: tuple[int, int, int], fps: torch.Tensor) -> torch.Tensor:
+        """3D RoPE rotations (B or 1, N, 1, head_dim // 2) of a token grid at frame rates ``fps`` (B,),
+        computed once per (grid, frame rates, device) and reused: they are constants of the shape."""
+        rates = fps.tolist()
+        rates = rates[:1] if len(set(rates)) == 1 else rates  # one clip rate in the batch: broadcast over B
+        key = (grid, tuple(rates), str(fps.device))
+        if key not in self._rope_cache:
+            with torch.inference_mode(False):  # a cached tensor made under inference_mode could not enter autograd
+                self._rope_cache[key] = self._compute_rope(grid, rates, fps.device)
+            if len(self._rope_cache) > ROPE_CACHE_SIZE:
+                self._rope_cache.pop(next(iter(self._rope_cache)))
+        return self._rope_cache[key]
+
+    def _compute_rope(self, grid: tuple[int, int, int], rates: list[float], device: torch.device) -> torch.Tensor:
+        cfg = self.cfg
+        pos = grid_positions(*grid, fps=torch.tensor(rates, device=device), base_fps=cfg.rope_base_fps)
+        pos[..., 0] *= cfg.patch_t  # (B|1, N, 3), time in units of latent frames
+        return rope_rotation(rope_angles(pos, cfg.head_dim, cfg.rope_theta)).unsqueeze(2)  # (B|1, N, 1, hd/2)
 
     def embed_text(self, text_emb: torch.Tensor, text_mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(B, L, text_dim), (B, L) -> tokens (B, 1+L, D) with the null token first, mask (B, 1+L)."""
@@ -128,9 +151,7 @@ class DiT(nn.Module):
             tokens = tokens + extra_token_cond
         emb, adaln_lora = self.time_embed(noise_level, extra_global_cond)  # (B, D), (B, 3D)
         text, mask = self.embed_text(text_emb, text_mask)  # (B, 1+L, D), (B, 1+L)
-        pos = grid_positions(*grid, fps=fps, base_fps=cfg.rope_base_fps)  # (B, N, 3)
-        pos[..., 0] *= cfg.patch_t
-        ctx = BlockContext(rope_angles(pos, cfg.head_dim, cfg.rope_theta), text, mask, grid, num_views, view_neighbors)
+        ctx = BlockContext(self.rope(grid, fps), text, mask, grid, num_views, view_neighbors)
         for block in self.blocks:
             tokens = block(tokens, emb, adaln_lora, ctx)  # (B, N, D)
         return unpatchify(self.final(tokens, emb), grid, cfg.patch_size, cfg.patch_t)  # (B, C, T, H, W)

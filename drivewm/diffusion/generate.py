@@ -1,6 +1,6 @@
 """Text2World generation: prompts -> latents -> video via the tokenizer -> clip shards, mp4, contact sheet.
 
-Generated samples use the clip format (DESIGN.md section 4) so drivewm.eval scores them like
+Generated samples use the clip format (docs/DESIGN.md section 4) so drivewm.eval scores them like
 real clips: ``GENDIR/generated-000000.tar`` + ``manifest.jsonl``, plus ``sample_XXX.mp4`` per
 sample and ``contact_sheet.png``.
 """
@@ -13,13 +13,16 @@ from pathlib import Path
 import numpy as np
 import torch
 from einops import rearrange
+from PIL import Image, ImageDraw
 from tqdm import tqdm
 
 from drivewm.atomic import atomic_path, write_bytes
 from drivewm.clips.format import ClipMeta, clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
+from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
+from drivewm.tokenizer import Tokenizer
 
 
 @dataclasses.dataclass
@@ -64,22 +67,20 @@ def video_to_uint8(video: torch.Tensor) -> np.ndarray:
 
 
 @torch.no_grad()
-def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None) -> np.ndarray:
-    """Raw latents (B, c, t, h, w) -> uint8 video (B, T, H, W, 3) with the tokenizer (preview if None)."""
+def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None, device: torch.device | str = "cpu") -> np.ndarray:
+    """Raw latents (B, c, t, h, w) -> uint8 video (B, T, H, W, 3) with the tokenizer on ``device``
+    (a preview of the latents themselves if None)."""
     if tokenizer_dir is None:
         return latents_preview(latents)
-    from drivewm.tokenizer import Tokenizer
 
-    tokenizer = Tokenizer.from_pretrained(tokenizer_dir)
-    return np.concatenate([video_to_uint8(tokenizer.decode(z[None])) for z in latents])
+    tokenizer = Tokenizer.from_pretrained(tokenizer_dir).to(device)
+    return np.concatenate([video_to_uint8(tokenizer.decode(z[None].to(device))) for z in latents])
 
 
 def write_grid_png(
     videos: np.ndarray, path: str | Path, captions: list[str] | None = None, max_frames: int = 6
 ) -> Path:
     """Contact sheet: one row per video (B, T, H, W, 3) uint8, ``max_frames`` frames spread over time."""
-    from PIL import Image, ImageDraw
-
     b, t = videos.shape[:2]
     cols = np.linspace(0, t - 1, min(t, max_frames)).round().astype(int)
     sheet = rearrange(videos[:, cols], "b n h w c -> (b h) (n w) c")
@@ -125,7 +126,7 @@ def write_generated(
             write_bytes(out_dir / f"sample_{i:03d}.mp4", encode_mp4(video, fps))
             files.append(out_dir / f"sample_{i:03d}.mp4")
             rows.append({"key": meta.key, "caption": prompt, **extra})
-    for (shard, key), row in zip(writer.written, rows):
+    for (shard, _key), row in zip(writer.written, rows):
         row["shard"] = Path(shard).name
     files.append(write_manifest(out_dir, rows))
     files.append(write_grid_png(videos, out_dir / "contact_sheet.png", prompts))
@@ -134,8 +135,6 @@ def write_generated(
 
 def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir: str | Path) -> list[Path]:
     """Sample ``options.num_samples`` clips per prompt from a Text2World folder and write them."""
-    from drivewm.diffusion.text2world import Text2World
-
     model = Text2World.from_pretrained(model_dir).to(options.device)
     prompts = [p for p in options.prompts for _ in range(options.num_samples)]
     seeds = [options.seed + i for i in range(len(prompts))]
@@ -145,7 +144,7 @@ def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir
         latents.append(
             model.sample_latents(prompts[part], seeds[part], options.steps, options.guidance, options.sampler)
         )
-    videos = decode_latents(torch.cat(latents), model.latent.tokenizer)
+    videos = decode_latents(torch.cat(latents), model.latent.tokenizer, model.device)
     extras = [
         {
             "model": str(Path(model_dir).resolve()),

@@ -13,15 +13,17 @@ from pathlib import Path
 
 import torch
 
-from drivewm.clips.latents import LatentCache
-from drivewm.config import apply_overrides, to_dict
+from drivewm.clips.latents import LatentCache, find_latent_cache
+from drivewm.config import to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.errors import DrivewmError
+from drivewm.recipe import RecipeBook
 from drivewm.text import TextConfig
-from drivewm.train.loop import TrainConfig, train
+from drivewm.train.loop import TrainConfig, TrainTask, train
 
 
 @dataclasses.dataclass
@@ -30,6 +32,14 @@ class DataConfig:
 
     latents: str | None = None
     """Cache name under CLIPDIR/latents/ (default: the tokenizer folder's name)."""
+    frames: int = 0
+    """Latent frames per sample, from the first (0 = all). 1 trains on images: the causal tokenizer
+    codes frame 0 alone, so latent frame 0 of every clip is an image latent (Cosmos' progressive
+    schedule starts with images: many more samples per second, the same network)."""
+
+    def validate(self) -> None:
+        if self.frames < 0:
+            raise DrivewmError(f"pretrain data.frames must be >= 0, got {self.frames}")
 
 
 @dataclasses.dataclass
@@ -50,6 +60,10 @@ class PretrainConfig:
     """Latent cache selection."""
     sample_steps: int = 12
     """Sampler steps for the sample grids written during training."""
+    init: str | None = None
+    """Text2World model folder whose DiT weights start the run (warm start: the next stage of a
+    progressive schedule, or fine-tuning shipped weights on a fleet's logs); None = random init.
+    Its DiT and text settings must equal this run's."""
 
 
 #: Per-preset training defaults (copy-and-change of the base TrainConfig).
@@ -57,6 +71,7 @@ TRAIN_PRESETS: dict[str, dict] = {
     "debug": dict(
         steps=300, batch_size=8, lr=1e-3, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100
     ),
+    "tiny": dict(steps=4000, batch_size=32, lr=5e-4, warmup_steps=200, ema_decay=0.999, checkpoint_every=250),
     "small": dict(steps=20000, batch_size=32, lr=3e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
     "base": dict(steps=100000, batch_size=64, lr=2e-4, warmup_steps=1000, checkpoint_every=2000, sample_every=5000),
     "large": dict(
@@ -82,24 +97,17 @@ TRAIN_PRESETS: dict[str, dict] = {
 }
 
 
+RECIPES: RecipeBook[PretrainConfig] = RecipeBook(  # no packaged recipes: presets and --set
+    "pretrain",
+    PretrainConfig,
+    {name: {"model": dit_preset(name), "train": TRAIN_PRESETS[name]} for name in TRAIN_PRESETS},
+    "debug",
+)
+
+
 def pretrain_config(preset: str, overrides: list[str] | None = None) -> PretrainConfig:
     """The recipe for ``preset`` with ``KEY=VALUE`` overrides (unknown keys/bad values raise DrivewmError)."""
-    base = {"preset": preset, "model": dit_preset(preset), "train": dict(TRAIN_PRESETS[preset])}
-    return apply_overrides(PretrainConfig, base, overrides or [], "pretrain")
-
-
-def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | None) -> Path:
-    """``data_dir`` itself if it is a cache, else ``data_dir/latents/<name or tokenizer folder name>``."""
-    if (data_dir / "index.json").is_file():
-        return data_dir
-    if name is None and tokenizer_dir is None:
-        raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
-    cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
-    if not (cache / "index.json").is_file():
-        raise DrivewmError(
-            f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first"
-        )
-    return cache
+    return RECIPES.resolve(preset, None, overrides or [])
 
 
 def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
@@ -117,7 +125,8 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
     if not same_config or not same_stats:
         raise DrivewmError(
-            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) than {tokenizer_dir}"
+            f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) "
+            f"than {tokenizer_dir}"
         )
 
 
@@ -129,7 +138,7 @@ def _close(a: list[float] | None, b: list[float] | None) -> bool:
     )
 
 
-class Text2WorldTask:
+class Text2WorldTask(TrainTask):
     """drivewm.train.loop.TrainTask for Text2World pretraining on a latent dataset."""
 
     def __init__(self, cfg: PretrainConfig, dataset: LatentDataset, latent: LatentInfo):
@@ -157,12 +166,7 @@ class Text2WorldTask:
         noise = torch.stack([torch.randn(x0.shape[1:], generator=g) for g in gens]).to(device)
         keep = torch.tensor([float(torch.rand(1, generator=g)) >= self.cfg.edm.text_dropout for g in gens])
         cond = self.bundle.conditioning([s.caption for s in samples])
-        cond = dataclasses.replace(
-            cond,
-            text_emb=cond.text_emb.to(device),
-            text_mask=cond.text_mask.to(device),
-            fps=torch.tensor([s.fps for s in samples], device=device),
-        )
+        cond = dataclasses.replace(cond, fps=torch.tensor([s.fps for s in samples])).to(device)
         return edm_loss(forward, self.cfg.edm, x0, cond, sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> tuple[Text2World, dict[str, torch.Tensor]]:
@@ -179,10 +183,10 @@ class Text2WorldTask:
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle, _ = self._ema_bundle(ema_state)
+        bundle = self._ema_bundle(ema_state)[0].to(next(self.model.parameters()).device)  # the training device
         prompts = self.dataset.captions()[:4]
         latents = bundle.sample_latents(prompts, list(range(len(prompts))), steps=self.cfg.sample_steps, guidance=3.0)
-        write_grid_png(decode_latents(latents, bundle.latent.tokenizer), path, prompts)
+        write_grid_png(decode_latents(latents, bundle.latent.tokenizer, bundle.device), path, prompts)
 
 
 def latent_info(dataset: LatentDataset, tokenizer_dir: Path | None) -> LatentInfo:
@@ -206,7 +210,8 @@ def resolve_for_data(cfg: PretrainConfig, dataset: LatentDataset) -> PretrainCon
     c, t, h, w = dataset.latent_shape
     if h % cfg.model.patch_size or w % cfg.model.patch_size or t % cfg.model.patch_t:
         raise DrivewmError(
-            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches {cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
+            f"latents (t, h, w)=({t}, {h}, {w}) do not divide into patches "
+            f"{cfg.model.patch_t}x{cfg.model.patch_size}x{cfg.model.patch_size}"
         )
     model = dataclasses.replace(cfg.model, in_channels=c, text_dim=text_dim, cond_mask_channel=cfg.edm.cond_frames > 0)
     return dataclasses.replace(cfg, model=model)
@@ -220,11 +225,26 @@ def pretrain(
     stop_after: int | None = None,
 ) -> dict:
     """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
-    dataset = LatentDataset(find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents), cfg.edm.sigma_data)
+    cache = find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents)
+    dataset = LatentDataset(cache, cfg.edm.sigma_data, cfg.data.frames or None)
     if tokenizer_dir is not None:
         check_tokenizer(dataset.cache, tokenizer_dir)
     cfg = resolve_for_data(cfg, dataset)
     torch.manual_seed(cfg.train.seed)  # the DiT's initial weights
     task = Text2WorldTask(cfg, dataset, latent_info(dataset, tokenizer_dir))
+    if cfg.init:
+        warm_start(task.bundle, Path(cfg.init))
     return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)
+
+
+def warm_start(bundle: Text2World, init_dir: Path) -> None:
+    """Load the DiT weights of the Text2World folder ``init_dir`` into ``bundle`` (same DiT and text config)."""
+    parent = Text2World.from_pretrained(init_dir)
+    for name in ("dit", "text"):
+        ours, theirs = to_dict(getattr(bundle.cfg, name)), to_dict(getattr(parent.cfg, name))
+        differ = sorted(k for k in ours if ours[k] != theirs.get(k))
+        if differ:
+            raise DrivewmError(f"{init_dir}: --init model's {name} config differs from this run's at {differ}")
+    bundle.dit.load_state_dict(parent.dit.state_dict())

@@ -5,6 +5,11 @@ proportional to the token's position. In 3D (as in Cosmos, arXiv 2501.03575 sec.
 dimension is split into a temporal, a vertical and a horizontal part, each rotated by its own
 coordinate. The temporal coordinate is *time*, not frame index: latent frame ``i`` of a clip at
 ``fps`` sits at ``i * base_fps / fps``, so clips recorded at other rates share positions.
+
+Channel pair (2j, 2j+1) is read as the complex number x_2j + i x_2j+1 and multiplied by
+e^(i angle_j) (RoFormer eq. 34 written in complex form, as LLaMA does): one fused multiply instead of
+slicing, stacking and re-interleaving the channels, and the rotations are computed once per token
+grid (drivewm.diffusion.dit caches them).
 """
 
 from __future__ import annotations
@@ -41,10 +46,18 @@ def rope_angles(pos: torch.Tensor, head_dim: int, theta: float = 10000.0) -> tor
     return torch.cat(angles, dim=-1)
 
 
+def rope_rotation(angles: torch.Tensor) -> torch.Tensor:
+    """Unit complex rotations e^(i angle), complex64 of the shape of ``angles`` (..., head_dim // 2)."""
+    return torch.polar(torch.ones_like(angles), angles)
+
+
+def rotate(x: torch.Tensor, rotation: torch.Tensor) -> torch.Tensor:
+    """RoPE: channel pairs of ``x`` (..., head_dim) times ``rotation`` (complex, broadcastable to
+    (..., head_dim // 2)); computed in float32 (complex bf16 does not exist), returned in x's dtype."""
+    pairs = torch.view_as_complex(x.float().unflatten(-1, (-1, 2)).contiguous())  # (..., head_dim/2)
+    return torch.view_as_real(pairs * rotation).flatten(-2).to(x.dtype)
+
+
 def apply_rope(x: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
     """Rotate ``x`` (B, heads, N, head_dim) by ``angles`` (B, N, head_dim // 2), pairing adjacent channels."""
-    cos = angles.cos().unsqueeze(1).to(x.dtype)  # (B, 1, N, head_dim/2)
-    sin = angles.sin().unsqueeze(1).to(x.dtype)
-    x_even, x_odd = x[..., 0::2], x[..., 1::2]
-    out = torch.stack([x_even * cos - x_odd * sin, x_even * sin + x_odd * cos], dim=-1)  # (B, heads, N, head_dim/2, 2)
-    return out.flatten(-2)
+    return rotate(x, rope_rotation(angles).unsqueeze(1))

@@ -85,20 +85,23 @@ SAMPLERS: dict[str, Callable] = {"euler": sample_euler, "heun": sample_heun}
 
 
 class GuidedDenoiser(nn.Module):
-    """Classifier-free guidance (Ho & Salimans 2022): D = D_uncond + w (D_cond - D_uncond).
+    """Classifier-free guidance (Ho & Salimans 2022): D = D_drop + w (D_cond - D_drop), where D_drop is
+    the prediction with one condition removed by ``drop(cond)``: the caption by default
+    (``cond.unconditional()``), or e.g. the ego trajectory (as Vista and GEM guide on their actions).
 
-    Wraps a denoiser ``denoiser(x, sigma, cond)`` whose ``cond`` has ``.unconditional()``;
-    ``guidance`` w = 1 is the plain conditional model, 0 the unconditional one.
+    Wraps a denoiser ``denoiser(x, sigma, cond)``; ``guidance`` w = 1 is the plain conditional model
+    (one evaluation), 0 the model without that condition.
     """
 
-    def __init__(self, denoiser: nn.Module, guidance: float):
+    def __init__(self, denoiser: nn.Module, guidance: float, drop: Callable | None = None):
         super().__init__()
-        self.denoiser = denoiser  # the EDM denoiser D(x; sigma, cond)
+        self.denoiser = denoiser  # D(x; sigma, cond), possibly guided on another condition already
         self.guidance = guidance  # w
+        self.drop = drop or (lambda cond: cond.unconditional())  # cond -> cond without the guided condition
 
     def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond) -> torch.Tensor:
         cond_out = self.denoiser(x, sigma, cond)
         if self.guidance == 1.0:
             return cond_out
-        uncond_out = self.denoiser(x, sigma, cond.unconditional())
+        uncond_out = self.denoiser(x, sigma, self.drop(cond))
         return uncond_out + self.guidance * (cond_out - uncond_out)

@@ -1,6 +1,6 @@
 """The Text2World model: DiT + EDM denoiser + text encoder + what it needs to turn samples into video.
 
-Model folder (DESIGN.md section 4): ``config.json`` with ``model_type: "text2world"``, the
+Model folder (docs/DESIGN.md section 4): ``config.json`` with ``model_type: "text2world"``, the
 :class:`Text2WorldConfig` and the :class:`LatentInfo` (latent shape and statistics, frame rate,
 camera, tokenizer folder), and ``model.safetensors`` with the DiT's (EMA) weights.
 """
@@ -13,12 +13,12 @@ from pathlib import Path
 import torch
 
 from drivewm.config import from_dict, to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
-from drivewm.errors import DrivewmError
+from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_fields
+from drivewm.diffusion.sampling import sample
 from drivewm.text import TextConfig, build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
@@ -55,6 +55,15 @@ class LatentInfo:
     """Single-camera rig (dict form) written into generated clips."""
 
 
+def read_latent_info(info: dict, folder: str | Path) -> LatentInfo:
+    """The ``latent`` entry of a model folder's config.json; a relative tokenizer path (shipped
+    weights point at ``../tokenizer``) is resolved against the model folder."""
+    latent = from_dict(LatentInfo, info.get("latent", {}), f"{Path(folder) / 'config.json'} latent")
+    if latent.tokenizer and not Path(latent.tokenizer).is_absolute():
+        latent = dataclasses.replace(latent, tokenizer=str((Path(folder) / latent.tokenizer).resolve()))
+    return latent
+
+
 class Text2World:
     """Inference bundle. ``sample_latents(prompts, seeds) -> raw tokenizer latents (B, c, t, h, w)``."""
 
@@ -68,9 +77,7 @@ class Text2World:
 
     def to(self, device: str | torch.device) -> Text2World:
         """Run sampling on ``device`` (``auto``: CUDA when available); noise stays seeded on the CPU."""
-        if device == "auto":
-            device = "cuda" if torch.cuda.is_available() else "cpu"
-        self.device = torch.device(device)
+        self.device = resolve_device(device)
         self.dit.to(self.device)
         return self
 
@@ -83,9 +90,10 @@ class Text2World:
     def from_pretrained(cls, path: str | Path) -> Text2World:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
+        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
         model = cls(
-            from_dict(Text2WorldConfig, info["config"], where),
-            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
+            from_dict(Text2WorldConfig, config, where),
+            read_latent_info(info, path),
         )
         load_weights(model.dit, state, path)
         return model
@@ -115,18 +123,13 @@ class Text2World:
         ``cond_latents`` (B, c, t, h, w) raw latents whose first ``edm.cond_frames`` frames are kept
         (Video2World models only).
         """
-        if sampler not in SAMPLERS:
-            raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
         c, t, h, w = self.latent.latent_shape
         cond = self.conditioning(prompts, fps)
         if cond_latents is not None:
-            given = normalize_latents(cond_latents.cpu(), *self._stats(), self.cfg.edm.sigma_data).to(self.device)
+            given = normalize_latents(cond_latents.cpu(), *self._stats(), self.cfg.edm.sigma_data)
             cond = dataclasses.replace(cond, cond_latents=given, cond_frames=self.cfg.edm.cond_frames)
-        sigmas = karras_sigmas(steps).to(self.device)
-        x = seeded_noise((len(prompts), c, t, h, w), seeds).to(self.device) * sigmas[0]
-        with torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=self.device.type == "cuda"):
-            x = SAMPLERS[sampler](GuidedDenoiser(self.denoiser, guidance), x, sigmas, extra_args={"cond": cond})
-        return denormalize_latents(x.float().cpu(), *self._stats(), self.cfg.edm.sigma_data)
+        x = sample(self.denoiser, cond, (c, t, h, w), seeds, steps, guidance, sampler, device=self.device)
+        return denormalize_latents(x, *self._stats(), self.cfg.edm.sigma_data)
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)

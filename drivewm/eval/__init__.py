@@ -1,17 +1,12 @@
-"""The geometric-consistency benchmark (DESIGN.md stage 4): TSE, CSE, pose success, trajectory errors, adherence.
+"""The geometric-consistency benchmark (docs/DESIGN.md stage 4): TSE, CSE, pose success, trajectory errors, adherence.
 
 ``evaluate(location, rig=None, out_dir=...)`` scores clip shards, per-camera mp4 folders or a grid mp4;
 the pieces (matching, epipolar, consistency, sfm, trajectory, adherence) are usable alone.
+``evaluate`` is imported on first use (:mod:`drivewm.lazy`: it pulls in pycolmap and matplotlib).
 """
 
-from __future__ import annotations
+from drivewm.lazy import lazy_exports
 
-
-def evaluate(*args, **kwargs):
-    """See :func:`drivewm.eval.suite.evaluate` (imported lazily: it pulls in pycolmap and matplotlib)."""
-    from drivewm.eval.suite import evaluate as _evaluate
-
-    return _evaluate(*args, **kwargs)
-
-
+_EXPORTS = {"evaluate": "drivewm.eval.suite"}
 __all__ = ["evaluate"]
+__getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -17,15 +17,20 @@
 
 ``classify_condition(scores)`` is a nearest-centroid classifier in z-scored feature space, one
 centroid per weather x time-of-day pair, with centroids and scales fitted on simulator renders
-(``python -m drivewm.eval.calibrate_adherence``; the numbers live in adherence_calibration.py).
+(``python scripts/calibrate_adherence.py``; the numbers are package data,
+``drivewm/tables/adherence_calibration.json``).
 Probabilities are a softmax over negative squared distances.
 """
 
 from __future__ import annotations
 
+import functools
+import json
+
 import cv2
 import numpy as np
 
+from drivewm import resources
 from drivewm.errors import DrivewmError
 
 FEATURES = (
@@ -107,10 +112,10 @@ def classify_condition(scores: dict[str, float], calibration: dict | None = None
     (weather looks different by day and by night, so one centroid per pair), probabilities a
     softmax over -d^2 / 2, then summed per weather and per time of day.
     Returns ``{"weather": str, "weather_prob": {class: p}, "time_of_day": str, "time_of_day_prob": {...}}``.
-    ``calibration`` defaults to the simulator-fitted tables in adherence_calibration.py.
+    ``calibration`` defaults to the simulator-fitted tables (:func:`load_calibration`).
     """
     if calibration is None:
-        from drivewm.eval.adherence_calibration import CALIBRATION as calibration
+        calibration = load_calibration()
     x = np.array([scores[k] for k in calibration["features"]])
     z = (x - np.asarray(calibration["mean"])) / np.asarray(calibration["std"])
     names = list(calibration["centroids"])
@@ -126,6 +131,12 @@ def classify_condition(scores: dict[str, float], calibration: dict | None = None
         out[field] = max(probs, key=probs.get)
         out[f"{field}_prob"] = probs
     return out
+
+
+@functools.cache
+def load_calibration() -> dict:
+    """The simulator-fitted classifier tables shipped with the package (drivewm/tables/adherence_calibration.json)."""
+    return json.loads((resources.package_dir("tables") / "adherence_calibration.json").read_text())
 
 
 def fit_calibration(samples: list[tuple[dict[str, float], str, str]]) -> dict:

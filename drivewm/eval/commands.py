@@ -1,8 +1,17 @@
-"""``drivewm eval LOCATION --rig R --out DIR``: the geometric-consistency benchmark (DESIGN.md section 8)."""
+"""``drivewm eval LOCATION --rig R --out DIR``: the geometric-consistency benchmark (docs/DESIGN.md section 8).
+
+Thin: parse, build the config, print it, call the library; the benchmark (OpenCV, pycolmap,
+matplotlib) is imported inside the handler so that ``drivewm --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+
+from drivewm import resources
+from drivewm.config import to_dict
+from drivewm.eval.config import ALL_METRICS, EVAL_RECIPES
 
 
 def register(subparsers) -> None:
@@ -19,34 +28,38 @@ def register(subparsers) -> None:
         "--out", required=True, help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd"
     )
     p.add_argument("--workers", type=int, default=1, help="clips scored in parallel (processes)")
-    p.add_argument("--metrics", default=None, help="comma list of tse,cse,pose,traj,adherence (default: the suite's)")
+    p.add_argument("--metrics", default=None, help=f"comma list of {','.join(ALL_METRICS)} (default: the recipe's)")
     p.add_argument(
-        "--reference", default=None, help="reference metrics JSON shown beside the results (eval/reference/*.json)"
+        "--reference",
+        default=None,
+        help="reference metrics shown beside the results: a JSON path or a packaged name ("
+        + ", ".join(resources.names("references", ".json"))
+        + ")",
     )
-    p.add_argument("--suite", default=None, help="suite YAML overriding protocol constants (eval/suites/*.yaml)")
+    EVAL_RECIPES.add_arguments(p)
+    p.add_argument(
+        "--rig-fit",
+        default="same",
+        choices=("same", "stretch", "crop"),
+        help="videos of another aspect ratio than the rig: were they stretched or centre-cropped from it? "
+        "(default: refuse them)",
+    )
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a protocol constant, e.g. match.ratio=0.75",
-    )
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
     p.set_defaults(func=run_eval)
 
 
 def run_eval(args: argparse.Namespace) -> int:
-    import json
-
-    from drivewm.config import apply_overrides, load_yaml
-    from drivewm.eval.config import EvalConfig
+    from drivewm.eval.report import json_safe
     from drivewm.eval.suite import evaluate
 
-    base = load_yaml(args.suite) if args.suite else {}
-    overrides = list(args.set) + ([f"metrics=[{args.metrics}]"] if args.metrics else [])
-    cfg = apply_overrides(EvalConfig, base, overrides, where=args.suite or "eval config")
+    if args.metrics:
+        args.overrides.append(f"metrics=[{args.metrics}]")
+    cfg = EVAL_RECIPES.from_args(args)
+    print(json.dumps(to_dict(cfg)))
+    if args.dry_run:
+        return 0
     cameras = args.cameras.split(",") if args.cameras else None
     metrics = evaluate(
         args.location,
@@ -58,8 +71,10 @@ def run_eval(args: argparse.Namespace) -> int:
         cameras=cameras,
         reference=args.reference,
         pictures=not args.no_pictures,
+        rig_fit=args.rig_fit,
     )
-    summary = {k: v for k, v in metrics.items() if k not in ("clips", "config")}
-    print(json.dumps(summary, indent=2, default=str))
+    # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
+    summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})
+    print(json.dumps(summary, indent=2, allow_nan=False))
     print(f"wrote {args.out}/metrics.json and metrics.md")
     return 0

@@ -1,15 +1,16 @@
-"""The evaluation protocol as one typed config: every constant of eval/protocol.md lives here.
+"""The evaluation protocol as one typed config: every constant of docs/eval-protocol.md lives here.
 
-Defaults are the pinned protocol; a suite YAML (eval/suites/*.yaml) may override them, and the
-resolved config is written next to every metrics.json so numbers can be traced to their settings.
+Defaults are the pinned protocol; a recipe (:data:`EVAL_RECIPES`: a packaged suite of
+drivewm/recipes/eval/ or a YAML path, then ``--set``) may override them, and the resolved config
+is written next to every metrics.json so numbers can be traced to their settings.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
+from drivewm.recipe import RecipeBook
 
 ALL_METRICS = ("tse", "cse", "pose", "traj", "adherence")
 
@@ -24,6 +25,14 @@ class MatchConfig:
     """Local path of a TorchScript matcher for matcher='learned'; nothing is ever downloaded."""
     max_features: int = 2000
     """SIFT keypoints kept per image (strongest first)."""
+    contrast_threshold: float = 0.01
+    """SIFT's DoG contrast threshold. OpenCV's default 0.04 keeps ~300 keypoints of a 320x192 day render
+    and 13-130 of a night one; structure from motion on the shared features then misregisters day
+    clips (ATE 0.8 m against 0.06 m at 0.01) and loses night frames. 0.01 keeps 130-700."""
+    max_side_px: int = 512
+    """Keypoints are detected on the image resized (area) to at most this on its longer side and mapped
+    back to the full image ((u + 0.5) / s - 0.5). SIFT costs ~290 ms a 960x540 frame here (64 s for a
+    221-frame clip), ~80 ms at 512x288; 320x192 clips are untouched."""
     ratio: float = 0.8
     """Lowe's ratio test: keep a match when best/second-best descriptor distance < ratio (Lowe 2004, sec. 7.1)."""
     mutual: bool = True
@@ -50,7 +59,16 @@ class EpipolarConfig:
     """Matches with a Sampson error above this (canonical px) under the fitted F are outliers and not
     scored, under either F: the scored set is the video's own geometrically verified matches."""
     min_matches: int = 16
-    """Fewer matches than this in a pair: status 'too_few_matches', error NaN (never 0)."""
+    """Fewer verified matches than this in a frame pair: status 'too_few_matches' (the pair is not
+    scored; a clip value counts it at ``failed_pair_px``)."""
+    min_parallax_px: float = 0.5
+    """TSE: a frame pair with fewer than ``min_matches`` verified matches that moved at least this
+    (canonical px) has no baseline to fit F with (any F through the epipole fits static points):
+    status 'no_motion', counted as failed."""
+    failed_pair_px: float = 4.0
+    """A pair that cannot be scored (too few verified matches, no fit, no motion) counts at this
+    error in the clip value: the worst a verified match may have (``verify_threshold_px``). A blurred,
+    frozen or shuffled video loses pairs and so scores worse, instead of scoring only its easy pairs."""
 
 
 @dataclasses.dataclass
@@ -65,16 +83,41 @@ class ConsistencyConfig:
     """Depths (m) at which frustum sample points are placed for the overlap test."""
     overlap_grid: int = 24
     """Sample points per image axis for the overlap test."""
+    cse_min_matches_per_frame: float = 4.0
+    """CSE: a camera pair pooled over T frames is scored only with at least this x T distinct verified
+    matches (a frozen video repeats one frame's few matches T times; the F fitted to them overfits)."""
+    compensate_exposure: bool = True
+    """Calibrated TSE / CSE use the ego pose at each camera's own exposure time
+    (``ClipMeta.camera_timestamps_ns``, drivewm.eval.exposure), not at the clip's tick."""
 
 
 @dataclasses.dataclass
 class PoseConfig:
     """Structure from motion with pycolmap (pose-estimation success and the recovered trajectory)."""
 
+    features: str = "colmap"
+    """'colmap' (the protocol): COLMAP extracts and matches (always so for a learned matcher). 'shared':
+    the benchmark's own SIFT keypoints and matches go into COLMAP's database, verified there (no second
+    extraction or matching): 1.8x less CPU per clip (17 against 31 s on a day clip), but on the reference
+    clips it left one snow clip 53% registered and doubled ATE on two others, so it is not the default."""
+    temporal_gaps: list[int] = dataclasses.field(default_factory=lambda: [1, 2])
+    """features='shared': each camera's frame t is matched with t + each gap (and overlapping cameras at t)."""
+    cross_gaps: list[int] = dataclasses.field(default_factory=lambda: [1])
+    """features='shared': overlapping cameras a, b are also matched as a at t with b at t + gap and back."""
+    verify: str = "colmap"
+    """features='shared': geometric verification of the shared matches by COLMAP ('colmap': calibrated
+    E / F / H model selection with the known cameras) or by the benchmark's own F fit ('drivewm')."""
+    verify_max_trials: int = 2000
+    """verify='colmap': RANSAC trials per image pair (COLMAP's default 10000 spends ~10 s a clip on snow
+    renders, whose falling flakes make a third of the matches outliers)."""
+    min_pair_inliers: int = 15
+    """features='shared': image pairs with fewer verified matches are not written to COLMAP."""
+    ba_global_frames_ratio: float = 1.1
+    """COLMAP mapper: a global bundle adjustment runs when the registered frames (and points) grew by this factor."""
     max_features: int = 4096
-    """SIFT features per image extracted by COLMAP."""
+    """features='colmap': SIFT features per image extracted by COLMAP."""
     sequential_overlap: int = 3
-    """Each frame is matched with the next ``sequential_overlap`` frames of the same camera."""
+    """features='colmap': each frame is matched with the next ``sequential_overlap`` frames of the same camera."""
     min_model_size: int = 3
     """COLMAP's smallest model."""
     abs_pose_min_num_inliers: int = 15
@@ -95,8 +138,29 @@ class TrajectoryConfig:
 
     camera: str = ""
     """Camera whose recovered motion is the ego trajectory; '' = the camera looking most along ego +x."""
-    rpe_delta_frames: int = 1
-    """RPE compares relative motion over this many frames."""
+    alignment: str = "sim3"
+    """Transform fitted onto the reference before ATE / RPE (Umeyama): 'sim3' (with scale: a video
+    fixes motion only up to scale; evo -as), 'se3' (evo -a) or 'none'."""
+    rpe_delta: float = 1.0
+    """RPE compares relative motion over this distance, in ``rpe_delta_unit``."""
+    rpe_delta_unit: str = "frames"
+    """'frames' or 'm' (travelled path of the reference; evo --delta_unit m, e.g. drift per 10 m)."""
+    rpe_all_pairs: bool = False
+    """False: consecutive pairs (0-d, d-2d, ...; evo's default); True: every frame starts a pair (evo --all_pairs)."""
+    rpe_pairs_from: str = "reference"
+    """Trajectory whose frames / path choose the pairs: 'reference' (evo --pairs_from_reference) or 'estimate'."""
+
+    def validate(self) -> None:
+        if self.alignment not in ("none", "se3", "sim3"):
+            raise DrivewmError(f"eval config: trajectory.alignment {self.alignment!r} is not none, se3 or sim3")
+        if self.rpe_delta_unit not in ("frames", "m") or self.rpe_delta <= 0:
+            raise DrivewmError(
+                f"eval config: RPE delta {self.rpe_delta} {self.rpe_delta_unit!r} must be > 0 frames or m"
+            )
+        if self.rpe_delta_unit == "frames" and self.rpe_delta != int(self.rpe_delta):
+            raise DrivewmError(f"eval config: trajectory.rpe_delta {self.rpe_delta} frames is not a whole number")
+        if self.rpe_pairs_from not in ("reference", "estimate"):
+            raise DrivewmError(f"eval config: trajectory.rpe_pairs_from {self.rpe_pairs_from!r}")
 
 
 @dataclasses.dataclass
@@ -120,8 +184,9 @@ class EvalConfig:
         unknown = sorted(set(self.metrics) - set(ALL_METRICS))
         if unknown:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
+        self.trajectory.validate()
 
 
-def eval_config_from_dict(data: dict, where: str = "eval config") -> EvalConfig:
-    """Build and validate an :class:`EvalConfig` (unknown keys refused)."""
-    return from_dict(EvalConfig, data, where)
+EVAL_RECIPES = RecipeBook("eval", EvalConfig, {"default": {}}, "default", recipes="eval")
+"""How an eval config is made (docs/DESIGN.md section 10): the pinned protocol above, a suite recipe
+(``default``: the protocol written out, ``quick``: no structure from motion, or a YAML path), ``--set``."""

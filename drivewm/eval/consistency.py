@@ -1,14 +1,19 @@
 """Temporal and cross-view Sampson errors (TSE, CSE) of a multi-camera clip.
 
-TSE (Cosmos paper, multi-view table; eval/protocol.md): per camera, frames t and t + frame_gap are
+TSE (Cosmos paper, multi-view table; docs/eval-protocol.md): per camera, frames t and t + frame_gap are
 matched, keypoints rectified to the canonical pinhole, an F fitted robustly, and the pair scored by
 the median Sampson error of its verified matches (within ``verify_threshold_px`` of the fitted F)
 under (a) that fitted F and (b), when ego poses are known, the F implied by the ego motion and the
-camera's extrinsics. CSE: for every pair of cameras whose
-frusta overlap (from the rig geometry, not names), matches of all frames are pooled and scored
-under one F fitted over all of them and under the calibrated F from the two extrinsics.
-A clip value is the mean of the pair medians whose status is 'ok'; pairs without enough matches
-are NaN and counted by status, never averaged in as zeros.
+camera's extrinsics, with the ego pose at each image's own exposure time (drivewm.eval.exposure).
+CSE: for every pair of cameras whose frusta overlap (from the rig geometry, not names), the distinct
+matches of all frames are pooled and scored under one F fitted over all of them and under the
+calibrated F of each frame (the two extrinsics, and the ego motion between the two exposures).
+
+A pair counts when it has enough verified matches (and, for TSE, motion); a clip value is the mean
+over pairs with a pair that does not count at ``failed_pair_px`` (docs/eval-protocol.md, 'Degenerate
+videos'), so a blurred, frozen or shuffled video cannot win by keeping only its easy pairs. Beside
+every figure: the verified matches per pair, the share of pairs that count, the mean over counted
+pairs only (the Cosmos-style figure) and the value in the native pixels of the rig's cameras.
 """
 
 from __future__ import annotations
@@ -20,14 +25,17 @@ import numpy as np
 from drivewm.eval.config import ConsistencyConfig, EpipolarConfig
 from drivewm.eval.epipolar import (
     FIT_FAILED,
+    NO_MOTION,
     OK,
+    TOO_FEW_MATCHES,
     SampsonResult,
     calibrated_fundamental,
     canonical_K,
     fit_fundamental,
     rectify_matches,
+    sampson_px,
     score_matches,
-    verified_matches,
+    verified_mask,
 )
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import Camera, Rig, invert_T, pixel_rays, project, transform_points
@@ -59,25 +67,62 @@ def overlapping_pairs(rig: Rig, cfg: ConsistencyConfig) -> list[tuple[str, str]]
     return pairs
 
 
+def native_px_per_canonical_px(camera: Camera, K_canonical: np.ndarray) -> float:
+    """How many of the camera's own pixels one canonical pixel is near its centre: f / f_canonical
+    (f = sqrt(fx fy)); 0.82 for nuscenes6's 70 deg cameras at 320 px, 4.2 for a 1156 px dashcam."""
+    return float(np.sqrt(camera.K[0, 0] * camera.K[1, 1] / (K_canonical[0, 0] * K_canonical[1, 1])))
+
+
 def _calibrated(T_b_from_a: np.ndarray, K_c: np.ndarray) -> np.ndarray | None:
     if np.linalg.norm(T_b_from_a[:3, 3]) < MIN_BASELINE_M:
         return None
     return calibrated_fundamental(K_c, T_b_from_a)
 
 
-def _score_pair(m: Matches, T_b_from_a: np.ndarray | None, K_c: np.ndarray, cfg: EpipolarConfig) -> dict:
-    """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated one."""
+def _score_calibrated(F_by_match: list, frame_of: np.ndarray, verified: Matches, cfg: EpipolarConfig):
+    """Sampson errors of ``verified`` under the calibrated F of each match's frame (``F_by_match[t]``)."""
+    if len(verified) < cfg.min_matches:
+        return SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
+    errors = np.empty(len(verified))
+    for t in np.unique(frame_of):
+        if F_by_match[t] is None:
+            return SampsonResult(np.zeros(0), float("nan"), len(verified), NO_BASELINE)
+        sel = frame_of == t
+        errors[sel] = sampson_px(F_by_match[t], verified.uv_a[sel], verified.uv_b[sel])
+    return SampsonResult(errors, float(np.median(errors)), len(verified), OK)
+
+
+def _score_pair(
+    m: Matches,
+    T_b_from_a: list[np.ndarray] | None,
+    frame_of: np.ndarray,
+    K_c: np.ndarray,
+    cfg: EpipolarConfig,
+    min_verified: int,
+    check_motion: bool,
+) -> dict:
+    """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated F of
+    each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``)."""
     F_fit, _ = fit_fundamental(m, cfg)
-    verified = verified_matches(F_fit, m, cfg)
+    keep = verified_mask(F_fit, m, cfg)
+    verified, frames = Matches(m.uv_a[keep], m.uv_b[keep]), frame_of[keep]
     fitted = score_matches(F_fit, verified, cfg)
     if F_fit is None and len(m) >= cfg.min_matches:
         fitted.status = FIT_FAILED
+    elif fitted.status == OK and len(verified) < min_verified:
+        fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
+    elif fitted.status == OK and check_motion:
+        # Screen-fixed content (a snow overlay, a bonnet) is static in real clips too: what F needs is
+        # enough matches that moved, not a moving median.
+        moved = np.linalg.norm(verified.uv_b - verified.uv_a, axis=1) >= cfg.min_parallax_px
+        if moved.sum() < cfg.min_matches:
+            fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), NO_MOTION)
     out = {"fitted": fitted}
     if T_b_from_a is not None:
-        F_cal = _calibrated(T_b_from_a, K_c)
-        cal = score_matches(F_cal, verified, cfg)
-        if F_cal is None and len(verified) >= cfg.min_matches:
-            cal.status = NO_BASELINE
+        Fs = [_calibrated(T, K_c) for T in T_b_from_a]
+        cal = _score_calibrated(Fs, frames, verified, cfg)
+        if cal.status == OK and len(verified) < min_verified:
+            cal = SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
         out["calibrated"] = cal
     return out
 
@@ -89,23 +134,43 @@ def temporal_sampson(
     epi_cfg: EpipolarConfig,
     cfg: ConsistencyConfig,
     matcher: FrameMatcher,
+    ego_at_camera: dict[str, np.ndarray] | None = None,
 ) -> dict:
-    """TSE of a clip. ``videos``: uint8 (T, H, W, 3) per camera of ``rig``; ``T_world_from_ego`` (T, 4, 4) or None."""
+    """TSE of a clip. ``videos``: uint8 (T, H, W, 3) per camera of ``rig``; ``T_world_from_ego``
+    (T, 4, 4) or None; ``ego_at_camera`` (optional): per camera, the ego poses (T, 4, 4) at that
+    camera's exposure times (drivewm.eval.exposure.ego_at_cameras), used instead of ``T_world_from_ego``."""
     K_c = canonical_K(epi_cfg)
     per_camera = {}
     for cam in rig.cameras:
         frames = videos[cam.name]
+        ego = None if T_world_from_ego is None else (ego_at_camera or {}).get(cam.name, T_world_from_ego)
         pairs = []
         for t in range(len(frames) - cfg.frame_gap):
             u = t + cfg.frame_gap
             m = rectify_matches(matcher.match((cam.name, t), frames[t], (cam.name, u), frames[u]), cam, cam, K_c)
             T_rel = None
-            if T_world_from_ego is not None:
-                T_wc = T_world_from_ego @ cam.T_ego_from_cam
-                T_rel = invert_T(T_wc[u]) @ T_wc[t]
-            pairs.append(_score_pair(m, T_rel, K_c, epi_cfg))
+            if ego is not None:
+                T_wc = ego @ cam.T_ego_from_cam
+                T_rel = [invert_T(T_wc[u]) @ T_wc[t]]
+            pairs.append(_score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, True))
         per_camera[cam.name] = pairs
-    return summarize(per_camera)
+    scale = {cam.name: native_px_per_canonical_px(cam, K_c) for cam in rig.cameras}
+    return summarize(per_camera, {g: scale[g] for g in per_camera}, epi_cfg.failed_pair_px)
+
+
+def _pooled_matches(videos, cam_a: Camera, cam_b: Camera, matcher: FrameMatcher, K_c) -> tuple[Matches, np.ndarray]:
+    """Distinct rectified matches of all frames of a camera pair and the frame (N,) each came from
+    (a repeated frame repeats its matches exactly; they count once)."""
+    parts, frame_of = [], []
+    for t in range(len(videos[cam_a.name])):
+        m = matcher.match((cam_a.name, t), videos[cam_a.name][t], (cam_b.name, t), videos[cam_b.name][t])
+        parts.append(rectify_matches(m, cam_a, cam_b, K_c))
+        frame_of.append(np.full(len(m), t))
+    pooled = Matches(np.concatenate([p.uv_a for p in parts]), np.concatenate([p.uv_b for p in parts]))
+    frame_of = np.concatenate(frame_of).astype(int)
+    _, first = np.unique(np.concatenate([pooled.uv_a, pooled.uv_b], 1), axis=0, return_index=True)
+    first = np.sort(first)
+    return Matches(pooled.uv_a[first], pooled.uv_b[first]), frame_of[first]
 
 
 def cross_sampson(
@@ -115,43 +180,79 @@ def cross_sampson(
     epi_cfg: EpipolarConfig,
     matcher: FrameMatcher,
     matches_out: dict | None = None,
+    cfg: ConsistencyConfig | None = None,
+    ego_at_camera: dict[str, np.ndarray] | None = None,
 ) -> dict:
-    """CSE of a clip over camera ``pairs``: one fitted F per pair over the matches of all frames.
+    """CSE of a clip over camera ``pairs``: one fitted F per pair over the distinct matches of all
+    frames; the calibrated F per frame from the extrinsics and, with ``ego_at_camera`` (per camera,
+    ego poses (T, 4, 4) at its exposure times), the ego motion between the two exposures.
     ``matches_out`` (optional) receives the pooled canonical matches per pair, for visualisation."""
+    cfg = cfg or ConsistencyConfig()
     K_c = canonical_K(epi_cfg)
     per_pair = {}
+    num_frames = len(next(iter(videos.values())))
+    min_verified = max(epi_cfg.min_matches, int(np.ceil(cfg.cse_min_matches_per_frame * num_frames)))
     for name_a, name_b in pairs:
         cam_a, cam_b = rig.camera(name_a), rig.camera(name_b)
-        pooled = Matches.empty()
-        for t in range(len(videos[name_a])):
-            m = matcher.match((name_a, t), videos[name_a][t], (name_b, t), videos[name_b][t])
-            pooled = pooled.concat(rectify_matches(m, cam_a, cam_b, K_c))
+        pooled, frame_of = _pooled_matches(videos, cam_a, cam_b, matcher, K_c)
         T_b_from_a = invert_T(cam_b.T_ego_from_cam) @ cam_a.T_ego_from_cam
-        per_pair[f"{name_a}~{name_b}"] = [_score_pair(pooled, T_b_from_a, K_c, epi_cfg)]
+        if ego_at_camera is not None:  # T_cam_b(t_b)_from_cam_a(t_a) = (E_b T_eb)^-1 E_a T_ea
+            T_wa = ego_at_camera[name_a] @ cam_a.T_ego_from_cam
+            T_wb = ego_at_camera[name_b] @ cam_b.T_ego_from_cam
+            T_rel = list(invert_T(T_wb) @ T_wa)
+        else:
+            T_rel = [T_b_from_a] * num_frames
+        per_pair[f"{name_a}~{name_b}"] = [_score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, False)]
         if matches_out is not None:
             matches_out[(name_a, name_b)] = pooled
-    return summarize(per_pair)
+    scale = {
+        f"{a}~{b}": 0.5
+        * (native_px_per_canonical_px(rig.camera(a), K_c) + native_px_per_canonical_px(rig.camera(b), K_c))
+        for a, b in pairs
+    }
+    return summarize(per_pair, scale, epi_cfg.failed_pair_px)
 
 
-def summarize(groups: dict[str, list[dict[str, SampsonResult]]]) -> dict:
-    """Clip value per F kind (mean of OK pair medians), status counts, and per-group means."""
+def summarize(
+    groups: dict[str, list[dict[str, SampsonResult]]], native_scale: dict[str, float], failed_px: float
+) -> dict:
+    """Per F kind: the clip value (failed pairs at ``failed_px``), the mean over counted pairs, the
+    share of pairs counted, verified matches per pair, native-pixel values (x the group's
+    ``native_scale``), status counts and per-group values."""
     out: dict = {}
     for kind in ("fitted", "calibrated"):
-        results = [r[kind] for rs in groups.values() for r in rs if kind in r]
-        if not results:
+        tagged = [(g, r[kind]) for g, rs in groups.items() for r in rs if kind in r]
+        if not tagged:
             continue
+        results = [r for _, r in tagged]
+        scales = np.array([native_scale[g] for g, _ in tagged])
         out[kind] = {
-            "value_px": _mean_ok(results),
+            "value_px": _clip_value(results, failed_px),
+            "value_native_px": _clip_value(results, failed_px, scales),
+            "counted_mean_px": _clip_value([r for r in results if r.status == OK], failed_px),
+            "counted_fraction": _counted_fraction(results),
+            "matches_per_pair": float(np.mean([r.num_matches for r in results])),
             "status_counts": _counts(results),
-            "per_group_px": {g: _mean_ok([r[kind] for r in rs]) for g, rs in groups.items()},
+            "per_group_px": {g: _clip_value([r[kind] for r in rs], failed_px) for g, rs in groups.items()},
             "pair_medians_px": [r.median_px for r in results],
+            "pair_matches": [r.num_matches for r in results],
         }
     return out
 
 
-def _mean_ok(results: list[SampsonResult]) -> float:
-    ok = [r.median_px for r in results if r.status == OK]
-    return float(np.mean(ok)) if ok else float("nan")
+def _clip_value(results: list[SampsonResult], failed_px: float, scales: np.ndarray | None = None) -> float:
+    """Mean of pair medians, a pair that failed at ``failed_px``; pairs without a calibrated F
+    (``no_baseline``: the ego did not move) are left out. NaN when no pair is left."""
+    scales = np.ones(len(results)) if scales is None else scales
+    values = [
+        (r.median_px if r.status == OK else failed_px) * s for r, s in zip(results, scales) if r.status != NO_BASELINE
+    ]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def _counted_fraction(results: list[SampsonResult]) -> float:
+    scored = [r for r in results if r.status != NO_BASELINE]
+    return float(np.mean([r.status == OK for r in scored])) if scored else float("nan")
 
 
 def _counts(results: list[SampsonResult]) -> dict[str, int]:

@@ -1,6 +1,6 @@
 """Epipolar geometry for the benchmark: canonical rectification, robust F / E fits, Sampson error.
 
-All errors are reported in pixels of one canonical pinhole (eval/protocol.md): keypoints are
+All errors are reported in pixels of one canonical pinhole (docs/eval-protocol.md): keypoints are
 undistorted with their camera's K and distortion and re-projected with ``K_canonical`` (960x540,
 120 deg horizontal FOV, the target camera of NVIDIA's public Sampson code), so a 320x192 clip and a
 1920x1080 clip with another lens are scored on the same scale. The Sampson error of one match is
@@ -23,6 +23,7 @@ from drivewm.geometry import Camera, fundamental_from_T, make_T, sampson_distanc
 OK = "ok"
 TOO_FEW_MATCHES = "too_few_matches"
 FIT_FAILED = "fit_failed"
+NO_MOTION = "no_motion"
 
 
 def canonical_K(cfg: EpipolarConfig) -> np.ndarray:
@@ -86,16 +87,27 @@ def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.nd
     return E, mask.reshape(-1).astype(bool)
 
 
+#: recoverPose's triangulation cut-off in baselines. OpenCV's default (50) drops every point farther
+#: than 50 baselines from its cheirality count and mask: on a driving stereo pair (0.5 m baseline,
+#: scene to 100 m and beyond) that is nearly all of them. Far points are valid epipolar inliers.
+CHEIRALITY_DISTANCE_BASELINES = 1e9
+
+
 def relative_pose(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) from E + cheirality
-    (cv2.recoverPose); (None, empty mask) when the fit fails."""
+    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) from E, and the inlier mask.
+
+    The inliers are E's RANSAC inliers: cheirality (cv2.recoverPose, points at any distance) only
+    picks which of E's four (R, t) decompositions is in front of both cameras (H&Z sec. 9.6.3); a far
+    point's triangulated depth sign is noise and says nothing about the match. (None, empty mask)
+    when the fit fails."""
     E, mask = fit_essential(m, K, cfg)
     if E is None:
         return None, mask
-    _, R, t, pose_mask = cv2.recoverPose(E, m.uv_a, m.uv_b, K, mask=mask.astype(np.uint8)[:, None].copy())
-    inliers = pose_mask.reshape(-1) > 0
-    T = refine_relative_pose(make_T(R, t.reshape(3)), Matches(m.uv_a[inliers], m.uv_b[inliers]), K, cfg)
-    return T, inliers
+    _, R, t, _, _ = cv2.recoverPose(
+        E, m.uv_a, m.uv_b, K, distanceThresh=CHEIRALITY_DISTANCE_BASELINES, mask=mask.astype(np.uint8)[:, None].copy()
+    )
+    T = refine_relative_pose(make_T(R, t.reshape(3)), Matches(m.uv_a[mask], m.uv_b[mask]), K, cfg)
+    return T, mask
 
 
 def refine_relative_pose(T_b_from_a: np.ndarray, m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> np.ndarray:
@@ -132,17 +144,22 @@ class SampsonResult:
         return {"median_px": self.median_px, "num_matches": self.num_matches, "status": self.status}
 
 
+def verified_mask(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> np.ndarray:
+    """(N,) bool: the matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
+    if F_fit is None or len(m) == 0:
+        return np.zeros(len(m), bool)
+    return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+
+
 def verified_matches(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> Matches:
     """The matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
-    if F_fit is None or len(m) == 0:
-        return Matches.empty()
-    keep = sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+    keep = verified_mask(F_fit, m, cfg)
     return Matches(m.uv_a[keep], m.uv_b[keep])
 
 
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
     """Median Sampson error of the verified matches ``m`` under F -- the same set for the fitted
-    and the calibrated F (eval/protocol.md, 'Per-pair error')."""
+    and the calibrated F (docs/eval-protocol.md, 'Per-pair error')."""
     if len(m) < cfg.min_matches:
         return SampsonResult(np.zeros(0), float("nan"), len(m), TOO_FEW_MATCHES)
     if F is None:

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from drivewm.errors import DrivewmError
+from drivewm.eval.ego import EgoTrajectory, ego_trajectory
 from drivewm.geometry import Camera, invert_T, make_T
 
 
@@ -58,7 +59,7 @@ def working_frames(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig) ->
     for g in grey:
         g = cv2.resize(g, size, interpolation=cv2.INTER_AREA).astype(np.float32)
         out.append(cv2.GaussianBlur(g, (0, 0), cfg.blur_sigma_px) if cfg.blur_sigma_px > 0 else g)
-    K = camera.scaled(size[0], size[1]).K.astype(np.float64)
+    K = camera.scaled(size[0], size[1], fit="stretch").K.astype(np.float64)  # cv2.resize above
     return np.stack(out), K
 
 
@@ -112,7 +113,8 @@ def flow_camera_poses(
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8 or len(frames) < 2:
         raise DrivewmError(
-            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), got {frames.dtype} {frames.shape}"
+            f"flow motion of camera {camera.name}: need uint8 RGB frames (T >= 2, H, W, 3), "
+            f"got {frames.dtype} {frames.shape}"
         )
     grey, K = working_frames(frames, camera, cfg)
     poses = np.full((len(grey), 4, 4), np.nan)
@@ -129,10 +131,6 @@ def flow_camera_poses(
     return poses, registered
 
 
-def flow_ego_trajectory(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig | None = None):
-    """:class:`drivewm.eval.trajectory.EgoTrajectory` of one camera's frames from dense flow:
-    ``T_world_from_ego = T_world_from_cam @ T_ego_from_cam^-1`` (world = the first camera frame)."""
-    from drivewm.eval.trajectory import EgoTrajectory
-
-    T_world_from_cam, registered = flow_camera_poses(frames, camera, cfg)
-    return EgoTrajectory(T_world_from_cam @ invert_T(camera.T_ego_from_cam), registered, camera.name)
+def flow_ego_trajectory(frames: np.ndarray, camera: Camera, cfg: FlowMotionConfig | None = None) -> EgoTrajectory:
+    """The ego trajectory of one camera's frames from dense flow (world = the first camera frame)."""
+    return ego_trajectory(*flow_camera_poses(frames, camera, cfg), camera)

@@ -9,10 +9,12 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import av
 import numpy as np
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_shard, list_shards
+from drivewm.clips.video import decode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
 
@@ -52,6 +54,10 @@ class EvalItem:
     mp4_paths: dict[str, str] = dataclasses.field(default_factory=dict)
     grid_path: str = ""
     grid: GridLayout | None = None
+    timestamps_ns: list[int] = dataclasses.field(default_factory=list)
+    """Time of each frame (and of each ego pose), ns; empty for mp4 inputs."""
+    camera_timestamps_ns: dict[str, list[int]] = dataclasses.field(default_factory=dict)
+    """Per camera, its frames' own exposure times (ns) when they differ from ``timestamps_ns``."""
     error: str = ""
     """Set when the input could not be read (e.g. a corrupt shard): the item is reported, not scored."""
 
@@ -69,8 +75,6 @@ class EvalItem:
 
 
 def _decode_file(path: str) -> np.ndarray:
-    from drivewm.clips.video import decode_mp4
-
     p = Path(path)
     if not p.is_file():
         raise DrivewmError(f"{p}: no such video file")
@@ -91,13 +95,16 @@ def split_grid(frames: np.ndarray, grid: GridLayout, where: str) -> dict[str, np
     return out
 
 
-def _rig_for(rig: Rig, names: list[str], width: int, height: int) -> Rig:
-    return rig.subset(names).scaled(width, height)
+def _rig_for(rig: Rig, names: list[str], width: int, height: int, fit: str = "same") -> Rig:
+    """The cameras named, at the videos' size; ``fit`` says how the videos were resized from the
+    rig's size when the aspect ratio differs (:meth:`drivewm.geometry.Camera.scaled`)."""
+    try:
+        return rig.subset(names).scaled(width, height, fit)
+    except DrivewmError as exc:
+        raise DrivewmError(f"{exc} (eval: --rig-fit stretch|crop)") from None
 
 
 def _video_size(path: Path) -> tuple[int, int, float]:
-    import av
-
     try:
         with av.open(str(path)) as c:
             s = c.streams.video[0]
@@ -106,25 +113,25 @@ def _video_size(path: Path) -> tuple[int, int, float]:
         raise DrivewmError(f"{path}: cannot read video ({exc.__class__.__name__})") from None
 
 
-def items_from_clips(location: Path, rig: Rig | None) -> list[EvalItem]:
+def items_from_clips(location: Path, rig: Rig | None, fit: str = "same") -> list[EvalItem]:
     """Clip shards (a folder of .tar or one .tar); ``rig`` (optional) overrides the clips' own.
     A shard that cannot be read becomes one failed item named after it; the others are kept."""
     items = []
     for shard in list_shards(location):
         try:
-            items += _shard_items(shard, rig)
+            items += _shard_items(shard, rig, fit)
         except DrivewmError as exc:
             items.append(EvalItem(shard.stem, rig or Rig("unknown", []), 0.0, error=str(exc)))
     return items
 
 
-def _shard_items(shard: Path, rig: Rig | None) -> list[EvalItem]:
+def _shard_items(shard: Path, rig: Rig | None, fit: str) -> list[EvalItem]:
     items = []
     for clip in iter_shard(shard):
         clip_rig = clip.meta.get_rig()
         if rig is not None:
             c0 = clip_rig.cameras[0]
-            clip_rig = _rig_for(rig, [n for n in rig.names if n in clip.meta.cameras], c0.width, c0.height)
+            clip_rig = _rig_for(rig, [n for n in rig.names if n in clip.meta.cameras], c0.width, c0.height, fit)
         m = clip.meta
         items.append(
             EvalItem(
@@ -136,12 +143,14 @@ def _shard_items(shard: Path, rig: Rig | None) -> list[EvalItem]:
                 list(m.trajectory_ego),
                 m.trajectory_dt_s,
                 clip=clip,
+                timestamps_ns=list(m.timestamps_ns),
+                camera_timestamps_ns=dict(m.camera_timestamps_ns),
             )
         )
     return items
 
 
-def items_from_mp4_folder(location: Path, rig: Rig) -> list[EvalItem]:
+def items_from_mp4_folder(location: Path, rig: Rig, fit: str = "same") -> list[EvalItem]:
     """A folder of ``CAMERA.mp4`` (one clip), or a folder of such folders (one clip each)."""
     folders = [location] if any(location.glob("*.mp4")) else sorted(p for p in location.iterdir() if p.is_dir())
     items = []
@@ -152,32 +161,39 @@ def items_from_mp4_folder(location: Path, rig: Rig) -> list[EvalItem]:
         w, h, fps = _video_size(next(iter(paths.values())))
         items.append(
             EvalItem(
-                folder.name, _rig_for(rig, list(paths), w, h), fps, mp4_paths={c: str(p) for c, p in paths.items()}
+                folder.name, _rig_for(rig, list(paths), w, h, fit), fps, mp4_paths={c: str(p) for c, p in paths.items()}
             )
         )
     return items
 
 
-def items_from_grid(path: Path, rig: Rig, grid: GridLayout) -> list[EvalItem]:
+def items_from_grid(path: Path, rig: Rig, grid: GridLayout, fit: str = "same") -> list[EvalItem]:
     """One mp4 holding a grid of views."""
     w, h, fps = _video_size(path)
     names = [n for n in grid.cameras if n != "-"]
     return [
-        EvalItem(path.stem, _rig_for(rig, names, w // grid.cols, h // grid.rows), fps, grid_path=str(path), grid=grid)
+        EvalItem(
+            path.stem, _rig_for(rig, names, w // grid.cols, h // grid.rows, fit), fps, grid_path=str(path), grid=grid
+        )
     ]
 
 
 def load_items(
-    location: str | Path, rig: str | Path | Rig | None = None, grid: str | None = None, cameras: list[str] | None = None
+    location: str | Path,
+    rig: str | Path | Rig | None = None,
+    grid: str | None = None,
+    cameras: list[str] | None = None,
+    fit: str = "same",
 ) -> list[EvalItem]:
     """Items of any supported input. ``grid`` ('2x3') and ``cameras`` (row-major order, default the
-    rig's) describe a grid video; mp4 folders and grid videos need ``rig``."""
+    rig's) describe a grid video; mp4 folders and grid videos need ``rig``. ``fit`` ('same',
+    'stretch', 'crop'): how videos of another aspect ratio than ``rig`` were resized from it."""
     location = Path(location)
     rig_obj = load_rig(rig) if isinstance(rig, (str, Path)) else rig
     if not location.exists():
         raise DrivewmError(f"{location}: no such file or folder")
     if location.suffix == ".tar" or (location.is_dir() and any(location.glob("*.tar"))):
-        return items_from_clips(location, rig_obj)
+        return items_from_clips(location, rig_obj, fit)
     if rig_obj is None:
         raise DrivewmError(f"{location}: mp4 inputs need --rig (camera names, intrinsics and extrinsics)")
     if location.is_file() and location.suffix == ".mp4":
@@ -187,7 +203,7 @@ def load_items(
                     f"{location}: a single mp4 with a {len(rig_obj.cameras)}-camera rig needs --grid ROWSxCOLS"
                 )
             grid = "1x1"
-        return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names))
+        return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names), fit)
     if location.is_dir():
-        return items_from_mp4_folder(location, rig_obj)
+        return items_from_mp4_folder(location, rig_obj, fit)
     raise DrivewmError(f"{location}: expected clip shards, a folder of per-camera mp4, or a grid mp4")

@@ -3,9 +3,10 @@
 ``metrics.json``: aggregates at the top level (tse, cse, pose_success, ate, rpe_trans, rpe_rot, tfe,
 ...), per clip under ``clips``, the resolved protocol under ``config``. ``metrics.md``: one row per
 aggregate with the reference ("real") value beside it when a reference JSON is given (same keys;
-eval/reference/*.json). ``error_distributions.png``: per-pair TSE / CSE medians and per-clip
-trajectory errors. ``eval.rrd``: per clip, the first CSE pair's matches and the recovered vs
-reference trajectory.
+a path, or the name of a packaged one in drivewm/references/). ``error_distributions.png``: per-pair
+TSE / CSE medians and per-clip trajectory errors. ``eval.rrd``: per clip, the first CSE pair's
+matches and the recovered vs reference trajectory.
+matplotlib and Rerun (seconds to import) load only when the pictures are drawn.
 """
 
 from __future__ import annotations
@@ -16,20 +17,31 @@ from pathlib import Path
 
 import numpy as np
 
+from drivewm import resources
 from drivewm.atomic import atomic_path, write_json, write_text
 from drivewm.errors import DrivewmError
 
 #: (key, unit, description) rows of the Markdown table, in order.
 TABLE_ROWS = (
-    ("tse", "px", "temporal Sampson error, F fitted per frame pair (lower is better)"),
+    ("tse", "px", "temporal Sampson error, F fitted per frame pair; failed pairs at 4 px (lower is better)"),
     ("tse_calibrated", "px", "temporal Sampson error under the F of the logged ego motion"),
+    ("tse_native", "px", "TSE in the cameras' own pixels"),
+    ("tse_counted", "px", "TSE over the pairs that count only (the Cosmos paper's figure)"),
+    ("tse_counted_fraction", "rate", "TSE frame pairs with enough verified matches and motion"),
+    ("tse_matches", "count", "verified matches per TSE frame pair"),
     ("cse", "px", "cross-view Sampson error, one F fitted per camera pair over all frames"),
     ("cse_calibrated", "px", "cross-view Sampson error under the rig's calibrated F"),
+    ("cse_native", "px", "CSE in the cameras' own pixels"),
+    ("cse_counted", "px", "CSE over the pairs that count only (the Cosmos paper's figure)"),
+    ("cse_counted_fraction", "rate", "CSE camera pairs with enough distinct verified matches"),
+    ("cse_matches", "count", "distinct verified matches per CSE camera pair (all frames)"),
     ("pose_success", "rate", "clips whose frames all register in COLMAP (higher is better)"),
     ("registered_fraction", "rate", "frames registered by COLMAP"),
     ("ate", "m", "absolute trajectory error after Sim(3) alignment"),
-    ("rpe_trans", "m", "relative pose error, translation per frame step"),
-    ("rpe_rot", "deg", "relative pose error, rotation per frame step"),
+    ("rpe_trans", "m", "relative pose error, translation per frame step (RMSE)"),
+    ("rpe_rot", "deg", "relative pose error, rotation per frame step (mean)"),
+    ("rpe_trans_mean", "m", "relative pose error, translation (mean)"),
+    ("rpe_rot_rmse", "deg", "relative pose error, rotation (RMSE, as evo reports it)"),
     ("tfe", "m", "trajectory-following error against the conditioned waypoints"),
     ("adherence_weather", "rate", "clips classified as the prompted weather"),
     ("adherence_time_of_day", "rate", "clips classified as the prompted time of day"),
@@ -37,10 +49,11 @@ TABLE_ROWS = (
 
 
 def load_reference(path: str | Path | None) -> dict:
-    """A reference metrics JSON (a metrics.json, or {"name": ..., "metrics": {key: value}})."""
+    """A reference metrics JSON (a metrics.json, or {"name": ..., "metrics": {key: value}}): a path, or
+    the name of a packaged reference (``cosmos_paper``, ``sim_clips``)."""
     if path is None:
         return {}
-    path = Path(path)
+    path = resources.find("references", path, "reference metrics", suffix=".json")
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
@@ -143,11 +156,12 @@ def _log_clip(rec, rr, result) -> None:
         )
 
 
-def _json_safe(obj):
+def json_safe(obj):
+    """``obj`` with NaN / inf written as None and numpy scalars as Python numbers (strict JSON)."""
     if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
+        return [json_safe(v) for v in obj]
     if isinstance(obj, (np.floating, float)):
         return float(obj) if math.isfinite(obj) else None
     if isinstance(obj, np.integer):
@@ -161,7 +175,7 @@ def write_report(
     """metrics.json (NaN written as null), metrics.md, error_distributions.png and eval.rrd."""
     ref = load_reference(reference)
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "metrics.json", _json_safe(metrics))
+    write_json(out_dir / "metrics.json", json_safe(metrics))
     write_text(out_dir / "metrics.md", markdown_table(metrics, ref))
     if pictures:
         plot_distributions(out_dir / "error_distributions.png", metrics)

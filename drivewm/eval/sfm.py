@@ -1,11 +1,21 @@
 """Structure from motion on a clip with pycolmap (COLMAP 4): the engine behind pose success and trajectories.
 
-Frames are written as PNG to a scratch folder (``CAM/TTTT.png``), SIFT features are extracted per
-camera with that camera's pinhole intrinsics held fixed, frames are matched sequentially in time
-(``sequential_overlap`` frames ahead, plus the other cameras of the same and nearby frames when the
-rig is known), and COLMAP's incremental mapper reconstructs. With a known rig the cameras are tied
-by a COLMAP rig config (``apply_rig_config``: each camera's ``cam_from_rig`` from the extrinsics,
-held fixed), so all views of one timestamp register together as one frame.
+The rig's intrinsics and extrinsics are known, so registration only has to find the ego motion:
+every camera keeps its calibration fixed (a COLMAP camera model that carries its distortion:
+PINHOLE, OPENCV or FULL_OPENCV), and a COLMAP rig config (``apply_rig_config``: each camera's
+``cam_from_rig`` from the extrinsics, held fixed in bundle adjustment) ties the views of one
+timestamp into one frame. Features come either from COLMAP's own SIFT extraction and sequential
+matching (``features='colmap'``, the default: it registers every reference clip), or from the
+benchmark's own matcher (``features='shared'``, about 2x faster, not yet as robust on snow): the
+SIFT keypoints and matches that TSE and CSE already computed
+(drivewm.eval.matching.FrameMatcher caches both), geometrically verified by the same robust F
+fit, are written into the COLMAP database, so COLMAP neither extracts nor matches: pairs are each
+camera's frame t with t + each of ``temporal_gaps``, and the overlapping camera pairs at each t.
+``features='colmap'`` (also what a learned matcher, which has no per-image keypoints, needs) writes
+PNGs and runs COLMAP's SIFT extraction and sequential matching, rig images expanded.
+
+COLMAP puts pixel centres at half-integers (the top-left pixel's centre is (0.5, 0.5)); drivewm at
+integers (OpenCV), so principal points and keypoints get +0.5 on the way in.
 """
 
 from __future__ import annotations
@@ -17,8 +27,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from drivewm.eval.config import PoseConfig
-from drivewm.geometry import Rig, invert_T, make_T
+from drivewm.errors import DrivewmError
+from drivewm.eval.config import EpipolarConfig, PoseConfig
+from drivewm.geometry import Camera, Rig, invert_T, make_T
+
+#: COLMAP models by the number of OpenCV distortion coefficients (k1, k2, p1, p2[, k3, k4, k5, k6]).
+COLMAP_MODELS = {4: "OPENCV", 8: "FULL_OPENCV"}
 
 
 @dataclasses.dataclass
@@ -38,26 +52,145 @@ class SfmResult:
         return all(bool(r.all()) for r in self.registered.values())
 
 
-def run_sfm(videos: dict[str, np.ndarray], rig: Rig, cfg: PoseConfig, rig_aware: bool = True) -> SfmResult:
-    """Reconstruct the clip. ``videos``: uint8 RGB (T, H, W, 3) per camera of ``rig`` (rig order)."""
+def colmap_camera(camera: Camera):
+    """A fixed-calibration pycolmap.Camera: PINHOLE without distortion, OPENCV for (k1, k2, p1, p2),
+    FULL_OPENCV for up to 8 coefficients (k3 and beyond); principal point shifted by +0.5 px."""
     import pycolmap
 
+    fx, fy, cx, cy = camera.K[0, 0], camera.K[1, 1], camera.K[0, 2] + 0.5, camera.K[1, 2] + 0.5
+    dist = np.asarray(camera.distortion, dtype=np.float64).reshape(-1)
+    if not np.any(dist):
+        model, params = "PINHOLE", [fx, fy, cx, cy]
+    elif len(dist) in (4, 5, 8):
+        n = 4 if len(dist) == 4 else 8
+        model, params = COLMAP_MODELS[n], [fx, fy, cx, cy, *np.pad(dist, (0, n - len(dist)))]
+    else:
+        raise DrivewmError(
+            f"camera {camera.name}: {len(dist)} distortion coefficients; structure from motion takes OpenCV's "
+            "4, 5 or 8 (k1, k2, p1, p2[, k3[, k4, k5, k6]])"
+        )
+    return pycolmap.Camera(model=model, width=camera.width, height=camera.height, params=params)
+
+
+def run_sfm(
+    videos: dict[str, np.ndarray],
+    rig: Rig,
+    cfg: PoseConfig,
+    rig_aware: bool = True,
+    matcher=None,
+    epi_cfg: EpipolarConfig | None = None,
+    pairs: list[tuple[str, str]] | None = None,
+) -> SfmResult:
+    """Reconstruct the clip. ``videos``: uint8 RGB (T, H, W, 3) per camera of ``rig`` (rig order).
+    ``matcher``: the FrameMatcher whose features to share (a new SIFT one if None); ``pairs``: the
+    overlapping camera pairs (drivewm.eval.consistency.overlapping_pairs if None)."""
+    import pycolmap
+
+    from drivewm.eval.matching import FrameMatcher
+
     pycolmap.set_random_seed(cfg.seed)
-    pycolmap.logging.minloglevel = max(
-        pycolmap.logging.minloglevel, 2
-    )  # COLMAP's INFO lines would drown the progress bar
+    pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 2)  # COLMAP's INFO lines drown the progress bar
+    matcher = matcher or FrameMatcher(_default_match_cfg())
+    shared = cfg.features == "shared" and matcher.shares_features
     with tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"
-        _write_frames(videos, images)
-        for cam in rig.cameras:
-            _extract(pycolmap, db_path, images, cam, len(videos[cam.name]), cfg)
+        images.mkdir()
+        if shared:
+            names = _write_shared(pycolmap, db_path, videos, rig, cfg, matcher, epi_cfg or EpipolarConfig(), pairs)
+        else:
+            _write_frames(videos, images)
+            for cam in rig.cameras:
+                _extract(pycolmap, db_path, images, cam, len(videos[cam.name]), cfg)
         if rig_aware and len(rig.cameras) > 1:
             _apply_rig(pycolmap, db_path, rig)
-        _match(pycolmap, db_path, cfg, rig_aware)
+        if not shared:
+            _match(pycolmap, db_path, cfg, rig_aware)
+        elif cfg.verify == "colmap":
+            _verify(pycolmap, db_path, names, cfg)
         models = _map(pycolmap, db_path, images, tmp / "sparse", cfg)
     num_frames = len(next(iter(videos.values())))
     return _poses_from_models(models, rig, num_frames)
+
+
+def _default_match_cfg():
+    from drivewm.eval.config import MatchConfig
+
+    return MatchConfig()
+
+
+def sfm_image_pairs(rig: Rig, num_frames: int, cfg: PoseConfig, pairs: list[tuple[str, str]]) -> list[tuple]:
+    """((camera, t), (camera, u)) pairs to match: each camera's frame t with t + gap
+    (``temporal_gaps``), and each overlapping camera pair at t with itself at t and, both ways, at
+    t + gap (``cross_gaps``). Cross-camera tracks are what fix the metric scale: with cameras that
+    share no points, a rig moving straight ahead has no observable scale (and no steady one)."""
+    T = num_frames
+    out = [((c, t), (c, t + g)) for c in rig.names for g in cfg.temporal_gaps for t in range(T - g)]
+    out += [((a, t), (b, t)) for a, b in pairs for t in range(T)]
+    for g in cfg.cross_gaps:
+        out += [(x, y) for a, b in pairs for t in range(T - g) for x, y in (((a, t), (b, t + g)), ((b, t), (a, t + g)))]
+    return out
+
+
+def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, matcher, epi_cfg, pairs) -> list[str]:
+    """Cameras, images, the matcher's keypoints and matches (F-verified for verify='drivewm') into a
+    new COLMAP database; returns the image-name pairs written ("CAM/TTTT.png CAM/TTTT.png")."""
+    from drivewm.eval.consistency import overlapping_pairs
+    from drivewm.eval.epipolar import canonical_K, fit_fundamental, rectify_matches, verified_mask
+    from drivewm.eval.matching import Matches
+
+    num_frames = len(next(iter(videos.values())))
+    pairs = overlapping_pairs(rig, _consistency_cfg()) if pairs is None else pairs
+    K_c = canonical_K(epi_cfg)
+    db = pycolmap.Database.open(db_path)
+    try:
+        ids = {}
+        for cam in rig.cameras:
+            camera_id = db.write_camera(colmap_camera(cam))
+            for t in range(num_frames):
+                image_id = db.write_image(pycolmap.Image(name=f"{cam.name}/{t:04d}.png", camera_id=camera_id))
+                ids[(cam.name, t)] = image_id
+                uv = matcher.features((cam.name, t), videos[cam.name][t]).uv
+                db.write_keypoints(image_id, (uv + 0.5).astype(np.float32))
+        names = []
+        for a, b in sfm_image_pairs(rig, num_frames, cfg, pairs):
+            idx = matcher.match_indices(a, videos[a[0]][a[1]], b, videos[b[0]][b[1]])
+            if cfg.verify == "drivewm":
+                fa, fb = matcher.features(a, None), matcher.features(b, None)
+                m = rectify_matches(
+                    Matches(fa.uv[idx[:, 0]], fb.uv[idx[:, 1]]), rig.camera(a[0]), rig.camera(b[0]), K_c
+                )
+                F, _ = fit_fundamental(m, epi_cfg)
+                idx = idx[verified_mask(F, m, epi_cfg)]
+            if len(idx) < cfg.min_pair_inliers:
+                continue
+            db.write_matches(ids[a], ids[b], idx.astype(np.uint32))
+            if cfg.verify == "drivewm":
+                geometry = pycolmap.TwoViewGeometry()
+                geometry.config = pycolmap.TwoViewGeometryConfiguration.UNCALIBRATED
+                geometry.inlier_matches = idx.astype(np.uint32)
+                db.write_two_view_geometry(ids[a], ids[b], geometry)
+            names.append(f"{a[0]}/{a[1]:04d}.png {b[0]}/{b[1]:04d}.png")
+    finally:
+        db.close()
+    return names
+
+
+def _verify(pycolmap, db_path: Path, names: list[str], cfg: PoseConfig) -> None:
+    """COLMAP's geometric verification of the written matches (after the rig config, so it knows the cameras)."""
+    pairs_path = db_path.parent / "pairs.txt"
+    pairs_path.write_text("\n".join(names) + "\n")
+    options = pycolmap.TwoViewGeometryOptions()
+    options.ransac.random_seed = cfg.seed
+    options.ransac.num_threads = 1
+    options.ransac.max_num_trials = cfg.verify_max_trials
+    pycolmap.verify_matches(db_path, pairs_path, options)
+
+
+def _consistency_cfg():
+    from drivewm.eval.config import ConsistencyConfig
+
+    return ConsistencyConfig()
 
 
 def _write_frames(videos: dict[str, np.ndarray], images: Path) -> None:
@@ -67,9 +200,10 @@ def _write_frames(videos: dict[str, np.ndarray], images: Path) -> None:
             cv2.imwrite(str(images / cam / f"{t:04d}.png"), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
 
 
-def _extract(pycolmap, db_path: Path, images: Path, cam, num_frames: int, cfg: PoseConfig) -> None:
-    fx, fy, cx, cy = cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]
-    reader = pycolmap.ImageReaderOptions(camera_model="PINHOLE", camera_params=f"{fx},{fy},{cx},{cy}")
+def _extract(pycolmap, db_path: Path, images: Path, cam: Camera, num_frames: int, cfg: PoseConfig) -> None:
+    colmap_cam = colmap_camera(cam)
+    params = ",".join(repr(float(p)) for p in colmap_cam.params)
+    reader = pycolmap.ImageReaderOptions(camera_model=colmap_cam.model.name, camera_params=params)
     extraction = pycolmap.FeatureExtractionOptions(num_threads=1)
     extraction.sift.max_num_features = cfg.max_features
     names = [f"{cam.name}/{t:04d}.png" for t in range(num_frames)]
@@ -118,6 +252,8 @@ def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> l
         ba_refine_principal_point=False,
         ba_refine_extra_params=False,
         ba_refine_sensor_from_rig=False,
+        ba_global_frames_ratio=cfg.ba_global_frames_ratio,
+        ba_global_points_ratio=cfg.ba_global_frames_ratio,
     )
     # Assign a whole new mapper-options object: mutating options.mapper in place is not reliable in pycolmap 4.2.
     options.mapper = pycolmap.IncrementalMapperOptions(

@@ -15,24 +15,39 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+import cv2
 import numpy as np
+from tqdm import tqdm
 
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
+from drivewm.eval.adherence import adherence, condition_scores
 from drivewm.eval.config import EvalConfig
+from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, overlapping_pairs, temporal_sampson
+from drivewm.eval.epipolar import canonical_K
 from drivewm.eval.inputs import EvalItem, load_items
+from drivewm.eval.matching import FrameMatcher
+from drivewm.eval.report import write_report
+from drivewm.eval.sfm import run_sfm
+from drivewm.eval.trajectory import ego_from_sfm
+from drivewm.eval.trajectory_errors import ate, relative_pose_errors, tfe
 
-#: Aggregate keys (DESIGN.md section 8) and the per-clip field each averages.
+#: Figures reported beside each Sampson metric (drivewm.eval.suite._put_sampson).
+SAMPSON_SUFFIXES = ("_native", "_counted", "_counted_fraction", "_matches")
+#: Aggregate keys (docs/DESIGN.md section 8) and the per-clip field each averages.
 AGGREGATE_KEYS = (
     "tse",
     "tse_calibrated",
     "cse",
     "cse_calibrated",
+    *(f"{m}{suffix}" for m in ("tse", "tse_calibrated", "cse", "cse_calibrated") for suffix in SAMPSON_SUFFIXES),
     "pose_success",
     "registered_fraction",
     "ate",
     "rpe_trans",
     "rpe_rot",
+    "rpe_trans_mean",
+    "rpe_rot_rmse",
     "tfe",
     "adherence_weather",
     "adherence_time_of_day",
@@ -50,8 +65,6 @@ class ClipResult:
 
 def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
     """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised."""
-    import cv2
-
     cv2.setNumThreads(1)
     metrics: dict = {"status": {}, "seconds": {}}
     artifacts: dict = {}
@@ -59,7 +72,6 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
         videos = item.videos()
     except DrivewmError as exc:
         return ClipResult(item.key, {"error": str(exc)}, {})
-    from drivewm.eval.matching import FrameMatcher
 
     matcher = FrameMatcher(cfg.match)
     for name, fn in (("tse", _tse), ("cse", _cse), ("pose", _pose), ("traj", _traj), ("adherence", _adherence)):
@@ -71,22 +83,33 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
 
 
 def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.consistency import temporal_sampson
+    K_c = canonical_K(cfg.epipolar)
+    metrics["native_px_per_canonical_px"] = {c.name: native_px_per_canonical_px(c, K_c) for c in item.rig.cameras}
 
-    r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher)
+    ego = _ego_at_cameras(item, cfg)
+    r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego)
     _put_sampson(metrics, "tse", r)
 
 
-def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.consistency import cross_sampson, overlapping_pairs
+def _ego_at_cameras(item, cfg) -> dict[str, np.ndarray] | None:
+    """Ego poses at each camera's exposure times, when the clip records its own times for any camera."""
+    if item.T_world_from_ego is None or not item.camera_timestamps_ns or not cfg.consistency.compensate_exposure:
+        return None
+    from drivewm.eval.exposure import ego_at_cameras
 
+    return ego_at_cameras(item.T_world_from_ego, item.timestamps_ns, item.camera_timestamps_ns, item.rig.names)
+
+
+def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
     pairs = overlapping_pairs(item.rig, cfg.consistency)
     metrics["cse_pairs"] = [f"{a}~{b}" for a, b in pairs]
     if not pairs:
         metrics["cse"] = metrics["cse_calibrated"] = math.nan
         metrics["status"]["cse"] = "no_overlapping_pairs"
         return
-    _put_sampson(metrics, "cse", cross_sampson(videos, item.rig, pairs, cfg.epipolar, matcher))
+    ego = _ego_at_cameras(item, cfg)
+    r = cross_sampson(videos, item.rig, pairs, cfg.epipolar, matcher, cfg=cfg.consistency, ego_at_camera=ego)
+    _put_sampson(metrics, "cse", r)
     a, b = pairs[0]
     m = matcher.match((a, 0), videos[a][0], (b, 0), videos[b][0])
     artifacts["cse_matches"] = {
@@ -98,28 +121,34 @@ def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 
 def _put_sampson(metrics: dict, name: str, r: dict) -> None:
+    """Clip keys of one Sampson metric: ``tse`` (canonical px, failed pairs counted), ``tse_native``
+    (the cameras' own px), ``tse_counted`` (mean over counted pairs only), ``tse_counted_fraction``,
+    ``tse_matches`` (verified matches per pair), per-pair lists; the same with ``_calibrated``."""
     for kind, key in (("fitted", name), ("calibrated", f"{name}_calibrated")):
         if kind in r:
-            metrics[key] = r[kind]["value_px"]
-            metrics["status"][key] = r[kind]["status_counts"]
-            metrics[f"{key}_per_group"] = r[kind]["per_group_px"]
-            metrics[f"{key}_pair_medians"] = r[kind]["pair_medians_px"]
+            k = r[kind]
+            metrics[key] = k["value_px"]
+            metrics[f"{key}_native"] = k["value_native_px"]
+            metrics[f"{key}_counted"] = k["counted_mean_px"]
+            metrics[f"{key}_counted_fraction"] = k["counted_fraction"]
+            metrics[f"{key}_matches"] = k["matches_per_pair"]
+            metrics["status"][key] = k["status_counts"]
+            metrics[f"{key}_per_group"] = k["per_group_px"]
+            metrics[f"{key}_pair_medians"] = k["pair_medians_px"]
+            metrics[f"{key}_pair_matches"] = k["pair_matches"]
 
 
 def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.sfm import run_sfm
-
-    sfm = run_sfm(videos, item.rig, cfg.pose)
+    pairs = overlapping_pairs(item.rig, cfg.consistency)
+    sfm = run_sfm(videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs)
     metrics["pose_success"] = float(sfm.all_registered)
     metrics["registered_fraction"] = sfm.registered_fraction
     artifacts["sfm"] = sfm
 
 
 def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.trajectory import ego_from_sfm
-    from drivewm.eval.trajectory_errors import ate, rpe, tfe
-
-    for k in ("ate", "rpe_trans", "rpe_rot", "tfe"):
+    tc = cfg.trajectory
+    for k in ("ate", "rpe_trans", "rpe_rot", "rpe_trans_mean", "rpe_rot_rmse", "tfe"):
         metrics[k] = math.nan
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
     reg = ego.registered
@@ -129,8 +158,16 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     est = ego.T_world_from_ego[reg]
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
-        metrics["ate"], sim = ate(est, ref)
-        metrics["rpe_trans"], metrics["rpe_rot"] = rpe(est, ref, cfg.trajectory.rpe_delta_frames, sim.scale)
+        metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
+        r = relative_pose_errors(
+            est, ref, tc.rpe_delta, tc.rpe_delta_unit, tc.rpe_all_pairs, sim.scale, tc.rpe_pairs_from
+        )
+        metrics["rpe_trans"], metrics["rpe_rot"] = r.trans_rmse, r.rot_mean
+        metrics["rpe_trans_mean"], metrics["rpe_rot_rmse"], metrics["rpe_pairs"] = (
+            r.trans_mean,
+            r.rot_rmse,
+            len(r.pairs),
+        )
         artifacts["trajectory"] = {"reference": ref[:, :3, 3], "recovered": sim.apply_points(est[:, :3, 3])}
     if item.trajectory_ego and reg.all():
         metrics["tfe"] = tfe(
@@ -140,8 +177,6 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 
 def _adherence(item, videos, cfg, matcher, metrics, artifacts) -> None:
-    from drivewm.eval.adherence import adherence, condition_scores
-
     scores = condition_scores(np.stack([videos[c] for c in item.rig.names]))
     result = adherence(scores, item.tags)
     metrics["condition_scores"] = scores
@@ -175,8 +210,6 @@ def _mean_seconds(results: list[ClipResult]) -> dict[str, float]:
 
 def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress: bool = True) -> list[ClipResult]:
     """Evaluate items, in a process pool when ``workers`` > 1; results in input order."""
-    from tqdm import tqdm
-
     bar = tqdm(total=len(items), desc="eval clips", unit="clip", disable=not progress)
     results: dict[int, ClipResult] = {}
     if workers <= 1:
@@ -206,15 +239,17 @@ def evaluate(
     reference: str | Path | None = None,
     progress: bool = True,
     pictures: bool = True,
+    rig_fit: str = "same",
 ) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
     Returns the metrics dict (aggregates at the top, per clip under ``clips``); with ``out_dir``
     also writes metrics.json, metrics.md (beside ``reference`` values), error-distribution plots
-    and a Rerun recording (eval.rrd).
+    and a Rerun recording (eval.rrd). ``rig_fit``: how videos of another aspect ratio than the rig
+    were resized from it ('same' refuses them, 'stretch', 'crop'; drivewm.geometry.Camera.scaled).
     """
     cfg = cfg or EvalConfig()
-    items = load_items(location, rig, grid, cameras)
+    items = load_items(location, rig, grid, cameras, rig_fit)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
     results = run_items(items, cfg, workers, progress)
@@ -223,7 +258,5 @@ def evaluate(
     metrics["config"] = to_dict(cfg)
     metrics["location"] = str(location)
     if out_dir is not None:
-        from drivewm.eval.report import write_report
-
         write_report(Path(out_dir), metrics, results, reference, pictures)
     return metrics

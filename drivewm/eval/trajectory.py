@@ -8,36 +8,20 @@ reconstruction's own; align to a reference with drivewm.eval.trajectory_errors (
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
+from drivewm.errors import DrivewmError
 from drivewm.eval.config import PoseConfig
+from drivewm.eval.ego import EgoTrajectory, ego_trajectory, forward_camera
+from drivewm.eval.flow_motion import flow_ego_trajectory
 from drivewm.eval.sfm import SfmResult, run_sfm
-from drivewm.geometry import Camera, Rig, invert_T
-
-
-@dataclasses.dataclass
-class EgoTrajectory:
-    """Recovered ``T_world_from_ego`` (T, 4, 4) (NaN where the frame did not register),
-    ``registered`` (T,) bool, and the camera it came from."""
-
-    T_world_from_ego: np.ndarray
-    registered: np.ndarray
-    camera: str
-
-
-def forward_camera(rig: Rig) -> str:
-    """The camera whose optical axis (OpenCV +z) points most along ego +x."""
-    return max(rig.cameras, key=lambda c: c.T_ego_from_cam[0, 2]).name
+from drivewm.geometry import Camera, Rig
 
 
 def ego_from_sfm(sfm: SfmResult, rig: Rig, camera: str = "") -> EgoTrajectory:
     """Ego poses from a reconstruction, through ``camera`` ('' = :func:`forward_camera`)."""
     camera = camera or forward_camera(rig)
-    T_cam_from_ego = invert_T(rig.camera(camera).T_ego_from_cam)
-    T = sfm.T_world_from_cam[camera] @ T_cam_from_ego
-    return EgoTrajectory(T, sfm.registered[camera].copy(), camera)
+    return ego_trajectory(sfm.T_world_from_cam[camera], sfm.registered[camera], rig.camera(camera))
 
 
 def estimate_ego_trajectory(
@@ -64,16 +48,12 @@ def estimate_ego_trajectory(
     if isinstance(clip_or_videos, dict):
         videos = clip_or_videos
         if rig is None:
-            from drivewm.errors import DrivewmError
-
             raise DrivewmError("estimate_ego_trajectory: frames given without a rig")
         rig = rig.subset([n for n in rig.names if n in videos])
     else:
         rig = rig or clip_or_videos.meta.get_rig()
         videos = {c: clip_or_videos.video(c) for c in rig.names}
     if method not in ("sfm", "flow", "auto"):
-        from drivewm.errors import DrivewmError
-
         raise DrivewmError(f"estimate_ego_trajectory: method {method!r} is not sfm, flow or auto")
     if method != "flow":
         est = ego_from_sfm(run_sfm(videos, rig, cfg or PoseConfig()), rig, camera)
@@ -85,7 +65,5 @@ def estimate_ego_trajectory(
 def flow_fallback(videos: dict[str, np.ndarray], rig: Rig, camera: str = "") -> EgoTrajectory:
     """Ego poses from dense optical flow of one camera ('' = :func:`forward_camera`): the fallback
     for frames structure from motion cannot register (drivewm.eval.flow_motion)."""
-    from drivewm.eval.flow_motion import flow_ego_trajectory
-
     camera = camera or forward_camera(rig)
     return flow_ego_trajectory(videos[camera], rig.camera(camera))

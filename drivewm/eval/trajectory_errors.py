@@ -51,28 +51,121 @@ def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> Sim3:
     return Sim3(scale, R, mu_d - scale * R @ mu_s)  # eq. 41
 
 
-def ate(est: np.ndarray, ref: np.ndarray, with_scale: bool = True) -> tuple[float, Sim3]:
-    """Absolute trajectory error (m): RMSE of positions after the best similarity (Sturm et al. 2012)."""
-    sim = umeyama(est[:, :3, 3], ref[:, :3, 3], with_scale)
+ALIGNMENTS = ("none", "se3", "sim3")
+DELTA_UNITS = ("frames", "m")
+
+
+def align(est_xyz: np.ndarray, ref_xyz: np.ndarray, alignment: str = "sim3") -> Sim3:
+    """The transform applied to the estimate before scoring, as evo's ``-a`` (``se3``: rotation and
+    translation), ``-as`` (``sim3``: with scale) or no flag (``none``: identity)."""
+    if alignment == "none":
+        return Sim3(1.0, np.eye(3), np.zeros(3))
+    if alignment not in ALIGNMENTS:
+        raise DrivewmError(f"trajectory alignment {alignment!r} is not one of {ALIGNMENTS}")
+    return umeyama(est_xyz, ref_xyz, with_scale=alignment == "sim3")
+
+
+def ate(est: np.ndarray, ref: np.ndarray, with_scale: bool = True, alignment: str = "") -> tuple[float, Sim3]:
+    """Absolute trajectory error (m): RMSE of positions after the best similarity (Sturm et al. 2012),
+    or after ``alignment`` ('none', 'se3', 'sim3'; evo_ape's translation part, RMSE)."""
+    sim = align(est[:, :3, 3], ref[:, :3, 3], alignment or ("sim3" if with_scale else "se3"))
     residual = sim.apply_points(est[:, :3, 3]) - ref[:, :3, 3]
     return float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), sim
 
 
-def rpe(est: np.ndarray, ref: np.ndarray, delta: int = 1, scale: float = 1.0) -> tuple[float, float]:
-    """Relative pose error over ``delta`` frames: (RMSE translation in m, mean rotation in deg).
+def rpe_pairs(T: np.ndarray, delta: float, unit: str = "frames", all_pairs: bool = False) -> list[tuple[int, int]]:
+    """Index pairs (i, j) of poses (N, 4, 4) ``delta`` apart, as evo's ``id_pairs_from_delta``.
 
-    E_i = (ref_i^-1 ref_{i+d})^-1 (est_i^-1 est_{i+d}) with the estimate's translations scaled by
-    ``scale`` (from the ATE alignment) (Sturm et al. 2012, eq. 1)."""
-    if len(est) <= delta:
-        return float("nan"), float("nan")
-    trans, rots = [], []
-    for i in range(len(est) - delta):
-        rel_est = invert_T(est[i]) @ est[i + delta]
-        rel_est[:3, 3] *= scale
-        err = invert_T(invert_T(ref[i]) @ ref[i + delta]) @ rel_est
-        trans.append(np.sum(err[:3, 3] ** 2))
-        rots.append(rotation_angle_deg(err[:3, :3]))
-    return float(np.sqrt(np.mean(trans))), float(np.mean(rots))
+    ``frames``: j = i + delta, for every i (``all_pairs``, overlapping) or every delta-th i
+    (consecutive, evo's default). ``m``: consecutive pairs end where the travelled path first
+    reaches ``delta`` metres (then the count restarts); all pairs take, for each i, the j whose path
+    from i is closest to ``delta`` and keep it when within 10% of ``delta`` (evo's rel_delta_tol)."""
+    n = len(T)
+    if unit == "frames":
+        d = int(delta)
+        starts = range(n) if all_pairs else range(0, n, d)
+        return [(i, i + d) for i in starts if i + d < n]
+    if unit != "m":
+        raise DrivewmError(f"RPE delta unit {unit!r} is not one of {DELTA_UNITS}")
+    path = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1))])
+    if all_pairs:
+        pairs = []
+        for i in range(n - 1):
+            j = i + 1 + int(np.argmin(np.abs(path[i + 1 :] - path[i] - delta)))
+            if abs(path[j] - path[i] - delta) <= 0.1 * delta:
+                pairs.append((i, j))
+        return pairs
+    ids, travelled = [0], 0.0
+    for i in range(1, n):
+        travelled += float(np.linalg.norm(T[i, :3, 3] - T[i - 1, :3, 3]))  # summed step by step, as evo does
+        if travelled >= delta:
+            ids.append(i)
+            travelled = 0.0
+    return list(zip(ids, ids[1:]))
+
+
+@dataclasses.dataclass
+class RelativePoseErrors:
+    """Per-pair relative pose errors: translation (m) and rotation (deg), with the pairs (i, j)."""
+
+    pairs: list[tuple[int, int]]
+    trans_m: np.ndarray
+    rot_deg: np.ndarray
+
+    @staticmethod
+    def _stat(x: np.ndarray, rms: bool) -> float:
+        if len(x) == 0:
+            return float("nan")
+        return float(np.sqrt(np.mean(x**2))) if rms else float(np.mean(x))
+
+    @property
+    def trans_rmse(self) -> float:
+        return self._stat(self.trans_m, True)
+
+    @property
+    def trans_mean(self) -> float:
+        return self._stat(self.trans_m, False)
+
+    @property
+    def rot_rmse(self) -> float:
+        return self._stat(self.rot_deg, True)
+
+    @property
+    def rot_mean(self) -> float:
+        return self._stat(self.rot_deg, False)
+
+
+def relative_pose_errors(
+    est: np.ndarray,
+    ref: np.ndarray,
+    delta: float = 1,
+    unit: str = "frames",
+    all_pairs: bool = False,
+    scale: float = 1.0,
+    pairs_from: str = "reference",
+) -> RelativePoseErrors:
+    """Relative pose errors E_ij = (ref_i^-1 ref_j)^-1 (est_i^-1 est_j) (Sturm et al. 2012, eq. 1;
+    evo's RPE.rpe_base), the estimate's translations scaled by ``scale`` (the alignment's; a Sim(3)
+    applied to the estimate changes its relative poses by exactly that). Rotation errors are the
+    angle of the nearest rotation (drivewm.geometry.rotation_angle_deg). Pairs come from
+    :func:`rpe_pairs` on ``pairs_from`` ('reference', evo's --pairs_from_reference, or the scaled
+    'estimate', evo's default)."""
+    if pairs_from not in ("reference", "estimate"):
+        raise DrivewmError(f"RPE pairs_from {pairs_from!r} is not 'reference' or 'estimate'")
+    scaled = est.copy()
+    scaled[:, :3, 3] *= scale
+    pairs = rpe_pairs(ref if pairs_from == "reference" else scaled, delta, unit, all_pairs)
+    errors = [invert_T(invert_T(ref[i]) @ ref[j]) @ (invert_T(scaled[i]) @ scaled[j]) for i, j in pairs]
+    trans = np.array([np.linalg.norm(E[:3, 3]) for E in errors])
+    rot = np.array([rotation_angle_deg(E[:3, :3]) for E in errors])
+    return RelativePoseErrors(pairs, trans, rot)
+
+
+def rpe(est: np.ndarray, ref: np.ndarray, delta: int = 1, scale: float = 1.0) -> tuple[float, float]:
+    """Relative pose error over ``delta`` frames (every frame starts a pair): (RMSE translation in m,
+    mean rotation in deg); see :func:`relative_pose_errors` for the other definitions."""
+    r = relative_pose_errors(est, ref, delta, "frames", all_pairs=True, scale=scale)
+    return r.trans_rmse, r.rot_mean
 
 
 def tfe(est_T_world_from_ego: np.ndarray, fps: float, waypoints_ego: np.ndarray, dt_s: float) -> float:

@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+from mcap.writer import IndexType, Writer
 
 from drivewm.atomic import atomic_path
 from drivewm.logs import names
@@ -190,8 +191,6 @@ def write_log_json(log: DriveLog, path: str | Path, indexed: bool = True) -> Pat
     ``indexed=False`` writes the bare layout some recorders produce: no chunks, no indexes and
     no summary section (readers must scan the file).
     """
-    from mcap.writer import IndexType, Writer
-
     events = drive_events(log)
     t0 = events[0][0] if events else 0
     messages = _static_messages(log, t0) + [(*_event_message(ts, k, p), ts) for ts, k, p in events]

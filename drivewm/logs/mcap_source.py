@@ -13,6 +13,11 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from mcap import exceptions
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
 from drivewm.errors import DrivewmError
 
 
@@ -56,8 +61,6 @@ def _split_index(p: Path) -> tuple[int, str]:
 
 def read_metadata(path: Path) -> dict[str, dict[str, str]]:
     """The MCAP metadata records of one file, by name."""
-    from mcap.reader import make_reader
-
     with _guard(path), open(path, "rb") as f:
         return {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
 
@@ -65,8 +68,6 @@ def read_metadata(path: Path) -> dict[str, dict[str, str]]:
 def list_channels(path: Path) -> list[ChannelInfo]:
     """Channels listed in the file's summary (also the ones without messages); empty if the
     file has no summary section."""
-    from mcap.reader import make_reader
-
     with _guard(path), open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     if summary is None:
@@ -76,8 +77,6 @@ def list_channels(path: Path) -> list[ChannelInfo]:
 
 def iter_messages(path: Path, wanted: Callable[[ChannelInfo], bool]) -> Iterator[Message]:
     """Decoded messages of the channels ``wanted`` selects, in log-time order, with chunk CRCs checked."""
-    from mcap.reader import make_reader
-
     decoders: dict[int, Callable[[bytes], Any] | None] = {}
     with _guard(path), open(path, "rb") as f:
         for schema, channel, record in make_reader(f, validate_crcs=True).iter_messages(log_time_order=True):
@@ -98,13 +97,9 @@ def _decoder(info: ChannelInfo, schema) -> Callable[[bytes], Any]:
     if info.encoding == "json":
         return json.loads
     if info.encoding == "protobuf":
-        from mcap_protobuf.decoder import DecoderFactory
-
-        decode = DecoderFactory().decoder_for(info.encoding, schema)
+        decode = ProtobufDecoderFactory().decoder_for(info.encoding, schema)
     elif info.encoding == "cdr":
-        from mcap_ros2.decoder import DecoderFactory
-
-        decode = DecoderFactory().decoder_for(info.encoding, schema)
+        decode = Ros2DecoderFactory().decoder_for(info.encoding, schema)
     else:
         decode = None
     if decode is None:
@@ -135,8 +130,6 @@ class _guard:
 
 def _describe(exc: BaseException) -> str:
     """One line saying what is wrong with the bytes."""
-    from mcap import exceptions
-
     name = type(exc).__name__
     if isinstance(exc, exceptions.InvalidMagic):
         return "not an MCAP file (bad magic bytes)"

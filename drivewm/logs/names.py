@@ -1,7 +1,7 @@
-"""Topic and frame names of drivewm's own drive logs (DESIGN.md section 4, apis.md).
+"""Topic and frame names of drivewm's own drive logs (docs/DESIGN.md section 4).
 
 Written logs use these; the reader uses them as the defaults for Foxglove files, and a topic map
-(``datasets/topicmaps/``) overrides them for fleet logs.
+(``drivewm/topicmaps/``) overrides them for fleet logs.
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ class _Collected:
 
 
 def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, require_images: bool = True) -> DriveLog:
-    """Read one drive. ``topic_map``: a TopicMap, a YAML path or a name in datasets/topicmaps/.
+    """Read one drive. ``topic_map``: a TopicMap, a YAML path or a name in drivewm/topicmaps/.
 
     ``require_images``: raise unless the log has camera images and ego poses (the contract of
     :meth:`DriveLog.validate`); False loads pose-only or sensor-only logs as they are.
@@ -188,7 +188,8 @@ def _camera(path: str | Path, name: str, col: _Collected, tmap: TopicMap, ego: s
     cal = col.calibrations[name]
     if cal.K.size != 9 or not np.all(np.isfinite(cal.K)) or cal.width <= 0 or cal.height <= 0:
         raise DrivewmError(
-            f"{path}: calibration of camera {name!r} is incomplete (K has {cal.K.size} values, size {cal.width}x{cal.height})"
+            f"{path}: calibration of camera {name!r} is incomplete (K has {cal.K.size} values, size "
+            f"{cal.width}x{cal.height})"
         )
     mapped = tmap.cameras.get(name)
     frame = (mapped.frame if mapped else None) or cal.frame_id or name

@@ -23,7 +23,8 @@ _DEFS = {
     "sensor_msgs/RegionOfInterest": "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify",
     "sensor_msgs/msg/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data",
     "sensor_msgs/msg/Image": (
-        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data"
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 "
+        "step\nuint8[] data"
     ),
     "sensor_msgs/msg/CameraInfo": (
         "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\nfloat64[9] k\n"

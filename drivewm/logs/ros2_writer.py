@@ -14,6 +14,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from mcap_ros2.writer import Writer
 
 from drivewm.atomic import atomic_path
 from drivewm.geometry import R_BODY_FROM_OPENCV, invert_T, make_T
@@ -137,8 +138,6 @@ def write_log_ros2(
     log: DriveLog, path: str | Path, raw_cameras: tuple[str, ...] = (), ego_pose: str = "tf", receive_delay_ns: int = 0
 ) -> Path:
     """Write ``log`` as a ROS 2 bag at ``path`` (atomic). Agents are not exported (no standard message)."""
-    from mcap_ros2.writer import Writer
-
     events = [e for e in drive_events(log) if e[1] != "agents"]
     t0 = events[0][0] if events else 0
     messages = [(t0, *m) for m in _static_messages(log, t0)]

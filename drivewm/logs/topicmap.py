@@ -1,6 +1,6 @@
 """Topic maps: how a fleet log's topics and frames become drivewm cameras and ego poses.
 
-A topic map is a YAML file in ``datasets/topicmaps/`` (see its README). Without one, the reader
+A topic map is a YAML file in ``drivewm/topicmaps/`` (see its README). Without one, the reader
 finds cameras by schema (Foxglove: ``foxglove.CompressedImage`` + ``foxglove.CameraCalibration``;
 ROS 2: ``sensor_msgs`` images + ``CameraInfo``) and names each camera by its ``frame_id``.
 """
@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from drivewm import resources
 from drivewm.config import from_dict, load_yaml
 from drivewm.errors import DrivewmError
 
@@ -67,22 +68,9 @@ class TopicMap:
         return topics + ([self.ego_pose.topic] if self.ego_pose else [])
 
 
-def topicmap_search_dirs() -> list[Path]:
-    """``datasets/topicmaps`` of the repository next to the installed package (editable installs)."""
-    return [Path(__file__).resolve().parents[2] / "datasets" / "topicmaps"]
-
-
 def load_topic_map(name_or_path: str | Path) -> TopicMap:
-    """Load a topic map by path or by name (``reductstore_demo`` -> datasets/topicmaps/reductstore_demo.yaml)."""
-    path = Path(name_or_path)
-    if not path.is_file():
-        candidates = [d / f"{name_or_path}.yaml" for d in topicmap_search_dirs()]
-        found = [c for c in candidates if c.is_file()]
-        if not found:
-            raise DrivewmError(
-                f"topic map {name_or_path!r}: no such file or named map in {[str(c.parent) for c in candidates]}"
-            )
-        path = found[0]
+    """Load a topic map by path or by name (``reductstore_demo`` -> drivewm/topicmaps/reductstore_demo.yaml)."""
+    path = resources.find("topicmaps", name_or_path, "topic map")
     tmap = from_dict(TopicMap, load_yaml(path), str(path))
     tmap.source = str(path)
     return tmap

@@ -18,6 +18,7 @@ from drivewm.geometry import Rig
 SCENE_TAG_KEYS = ("weather", "time_of_day", "road_type", "traffic_density", "source")
 WEATHERS = ("clear", "overcast", "rain", "snow", "fog")
 TIMES_OF_DAY = ("day", "dusk", "night")
+TRAFFIC_DENSITIES = ("low", "medium", "high")
 
 
 @dataclasses.dataclass

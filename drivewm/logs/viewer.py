@@ -17,6 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import rerun as rr
 
 from drivewm.atomic import atomic_path
 from drivewm.logs.transforms import quat_xyzw_from_yaw
@@ -33,8 +34,6 @@ def _set_time(rec, timestamp_ns: int) -> None:
 
 def log_static(rec, log: DriveLog) -> None:
     """World axes, camera mounts and pinholes, ego trajectory, scene text."""
-    import rerun as rr
-
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for cam in log.rig.cameras:
         T = cam.T_ego_from_cam
@@ -70,8 +69,6 @@ def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:
 
 def log_ticks(rec, log: DriveLog) -> None:
     """Ego poses, images and agent boxes on the ``log_time`` timeline."""
-    import rerun as rr
-
     for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
         if np.all(np.isfinite(T)):
             _set_time(rec, ts)
@@ -86,8 +83,6 @@ def log_ticks(rec, log: DriveLog) -> None:
 
 
 def _boxes(boxes):
-    import rerun as rr
-
     if not boxes:
         return rr.Boxes3D(centers=np.zeros((0, 3)), sizes=np.zeros((0, 3)))
     return rr.Boxes3D(
@@ -101,8 +96,6 @@ def _boxes(boxes):
 
 def write_recording(log: DriveLog, out_path: str | Path) -> Path:
     """Write ``log`` as a Rerun recording at ``out_path`` (atomic)."""
-    import rerun as rr
-
     out_path = Path(out_path)
     with atomic_path(out_path) as tmp:
         rec = rr.RecordingStream("drivewm", recording_id=Path(log.path).stem)

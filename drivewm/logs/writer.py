@@ -1,4 +1,4 @@
-"""Write drive logs as MCAP with the Foxglove SDK (protobuf Foxglove schemas, DESIGN.md section 4).
+"""Write drive logs as MCAP with the Foxglove SDK (protobuf Foxglove schemas, docs/DESIGN.md section 4).
 
 Topics (see :mod:`drivewm.logs.names`): ``/CAMERA/image`` (foxglove.CompressedImage, frame_id =
 camera), ``/CAMERA/calibration`` (foxglove.CameraCalibration), ``/tf_static`` (FrameTransforms
@@ -19,7 +19,10 @@ import json
 from pathlib import Path
 
 import cv2
+import foxglove
 import numpy as np
+from foxglove import channels, messages
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
 from drivewm.atomic import atomic_path
 from drivewm.errors import DrivewmError
@@ -37,15 +40,6 @@ SCENE_JSON_SCHEMA = {
         "description": {"type": "string"},
     },
 }
-
-
-def _fg():
-    """The Foxglove SDK modules, imported on first use (they load a native extension)."""
-    import foxglove
-    from foxglove import channels, messages
-    from foxglove.mcap import MCAPCompression, MCAPWriteOptions
-
-    return foxglove, channels, messages, MCAPCompression, MCAPWriteOptions
 
 
 class LogWriter:
@@ -74,8 +68,6 @@ class LogWriter:
     # ------------------------------------------------------------------ set-up
 
     def _open(self, tmp: Path) -> None:
-        foxglove, channels, messages, MCAPCompression, MCAPWriteOptions = _fg()
-        self._msg = messages
         self._ctx = foxglove.Context()
         # LZ4: the payload is mostly JPEG/PNG, which no codec shrinks; LZ4 costs least (bench_logs.py).
         options = MCAPWriteOptions(compression=MCAPCompression.Lz4, compression_threads=0)
@@ -100,7 +92,7 @@ class LogWriter:
 
     def _timestamp(self, timestamp_ns: int):
         sec, nsec = ns_to_sec_nsec(timestamp_ns)
-        return self._msg.Timestamp(sec, nsec)
+        return messages.Timestamp(sec, nsec)
 
     def _ensure_static(self, timestamp_ns: int) -> None:
         """Log calibration, tf_static and scene once, at the first timestamp seen."""
@@ -112,7 +104,7 @@ class LogWriter:
         statics = [
             self._transform_msg(timestamp_ns, names.EGO_FRAME, c.name, c.T_ego_from_cam) for c in self.rig.cameras
         ]
-        self._tf_static_ch.log(self._msg.FrameTransforms(transforms=statics), log_time=timestamp_ns)
+        self._tf_static_ch.log(messages.FrameTransforms(transforms=statics), log_time=timestamp_ns)
         scene = {"tags": dict(self.scene.tags), "description": self.scene.description}
         self._scene_ch.log(scene, log_time=timestamp_ns)
 
@@ -120,7 +112,7 @@ class LogWriter:
 
     def _calibration_msg(self, cam: Camera, timestamp_ns: int):
         P = np.concatenate([cam.K, np.zeros((3, 1))], axis=1)
-        return self._msg.CameraCalibration(
+        return messages.CameraCalibration(
             timestamp=self._timestamp(timestamp_ns),
             frame_id=cam.name,
             width=cam.width,
@@ -134,16 +126,16 @@ class LogWriter:
 
     def _transform_msg(self, timestamp_ns: int, parent: str, child: str, T_parent_from_child: np.ndarray):
         t, q = split_T(T_parent_from_child)
-        return self._msg.FrameTransform(
+        return messages.FrameTransform(
             timestamp=self._timestamp(timestamp_ns),
             parent_frame_id=parent,
             child_frame_id=child,
-            translation=self._msg.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-            rotation=self._msg.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+            translation=messages.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+            rotation=messages.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
         )
 
     def _cube_entity(self, timestamp_ns: int, box: AgentBox):
-        m = self._msg
+        m = messages
         c, s, q = box.center_xyz, box.size_lwh, quat_xyzw_from_yaw(box.yaw_rad)
         pose = m.Pose(
             position=m.Vector3(x=float(c[0]), y=float(c[1]), z=float(c[2])),
@@ -163,7 +155,7 @@ class LogWriter:
         )
 
     def _line_entity(self, timestamp_ns: int, index: int, line: RoadLine):
-        m = self._msg
+        m = messages
         points = [m.Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in line.points_xyz]
         primitive = m.LinePrimitive(
             type=m.LinePrimitiveLineType.LineStrip,
@@ -188,7 +180,8 @@ class LogWriter:
         image = np.asarray(image)
         if image.dtype != np.uint8 or image.shape != (cam.height, cam.width, 3):
             raise DrivewmError(
-                f"{self.path}: image for {camera} must be uint8 ({cam.height}, {cam.width}, 3), got {image.dtype} {image.shape}"
+                f"{self.path}: image for {camera} must be uint8 ({cam.height}, {cam.width}, 3), got {image.dtype} "
+                f"{image.shape}"
             )
         self.write_encoded_image(
             camera, timestamp_ns, encode_image(image, self.image_format, self.jpeg_quality), self.image_format
@@ -204,7 +197,7 @@ class LogWriter:
         if camera not in self._image_ch:
             raise DrivewmError(f"{self.path}: camera {camera!r} is not in rig {self.rig.name} ({self.rig.names})")
         self._ensure_static(timestamp_ns)
-        msg = self._msg.CompressedImage(
+        msg = messages.CompressedImage(
             timestamp=self._timestamp(timestamp_ns), frame_id=camera, data=bytes(data), format=format
         )
         self._image_ch[camera].log(msg, log_time=int(timestamp_ns))
@@ -213,12 +206,12 @@ class LogWriter:
         """Log the ego pose (4x4, NaN allowed for a gap) as a world -> ego FrameTransform."""
         self._ensure_static(timestamp_ns)
         tf = self._transform_msg(timestamp_ns, names.WORLD_FRAME, names.EGO_FRAME, T_world_from_ego)
-        self._tf_ch.log(self._msg.FrameTransforms(transforms=[tf]), log_time=int(timestamp_ns))
+        self._tf_ch.log(messages.FrameTransforms(transforms=[tf]), log_time=int(timestamp_ns))
 
     def write_agents(self, timestamp_ns: int, boxes: list[AgentBox]) -> None:
         """Log the other road users at one tick: the scene is replaced (delete all, then cubes)."""
         self._ensure_static(timestamp_ns)
-        m = self._msg
+        m = messages
         deletion = m.SceneEntityDeletion(timestamp=self._timestamp(timestamp_ns), type=m.SceneEntityDeletionType.All)
         update = m.SceneUpdate(deletions=[deletion], entities=[self._cube_entity(timestamp_ns, b) for b in boxes])
         self._agents_ch.log(update, log_time=int(timestamp_ns))
@@ -226,7 +219,7 @@ class LogWriter:
     def write_road(self, timestamp_ns: int, lines: list[RoadLine]) -> None:
         """Log the static road polylines once (optional; viewers draw them)."""
         self._ensure_static(timestamp_ns)
-        update = self._msg.SceneUpdate(
+        update = messages.SceneUpdate(
             entities=[self._line_entity(timestamp_ns, i, line) for i, line in enumerate(lines)]
         )
         self._road_ch.log(update, log_time=int(timestamp_ns))

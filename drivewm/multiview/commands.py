@@ -1,5 +1,6 @@
 """``drivewm posttrain`` and ``drivewm rollout`` (thin: parse, build config, print it, call the library).
-Multi-view ``drivewm generate`` lives in drivewm.multiview.generate (dispatched on model_type)."""
+Multi-view ``drivewm generate`` lives in drivewm.multiview.generate (dispatched on model_type).
+The models are imported inside the handlers, so that ``drivewm --help`` imports no PyTorch."""
 
 from __future__ import annotations
 
@@ -7,14 +8,20 @@ import argparse
 import json
 from pathlib import Path
 
+from drivewm import resources
+from drivewm.choices import add_registry_argument
+from drivewm.diffusion.dit_config import DIT_PRESETS
+from drivewm.recipe import add_recipe_arguments
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "posttrain", help="post-train a multi-view, trajectory-conditioned model from a Text2World model"
     )
-    p.add_argument("--preset", help="size preset: debug, small, base, large, xl (default: the recipe's, else debug)")
-    p.add_argument("--recipe", type=Path, help="YAML with preset, rig and overrides (multiview/recipes/*.yaml)")
-    p.add_argument("--init", required=True, type=Path, help="Text2World model folder to start from")
+    add_recipe_arguments(p, DIT_PRESETS, "debug", resources.names("recipes/posttrain"))
+    p.add_argument(
+        "--init", required=True, type=Path, help="Text2World folder to start from, or a multi-view folder to fine-tune"
+    )
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
     )
@@ -23,18 +30,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
     p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override, e.g. multiview.cross_view=joint or train.steps=100",
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        help="where to train (sets train.device; default: the recipe's, auto)",
     )
-    p.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
     p.set_defaults(func=posttrain_command)
 
     r = sub.add_parser("rollout", help="continue a real clip autoregressively under a chosen ego trajectory")
-    r.add_argument("--model", required=True, type=Path, help="multi-view model folder (with its tokenizer recorded)")
+    r.add_argument(
+        "--model", type=Path, help="multi-view model folder (with its tokenizer recorded); default: the shipped one"
+    )
     r.add_argument("--clip", required=True, type=Path, help="clip shard (.tar) or clip folder")
     r.add_argument("--key", help="clip key inside --clip (default: the first clip)")
     r.add_argument(
@@ -53,18 +58,22 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
     r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
-    r.add_argument("--sampler", default="heun", choices=["heun", "euler"])
+    add_registry_argument(
+        r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
+    )
+    r.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
+    )
     r.set_defaults(func=rollout_command)
 
 
 def posttrain_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
-    from drivewm.multiview.posttrain import load_recipe, posttrain, posttrain_config
+    from drivewm.multiview.posttrain import RECIPES, posttrain
 
-    recipe = load_recipe(args.recipe) if args.recipe else {}
-    rig = args.rig if args.rig is not None else recipe.get("rig", "")
-    overrides = [*recipe.get("overrides", []), *([f"rig={rig}"] if rig else []), *args.overrides]
-    cfg = posttrain_config(args.preset or recipe.get("preset", "debug"), overrides)
+    overrides = [*([f"rig={args.rig}"] if args.rig else []), *args.overrides]
+    overrides += [f"train.device={args.device}"] if args.device else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, overrides)
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0
@@ -91,12 +100,17 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.prompt,
         args.speed,
     )
-    model = MultiView.from_pretrained(args.model)
+    if args.model is None:
+        from drivewm.release import shipped_model
+
+        args.model = shipped_model("multiview")
+    model = MultiView.from_pretrained(args.model).to(args.device)
     if not model.latent.tokenizer:
         raise DrivewmError(
             f"{args.model}: no tokenizer recorded in the model folder; a rollout needs one to encode the clip"
         )
-    sample = rollout(model, load_clip(args.clip, args.key), options, Tokenizer.from_pretrained(model.latent.tokenizer))
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
+    sample = rollout(model, load_clip(args.clip, args.key), options, tokenizer)
     files = write_samples(args.out, [sample], model.latent.fps, name="rollout")
     print(f"wrote {len(files)} files to {args.out} ({sample.videos.shape[1]} frames per view)")
     return 0

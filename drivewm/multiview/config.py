@@ -33,7 +33,7 @@ class MultiViewConfig:
     cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity
     reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
     it predicts the simulated clips' later frames no better than copying the first frame (see
-    tests/multiview/study_turned_following.py)."""
+    studies/turned_following.py)."""
     warp_ground_m: float = 100.0
     """The warp follows rays that meet the road within this distance (m) to the road plane and all
     others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""
@@ -61,7 +61,8 @@ class MultiViewConfig:
     def validate(self) -> None:
         if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
             raise DrivewmError(
-                f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, {self.neighbors}"
+                f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, "
+                f"{self.neighbors}"
             )
         if (
             self.trajectory_waypoints < 0
@@ -71,7 +72,8 @@ class MultiViewConfig:
             or self.warp_ground_m < 0
         ):
             raise DrivewmError(
-                "multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= video2world_prob <= 1, 0 <= trajectory_dropout < 1, warp_ground_m >= 0"
+                "multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= "
+                "video2world_prob <= 1, 0 <= trajectory_dropout < 1, warp_ground_m >= 0"
             )
 
 

@@ -6,17 +6,17 @@ attend to all tokens (every latent frame) of the views ``view_neighbors[i]``: al
 ("joint", as Cosmos' multi-view model's joint attention) or view i and its nearest cameras by
 viewing direction ("neighbors", cost grows with V * K instead of V^2). Its output projection
 starts at zero (drivewm.diffusion.blocks), so inserting it leaves the pretrained model unchanged.
+The multi-view network registers it under ``cross_view_attn`` where it builds its DiT
+(drivewm.multiview.model.MultiViewNet).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from einops import rearrange
 
-from drivewm.diffusion.blocks import BlockContext, SelfAttention, register_sublayer
-from drivewm.diffusion.rope import apply_rope
+from drivewm.diffusion.blocks import BlockContext, SelfAttention, attend
 from drivewm.geometry import Rig
 
 SUBLAYER_NAME = "cross_view_attn"
@@ -27,24 +27,20 @@ class CrossViewAttention(SelfAttention):
     The same projections as in-view self-attention (own weights, zero output projection)."""
 
     def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
-        v = ctx.num_views
-        q, k, val = rearrange(self.qkv(x), "bv n (three h d) -> three bv h n d", three=3, h=self.num_heads)
         # Same RoPE angles in every view: a token's (time, row, column) relation holds across views,
         # and where the views differ is told by the camera (Plucker) conditioning.
-        q = apply_rope(self.q_norm(q), ctx.rope_angles)  # (B V, heads, N, hd)
-        k = apply_rope(self.k_norm(k), ctx.rope_angles)
-        neighbors = ctx.view_neighbors if ctx.view_neighbors is not None else all_views(v, x.device)  # (V, K)
-        k, val = (gather_views(t, neighbors) for t in (k, val))  # (B V, heads, K N, hd)
-        out = F.scaled_dot_product_attention(q, k, val)  # (B V, heads, N, hd)
-        return self.out(rearrange(out, "bv h n d -> bv n (h d)"))
+        q, k, val = self.heads(x, ctx)  # (B V, N, heads, hd)
+        neighbors = ctx.view_neighbors if ctx.view_neighbors is not None else all_views(ctx.num_views, x.device)
+        k, val = (gather_views(t, neighbors) for t in (k, val))  # (B V, K N, heads, hd)
+        return self.out(attend(q, k, val))  # (B V, N, D)
 
 
 def gather_views(t: torch.Tensor, neighbors: torch.Tensor) -> torch.Tensor:
-    """(B V, heads, N, d) per view -> (B V, heads, K N, d): for view i, the tokens of views ``neighbors[i]``."""
+    """(B V, N, heads, d) per view -> (B V, K N, heads, d): for view i, the tokens of views ``neighbors[i]``."""
     num_views = neighbors.shape[0]
-    per_clip = rearrange(t, "(b v) h n d -> b v h n d", v=num_views)
-    picked = per_clip[:, neighbors.to(t.device)]  # (B, V, K, heads, N, d)
-    return rearrange(picked, "b v k h n d -> (b v) h (k n) d")
+    per_clip = rearrange(t, "(b v) n h d -> b v n h d", v=num_views)
+    picked = per_clip[:, neighbors.to(t.device)]  # (B, V, K, N, heads, d)
+    return rearrange(picked, "b v k n h d -> (b v) (k n) h d")
 
 
 def all_views(num_views: int, device: torch.device | str = "cpu") -> torch.Tensor:
@@ -71,6 +67,3 @@ def view_neighbors(rig: Rig, mode: str, neighbors: int) -> torch.Tensor:
     gap = np.abs(np.angle(np.exp(1j * (az[:, None] - az[None, :]))))  # (V, V) wrapped angle difference
     order = np.argsort(gap + np.eye(v) * -1.0, axis=1, kind="stable")  # itself (gap -1) first
     return torch.from_numpy(order[:, : neighbors + 1].copy()).long()
-
-
-register_sublayer(SUBLAYER_NAME, CrossViewAttention)

@@ -59,7 +59,7 @@ class MultiViewDataset:
     def __len__(self) -> int:
         return len(self.cache)
 
-    @functools.lru_cache(maxsize=256)
+    @functools.lru_cache(maxsize=256)  # noqa: B019 (bounded; a dataset lives as long as its training run)
     def __getitem__(self, i: int) -> MultiViewSample:
         clip = self.cache[i]
         where = f"{self.cache.dir} clip {clip.meta.key}"

@@ -14,19 +14,20 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from drivewm.curate.captions import camera_direction
 from drivewm.diffusion.generate import GenerateOptions, decode_latents
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
 from drivewm.multiview.trajectories import resolve_trajectory
 from drivewm.multiview.writer import GeneratedSample, write_samples
+from drivewm.tokenizer import Tokenizer
 
 
 def view_captions(prompt: str, rig: Rig) -> list[str]:
     """Per-view captions in the curated clips' form ("The front-left camera view of ..."), unless
     the prompt already names a camera view."""
-    from drivewm.curate.captions import camera_direction
-
     if "camera view" in prompt:
         return [prompt] * len(rig.cameras)
     scene = prompt.strip().rstrip(".")
@@ -36,20 +37,17 @@ def view_captions(prompt: str, rig: Rig) -> list[str]:
 
 def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tuple[torch.Tensor, Rig, float]:
     """Raw latents (1, V, c, t, h, w) of a real clip's first frames (Video2World), its rig, its speed."""
-    from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
-    from drivewm.tokenizer import Tokenizer
-
     if not model.latent.tokenizer:
         raise DrivewmError(
             f"{clip_path}: conditioning on a clip needs the model's tokenizer (none recorded in the model folder)"
         )
-    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer)
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
     clip = load_clip(clip_path)
     rig = clip_rig(model, clip) if rig is None else clip.meta.get_rig().subset(rig.names)
     c, t, h, w = model.latent.latent_shape
     sc, tc = tokenizer.config.spatial_compression, tokenizer.config.temporal_compression
     frames = np.stack([clip.video(n)[: 1 + (t - 1) * tc] for n in rig.names])
-    z = encode_views(tokenizer, frames, (h * sc, w * sc))
+    z = encode_views(tokenizer, frames, (h * sc, w * sc), model.device)
     return z[None], rig, initial_speed_mps(clip)
 
 
@@ -64,7 +62,7 @@ def generate_multiview(
 ) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer)."""
-    model = MultiView.from_pretrained(model_dir)
+    model = MultiView.from_pretrained(model_dir).to(options.device)
     mv = model.cfg.multiview
     rig = load_rig(rig_spec) if rig_spec else None
     cond, speed = None, mv.speed_mps
@@ -88,7 +86,7 @@ def generate_multiview(
             cond_latents=cond,
             trajectory_guidance=trajectory_guidance,
         )
-        videos = decode_latents(z[0], model.latent.tokenizer)  # (V, T, H, W, 3)
+        videos = decode_latents(z[0], model.latent.tokenizer, model.device)  # (V, T, H, W, 3)
         extra = {
             "model": str(Path(model_dir).resolve()),
             "prompt": prompt,
@@ -106,7 +104,9 @@ def generate_multiview(
 
 def generate_command(args: argparse.Namespace) -> int:
     """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
-    options = GenerateOptions(args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler)
+    options = GenerateOptions(
+        args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device
+    )
     files = generate_multiview(
         args.model, options, args.rig, args.trajectory, args.condition_clip, args.out, args.trajectory_guidance
     )

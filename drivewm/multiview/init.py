@@ -21,11 +21,12 @@ from drivewm.multiview.model import MultiView
 
 
 def multiview_config(parent: Text2World, mv: MultiViewConfig, cond_frames: int) -> MultiViewModelConfig:
-    """The parent's networks with ``cross_view_attn`` inserted after in-view self-attention and
-    ``cond_frames`` Video2World latent frames (which need the mask input channel)."""
+    """The parent's networks with ``cross_view_attn`` inserted after in-view (joint or self) attention
+    and ``cond_frames`` Video2World latent frames (which need the mask input channel)."""
     layers = list(parent.cfg.dit.block_layers)
     if SUBLAYER_NAME not in layers:
-        layers.insert(layers.index("self_attn") + 1 if "self_attn" in layers else 0, SUBLAYER_NAME)
+        in_view = [i for i, name in enumerate(layers) if name in ("joint_attn", "self_attn")]
+        layers.insert(in_view[0] + 1 if in_view else 0, SUBLAYER_NAME)
     dit = dataclasses.replace(
         parent.cfg.dit, block_layers=layers, cond_mask_channel=parent.cfg.dit.cond_mask_channel or cond_frames > 0
     )

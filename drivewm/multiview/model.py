@@ -18,16 +18,19 @@ from einops import rearrange, repeat
 from torch import nn
 
 from drivewm.config import from_dict, to_dict
+from drivewm.device import resolve_device
+from drivewm.diffusion.blocks import register_sublayer
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas
-from drivewm.diffusion.text2world import LatentInfo
+from drivewm.diffusion.dit_config import upgrade_saved_fields
+from drivewm.diffusion.sampling import sample
+from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.errors import DrivewmError
-from drivewm.geometry import Rig, invert_T
-from drivewm.multiview import cross_view  # noqa: F401  (registers the cross_view_attn sub-layer)
+from drivewm.geometry import Rig, invert_T, rig_from_dict
 from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
 from drivewm.multiview.config import MultiViewModelConfig
+from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
@@ -77,6 +80,7 @@ class MultiViewNet(nn.Module):
         super().__init__()
         cfg.multiview.validate()
         self.cfg = cfg
+        register_sublayer(SUBLAYER_NAME, CrossViewAttention)  # the one sub-layer the multi-view DiT adds
         self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
         self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
@@ -124,25 +128,6 @@ class MultiViewNet(nn.Module):
         )
 
 
-class TrajectoryGuidedDenoiser(nn.Module):
-    """Guidance on the trajectory (classifier-free guidance, Ho & Salimans 2022, applied to the ego
-    motion as Vista and GEM guide on their action conditions): D = D_free + w (D_traj - D_free), where
-    D_traj is the (text-guided) prediction under the trajectory and D_free the one with it dropped.
-    w = 1 is the plain trajectory-conditioned model; w > 1 exaggerates what the trajectory changes."""
-
-    def __init__(self, denoiser: nn.Module, guidance: float):
-        super().__init__()
-        self.denoiser = denoiser  # a (text-)guided D(x; sigma, cond)
-        self.guidance = guidance
-
-    def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond: MultiViewConditioning) -> torch.Tensor:
-        out = self.denoiser(x, sigma, cond)
-        if self.guidance == 1.0:
-            return out
-        free = self.denoiser(x, sigma, cond.without_trajectory())
-        return free + self.guidance * (out - free)
-
-
 class MultiView:
     """Inference bundle: ``sample_latents(rig, view_captions, trajectories, seeds) -> (B, V, c, t, h, w)``."""
 
@@ -151,6 +136,13 @@ class MultiView:
         self.latent = latent
         self.text_encoder = build_text_encoder(cfg.text)
         self.net = MultiViewNet(cfg).eval()
+        self.device = torch.device("cpu")
+
+    def to(self, device: str | torch.device) -> MultiView:
+        """Run sampling on ``device`` (``auto``: CUDA when available); noise stays seeded on the CPU."""
+        self.device = resolve_device(device)
+        self.net.to(self.device)
+        return self
 
     def save_pretrained(self, path: str | Path, state: dict[str, torch.Tensor] | None = None) -> None:
         """Write the model folder (``state`` defaults to the network's current weights)."""
@@ -161,17 +153,16 @@ class MultiView:
     def from_pretrained(cls, path: str | Path) -> MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
+        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
         model = cls(
-            from_dict(MultiViewModelConfig, info["config"], where),
-            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
+            from_dict(MultiViewModelConfig, config, where),
+            read_latent_info(info, path),
         )
         load_weights(model.net, state, path)
         return model
 
     @property
     def training_rig(self) -> Rig:
-        from drivewm.geometry import rig_from_dict
-
         return rig_from_dict(self.latent.rig, "model rig")
 
     def token_grid(self) -> tuple[int, int, int]:
@@ -204,33 +195,20 @@ class MultiView:
 
         ``cond_latents`` (B, V, c, t, h, w) raw latents whose first ``edm.cond_frames`` latent frames
         are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
-        trajectory's effect w times (:class:`TrajectoryGuidedDenoiser`; twice the network evaluations).
+        trajectory's effect w times (drivewm.diffusion.sampling.guided; twice the network evaluations).
         """
-        if sampler not in SAMPLERS:
-            raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
-        b, v = len(view_captions), len(rig.cameras)
+        v = len(rig.cameras)
         cond = self.conditioning(rig, view_captions, trajectories, fps)
         mean, std = self._stats()
         if cond_latents is not None:
             z = normalize_latents(
-                rearrange(cond_latents, "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data
+                rearrange(cond_latents.cpu(), "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data
             )
             cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
-        sigmas = karras_sigmas(steps)
-        denoiser = GuidedDenoiser(self.net, guidance)
-        if trajectories is not None and trajectory_guidance != 1.0:
-            denoiser = TrajectoryGuidedDenoiser(denoiser, trajectory_guidance)
-        noise = torch.stack(
-            [
-                torch.randn((v, *self.latent.latent_shape), generator=torch.Generator().manual_seed(int(s)))
-                for s in seeds
-            ]
-        )
-        x = rearrange(noise, "b v c t h w -> (b v) c t h w") * sigmas[0]
-        x = SAMPLERS[sampler](denoiser, x, sigmas, extra_args={"cond": cond})
-        return rearrange(
-            denormalize_latents(x, mean, std, self.cfg.edm.sigma_data), "(b v) c t h w -> b v c t h w", b=b
-        )
+        shape = (v, *self.latent.latent_shape)  # the views of a clip share its seed, folded as (B V)
+        trajectory_guidance = trajectory_guidance if trajectories is not None else 1.0
+        x = sample(self.net, cond, shape, seeds, steps, guidance, sampler, trajectory_guidance, self.device)
+        return denormalize_latents(x, mean, std, self.cfg.edm.sigma_data)  # (B, V, c, t, h, w)
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)
@@ -240,8 +218,6 @@ def build_conditioning(
     model: MultiView, rig: Rig, view_captions: list[list[str]], trajectories: np.ndarray | None, fps: float
 ) -> MultiViewConditioning:
     """Text, rays, waypoints and view neighbours of B clips of ``rig``, folded to (B V)."""
-    from drivewm.multiview.cross_view import view_neighbors
-
     b, v = len(view_captions), len(rig.cameras)
     if any(len(caps) != v for caps in view_captions):
         raise DrivewmError(f"need one caption per camera of rig {rig.name} ({v}) for every clip")

@@ -13,17 +13,22 @@ from pathlib import Path
 
 import torch
 
-from drivewm.config import apply_overrides, to_dict
+from drivewm.clips.latents import find_latent_cache
+from drivewm.config import to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
-from drivewm.diffusion.pretrain import DataConfig, find_latent_cache
+from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.init import from_text2world
+from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
-from drivewm.train.loop import TrainConfig, train
+from drivewm.recipe import RecipeBook
+from drivewm.train.checkpoint import load_weights, read_model_type
+from drivewm.train.loop import TrainConfig, TrainTask, train
 
 
 @dataclasses.dataclass
@@ -53,6 +58,7 @@ POSTTRAIN_PRESETS: dict[str, dict] = {
     "debug": dict(
         steps=300, batch_size=2, lr=5e-4, warmup_steps=20, ema_decay=0.99, log_every=10, checkpoint_every=100
     ),
+    "tiny": dict(steps=2000, batch_size=2, lr=2e-4, warmup_steps=100, ema_decay=0.999, checkpoint_every=250),
     "small": dict(steps=10000, batch_size=8, lr=2e-4, warmup_steps=500, checkpoint_every=1000, sample_every=2000),
     "base": dict(
         steps=30000,
@@ -86,30 +92,21 @@ POSTTRAIN_PRESETS: dict[str, dict] = {
 }
 
 
+RECIPES: RecipeBook[PosttrainConfig] = RecipeBook(
+    "posttrain",
+    PosttrainConfig,
+    {name: {"train": train} for name, train in POSTTRAIN_PRESETS.items()},
+    "debug",
+    recipes="posttrain",
+)
+
+
 def posttrain_config(preset: str, overrides: list[str] | None = None) -> PosttrainConfig:
     """The recipe for ``preset`` with ``KEY=VALUE`` overrides (unknown keys/bad values raise DrivewmError)."""
-    if preset not in POSTTRAIN_PRESETS:
-        raise DrivewmError(f"unknown preset {preset!r}; known: {sorted(POSTTRAIN_PRESETS)}")
-    base = {"preset": preset, "train": dict(POSTTRAIN_PRESETS[preset])}
-    return apply_overrides(PosttrainConfig, base, overrides or [], "posttrain")
+    return RECIPES.resolve(preset, None, overrides or [])
 
 
-def load_recipe(path: str | Path) -> dict:
-    """A run recipe YAML: ``preset`` (str), ``rig`` (str) and ``overrides`` (list of KEY=VALUE), all optional."""
-    from drivewm.config import load_yaml
-
-    recipe = load_yaml(path)
-    unknown = set(recipe) - {"preset", "rig", "overrides"}
-    if unknown:
-        raise DrivewmError(f"{path}: unknown recipe keys {sorted(unknown)} (known: preset, rig, overrides)")
-    if not isinstance(recipe.get("overrides", []), list) or not all(
-        isinstance(o, str) for o in recipe.get("overrides", [])
-    ):
-        raise DrivewmError(f"{path}: 'overrides' must be a list of KEY=VALUE strings")
-    return recipe
-
-
-class MultiViewTask:
+class MultiViewTask(TrainTask):
     """drivewm.train.loop.TrainTask for multi-view post-training on a :class:`MultiViewDataset`."""
 
     def __init__(self, cfg: PosttrainConfig, dataset: MultiViewDataset, model: MultiView):
@@ -153,7 +150,7 @@ class MultiViewTask:
             [build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples]
         )
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
-        return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
+        return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> MultiView:
         with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
@@ -167,11 +164,12 @@ class MultiViewTask:
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle, s = self._ema_bundle(ema_state), self.dataset[0]
+        bundle = self._ema_bundle(ema_state).to(next(self.model.parameters()).device)  # the training device
+        s = self.dataset[0]
         z = bundle.sample_latents(
             s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0
         )
-        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer), path, s.rig.names)  # one row per view
+        write_grid_png(decode_latents(z[0], bundle.latent.tokenizer, bundle.device), path, s.rig.names)
 
 
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
@@ -195,32 +193,26 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
     return dataclasses.replace(first, **cat)
 
 
-def to_device(cond: MultiViewConditioning, device: torch.device) -> MultiViewConditioning:
-    moved = {
-        f.name: getattr(cond, f.name).to(device)
-        for f in dataclasses.fields(cond)
-        if isinstance(getattr(cond, f.name), torch.Tensor)
-    }
-    return dataclasses.replace(cond, **moved)
-
-
 def posttrain(
     cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path, out_dir: str | Path, stop_after: int | None = None
 ) -> dict:
-    """Post-train a multi-view model folder into ``out_dir`` from the Text2World folder ``init_dir``
-    (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
-    parent = Text2World.from_pretrained(init_dir)
-    tokenizer = Path(parent.latent.tokenizer) if parent.latent.tokenizer else None
+    """Post-train a multi-view model folder into ``out_dir`` from ``init_dir``: a Text2World folder
+    (the multi-view parts start at zero effect), or a multi-view folder to fine-tune (e.g. the
+    shipped model on a fleet's logs). Resumes when ``out_dir`` holds a train state. Returns the
+    last metrics row."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
+    init_dir = Path(init_dir)
+    init = MultiView.from_pretrained(init_dir) if read_model_type(init_dir) == MV_MODEL_TYPE else None
+    parent = Text2World.from_pretrained(init_dir) if init is None else None
+    start = init or parent
+    tokenizer = Path(start.latent.tokenizer) if start.latent.tokenizer else None
     cameras = load_rig(cfg.rig).names if cfg.rig else None
-    dataset = MultiViewDataset(
-        find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents),
-        cameras,
-        cfg.multiview.trajectory_waypoints,
-        parent.cfg.edm.sigma_data,
-    )
-    if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
+    cache = find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents)
+    dataset = MultiViewDataset(cache, cameras, cfg.multiview.trajectory_waypoints, start.cfg.edm.sigma_data)
+    if dataset.latent_shape[0] != start.cfg.dit.in_channels:
         raise DrivewmError(
-            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on {parent.cfg.dit.in_channels}"
+            f"{data_dir}: latents have {dataset.latent_shape[0]} channels, "
+            f"{init_dir} was trained on {start.cfg.dit.in_channels}"
         )
     torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
     mv = dataclasses.replace(
@@ -229,9 +221,17 @@ def posttrain(
         speed_mps=round(dataset.median_speed_mps(), 2),
         temporal_compression=dataset.temporal_compression,
     )
-    model = from_text2world(parent, mv, cfg.cond_frames)
+    model = from_text2world(parent, mv, cfg.cond_frames) if init is None else continue_from(init, mv, init_dir)
     model.latent = dataclasses.replace(
         model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict()
     )
-    record = {**to_dict(cfg), "init": str(Path(init_dir).resolve())}
+    record = {**to_dict(cfg), "init": str(init_dir.resolve())}
     return train(MultiViewTask(cfg, dataset, model), cfg.train, out_dir, config_record=record, stop_after=stop_after)
+
+
+def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
+    """A multi-view model with ``init``'s weights and this run's multi-view settings (training
+    probabilities, the data's trajectory spacing); a structural difference is a DrivewmError."""
+    model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
+    load_weights(model.net, init.net.state_dict(), init_dir)
+    return model

@@ -48,7 +48,7 @@ class RolloutOptions:
     guidance: float = 7.0
     """Classifier-free guidance scale."""
     trajectory_guidance: float = 1.0
-    """Guidance on the trajectory (drivewm.multiview.model.TrajectoryGuidedDenoiser; 1 = none)."""
+    """Guidance on the trajectory (drivewm.diffusion.sampling.guided; 1 = none)."""
     sampler: str = "heun"
     """``heun`` or ``euler``."""
     seed: int = 0
@@ -83,16 +83,19 @@ def frames_to_video(frames: np.ndarray, size_hw: tuple[int, int]) -> torch.Tenso
 
 
 @torch.no_grad()
-def encode_views(tokenizer, frames: np.ndarray, size_hw: tuple[int, int]) -> torch.Tensor:
-    """uint8 (V, T, H, W, 3) -> raw latents (V, c, t, h, w), one view at a time (memory)."""
+def encode_views(
+    tokenizer, frames: np.ndarray, size_hw: tuple[int, int], device: torch.device | str = "cpu"
+) -> torch.Tensor:
+    """uint8 (V, T, H, W, 3) -> raw latents (V, c, t, h, w) on the CPU, coded on ``device`` (where the
+    tokenizer is) one view at a time (memory)."""
     video = frames_to_video(frames, size_hw)
-    return torch.cat([tokenizer.encode(v[None]) for v in video])
+    return torch.cat([tokenizer.encode(v[None].to(device)).cpu() for v in video])
 
 
 @torch.no_grad()
-def decode_views(tokenizer, latents: torch.Tensor) -> np.ndarray:
-    """Raw latents (V, c, t, h, w) -> uint8 (V, T, H, W, 3)."""
-    return np.concatenate([video_to_uint8(tokenizer.decode(z[None])) for z in latents])
+def decode_views(tokenizer, latents: torch.Tensor, device: torch.device | str = "cpu") -> np.ndarray:
+    """Raw latents (V, c, t, h, w) -> uint8 (V, T, H, W, 3), decoded on ``device`` (where the tokenizer is)."""
+    return np.concatenate([video_to_uint8(tokenizer.decode(z[None].to(device))) for z in latents])
 
 
 def initial_speed_mps(clip: Clip) -> float:
@@ -132,8 +135,8 @@ class _Windows:
 
 
 def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) -> GeneratedSample:
-    """Continue ``clip`` for ``options.windows`` windows; returns the whole video (real conditioning
-    frames first) with the trajectory it was conditioned on."""
+    """Continue ``clip`` for ``options.windows`` windows on ``model.device`` (the tokenizer must be there
+    too); returns the whole video (real conditioning frames first) with the trajectory it was conditioned on."""
     rig, mv = clip_rig(model, clip), model.cfg.multiview
     c, t, h, w = model.latent.latent_shape
     tc, sc = tokenizer.config.temporal_compression, tokenizer.config.spatial_compression
@@ -194,7 +197,7 @@ def _next_window(
     c, t, h, w = model.latent.latent_shape
     start = video.shape[1] - win.n_cond  # the window's first frame in the rollout
     cond = torch.zeros(len(rig.cameras), c, t, h, w)
-    cond[:, :, : win.k] = encode_views(tokenizer, video[:, start:], size)[:, :, : win.k]
+    cond[:, :, : win.k] = encode_views(tokenizer, video[:, start:], size, model.device)[:, :, : win.k]
     waypoints = waypoints_from_poses(
         poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints
     )
@@ -210,4 +213,4 @@ def _next_window(
         fps=fps,
         trajectory_guidance=options.trajectory_guidance,
     )
-    return decode_views(tokenizer, z[0])[:, win.n_cond :]
+    return decode_views(tokenizer, z[0], model.device)[:, win.n_cond :]

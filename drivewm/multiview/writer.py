@@ -86,7 +86,7 @@ def write_samples(
 def sample_clip(key: str, s: GeneratedSample, fps: float):
     """A :class:`drivewm.clips.Clip` of one sample (rig scaled to the decoded image size)."""
     _, t, h, w, _ = s.videos.shape
-    rig = s.rig.scaled(w, h)
+    rig = s.rig.scaled(w, h, fit="stretch")  # samples are made at the size of the (cv2.resize-d) training clips
     meta = clip_meta(key, rig.to_dict(), fps, t, s.caption, s.extra)
     meta = dataclasses.replace(
         meta,

@@ -1,31 +1,51 @@
-"""``drivewm simulate``: simulated multi-camera drives written as MCAP drive logs."""
+"""``drivewm simulate``: simulated multi-camera drives written as MCAP drive logs.
+
+The simulator is imported inside the handler, so ``drivewm --help`` stays fast.
+"""
 
 from __future__ import annotations
 
 import argparse
 
+from drivewm import resources
+from drivewm.choices import add_registry_argument
+from drivewm.recipe import add_override_arguments
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "simulate", help="simulate drives (highway-env or SUMO) into MCAP drive logs", description=__doc__
+        "simulate",
+        help="simulate drives (highway-env or SUMO) into MCAP drive logs",
+        description="Simulated multi-camera drives (highway-env or SUMO traffic, a calibrated rig) as MCAP drive logs.",
     )
-    p.add_argument("--source", choices=["highway", "sumo"], default=None, help="traffic simulator (default highway)")
+    add_registry_argument(p, "--source", "drivewm.sim.config:SOURCES", "traffic simulator (default highway)")
+    add_registry_argument(
+        p, "--scenario", "drivewm.sim.config:ALL_SCENARIOS", "scenario of the source (default: its first)"
+    )
     p.add_argument(
-        "--scenario", default=None, help="highway|merge|roundabout|intersection (highway) or grid|spider|random (sumo)"
+        "--rig",
+        default=None,
+        help="rig name or YAML path (default nuscenes6); names are looked up in $DRIVEWM_RIGS, then packaged: "
+        + ", ".join(resources.names("rigs")),
     )
-    p.add_argument("--rig", default=None, help="rig name (multiview/rigs/) or YAML path (default nuscenes6)")
-    p.add_argument("--weather", choices=["clear", "overcast", "rain", "snow", "fog"], default=None)
-    p.add_argument("--time-of-day", choices=["day", "dusk", "night"], default=None)
+    add_registry_argument(p, "--weather", "drivewm.logs.types:WEATHERS", "weather (default clear)")
+    add_registry_argument(p, "--time-of-day", "drivewm.logs.types:TIMES_OF_DAY", "time of day (default day)")
+    add_registry_argument(p, "--traffic", "drivewm.logs.types:TRAFFIC_DENSITIES", "traffic density (default medium)")
     p.add_argument(
         "--conditions",
         default=None,
         help="render every drive once per WEATHER:TIME (e.g. clear:day,snow:day,clear:night): same traffic, geometry",
     )
-    p.add_argument("--traffic", choices=["low", "medium", "high"], default=None, help="traffic density")
     p.add_argument("--duration", type=float, default=None, help="seconds per drive (default 10)")
     p.add_argument("--fps", type=float, default=None, help="frames per second (default 10)")
     p.add_argument("--width", type=int, default=None, help="image width (default: the rig's)")
     p.add_argument("--height", type=int, default=None, help="image height (default: the rig's)")
+    p.add_argument(
+        "--exposure-stagger-ms",
+        type=float,
+        default=None,
+        help="camera i exposes at tick + i x this (ms), like rigs that fire cameras in turn (default 0: together)",
+    )
     p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
     p.add_argument(
         "--drives",
@@ -34,7 +54,13 @@ def register(subparsers) -> None:
         help="number of drives (seeds seed, seed+1, ...); recipes give their own counts",
     )
     p.add_argument("--workers", type=int, default=1, help="drives simulated in parallel processes (default 1)")
-    p.add_argument("--recipe", default=None, help="dataset recipe YAML (datasets/scenarios/); flags given override it")
+    p.add_argument(
+        "--recipe",
+        default=None,
+        help="dataset recipe: a YAML path or a packaged name "
+        f"({', '.join(resources.names('recipes/simulate'))}); flags and --set apply to every drive",
+    )
+    add_override_arguments(p, "a SimConfig field in every drive, e.g. jpeg_quality=80", "drives")
     p.add_argument("--out", required=True, help="output folder for the .mcap logs")
     p.set_defaults(func=run_simulate)
 
@@ -51,28 +77,31 @@ FLAG_FIELDS = {
     "width": "width",
     "height": "height",
     "seed": "seed",
+    "exposure_stagger_ms": "exposure_stagger_ms",
 }
 
 
 def run_simulate(args: argparse.Namespace) -> int:
-    from drivewm.config import from_dict, to_dict
-    from drivewm.sim import SimConfig, simulate_many
-    from drivewm.sim.paired import in_conditions, parse_conditions
-    from drivewm.sim.recipe import load_recipe
+    from drivewm.config import to_dict
+    from drivewm.sim import simulate_many
+    from drivewm.sim.recipe import load_recipe, plan_drives
     from drivewm.sim.world import sim_rig
 
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
-        plan = load_recipe(args.recipe, given | ({"conditions": args.conditions} if args.conditions else {}))
+        plan = load_recipe(
+            args.recipe, given | ({"conditions": args.conditions} if args.conditions else {}), args.overrides
+        )
     else:
-        cfg = from_dict(SimConfig, given, "drivewm simulate")
-        configs = in_conditions(cfg, parse_conditions(args.conditions)) if args.conditions else [cfg]
-        plan = [(c, args.drives) for c in configs]
+        plan = plan_drives(given, args.overrides, args.drives, args.conditions)
     for cfg, _ in plan:
         sim_rig(cfg)  # every rig loads before the first drive starts
-    paths = []
     for cfg, count in plan:
         print(f"simulate {count} drive(s): {to_dict(cfg)}")
+    if args.dry_run:
+        return 0
+    paths = []
+    for cfg, count in plan:
         paths += simulate_many(cfg, count, args.out, workers=args.workers)
     for p in paths:
         print(p)

@@ -3,30 +3,34 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
 
 from drivewm.errors import DrivewmError
-from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
+from drivewm.logs.types import TIMES_OF_DAY, TRAFFIC_DENSITIES, WEATHERS
 
-HIGHWAY_SCENARIOS = ("highway", "merge", "roundabout", "intersection")
-SUMO_SCENARIOS = ("grid", "spider", "random")
+#: Traffic source -> its scenarios (the first is the source's default).
+SCENARIOS = {
+    "highway": ("highway", "merge", "roundabout", "intersection"),  # highway-env
+    "sumo": ("grid", "spider", "random"),  # SUMO networks made by netgenerate
+}
+SOURCES = tuple(SCENARIOS)
+ALL_SCENARIOS = tuple(name for names in SCENARIOS.values() for name in names)
 
 
 @dataclasses.dataclass
 class SimConfig:
-    """One simulated drive (apis.md, drivewm.sim)."""
+    """One simulated drive (drivewm.sim)."""
 
-    source: Literal["highway", "sumo"] = "highway"
-    """Traffic simulator: highway-env or SUMO (libsumo)."""
+    source: str = "highway"
+    """Traffic simulator (:data:`SOURCES`): highway-env or SUMO (libsumo)."""
     scenario: str | None = None
-    """highway|merge|roundabout|intersection (highway-env) or grid|spider|random (SUMO); None: the
-    source's first."""
+    """A scenario of the source (:data:`SCENARIOS`): highway|merge|roundabout|intersection (highway-env)
+    or grid|spider|random (SUMO); None: the source's first."""
     rig: str = "nuscenes6"
-    """Camera rig name (multiview/rigs/NAME.yaml) or a rig YAML path."""
-    weather: Literal["clear", "overcast", "rain", "snow", "fog"] = "clear"
-    """Weather rendered (also written as the scene tag)."""
-    time_of_day: Literal["day", "dusk", "night"] = "day"
-    """Time of day rendered (also written as the scene tag)."""
+    """Camera rig name (drivewm/rigs/NAME.yaml) or a rig YAML path."""
+    weather: str = "clear"
+    """Weather rendered (also written as the scene tag), one of drivewm.logs.types.WEATHERS."""
+    time_of_day: str = "day"
+    """Time of day rendered (also written as the scene tag), one of drivewm.logs.types.TIMES_OF_DAY."""
     duration_s: float = 10.0
     """Length of the drive in seconds of simulated time."""
     fps: float = 10.0
@@ -37,33 +41,38 @@ class SimConfig:
     """Image height in pixels; None: the rig's own size."""
     seed: int = 0
     """Seeds the traffic, the world textures and every random effect: same seed, same pixels."""
-    traffic_density: Literal["low", "medium", "high"] = "medium"
-    """How many other road users the source spawns."""
+    traffic_density: str = "medium"
+    """How many other road users the source spawns, one of drivewm.logs.types.TRAFFIC_DENSITIES."""
     jpeg_quality: int = 92
     """JPEG quality of the logged images."""
     max_range_m: float = 150.0
     """Objects and ground farther than this from a camera are not drawn (fog/haze hides the cut)."""
+    exposure_stagger_ms: float = 0.0
+    """Camera i of the rig exposes at tick + i x this (ms), as rigs that fire cameras in turn (nuScenes:
+    ~40 ms over the sweep); each image shows the world at its own exposure time and is logged with
+    that time. 0: every camera at the tick. (cameras - 1) x stagger must stay below a tick."""
 
     def __post_init__(self) -> None:
-        if self.scenario is None:
-            self.scenario = HIGHWAY_SCENARIOS[0] if self.source == "highway" else SUMO_SCENARIOS[0]
+        if self.scenario is None and self.source in SCENARIOS:
+            self.scenario = SCENARIOS[self.source][0]
 
     def validate(self) -> None:
         """Raise DrivewmError naming the bad field."""
-        known = HIGHWAY_SCENARIOS if self.source == "highway" else SUMO_SCENARIOS
-        if self.source not in ("highway", "sumo"):
-            raise DrivewmError(f"sim config: source {self.source!r} is not one of ['highway', 'sumo']")
-        if self.scenario not in known:
-            raise DrivewmError(
-                f"sim config: scenario {self.scenario!r} is not one of {list(known)} for source {self.source}"
-            )
         for name, value, allowed in (
+            ("source", self.source, SOURCES),
             ("weather", self.weather, WEATHERS),
             ("time_of_day", self.time_of_day, TIMES_OF_DAY),
-            ("traffic_density", self.traffic_density, ("low", "medium", "high")),
+            ("traffic_density", self.traffic_density, TRAFFIC_DENSITIES),
         ):
             if value not in allowed:
                 raise DrivewmError(f"sim config: {name} {value!r} is not one of {list(allowed)}")
+        if self.scenario not in SCENARIOS[self.source]:
+            raise DrivewmError(
+                f"sim config: scenario {self.scenario!r} is not one of {list(SCENARIOS[self.source])} "
+                f"for source {self.source}"
+            )
+        if self.exposure_stagger_ms < 0:
+            raise DrivewmError(f"sim config: exposure_stagger_ms ({self.exposure_stagger_ms}) must be >= 0")
         if self.duration_s <= 0 or self.fps <= 0:
             raise DrivewmError(f"sim config: duration_s ({self.duration_s}) and fps ({self.fps}) must be positive")
         if (self.width is None) != (self.height is None) or (
@@ -77,6 +86,12 @@ class SimConfig:
     def num_ticks(self) -> int:
         """Logged frames in the drive (the first at t = 0)."""
         return int(round(self.duration_s * self.fps))
+
+    @property
+    def simulated_ticks(self) -> int:
+        """Ticks the traffic simulator records: one past the last logged tick when exposures are
+        staggered (the last tick's late exposures interpolate towards it)."""
+        return self.num_ticks + (1 if self.exposure_stagger_ms > 0 else 0)
 
     @property
     def road_type(self) -> str:

@@ -1,4 +1,4 @@
-"""Dataset recipes (datasets/scenarios/*.yaml): several kinds of drives in one file.
+"""Dataset recipes (drivewm/recipes/simulate/*.yaml): several kinds of drives in one file.
 
 Layout::
 
@@ -10,23 +10,44 @@ Layout::
 
 ``count`` (default 1) drives per entry, seeds seed, seed + 1, ...; ``conditions`` (optional, in
 ``common`` or an entry) renders each of those drives once per WEATHER:TIME with the same seed, so
-the same traffic and geometry (drivewm.sim.paired); every other key is a SimConfig field, checked
-like any config (unknown keys and bad values are errors).
+the same traffic and geometry (drivewm.sim.paired); every other key is a SimConfig field. A dataset
+is a list of runs rather than one run, so this is not a :class:`drivewm.recipe.RecipeBook` recipe,
+but it resolves the same way: ``--recipe`` takes a path or a packaged name, and the command line's
+fields and ``--set KEY=VALUE`` overrides apply to every entry through
+:func:`drivewm.config.apply_overrides` (unknown keys and bad values are one-line errors naming the
+file and the entry).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from drivewm.config import from_dict, load_yaml
+from drivewm import resources
+from drivewm.config import apply_overrides, load_yaml
 from drivewm.errors import DrivewmError
 from drivewm.sim.config import SimConfig
 from drivewm.sim.paired import in_conditions, parse_conditions
 
+#: Where packaged dataset recipes live: drivewm/recipes/simulate/NAME.yaml.
+RECIPES = "recipes/simulate"
 
-def load_recipe(path: str | Path, overrides: dict | None = None) -> list[tuple[SimConfig, int]]:
-    """(config, drive count) per entry of the recipe at ``path`` (one per condition of an entry with
-    ``conditions``); ``overrides`` replace fields (and ``conditions``) in all."""
+
+def plan_drives(
+    fields: dict, overrides: list[str] = (), drives: int = 1, conditions: str | None = None
+) -> list[tuple[SimConfig, int]]:
+    """One kind of drive (SimConfig ``fields`` with ``KEY=VALUE`` overrides), ``drives`` of it, once per
+    WEATHER:TIME of ``conditions`` when given (same seeds, so the same drives)."""
+    cfg = apply_overrides(SimConfig, fields, list(overrides), "drivewm simulate")
+    return [(c, drives) for c in in_conditions(cfg, parse_conditions(conditions))] if conditions else [(cfg, drives)]
+
+
+def load_recipe(
+    name_or_path: str | Path, fields: dict | None = None, overrides: list[str] = ()
+) -> list[tuple[SimConfig, int]]:
+    """(config, drive count) per entry of a dataset recipe (a path or a packaged name), one per
+    condition of an entry with ``conditions``; ``fields`` (e.g. the command line's flags, and
+    ``conditions``) and then ``overrides`` replace fields in every entry."""
+    path = resources.find(RECIPES, name_or_path, "simulate recipe")
     data = load_yaml(path)
     unknown = sorted(set(data) - {"common", "drives"})
     if unknown or not isinstance(data.get("drives"), list) or not data["drives"]:
@@ -38,12 +59,12 @@ def load_recipe(path: str | Path, overrides: dict | None = None) -> list[tuple[S
     for i, entry in enumerate(data["drives"]):
         if not isinstance(entry, dict):
             raise DrivewmError(f"{path}: drives[{i}] must be a mapping")
-        fields = {**common, **entry, **(overrides or {})}
-        count = fields.pop("count", 1)
-        conditions = fields.pop("conditions", None)
+        entry = {**common, **entry, **(fields or {})}
+        count = entry.pop("count", 1)
+        conditions = entry.pop("conditions", None)
         if not isinstance(count, int) or count < 1:
             raise DrivewmError(f"{path}: drives[{i}].count must be a positive integer, got {count!r}")
-        cfg = from_dict(SimConfig, fields, f"{path}: drives[{i}]")
+        cfg = apply_overrides(SimConfig, entry, list(overrides), f"{path}: drives[{i}]")
         for one in in_conditions(cfg, _conditions(conditions, f"{path}: drives[{i}]")) if conditions else [cfg]:
             out.append((one, count))
     return out

@@ -8,7 +8,7 @@ Per pixel, the nearest of two kinds of surface wins (z-buffer on camera depth):
 Then the condition's per-frame effects: depth fog (Koschmieder), ego headlights, snow flakes
 or rain streaks. Same seed, same pixels: every random choice comes from the drive seed.
 
-Speed (benchmarks/bench_render.py, see datasets/README.md), CPU time of one core on the busy
+Speed (benchmarks/bench_render.py, see docs/simulator.md), CPU time of one core on the busy
 2-core development machine, nuscenes6 rig: 150-280 camera-frames/s at 320x192 and 70-125 at
 640x360. A 6-camera tick at 320x192 (22-35 ms) costs about 1.9x a highway-env step with 30
 vehicles and far more than a SUMO step: the renderer, not the traffic, sets the pace of a drive.
@@ -60,8 +60,18 @@ class Renderer:
         self, T_world_from_ego: np.ndarray, agents: list[AgentBox], timestamp_ns: int = 0
     ) -> dict[str, np.ndarray]:
         """Images (H, W, 3) uint8 RGB per camera name for the ego at ``T_world_from_ego``."""
-        moving = BoxSet.from_boxes(agents, [self._agent_textures(a) for a in agents], self.cond.face_shade)
+        moving = self._moving(agents)
         return {v.name: self._render_view(v, T_world_from_ego, moving, timestamp_ns) for v in self.views}
+
+    def render_camera(
+        self, camera: str, T_world_from_ego: np.ndarray, agents: list[AgentBox], timestamp_ns: int
+    ) -> np.ndarray:
+        """One camera's image (H, W, 3) uint8 RGB, for a world state of its own (staggered exposures)."""
+        view = next(v for v in self.views if v.name == camera)
+        return self._render_view(view, T_world_from_ego, self._moving(agents), timestamp_ns)
+
+    def _moving(self, agents: list[AgentBox]) -> BoxSet:
+        return BoxSet.from_boxes(agents, [self._agent_textures(a) for a in agents], self.cond.face_shade)
 
     def _agent_textures(self, agent: AgentBox) -> FaceTextures:
         if agent.track_id not in self._agent_tex:

@@ -36,10 +36,11 @@ def vehicle_look(seed: int, track_id: str) -> tuple[str, float, tuple[float, flo
     """(category, height m, colour) of a vehicle, fixed by the drive seed and its track id."""
     u = stable_unit(seed, track_id, "body")
     acc = 0.0
-    for category, height, p in BODY_TYPES:
-        acc += p
+    for body in BODY_TYPES:
+        acc += body[2]
         if u < acc:
             break
+    category, height, _ = body
     color = CAR_PALETTE[int(stable_unit(seed, track_id, "color") * len(CAR_PALETTE))]
     return category, height, color
 

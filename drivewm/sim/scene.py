@@ -1,6 +1,6 @@
 """The scene-state stream every scenario source produces and the renderer consumes.
 
-World frame: right-handed, z up, metres (DESIGN.md section 3). The ground is the plane z = 0.
+World frame: right-handed, z up, metres (docs/DESIGN.md section 3). The ground is the plane z = 0.
 A source turns its simulator's state into a :class:`SceneRecording`: one static
 :class:`RoadMap` per drive and one :class:`SceneTick` per logged frame.
 """

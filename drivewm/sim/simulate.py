@@ -1,4 +1,8 @@
-"""simulate / simulate_many: scenario source -> renderer -> MCAP drive log (through LogWriter)."""
+"""simulate / simulate_many: scenario source -> renderer -> MCAP drive log (through LogWriter).
+
+The traffic source is imported for the drive that needs it (highway-env takes seconds to import and
+brings pygame; libsumo is the other source), not at the top.
+"""
 
 from __future__ import annotations
 
@@ -8,11 +12,14 @@ import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from drivewm.logs.types import RoadLine, SceneInfo
+from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
+from drivewm.sim.exposure import exposure_offsets_ns, state_at
 from drivewm.sim.paired import drive_id
 from drivewm.sim.scene import SceneRecording
 from drivewm.sim.world import build_renderer, sim_rig
@@ -52,8 +59,9 @@ def describe(cfg: SimConfig, rec: SceneRecording) -> str:
     weather = {"clear": "clear weather", "overcast": "overcast weather", "rain": "rain", "snow": "snow", "fog": "fog"}[
         cfg.weather
     ]
-    speed = np.mean([t.ego_speed_mps for t in rec.ticks]) * 3.6
-    others = int(np.mean([len(t.agents) for t in rec.ticks]))
+    logged = rec.ticks[: cfg.num_ticks]
+    speed = np.mean([t.ego_speed_mps for t in logged]) * 3.6
+    others = int(np.mean([len(t.agents) for t in logged]))
     return (
         f"The ego car drives through {road} in {weather} {light}, at about {speed:.0f} km/h, "
         f"with {cfg.traffic_density} traffic ({others} other vehicles in the scene)."
@@ -62,22 +70,34 @@ def describe(cfg: SimConfig, rec: SceneRecording) -> str:
 
 def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Path:
     """Simulate one drive and write it as an MCAP drive log at ``out_path`` (atomically)."""
-    from drivewm.logs.writer import LogWriter
-
     cfg.validate()
     rig = sim_rig(cfg)  # a bad rig fails before any simulation
     rec = record(cfg)
     renderer = build_renderer(cfg, rec, rig)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
+    offsets = exposure_offsets_ns(len(rig.cameras), cfg.exposure_stagger_ms, 1e9 / cfg.fps)
     with LogWriter(out_path, rig, SceneInfo(dict(rec.tags), rec.description), "jpeg", cfg.jpeg_quality) as writer:
         _write_road(writer, rec)
-        for tick in tqdm(rec.ticks, desc=out_path.name, unit="tick", disable=not progress, leave=False):
-            images = renderer.render(tick.T_world_from_ego, tick.agents, tick.timestamp_ns)
-            writer.write_images(tick.timestamp_ns, images)
+        logged = rec.ticks[: cfg.num_ticks]
+        for k, tick in enumerate(tqdm(logged, desc=out_path.name, unit="tick", disable=not progress, leave=False)):
+            if cfg.exposure_stagger_ms > 0:
+                _write_staggered(writer, renderer, rec, k, offsets)
+            else:
+                writer.write_images(
+                    tick.timestamp_ns, renderer.render(tick.T_world_from_ego, tick.agents, tick.timestamp_ns)
+                )
             writer.write_pose(tick.timestamp_ns, tick.T_world_from_ego)
             writer.write_agents(tick.timestamp_ns, tick.agents)
     return out_path
+
+
+def _write_staggered(writer, renderer, rec: SceneRecording, k: int, offsets_ns: list[int]) -> None:
+    """Each camera rendered from the world at its own exposure time and logged at that time."""
+    for cam, offset in zip(writer.rig.cameras, offsets_ns):
+        t = rec.ticks[k].timestamp_ns + offset
+        state = state_at(rec.ticks, k, t)
+        writer.write_image(cam.name, t, renderer.render_camera(cam.name, state.T_world_from_ego, state.agents, t))
 
 
 def _write_road(writer, rec: SceneRecording) -> None:
@@ -90,8 +110,9 @@ def _write_road(writer, rec: SceneRecording) -> None:
 
 
 def drive_name(cfg: SimConfig) -> str:
-    """File name of a drive: source, scenario, conditions and seed."""
-    return f"{cfg.source}_{cfg.scenario}_{cfg.weather}_{cfg.time_of_day}_s{cfg.seed:04d}.mcap"
+    """File name of a drive: source, scenario, conditions, seed (and the exposure stagger if any)."""
+    stagger = f"_stagger{cfg.exposure_stagger_ms:g}ms" if cfg.exposure_stagger_ms > 0 else ""
+    return f"{cfg.source}_{cfg.scenario}_{cfg.weather}_{cfg.time_of_day}_s{cfg.seed:04d}{stagger}.mcap"
 
 
 def simulate_many(
@@ -125,6 +146,4 @@ def simulate_many(
 
 
 def _worker_init() -> None:
-    import cv2
-
     cv2.setNumThreads(1)  # one process per core

@@ -1,6 +1,6 @@
 """highway-env scenario source: highway, merge, roundabout, intersection -> SceneRecording.
 
-highway-env is 2D with its y axis pointing down in its own render (DESIGN.md section 9), so a
+highway-env is 2D with its y axis pointing down in its own render (docs/DESIGN.md section 9), so a
 z-up world is X = x, Y = -y, yaw = -heading. Its vehicle position is the box centre; the ego
 origin is on the ground under the rear axle. The ego is an IDM + MOBIL driver (car following and
 lane changes, Treiber 2000 / Kesting 2007), so drives are sensible without a trained policy.
@@ -11,7 +11,9 @@ from __future__ import annotations
 import math
 import time
 
+import highway_env.envs as envs
 import numpy as np
+from highway_env.vehicle.behavior import IDMVehicle
 
 from drivewm.geometry import T_from_xyz_yaw
 from drivewm.sim.config import SimConfig
@@ -28,8 +30,6 @@ DENSITY = {"low": (15, 0.7), "medium": (30, 1.0), "high": (50, 1.6)}  # (vehicle
 
 def make_env(scenario: str, traffic_density: str, seed: int):
     """The unwrapped highway-env environment for ``scenario``, reset with ``seed``."""
-    import highway_env.envs as envs
-
     count, density = DENSITY[traffic_density]
     classes = {
         "highway": envs.HighwayEnv,
@@ -59,8 +59,6 @@ def record_highway(cfg: SimConfig) -> SceneRecording:
 
 
 def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> SceneRecording | None:
-    from highway_env.vehicle.behavior import IDMVehicle
-
     env = make_env(cfg.scenario, cfg.traffic_density, sim_seed)
     old = env.vehicle
     ego = IDMVehicle.create_from(old)
@@ -71,7 +69,7 @@ def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> Scene
     ids: dict[int, str] = {}
     ticks = []
     step_cpu_s = 0.0
-    for i in range(cfg.num_ticks):
+    for i in range(cfg.simulated_ticks):
         ticks.append(_tick(env, ego, int(round(i * 1e9 / cfg.fps)), ids, cfg.seed))
         t0 = time.process_time()
         for _ in range(substeps):

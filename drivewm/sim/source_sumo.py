@@ -3,7 +3,7 @@
 Nothing needs to exist beforehand: ``netgenerate`` builds the network and ``randomTrips.py``
 (shipped with the eclipse-sumo package) the traffic, in a temporary folder, all seeded.
 SUMO's ``getAngle`` is in degrees, 0 = north, clockwise, and ``getPosition`` is the front bumper
-(DESIGN.md section 9); drivewm's ego origin is on the ground under the rear axle.
+(docs/DESIGN.md section 9); drivewm's ego origin is on the ground under the rear axle.
 """
 
 from __future__ import annotations
@@ -16,7 +16,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import libsumo
 import numpy as np
+import sumo
+import sumolib
 
 from drivewm.errors import DrivewmError
 from drivewm.geometry import T_from_xyz_yaw
@@ -56,14 +59,10 @@ NETGENERATE_ARGS = {
 
 def sumo_tools_dir() -> Path:
     """The ``tools`` folder of the eclipse-sumo package (randomTrips.py lives there)."""
-    import sumo
-
     return Path(sumo.__file__).resolve().parent / "tools"
 
 
 def _run(cmd: list[str], what: str) -> None:
-    import sumo
-
     env = {**os.environ, "SUMO_HOME": str(Path(sumo.__file__).resolve().parent)}
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if proc.returncode != 0:
@@ -72,8 +71,6 @@ def _run(cmd: list[str], what: str) -> None:
 
 def generate_network(scenario: str, seed: int, traffic_density: str, end_s: float, folder: Path) -> tuple[Path, Path]:
     """netgenerate + randomTrips into ``folder``: (net.xml, routes.xml)."""
-    import sumolib
-
     net, routes = folder / "net.net.xml", folder / "routes.rou.xml"
     _run(
         [
@@ -119,8 +116,6 @@ def generate_network(scenario: str, seed: int, traffic_density: str, end_s: floa
 
 def record_sumo(cfg: SimConfig) -> SceneRecording:
     """Run one SUMO drive (network and traffic generated in a temp dir) and return its scene stream."""
-    import libsumo
-
     dt = 1.0 / cfg.fps
     with tempfile.TemporaryDirectory(prefix="drivewm-sumo-") as tmp:
         net_path, routes = generate_network(
@@ -160,7 +155,7 @@ def _drive(traci, cfg: SimConfig, dt: float) -> tuple[list[SceneTick], float]:
         traci.simulationStep()
     _add_ego(traci, cfg.seed)
     ticks, step_cpu_s = [], 0.0
-    for i in range(cfg.num_ticks):
+    for i in range(cfg.simulated_ticks):
         _extend_route(traci, cfg.seed, i)
         ticks.append(_tick(traci, int(round(i * 1e9 / cfg.fps)), cfg.seed))
         t0 = time.process_time()
@@ -234,8 +229,6 @@ def _tick(traci, timestamp_ns: int, seed: int) -> SceneTick:
 
 def road_map_from_net(net_path: Path, lo_xy: np.ndarray, hi_xy: np.ndarray) -> RoadMap:
     """Lanes, painted borders, junction areas of a SUMO net (sumolib) inside the world box."""
-    import sumolib
-
     net = sumolib.net.readNet(str(net_path), withInternal=True)
     centers, widths, boundaries, polygons = [], [], [], []
     for edge in net.getEdges(withInternal=True):

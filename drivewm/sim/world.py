@@ -17,7 +17,9 @@ TEXTURE_MARGIN_M = 110.0
 def sim_rig(cfg: SimConfig) -> Rig:
     """The rig of ``cfg`` at the configured image size."""
     rig = load_rig(cfg.rig)
-    return rig if cfg.width is None else rig.scaled(cfg.width, cfg.height)
+    # The renderer draws with the K it logs, so any aspect is self-consistent; stretch keeps the
+    # rig's fields of view on both axes (fx != fy when the aspect changes).
+    return rig if cfg.width is None else rig.scaled(cfg.width, cfg.height, fit="stretch")
 
 
 def build_renderer(cfg: SimConfig, rec: SceneRecording, rig: Rig) -> Renderer:

@@ -1,7 +1,8 @@
 """The text-encoder interface: captions -> token embeddings (B, L, D) float32 + mask (B, L) bool.
 
 Encoders are frozen (as T5 is in Cosmos), so an embedding is a pure function of the caption and is
-cached per caption; the DiT learns its own projection and cross-attention on top.
+cached per caption; the DiT learns its own projection and cross-attention on top. The encoders
+(drivewm.text.hashed, drivewm.text.pretrained) implement this interface; drivewm.text.build picks one.
 """
 
 from __future__ import annotations
@@ -71,15 +72,3 @@ class TextEncoder(abc.ABC):
         while len(self._cache) > self.cache_size:
             self._cache.popitem(last=False)
         return torch.stack([r[0] for r in rows]), torch.stack([r[1] for r in rows])
-
-
-def build_text_encoder(cfg: TextConfig) -> TextEncoder:
-    """The encoder ``cfg`` names (pretrained ones load from the local path only)."""
-    cfg.validate()
-    if cfg.kind == "hashed":
-        from drivewm.text.hashed import HashedWordEncoder
-
-        return HashedWordEncoder(cfg.dim, cfg.max_length, cfg.seed, cfg.cache_size)
-    from drivewm.text.pretrained import PretrainedTextEncoder
-
-    return PretrainedTextEncoder(cfg.path, cfg.kind, cfg.max_length, cfg.cache_size)

@@ -2,7 +2,8 @@
 
 Nothing is downloaded: the folder must hold a Hugging Face model and its tokenizer (what
 ``save_pretrained`` writes). T5 runs its encoder stack only (as Cosmos does with T5-XXL); other
-models use their last hidden state. Padding positions are zeroed and masked.
+models use their last hidden state. Padding positions are zeroed and masked. ``transformers`` (the
+optional ``peers`` extra) is imported when an encoder loads, so drivewm runs without it.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ class PretrainedTextEncoder(TextEncoder):
         self.path = Path(path)
         if not (self.path / "config.json").is_file():
             raise DrivewmError(
-                f"{self.path}: not a local Hugging Face model folder (no config.json); text encoders are never downloaded"
+                f"{self.path}: not a local Hugging Face model folder (no config.json); "
+                "text encoders are never downloaded"
             )
         from transformers import AutoModel, AutoTokenizer, T5EncoderModel
 

@@ -43,6 +43,15 @@ class Adversary:
             self.disc.load_state_dict(_load(Path(weights)))
         self.opt = torch.optim.AdamW(self.disc.parameters(), lr=lr, betas=(0.5, 0.9))
 
+    def to(self, device: torch.device) -> Adversary:
+        """Move the discriminator and its optimizer state (loaded on the CPU when resuming)."""
+        self.disc.to(device)
+        for state in self.opt.state.values():
+            for key, value in state.items():
+                if isinstance(value, torch.Tensor) and key != "step":
+                    state[key] = value.to(device)
+        return self
+
     def generator_loss(self, recon: torch.Tensor) -> torch.Tensor:
         """-E[D(recon)]: the tokenizer is rewarded where the discriminator finds its output real."""
         return -self.disc(recon).mean()

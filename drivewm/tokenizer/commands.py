@@ -1,28 +1,26 @@
-"""``drivewm tokenizer train|encode|decode|eval`` (heavy imports inside the handlers)."""
+"""``drivewm tokenizer train|encode|decode|eval`` (heavy imports inside the handlers; the recipe book is light)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from drivewm.tokenizer.recipe import RECIPES
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("tokenizer", help="video tokenizer: train, encode clips to a latent cache, decode, evaluate")
     tsub = p.add_subparsers(dest="tokenizer_command", metavar="ACTION", required=True)
 
-    t = tsub.add_parser("train", help="train (or resume) a tokenizer on clip shards")
-    t.add_argument("--preset", default="debug", help="network preset, e.g. debug, debug-8x8x8, base-8x8x8-fsq")
+    t = tsub.add_parser(
+        "train",
+        help="train (or resume) a tokenizer on clip shards",
+        description="Presets are SIZE-TxHxW[-fsq] (e.g. small-4x8x8); override any field with --set, "
+        "e.g. --set train.steps=2000 --set data.crop=[96,160] --set model.base_channels=32.",
+    )
+    RECIPES.add_arguments(t)
     t.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
     t.add_argument("--out", required=True, type=Path, help="model folder; rerun with the same --out to resume")
-    t.add_argument("--steps", type=int, default=None, help="total optimizer steps")
-    t.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config field, e.g. lr=1e-3, crop=[128,192], model.base_channels=32",
-    )
     _threads(t)
     t.set_defaults(func=_train)
 
@@ -61,6 +59,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _threads(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    p.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
+    )
 
 
 def _tiling(p: argparse.ArgumentParser) -> None:
@@ -86,17 +87,16 @@ def _tiling_config(args: argparse.Namespace):
 def _train(args: argparse.Namespace) -> int:
     import json
 
-    from drivewm.config import apply_overrides, to_dict
-    from drivewm.tokenizer.config import preset
-    from drivewm.tokenizer.train import TokenizerTrainConfig, train
+    from drivewm.config import to_dict
+    from drivewm.tokenizer.train import tokenizer_train
 
     _set_threads(args)
-    base = to_dict(TokenizerTrainConfig(model=preset(args.preset)))
-    overrides = args.overrides + ([f"steps={args.steps}"] if args.steps is not None else [])
-    cfg = apply_overrides(TokenizerTrainConfig, base, overrides, "tokenizer train config")
-    print(json.dumps(to_dict(cfg)))
-    summary = train(args.data, args.out, cfg)
-    print(json.dumps(summary))
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*args.overrides, f"train.device={args.device}"])
+    print(json.dumps(to_dict(cfg), indent=2))
+    if args.dry_run:
+        return 0
+    last = tokenizer_train(cfg, args.data, args.out)
+    print(json.dumps(last))
     print(f"model folder: {args.out}")
     return 0
 

@@ -1,4 +1,4 @@
-"""Tokenizer configuration and named presets (DESIGN.md section 5).
+"""Tokenizer configuration and named presets (docs/DESIGN.md section 5).
 
 A preset name reads ``SIZE-TxHxW[-fsq]``: ``debug-4x8x8`` compresses 4x in time and 8x in
 height and width into 16 continuous channels; ``base-8x8x8-fsq`` quantizes with FSQ instead.
@@ -26,12 +26,22 @@ class TokenizerConfig:
     (so ``len == log2(spatial_compression / 2) + 1``)."""
     num_res_blocks: int = 1
     """Residual blocks per stage (encoder and decoder alike)."""
+    encoder_mid_blocks: int = 1
+    """Residual blocks of the encoder at the bottleneck resolution, where parameters cost the fewest FLOPs."""
+    decoder_mid_blocks: int = 2
+    """Residual blocks of the decoder at the bottleneck resolution. The decoder gets more than the
+    encoder (as in Cosmos' and most video VAEs' decoders): it must synthesize the detail the latents drop."""
     spatial_compression: int = 8
-    """Height and width downsampling factor (4, 8 or 16). The 2x2 Haar patch gives 2x."""
+    """Height and width downsampling factor (4, 8 or 16)."""
     temporal_compression: int = 4
     """Time downsampling factor f (1, 2, 4 or 8): T = 1 + k*f frames give 1 + k latent frames."""
-    temporal_haar: bool = True
-    """Also apply the causal temporal Haar step at the input (2x of the time compression)."""
+    patch_size: int = 4
+    """Spatial Haar patch (2, 4 or 8: one, two or three levels of the 2x2 Haar transform): the network
+    starts at 1/patch_size of the resolution, where convolutions cost patch_size^2 times less
+    (Cosmos Tokenizer uses 4). The rest of ``spatial_compression`` is learned downsampling."""
+    patch_time: int = 4
+    """Temporal causal Haar patch (1, 2 or 4, at most ``temporal_compression``); the rest of the time
+    compression is learned downsampling."""
     temporal_kernel: int = 3
     """Kernel length of the causal temporal convolutions."""
     latent_channels: int = 16
@@ -47,16 +57,19 @@ class TokenizerConfig:
         return len(self.fsq_levels) if self.quantizer == "fsq" else self.latent_channels
 
     @property
-    def haar_time(self) -> int:
-        return 2 if self.temporal_haar and self.temporal_compression > 1 else 1
+    def patch_channels(self) -> int:
+        """Channels after the Haar patch: 3 colours x patch_size^2 spatial x patch_time temporal subbands."""
+        return 3 * self.patch_size**2 * self.patch_time
 
     @property
     def spatial_downs(self) -> int:
-        return int(math.log2(self.spatial_compression // 2))
+        """Learned 2x spatial downsampling steps after the patch."""
+        return int(math.log2(self.spatial_compression // self.patch_size))
 
     @property
     def temporal_downs(self) -> int:
-        return int(math.log2(self.temporal_compression // self.haar_time))
+        """Learned 2x temporal downsampling steps after the patch."""
+        return int(math.log2(self.temporal_compression // self.patch_time))
 
     def validate(self) -> None:
         if self.spatial_compression not in (4, 8, 16):
@@ -66,6 +79,15 @@ class TokenizerConfig:
         if self.temporal_compression not in (1, 2, 4, 8):
             raise DrivewmError(
                 f"tokenizer config: temporal_compression must be 1, 2, 4 or 8, got {self.temporal_compression}"
+            )
+        if self.patch_size not in (2, 4, 8) or self.patch_size > self.spatial_compression:
+            raise DrivewmError(
+                f"tokenizer config: patch_size must be 2, 4 or 8 and at most spatial_compression, got {self.patch_size}"
+            )
+        if self.patch_time not in (1, 2, 4) or self.patch_time > self.temporal_compression:
+            raise DrivewmError(
+                f"tokenizer config: patch_time must be 1, 2 or 4 and at most temporal_compression, "
+                f"got {self.patch_time}"
             )
         if len(self.channel_multipliers) != self.spatial_downs + 1:
             raise DrivewmError(
@@ -81,15 +103,55 @@ class TokenizerConfig:
 
 
 #: Network sizes; the compression and quantizer variants are derived from these.
+@dataclasses.dataclass
+class LossConfig:
+    """Weights of the loss terms."""
+
+    l1: float = 1.0
+    """Pixel L1."""
+    ssim: float = 0.2
+    """Structural term ``1 - SSIM`` (keeps lane markings and edges sharp)."""
+    temporal: float = 0.5
+    """L1 between the frame differences of reconstruction and input (penalizes flicker)."""
+    perceptual: float = 0.0
+    """VGG16 feature distance; > 0 needs ``perceptual_weights``."""
+    perceptual_weights: str = ""
+    """Local VGG16 state dict (.safetensors, or a .pth read with weights_only=True), torchvision key names."""
+    adversarial: float = 0.0
+    """Weight of the hinge-GAN generator term (a PatchGAN discriminator trains alongside; 0 = off)."""
+    adversarial_start: int = 0
+    """Step from which the adversarial terms run (after the reconstruction has settled)."""
+    discriminator_weights: str = ""
+    """Optional local discriminator state dict (.safetensors) to start from; empty = from scratch."""
+
+    def validate(self) -> None:
+        if self.perceptual > 0 and not self.perceptual_weights:
+            raise DrivewmError(
+                "loss.perceptual > 0 needs loss.perceptual_weights: a local VGG16 state dict "
+                "(.safetensors or .pth); drivewm never downloads weights"
+            )
+
+
+#: Parameter counts at 8x8x8 (continuous); Cosmos-architecture peers of matched size are in
+#: benchmarks/bench_tokenizer.py (tiny ~ diffusers AutoencoderKLCosmos at (32, 64, 64, 64), 1.75M;
+#: small ~ (32, 64, 128, 128), 5.1M).
 SIZES: dict[str, dict] = {
-    "debug": dict(base_channels=16, channel_multipliers=[1, 2, 2], num_res_blocks=1),  # ~0.2M params, CPU in a minute
-    "small": dict(base_channels=64, channel_multipliers=[1, 2, 4], num_res_blocks=2),  # ~10M, one GPU
-    "base": dict(base_channels=128, channel_multipliers=[1, 2, 4], num_res_blocks=2),  # ~40M, GPU
+    "debug": dict(base_channels=16, channel_multipliers=[1, 2], decoder_mid_blocks=1),  # 0.12M, for tests
+    "tiny": dict(base_channels=48, channel_multipliers=[1, 2], decoder_mid_blocks=3),  # 1.4M
+    "small": dict(base_channels=48, channel_multipliers=[1, 4], decoder_mid_blocks=3),  # 4.7M
+    "base": dict(
+        base_channels=96, channel_multipliers=[1, 4], num_res_blocks=2, encoder_mid_blocks=2, decoder_mid_blocks=4
+    ),
 }
 #: Compression variants: name -> (temporal, spatial).
 COMPRESSIONS = {"4x8x8": (4, 8), "8x8x8": (8, 8), "8x16x16": (8, 16), "1x8x8": (1, 8)}
 #: Default FSQ levels per size (codebook 1,000 for debug, 64,000 otherwise as in Cosmos DV).
-FSQ_LEVELS = {"debug": [8, 5, 5, 5], "small": [8, 8, 8, 5, 5, 5], "base": [8, 8, 8, 5, 5, 5]}
+FSQ_LEVELS = {
+    "debug": [8, 5, 5, 5],
+    "tiny": [8, 8, 8, 5, 5, 5],
+    "small": [8, 8, 8, 5, 5, 5],
+    "base": [8, 8, 8, 5, 5, 5],
+}
 
 
 def _build_presets() -> dict[str, TokenizerConfig]:
@@ -97,8 +159,16 @@ def _build_presets() -> dict[str, TokenizerConfig]:
     for size, fields in SIZES.items():
         for name, (temporal, spatial) in COMPRESSIONS.items():
             mults = list(fields["channel_multipliers"])
-            mults = mults + [mults[-1]] * (int(math.log2(spatial // 2)) + 1 - len(mults))
-            common = dict(fields, channel_multipliers=mults, temporal_compression=temporal, spatial_compression=spatial)
+            patch_time = min(4, temporal)
+            mults = mults + [mults[-1]] * (int(math.log2(spatial // 4)) + 1 - len(mults))
+            common = dict(
+                fields,
+                channel_multipliers=mults,
+                temporal_compression=temporal,
+                spatial_compression=spatial,
+                patch_size=4,
+                patch_time=patch_time,
+            )
             presets[f"{size}-{name}"] = TokenizerConfig(**common)
             presets[f"{size}-{name}-fsq"] = TokenizerConfig(
                 **common, quantizer="fsq", fsq_levels=list(FSQ_LEVELS[size])

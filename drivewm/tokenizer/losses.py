@@ -5,7 +5,6 @@ only from weights the user has on disk: nothing is ever downloaded.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import torch
@@ -14,37 +13,8 @@ from einops import rearrange
 from torch import nn
 
 from drivewm.errors import DrivewmError
+from drivewm.tokenizer.config import LossConfig
 from drivewm.tokenizer.metrics import ssim
-
-
-@dataclasses.dataclass
-class LossConfig:
-    """Weights of the loss terms."""
-
-    l1: float = 1.0
-    """Pixel L1."""
-    ssim: float = 0.2
-    """Structural term ``1 - SSIM`` (keeps lane markings and edges sharp)."""
-    temporal: float = 0.5
-    """L1 between the frame differences of reconstruction and input (penalizes flicker)."""
-    perceptual: float = 0.0
-    """VGG16 feature distance; > 0 needs ``perceptual_weights``."""
-    perceptual_weights: str = ""
-    """Local VGG16 state dict (.safetensors, or a .pth read with weights_only=True), torchvision key names."""
-    adversarial: float = 0.0
-    """Weight of the hinge-GAN generator term (a PatchGAN discriminator trains alongside; 0 = off)."""
-    adversarial_start: int = 0
-    """Step from which the adversarial terms run (after the reconstruction has settled)."""
-    discriminator_weights: str = ""
-    """Optional local discriminator state dict (.safetensors) to start from; empty = from scratch."""
-
-    def validate(self) -> None:
-        if self.perceptual > 0 and not self.perceptual_weights:
-            raise DrivewmError(
-                "loss.perceptual > 0 needs loss.perceptual_weights: a local VGG16 state dict "
-                "(.safetensors or .pth); drivewm never downloads weights"
-            )
-
 
 # VGG16 ``features`` layout (torchvision key names): conv widths, "M" = max-pool.
 _VGG16 = [64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512]

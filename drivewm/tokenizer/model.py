@@ -1,4 +1,4 @@
-"""The tokenizer: a causal video autoencoder with continuous or FSQ latents (DESIGN.md section 5).
+"""The tokenizer: a causal video autoencoder with continuous or FSQ latents (docs/DESIGN.md section 5).
 
 ``encode``: video (B, 3, T, H, W) in [-1, 1], T = 1 + k*f -> latents (B, c, 1 + k, H/s, W/s).
 ``decode`` inverts it. Frame 0 is coded alone and no latent frame depends on later frames, so a
@@ -18,7 +18,7 @@ from drivewm.tokenizer.causal import CausalContext, is_first
 from drivewm.tokenizer.config import TokenizerConfig
 from drivewm.tokenizer.fsq import FSQ
 from drivewm.tokenizer.networks import Decoder, Encoder
-from drivewm.tokenizer.wavelet import haar_space, haar_time, inverse_haar_space, inverse_haar_time
+from drivewm.tokenizer.wavelet import patchify, unpatchify
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
 MODEL_TYPE = "drivewm-tokenizer"
@@ -45,19 +45,17 @@ class Tokenizer(nn.Module):
         has T = 1 + k*f frames, later chunks k*f frames (they give k latent frames).
         """
         self.check_video(video, is_first(ctx))
-        x = haar_space(video)  # (B, 12, T, H/2, W/2)
-        if self.config.haar_time == 2:
-            x = haar_time(x, is_first(ctx))  # (B, 24, (T+1)/2, H/2, W/2)
+        x = patchify(
+            video, self.config.patch_size, self.config.patch_time, is_first(ctx)
+        )  # (B, patch_channels, T', H/p, W/p)
         z = self.encoder(x, ctx)  # (B, c, t, h, w)
         return self.quantizer(z) if self.quantizer is not None else z
 
     def decode(self, latents: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         """Latents (B, c, t, h, w) -> video (B, 3, T, h*s, w*s), T = 1 + (t-1)*f (t*f for a later chunk)."""
         self.check_latents(latents)
-        x = self.decoder(latents, ctx)  # (B, patch_channels, T', H/2, W/2)
-        if self.config.haar_time == 2:
-            x = inverse_haar_time(x, is_first(ctx))
-        return inverse_haar_space(x)  # (B, 3, T, H, W)
+        x = self.decoder(latents, ctx)  # (B, patch_channels, T', H/p, W/p)
+        return unpatchify(x, self.config.patch_size, self.config.patch_time, is_first(ctx))  # (B, 3, T, H, W)
 
     def forward(self, video: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(reconstruction, latents) of ``video`` (B, 3, T, H, W)."""
@@ -99,7 +97,7 @@ class Tokenizer(nn.Module):
     # -- model folders ----------------------------------------------------------------------------
 
     def save_pretrained(self, path: str | Path, extra: dict | None = None) -> None:
-        """Write ``config.json`` + ``model.safetensors`` (DESIGN.md section 4)."""
+        """Write ``config.json`` + ``model.safetensors`` (docs/DESIGN.md section 4)."""
         stats = {"latent_mean": self.latent_mean.tolist(), "latent_std": self.latent_std.tolist()}
         save_model_folder(path, MODEL_TYPE, to_dict(self.config), self.state_dict(), {**stats, **(extra or {})})
 

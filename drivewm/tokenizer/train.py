@@ -1,202 +1,175 @@
-"""Train a tokenizer on clip shards: AdamW with warm-up, gradient clipping, EMA, exact resume.
+"""Tokenizer training as a task of the shared loop (drivewm.train.loop): resume, EMA, learning-rate
+schedule, bf16 autocast, activation checkpointing, compile and DDP/FSDP2 all live there.
 
-``TOKDIR`` receives the model folder (``config.json`` + ``model.safetensors``: EMA weights and
-the per-channel latent statistics), ``train_state.pt`` (model, EMA, optimizer, step, config),
-``train_config.json`` and ``metrics.jsonl``. Batches are drawn from (seed, step) and the
-learning rate depends on the step alone, so a run that is stopped and started again, even with
-a larger ``steps``, continues exactly as an uninterrupted run would.
+The run's config nests like the other stages' (``model`` / ``loss`` / ``data`` / ``train``) and is
+built by :data:`RECIPES` (drivewm.recipe): ``drivewm tokenizer train --preset small
+--set train.steps=2000``. Each training sample is a random crop (``data.frames`` frames of
+``data.crop`` pixels) of one camera video of one clip; the crop is drawn from the sample's seed,
+so a resumed run (and a run on W processes) trains exactly what an uninterrupted single process
+trains. ``TOKDIR`` receives the model folder (``config.json`` + ``model.safetensors``: EMA weights
+and the per-channel latent statistics), ``train_state.pt``, ``metrics.jsonl`` and
+``samples/step_N.png`` (input | reconstruction of held-in crops).
 """
 
 from __future__ import annotations
 
 import copy
-import dataclasses
-import json
-import time
 from pathlib import Path
 
+import numpy as np
 import torch
-from tqdm import tqdm
+from torch import nn
 
-from drivewm.atomic import write_json
 from drivewm.config import to_dict
+from drivewm.diffusion.generate import write_grid_png
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer.adversarial import Adversary
-from drivewm.tokenizer.config import TokenizerConfig, preset
-from drivewm.tokenizer.data import CameraVideos, CropSampler, load_clips
-from drivewm.tokenizer.losses import LossConfig, TokenizerLoss
+from drivewm.tokenizer.data import CameraVideos, load_clips, to_model_range, to_uint8
+from drivewm.tokenizer.layers import ResBlock
+from drivewm.tokenizer.losses import TokenizerLoss
 from drivewm.tokenizer.metrics import psnr
 from drivewm.tokenizer.model import Tokenizer
-from drivewm.train.checkpoint import load_train_state, save_train_state
-from drivewm.train.ema import EMA
+from drivewm.tokenizer.recipe import TokenizerTrainConfig
+from drivewm.train.checkpoint import load_weights
+from drivewm.train.loop import TrainTask, train
 
 
-@dataclasses.dataclass
-class TokenizerTrainConfig:
-    """A tokenizer training run."""
+class CropDataset:
+    """Every (clip, camera) video of the training clips; sample i under seed s is a random crop of
+    video i drawn from a generator seeded s (so batches are a function of the step)."""
 
-    model: TokenizerConfig = dataclasses.field(default_factory=lambda: preset("debug"))
-    """The network (start from a preset: ``drivewm.tokenizer.config.PRESETS``)."""
-    loss: LossConfig = dataclasses.field(default_factory=LossConfig)
-    """Loss weights."""
-    steps: int = 300
-    """Total optimizer steps (a resumed run continues up to this)."""
-    batch_size: int = 4
-    """Videos per step (random camera videos of random clips)."""
-    frames: int = 9
-    """Frames per training video, 1 + k * temporal_compression."""
-    crop: list[int] = dataclasses.field(default_factory=lambda: [64, 96])
-    """Random crop [height, width] in pixels, multiples of the spatial compression."""
-    lr: float = 1e-3
-    """AdamW peak learning rate (constant after warm-up, so extending a run changes nothing before)."""
-    warmup_steps: int = 20
-    """Linear warm-up steps."""
-    weight_decay: float = 0.0
-    """AdamW weight decay."""
-    grad_clip: float = 1.0
-    """Global gradient-norm clip (0 = off)."""
-    ema_decay: float = 0.99
-    """EMA decay of the shipped weights (ramped up as min(d, (1+step)/(10+step)))."""
-    seed: int = 0
-    """Seeds initialization and every batch."""
-    holdout_percent: int = 10
-    """Clips held out from training by key hash (``drivewm tokenizer eval --split holdout`` scores them)."""
-    checkpoint_every: int = 100
-    """Write the training state every this many steps (and at the end)."""
-    stats_batches: int = 4
-    """Batches encoded after training to measure the per-channel latent mean and std."""
-    log_every: int = 10
-    """Append to metrics.jsonl every this many steps."""
+    def __init__(self, videos: CameraVideos, frames: int, crop_hw: tuple[int, int]):
+        self.videos, self.frames, self.crop_hw = videos, frames, crop_hw
+        shortest = min(len(c.meta.timestamps_ns) for c in videos.clips)
+        if frames > shortest:
+            raise DrivewmError(f"training wants {frames} frames per sample but the shortest clip has {shortest}")
 
-    def validate(self) -> None:
-        f, s = self.model.temporal_compression, self.model.spatial_compression
-        if (self.frames - 1) % f:
-            raise DrivewmError(f"train config: frames={self.frames} must be 1 + k*{f} for this model")
-        if len(self.crop) != 2 or self.crop[0] % s or self.crop[1] % s:
-            raise DrivewmError(f"train config: crop {self.crop} must be [height, width], multiples of {s}")
+    def __len__(self) -> int:
+        return len(self.videos)
+
+    def crop(self, index: int, seed: int) -> torch.Tensor:
+        """(3, frames, H, W) in [-1, 1]: a crop of video ``index`` at a position drawn from ``seed``."""
+        rng = np.random.default_rng(seed)
+        frames = self.videos.frames(index)
+        (t_all, h_all, w_all, _), (ch, cw) = frames.shape, self.crop_hw
+        if ch > h_all or cw > w_all:
+            raise DrivewmError(f"crop {ch}x{cw} is larger than the clip frames {h_all}x{w_all}")
+        t0 = int(rng.integers(t_all - self.frames + 1))
+        y0, x0 = int(rng.integers(h_all - ch + 1)), int(rng.integers(w_all - cw + 1))
+        return to_model_range(np.ascontiguousarray(frames[t0 : t0 + self.frames, y0 : y0 + ch, x0 : x0 + cw]))
+
+    def batch(self, indices: list[int], seeds: list[int]) -> torch.Tensor:
+        """(B, 3, frames, H, W) crops."""
+        return torch.stack([self.crop(i, s) for i, s in zip(indices, seeds)])
 
 
-def ema_model(model: Tokenizer, ema: EMA) -> Tokenizer:
-    """A frozen copy of ``model`` carrying the EMA weights (the weights the model folder ships)."""
-    shipped = copy.deepcopy(model).requires_grad_(False).eval()
-    shipped.load_state_dict(ema.state_dict(), strict=False)  # the EMA holds parameters; buffers are the model's
-    return shipped
+class TokenizerTask(TrainTask):
+    """drivewm.train.loop.TrainTask for the tokenizer: reconstruction loss (+ optional hinge GAN)."""
 
-
-def learning_rate(cfg: TokenizerTrainConfig, step: int) -> float:
-    return cfg.lr * min(1.0, (step + 1) / max(1, cfg.warmup_steps))
-
-
-def train(clip_dir: str | Path, out_dir: str | Path, cfg: TokenizerTrainConfig, progress: bool = True) -> dict:
-    """Train (or resume) a tokenizer on the clips in ``clip_dir``; returns a summary dict."""
-    cfg.validate()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    videos = CameraVideos(load_clips(clip_dir, "train", cfg.holdout_percent))
-    sampler = CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed)
-    torch.manual_seed(cfg.seed)
-    model = Tokenizer(cfg.model).train()
-    ema = EMA(model, cfg.ema_decay)
-    loss_fn = TokenizerLoss(cfg.loss)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, betas=(0.9, 0.99), weight_decay=cfg.weight_decay)
-    adversary = Adversary(cfg.lr, cfg.loss.discriminator_weights) if cfg.loss.adversarial > 0 else None
-    start = _resume(out_dir, cfg, model, ema, opt, adversary)
-    write_json(out_dir / "train_config.json", to_dict(cfg))
-    t0, terms = time.perf_counter(), {}
-    for step in tqdm(
-        range(start, cfg.steps), desc="tokenizer train", initial=start, total=cfg.steps, disable=not progress
-    ):
-        adv = adversary if adversary is not None and step >= cfg.loss.adversarial_start else None
-        terms = _train_step(
-            model, loss_fn, opt, sampler.batch(step, cfg.batch_size), learning_rate(cfg, step), cfg, adv
+    def __init__(self, cfg: TokenizerTrainConfig, dataset: CropDataset):
+        self.cfg = cfg
+        self.dataset = dataset
+        self.model = Tokenizer(cfg.model).train()
+        if cfg.init:
+            load_weights(self.model, Tokenizer.from_pretrained(cfg.init).state_dict(), cfg.init)
+        if cfg.freeze_encoder:
+            self.model.encoder.requires_grad_(False)
+        self.loss_fn = TokenizerLoss(cfg.loss)
+        self.adversary = Adversary(cfg.train.lr, cfg.loss.discriminator_weights) if cfg.loss.adversarial > 0 else None
+        self._last: tuple[torch.Tensor, torch.Tensor] | None = None  # (recon, video) of the last step, for the GAN
+        self.steps_done = (
+            0  # optimizer steps of the model so far (the adversarial term starts at loss.adversarial_start)
         )
-        ema.update(model, step)
-        if (step + 1) % cfg.log_every == 0 or step + 1 == cfg.steps:
-            _log(out_dir, {"step": step + 1, "lr": learning_rate(cfg, step), **terms})
-        if (step + 1) % cfg.checkpoint_every == 0:
-            _save_state(out_dir, cfg, model, ema, opt, adversary, step + 1)
-    _save_state(out_dir, cfg, model, ema, opt, adversary, max(start, cfg.steps))
-    shipped = ema_model(model, ema)
-    set_latent_stats(
-        shipped, CropSampler(videos, cfg.frames, tuple(cfg.crop), cfg.seed + 1), cfg.stats_batches, cfg.batch_size
-    )
-    shipped.save_pretrained(out_dir, {"trained_steps": max(start, cfg.steps)})
-    return {
-        "steps": max(start, cfg.steps),
-        "resumed_from": start,
-        "seconds": time.perf_counter() - t0,
-        "train_videos": len(videos),
-        **terms,
-    }
 
+    def blocks(self) -> list[nn.Module]:
+        return [m for m in self.model.modules() if isinstance(m, ResBlock)]
 
-def _train_step(
-    model: Tokenizer,
-    loss_fn: TokenizerLoss,
-    opt: torch.optim.Optimizer,
-    video: torch.Tensor,
-    lr: float,
-    cfg: TokenizerTrainConfig,
-    adversary: Adversary | None,
-) -> dict[str, float]:
-    for group in opt.param_groups:
-        group["lr"] = lr
-    recon, _ = model(video)  # (B, 3, T, H, W)
-    total, terms = loss_fn(recon, video)
-    if adversary is not None:
-        adv = adversary.generator_loss(recon)
-        total, terms["adversarial"] = total + cfg.loss.adversarial * adv, adv.item()
-    opt.zero_grad(set_to_none=True)
-    total.backward()
-    if cfg.grad_clip > 0:
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-    opt.step()
-    if adversary is not None:
-        terms["discriminator"] = adversary.discriminator_step(recon, video)
-    return {"loss": total.item(), **terms, "psnr": psnr(recon.detach(), video)}
+    def num_samples(self) -> int:
+        return len(self.dataset)
+
+    def tokens_per_sample(self) -> int:
+        """Latent positions (t * h * w) of one crop."""
+        m, (h, w) = self.cfg.model, self.cfg.data.crop
+        return (
+            (1 + (self.cfg.data.frames - 1) // m.temporal_compression)
+            * (h // m.spatial_compression)
+            * (w // m.spatial_compression)
+        )
+
+    def loss(self, forward, indices: list[int], seeds: list[int], device: torch.device):
+        video = self.dataset.batch(indices, seeds).to(device)  # (B, 3, T, H, W)
+        recon, _ = forward(video)
+        total, terms = self.loss_fn(recon, video)
+        if self.adversary is not None and self.steps_done >= self.cfg.loss.adversarial_start:
+            self.adversary.to(device)
+            adv = self.adversary.generator_loss(recon)
+            total, terms["adversarial"] = total + self.cfg.loss.adversarial * adv, adv.item()
+            self._last = (recon.detach(), video)
+        return total, {**terms, "psnr": psnr(recon.detach().float(), video)}
+
+    def after_step(self, step: int) -> dict[str, float]:
+        """One discriminator update on the step's reconstructions (when the adversarial term is on)."""
+        self.steps_done = step
+        if self._last is None:
+            return {}
+        recon, video = self._last
+        self._last = None
+        return {"discriminator": self.adversary.discriminator_step(recon, video)}
+
+    def extra_state(self) -> dict:
+        state = {"steps_done": self.steps_done}
+        return {**state, "adversary": self.adversary.state_dict()} if self.adversary is not None else state
+
+    def load_extra_state(self, state: dict) -> None:
+        self.steps_done = int(state.get("steps_done", 0))
+        if self.adversary is not None and "adversary" in state:
+            self.adversary.load_state_dict(state["adversary"])
+
+    def shipped_model(self, ema_state: dict[str, torch.Tensor]) -> Tokenizer:
+        """A frozen tokenizer with the EMA weights and latent statistics measured on training crops."""
+        model = copy.deepcopy(self.model)  # frozen parameters and buffers are the live model's
+        model.load_state_dict(ema_state, strict=False)  # the EMA holds the trained parameters
+        model.requires_grad_(False).eval()
+        set_latent_stats(model, self._stats_batches())
+        return model
+
+    def _stats_batches(self) -> list[torch.Tensor]:
+        n, b = self.cfg.data.stats_batches, self.cfg.train.batch_size
+        gen = torch.Generator().manual_seed(self.cfg.train.seed + 1)
+        return [
+            self.dataset.batch(
+                torch.randint(len(self.dataset), (b,), generator=gen).tolist(), [i * b + j for j in range(b)]
+            )
+            for i in range(n)
+        ]
+
+    def save_model(self, ema_state: dict[str, torch.Tensor], out_dir: Path) -> None:
+        self.shipped_model(ema_state).save_pretrained(out_dir)
+
+    def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
+        model = copy.deepcopy(self.model)
+        model.load_state_dict(ema_state, strict=False)
+        video = self._stats_batches()[0][:4]
+        with torch.no_grad():
+            recon = model.eval()(video)[0].clamp(-1, 1)
+        rows = np.stack([to_uint8(torch.cat([v, r], dim=-1)) for v, r in zip(video, recon)])  # input | output
+        write_grid_png(rows, path, ["input | reconstruction"] * len(rows))
 
 
 @torch.no_grad()
-def set_latent_stats(model: Tokenizer, sampler: CropSampler, batches: int, batch_size: int) -> None:
-    """Measure the per-channel mean and std of the latents over ``batches`` random batches."""
-    latents = torch.cat(
-        [model.encode(sampler.batch(i, batch_size)).transpose(0, 1).flatten(1) for i in range(batches)], 1
-    )
+def set_latent_stats(model: Tokenizer, batches: list[torch.Tensor]) -> None:
+    """Measure the per-channel mean and std of the latents of ``batches`` (each (B, 3, T, H, W))."""
+    latents = torch.cat([model.encode(b).transpose(0, 1).flatten(1) for b in batches], 1)  # (c, N)
     model.latent_mean.copy_(latents.mean(1))
     model.latent_std.copy_(latents.std(1).clamp_min(1e-6))
 
 
-def _save_state(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EMA, opt, adversary, step: int) -> None:
-    state = {
-        "step": step,
-        "config": json.dumps(to_dict(cfg)),
-        "model": model.state_dict(),
-        "ema": ema.state_dict(),
-        "optimizer": opt.state_dict(),
-    }
-    if adversary is not None:
-        state["adversary"] = adversary.state_dict()
-    save_train_state(out_dir, state)
-
-
-def _resume(out_dir: Path, cfg: TokenizerTrainConfig, model, ema: EMA, opt, adversary) -> int:
-    """Load the training state in ``out_dir`` if any; returns the step to start from."""
-    state = load_train_state(out_dir)
-    if state is None:
-        return 0
-    saved = json.loads(state["config"])
-    if saved["model"] != to_dict(cfg.model):
-        raise DrivewmError(
-            f"{out_dir}: holds a training run of a different model config; use a new --out or the same preset"
-        )
-    model.load_state_dict(state["model"])
-    ema.load_state_dict(state["ema"])
-    opt.load_state_dict(state["optimizer"])
-    if adversary is not None and "adversary" in state:
-        adversary.load_state_dict(state["adversary"])
-    return int(state["step"])
-
-
-def _log(out_dir: Path, row: dict) -> None:
-    with open(out_dir / "metrics.jsonl", "a") as f:
-        f.write(json.dumps(row) + "\n")
+def tokenizer_train(
+    cfg: TokenizerTrainConfig, clip_dir: str | Path, out_dir: str | Path, stop_after: int | None = None
+) -> dict:
+    """Train (or resume) a tokenizer on the clips in ``clip_dir`` into ``out_dir``; returns the last metrics row."""
+    videos = CameraVideos(load_clips(clip_dir, "train", cfg.data.holdout_percent))
+    dataset = CropDataset(videos, cfg.data.frames, tuple(cfg.data.crop))
+    torch.manual_seed(cfg.train.seed)  # the network's initial weights
+    task = TokenizerTask(cfg, dataset)
+    return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)

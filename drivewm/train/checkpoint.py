@@ -1,4 +1,4 @@
-"""Model folders and resumable training state (DESIGN.md section 4).
+"""Model folders and resumable training state (docs/DESIGN.md section 4).
 
 A *model folder* is ``config.json`` + ``model.safetensors`` (Hugging Face style): the
 inference weights (EMA where there is one) and the config that rebuilds the network.
@@ -37,6 +37,20 @@ def save_model_folder(
         path / CONFIG_NAME,
         {"model_type": model_type, "drivewm_version": __version__, "config": config, **(extra or {})},
     )
+
+
+def read_model_type(path: str | Path) -> str | None:
+    """The ``model_type`` of the model folder ``path`` (DrivewmError when it is not one)."""
+    cfg_path = Path(path) / CONFIG_NAME
+    if not cfg_path.is_file():
+        raise DrivewmError(f"{path}: not a drivewm model folder (no {CONFIG_NAME})")
+    try:
+        info = json.loads(cfg_path.read_text())
+    except json.JSONDecodeError:
+        raise DrivewmError(f"{cfg_path}: not valid JSON") from None
+    if not isinstance(info, dict):
+        raise DrivewmError(f"{cfg_path}: expected a JSON object")
+    return info.get("model_type")
 
 
 def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tuple[dict, dict[str, torch.Tensor]]:

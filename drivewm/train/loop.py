@@ -21,7 +21,6 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Literal, Protocol
 
 import torch
 import torch.distributed as dist
@@ -31,85 +30,58 @@ from tqdm import tqdm
 from drivewm.atomic import write_text
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import load_train_state, save_train_state
+from drivewm.train.config import TrainConfig
 from drivewm.train.distributed import DistInfo, barrier, init_distributed, shutdown_distributed
 from drivewm.train.ema import EMA
-from drivewm.train.parallelize import Parallel, parallelize
+from drivewm.train.parallelize import parallelize
 
 METRICS_NAME = "metrics.jsonl"
 
 
-@dataclasses.dataclass
-class TrainConfig:
-    """Optimisation and run settings (model and data settings live with the task)."""
-
-    steps: int = 1000
-    """Total optimizer steps of the run (a resumed run continues up to this)."""
-    batch_size: int = 8
-    """Global batch: samples per step summed over all ranks (must divide by the world size)."""
-    lr: float = 3e-4
-    """AdamW peak learning rate."""
-    warmup_steps: int = 50
-    """Linear learning-rate warm-up from 0."""
-    weight_decay: float = 0.0
-    """AdamW weight decay."""
-    betas: list[float] = dataclasses.field(default_factory=lambda: [0.9, 0.99])
-    """AdamW betas."""
-    grad_clip: float = 1.0
-    """Clip the global gradient norm to this (0 = off)."""
-    ema_decay: float = 0.999
-    """EMA decay of the shipped weights."""
-    seed: int = 0
-    """Seeds initialisation, data order and every per-sample draw."""
-    log_every: int = 10
-    """Steps between metrics.jsonl rows."""
-    checkpoint_every: int = 200
-    """Steps between checkpoints (model folder + train_state.pt); always at the end."""
-    sample_every: int = 0
-    """Steps between sample grids in OUT/samples/ (0 = only at the end)."""
-    precision: Literal["auto", "fp32", "bf16"] = "auto"
-    """``auto``: bf16 autocast on CUDA, fp32 on the CPU (bf16 is ~200x slower there)."""
-    device: Literal["auto", "cpu", "cuda"] = "auto"
-    """Where to train."""
-    activation_checkpointing: bool = False
-    """Recompute block activations in the backward pass (saves memory)."""
-    compile: bool = False
-    """torch.compile each block (20-45 s up front on this CPU, ~10% faster)."""
-    parallel: Parallel = "auto"
-    """Under torchrun: ``ddp`` (= auto) or ``fsdp`` (FSDP2, for large presets)."""
-
-    def validate(self) -> None:
-        if self.steps < 1 or self.batch_size < 1:
-            raise DrivewmError("train: steps and batch_size must be >= 1")
-        if len(self.betas) != 2:
-            raise DrivewmError(f"train.betas: expected two numbers, got {self.betas}")
-
-
-class TrainTask(Protocol):
-    """What a stage gives the loop."""
+class TrainTask:
+    """What a stage gives the loop. Subclasses implement the first six methods; the last three are
+    optional hooks (a second network trained beside the model, e.g. a GAN discriminator)."""
 
     model: nn.Module
     """The module to train (e.g. an EDM denoiser around a DiT)."""
 
     def blocks(self) -> list[nn.Module]:
         """The repeated blocks (checkpointing, compile and FSDP apply per block)."""
+        raise NotImplementedError
 
     def num_samples(self) -> int:
         """Dataset size."""
+        raise NotImplementedError
 
     def tokens_per_sample(self) -> int:
         """Latent tokens per sample (throughput metric)."""
+        raise NotImplementedError
 
     def loss(
         self, forward: Callable[..., torch.Tensor], indices: list[int], seeds: list[int], device: torch.device
-    ) -> torch.Tensor:
+    ) -> torch.Tensor | tuple[torch.Tensor, dict[str, float]]:
         """Mean loss of the samples ``indices``, sample i drawing its randomness from ``seeds[i]``;
-        ``forward`` is the (possibly wrapped) model to call."""
+        ``forward`` is the (possibly wrapped) model to call. May also return named terms to log."""
+        raise NotImplementedError
 
     def save_model(self, ema_state: dict[str, torch.Tensor], out_dir: Path) -> None:
         """Write the model folder (config.json + model.safetensors) from EMA weights."""
+        raise NotImplementedError
 
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         """Write a PNG of samples from the EMA weights."""
+        raise NotImplementedError
+
+    def after_step(self, step: int) -> dict[str, float]:
+        """Called after every optimizer step of the model (``step`` = steps done); returns terms to log."""
+        return {}
+
+    def extra_state(self) -> dict:
+        """Task state saved in train_state.pt beside the model's (tensors, numbers, dicts)."""
+        return {}
+
+    def load_extra_state(self, state: dict) -> None:
+        """Restore :meth:`extra_state` on resume."""
 
 
 def mix_seed(*parts: int) -> int:
@@ -143,6 +115,8 @@ class _Run:
     optimizer: torch.optim.Optimizer
     ema: EMA
     step: int = 0
+    train_seconds: float = 0.0
+    """Wall seconds spent in training steps over the whole run, resumes included (compute spent)."""
 
 
 def _setup(task: TrainTask, cfg: TrainConfig) -> _Run:
@@ -163,12 +137,25 @@ def _state_dicts(run: _Run) -> tuple[dict, dict]:
     return get_state_dict(run.model, run.optimizer, options=StateDictOptions(full_state_dict=True, cpu_offload=True))
 
 
-def _resume(run: _Run, out_dir: Path) -> None:
+def _check_same_model(model: nn.Module, saved: dict[str, torch.Tensor], out_dir: Path) -> None:
+    """A resumed run must train the same network: same parameter names and shapes."""
+    ours = {name: tuple(p.shape) for name, p in model.state_dict().items()}  # DTensors report full shapes
+    theirs = {name: tuple(t.shape) for name, t in saved.items()}
+    if ours != theirs:
+        diff = sorted(set(ours.items()) ^ set(theirs.items()))[:3]
+        raise DrivewmError(
+            f"{out_dir}: holds a training run of a different model (differs at {diff}); "
+            "use a new --out or the same config"
+        )
+
+
+def _resume(run: _Run, task: TrainTask, out_dir: Path) -> None:
     from torch.distributed.checkpoint.state_dict import StateDictOptions, set_state_dict
 
     state = load_train_state(out_dir)
     if state is None:
         return
+    _check_same_model(run.model, state["model"], out_dir)
     set_state_dict(
         run.model,
         run.optimizer,
@@ -178,7 +165,9 @@ def _resume(run: _Run, out_dir: Path) -> None:
     )
     run.ema.load_state_dict(state["ema"])
     run.step = int(state["step"])
+    run.train_seconds = float(state.get("train_seconds", 0.0))
     torch.set_rng_state(state["rng"]["torch"])
+    task.load_extra_state(state.get("task", {}))
 
 
 def _checkpoint(run: _Run, task: TrainTask, out_dir: Path, config_record: dict) -> None:
@@ -194,9 +183,11 @@ def _checkpoint(run: _Run, task: TrainTask, out_dir: Path, config_record: dict) 
                 "ema": ema_sd,
                 "optimizer": optim_sd,
                 "step": run.step,
+                "train_seconds": run.train_seconds,
                 "data_position": run.step,
                 "rng": {"torch": torch.get_rng_state()},
                 "config": config_record,
+                "task": task.extra_state(),
             },
         )
     barrier(run.info)
@@ -212,8 +203,9 @@ def _metrics_file(out_dir: Path, start_step: int):
     return path.open("a")
 
 
-def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, float]:
-    """One optimizer step on this rank's slice of the global batch; returns (mean loss, grad norm)."""
+def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, float, dict[str, float]]:
+    """One optimizer step on this rank's slice of the global batch; returns (mean loss, grad norm, the
+    task's named terms of this rank)."""
     info, step = run.info, run.step
     indices = global_batch(step, cfg.batch_size, task.num_samples(), cfg.seed)
     seeds = [mix_seed(cfg.seed, step, j) for j in range(cfg.batch_size)]
@@ -223,6 +215,7 @@ def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, fl
     use_bf16 = cfg.precision == "bf16" or (cfg.precision == "auto" and info.device.type == "cuda")
     with torch.autocast(info.device.type, dtype=torch.bfloat16, enabled=use_bf16):
         loss = task.loss(run.forward, indices[local], seeds[local], info.device)
+    loss, terms = loss if isinstance(loss, tuple) else (loss, {})
     loss.backward()
     grad_norm = torch.nn.utils.clip_grad_norm_(
         run.model.parameters(), cfg.grad_clip if cfg.grad_clip > 0 else float("inf")
@@ -231,11 +224,13 @@ def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, fl
     run.optimizer.zero_grad(set_to_none=True)
     run.ema.update(run.model, step)
     run.step += 1
+    terms = {**terms, **task.after_step(run.step)}
     mean_loss = loss.detach()
     if info.distributed:
         dist.all_reduce(mean_loss)  # SUM (gloo has no AVG)
         mean_loss /= info.world_size
-    return float(mean_loss), float(grad_norm.full_tensor() if hasattr(grad_norm, "full_tensor") else grad_norm)
+    grad_norm = grad_norm.full_tensor() if hasattr(grad_norm, "full_tensor") else grad_norm
+    return float(mean_loss), float(grad_norm), terms
 
 
 def train(
@@ -253,7 +248,7 @@ def train(
     out_dir = Path(out_dir)
     torch.manual_seed(cfg.seed)
     run = _setup(task, cfg)
-    _resume(run, out_dir)
+    _resume(run, task, out_dir)
     start, last = run.step, {}
     end = cfg.steps if stop_after is None else min(cfg.steps, start + stop_after)
     metrics = _metrics_file(out_dir, start) if run.info.is_main else None
@@ -261,8 +256,9 @@ def train(
     busy_s, busy_steps = 0.0, 0  # training time since the last row (checkpoints and samples excluded)
     for _ in bar:
         tic = time.perf_counter()
-        loss, grad_norm = _train_step(run, task, cfg)
+        loss, grad_norm, terms = _train_step(run, task, cfg)
         busy_s, busy_steps = busy_s + time.perf_counter() - tic, busy_steps + 1
+        run.train_seconds += time.perf_counter() - tic
         if run.step % cfg.log_every == 0 or run.step == end:
             last = {
                 "step": run.step,
@@ -270,6 +266,8 @@ def train(
                 "grad_norm": grad_norm,
                 "lr": learning_rate(cfg, run.step - 1),
                 "tokens_per_s": task.tokens_per_sample() * cfg.batch_size * busy_steps / max(busy_s, 1e-9),
+                "train_seconds": run.train_seconds,
+                **terms,
             }
             busy_s, busy_steps = 0.0, 0
             if metrics:

@@ -7,13 +7,10 @@ APIs), so checkpoints of a parallel run load into the plain single-device model.
 
 from __future__ import annotations
 
-from typing import Literal
-
 from torch import nn
 
+from drivewm.train.config import Parallel
 from drivewm.train.distributed import DistInfo
-
-Parallel = Literal["auto", "ddp", "fsdp"]
 
 
 def apply_activation_checkpointing(blocks: list[nn.Module]) -> None:

@@ -55,6 +55,8 @@ class TransferOptions:
     (a Text2World model): the noise level the source is lifted to (required)."""
     tokenizer: str | None = None
     """Tokenizer folder; None = the one recorded in the model folder."""
+    device: str = "cpu"
+    """Where the networks run: ``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
 
     def target_for(self, clip: Clip) -> TargetCondition:
         """The target of one clip: the weather asked for, the time asked for or the clip's own."""
@@ -71,6 +73,7 @@ class Transferer:
     fn: object
     latent: LatentInfo
     record: dict  # what the output clips record in extra["transfer"]
+    device: torch.device = torch.device("cpu")  # where the model runs (the tokenizer joins it)
 
 
 def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transferer:
@@ -86,33 +89,33 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
     if model_type == "transfer":
         from drivewm.transfer.model import Transfer
 
-        model = Transfer.from_pretrained(model_dir)
+        model = Transfer.from_pretrained(model_dir).to(o.device)
 
         def fn(src, captions, targets, seeds):
             return model.transfer_latents(src, captions, targets, seeds, o.steps, o.guidance, o.sampler, o.start_sigma)
 
-        return Transferer(fn, model.latent, {**record, "method": "transfer"})
+        return Transferer(fn, model.latent, {**record, "method": "transfer"}, model.device)
     if model_type == "text2world":
         from drivewm.diffusion.text2world import Text2World
         from drivewm.transfer.sdedit import sdedit_latents
 
         if not o.start_sigma:
             raise DrivewmError(f"{model_dir}: a Text2World model transfers by SDEdit and needs --start-sigma")
-        t2w = Text2World.from_pretrained(model_dir)
+        t2w = Text2World.from_pretrained(model_dir).to(o.device)
 
         def fn(src, captions, targets, seeds):
             return sdedit_latents(t2w, src, captions, seeds, o.start_sigma, o.steps, o.guidance, o.sampler)
 
-        return Transferer(fn, t2w.latent, {**record, "method": "sdedit"})
+        return Transferer(fn, t2w.latent, {**record, "method": "sdedit"}, t2w.device)
     raise DrivewmError(f"{model_dir}: cannot transfer with model_type {model_type!r} (transfer or text2world)")
 
 
-def load_tokenizer(path: str | None, model_dir: str | Path):
+def load_tokenizer(path: str | None, model_dir: str | Path, device: torch.device | str = "cpu"):
     from drivewm.tokenizer import Tokenizer
 
     if not path:
         raise DrivewmError(f"{model_dir}: no tokenizer recorded in the model folder; give --tokenizer")
-    return Tokenizer.from_pretrained(path)
+    return Tokenizer.from_pretrained(path).to(device)
 
 
 @torch.no_grad()
@@ -128,11 +131,11 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
         )
     target = options.target_for(clip)
     small = video_to_uint8(frames_to_video(clip.videos(), (h * sc, w * sc)))  # (V, T, H, W, 3) at the model's size
-    source = encode_views(tokenizer, small, (h * sc, w * sc))  # (V, c, t, h, w)
+    source = encode_views(tokenizer, small, (h * sc, w * sc), transferer.device)  # (V, c, t, h, w) on the CPU
     _, views = target_captions(clip.meta, target)
     captions = [views[name] for name in clip.meta.cameras]
     seeds = [options.seed + v for v in range(len(captions))]
-    out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds))
+    out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
     rig = clip.meta.get_rig().scaled(w * sc, h * sc)
     meta = dataclasses.replace(clip.meta, rig=rig.to_dict())
     meta = retarget_meta(meta, target, f"{clip.key}-{target.weather}-{target.time_of_day}", transferer.record)
@@ -145,7 +148,7 @@ def transfer_clips(
     """Transfer every clip of ``inputs`` (shards or clip folders) into ``out_dir``; returns the report
     (also ``report.json``): clips written, and clips or shards skipped with the reason."""
     transferer = load_transferer(model_dir, options)
-    tokenizer = load_tokenizer(options.tokenizer or transferer.latent.tokenizer, model_dir)
+    tokenizer = load_tokenizer(options.tokenizer or transferer.latent.tokenizer, model_dir, transferer.device)
     out = Path(out_dir)
     (out / "sheets").mkdir(parents=True, exist_ok=True)
     rows, failed, sheet = [], [], []

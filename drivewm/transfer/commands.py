@@ -28,6 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="start from the source noised to this sigma (transfer model: optional; Text2World/SDEdit: required)",
     )
     p.add_argument("--tokenizer", help="tokenizer folder (default: the model's)")
+    p.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
+    )
     p.set_defaults(func=transfer_command)
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
@@ -40,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--recipe", type=Path, help="recipe YAML (keys: preset, config, overrides)")
     t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a field")
     t.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+    t.add_argument(
+        "--device", choices=["auto", "cpu", "cuda"], help="where to train (sets train.device; default: the recipe's)"
+    )
     t.set_defaults(func=transfer_train_command)
 
 
@@ -55,6 +61,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.seed,
         args.start_sigma,
         args.tokenizer,
+        args.device,
     )
     report = transfer_clips(args.model, args.clips, options, args.out)
     for item in report["failed"]:
@@ -67,7 +74,8 @@ def transfer_train_command(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
     from drivewm.transfer.train import RECIPES, train_transfer
 
-    cfg = RECIPES.resolve(args.preset, args.recipe, args.overrides)
+    device = [f"train.device={args.device}"] if args.device else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*args.overrides, *device])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0

@@ -62,7 +62,7 @@ class PairDataset:
         if not self.pairs:
             raise DrivewmError(
                 f"{self.cache.dir}: no clip pairs (clips of one pair_id in different conditions); simulate with "
-                "--conditions and curate with datasets/curate/transfer.yaml"
+                "--conditions and curate with --recipe transfer"
             )
         self._clips: dict[int, LatentClip] = {}
         self.items = [(s, t, v) for s, t in self.pairs for v in range(len(self.metas[s].cameras))]

@@ -18,17 +18,19 @@ import torch
 from torch import nn
 
 from drivewm.config import from_dict, to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.text2world import LatentInfo
+from drivewm.diffusion.dit_config import upgrade_saved_fields
+from drivewm.diffusion.sampling import sample
+from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.multiview.warp import WarpEncoder
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 from drivewm.transfer.condition_encoder import ConditionEncoder, condition_indices
 from drivewm.transfer.config import TransferModelConfig
 from drivewm.transfer.retarget import TargetCondition
-from drivewm.transfer.sampling import sample_from
 
 MODEL_TYPE = "transfer"
 
@@ -97,6 +99,13 @@ class Transfer:
         self.parent = parent  # the Text2World folder it was post-trained from (for the record)
         self.text_encoder = build_text_encoder(cfg.text)
         self.net = TransferNet(cfg).eval()
+        self.device = torch.device("cpu")
+
+    def to(self, device: str | torch.device) -> Transfer:
+        """Run sampling on ``device`` (``auto``: CUDA when available); noise stays seeded on the CPU."""
+        self.device = resolve_device(device)
+        self.net.to(self.device)
+        return self
 
     def save_pretrained(self, path: str | Path, state: dict[str, torch.Tensor] | None = None) -> None:
         """Write the model folder (``state`` defaults to the network's current weights)."""
@@ -108,10 +117,9 @@ class Transfer:
     def from_pretrained(cls, path: str | Path) -> Transfer:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
+        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
         model = cls(
-            from_dict(TransferModelConfig, info["config"], where),
-            from_dict(LatentInfo, info.get("latent", {}), f"{where} latent"),
-            str(info.get("parent", "")),
+            from_dict(TransferModelConfig, config, where), read_latent_info(info, path), str(info.get("parent", ""))
         )
         load_weights(model.net, state, path)
         return model
@@ -119,12 +127,13 @@ class Transfer:
     def conditioning(
         self, source: torch.Tensor, captions: list[str], targets: list[TargetCondition], fps: float | None = None
     ) -> TransferConditioning:
-        """Conditioning of B samples: normalised source latents (B, c, t, h, w), a caption and a target each."""
+        """Conditioning of B samples: normalised source latents (B, c, t, h, w), a caption and a target each
+        (on the CPU; ``.to(device)`` moves it)."""
         emb, mask = self.text_encoder.encode(captions)
         idx = torch.tensor([condition_indices(t.weather, t.time_of_day) for t in targets], dtype=torch.long)
         return TransferConditioning(
-            emb,
-            mask,
+            emb.cpu(),
+            mask.cpu(),
             torch.full((len(captions),), float(fps or self.latent.fps)),
             source=source,
             weather=idx[:, 0],
@@ -153,7 +162,18 @@ class Transfer:
         z = normalize_latents(source.float(), mean, std, self.cfg.edm.sigma_data)
         cond = self.conditioning(z, captions, targets)
         start = z if start_sigma is not None else None
-        x = sample_from(self.net, z.shape, seeds, cond, steps, guidance, sampler, start, start_sigma)
+        x = sample(
+            self.net,
+            cond,
+            z.shape[1:],
+            seeds,
+            steps,
+            guidance,
+            sampler,
+            device=self.device,
+            start=start,
+            start_sigma=start_sigma,
+        )
         return denormalize_latents(x, mean, std, self.cfg.edm.sigma_data)
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:

@@ -1,7 +1,7 @@
 """The baseline transfer: SDEdit with the Text2World model (no training).
 
 Noise the source clip's latents to ``sigma`` and denoise them with the target caption
-(drivewm.transfer.sampling; Meng et al. 2022). Small sigma keeps the source (and its condition),
+(drivewm.diffusion.sampling; Meng et al. 2022). Small sigma keeps the source (and its condition),
 large sigma follows the caption but forgets the drive; the transfer model must beat the best
 sigma at the same number of network evaluations (benchmarks/bench_transfer.py).
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 import torch
 
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
+from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import Text2World
-from drivewm.transfer.sampling import sample_from
 
 
 @torch.no_grad()
@@ -31,6 +31,17 @@ def sdedit_latents(
     mean, std = torch.tensor(model.latent.latent_mean), torch.tensor(model.latent.latent_std)
     sigma_data = model.cfg.edm.sigma_data
     z = normalize_latents(source.float(), mean, std, sigma_data)
-    cond = model.conditioning(captions)
-    x = sample_from(model.denoiser, z.shape, seeds, cond, steps, guidance, sampler, z, sigma)
+    cond = model.conditioning(captions)  # on the model's device
+    x = sample(
+        model.denoiser,
+        cond,
+        z.shape[1:],
+        seeds,
+        steps,
+        guidance,
+        sampler,
+        device=model.device,
+        start=z,
+        start_sigma=sigma,
+    )
     return denormalize_latents(x, mean, std, sigma_data)

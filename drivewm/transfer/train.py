@@ -13,15 +13,16 @@ from pathlib import Path
 
 import torch
 
+from drivewm.clips.latents import find_latent_cache
 from drivewm.config import to_dict
+from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
-from drivewm.diffusion.pretrain import DataConfig, check_tokenizer, find_latent_cache
+from drivewm.diffusion.pretrain import DataConfig, check_tokenizer
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
-from drivewm.multiview.posttrain import to_device
 from drivewm.recipe import RecipeBook
 from drivewm.sim.paired import parse_conditions
-from drivewm.train.loop import TrainConfig, train
+from drivewm.train.loop import TrainConfig, TrainTask, train
 from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.data import PairDataset
 from drivewm.transfer.init import from_text2world
@@ -92,7 +93,7 @@ RECIPES = RecipeBook(
 )
 
 
-class TransferTask:
+class TransferTask(TrainTask):
     """drivewm.train.loop.TrainTask for transfer post-training on a :class:`PairDataset`."""
 
     def __init__(self, cfg: TransferTrainConfig, dataset: PairDataset, model: Transfer):
@@ -124,7 +125,7 @@ class TransferTask:
         keep = torch.tensor([float(torch.rand(1, generator=g)) >= self.cfg.transfer.condition_dropout for g in gens])
         source = torch.stack([s.source for s in samples])
         cond = self.bundle.conditioning(source, [s.caption for s in samples], [s.condition for s in samples])
-        return edm_loss(forward, edm, x0, to_device(cond, device), sigma.to(device), noise, keep.to(device))
+        return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
     def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> Transfer:
         with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
@@ -140,7 +141,8 @@ class TransferTask:
         from drivewm.diffusion.data import denormalize_latents
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle = self._ema_bundle(ema_state)
+        device = next(self.model.parameters()).device  # the training device
+        bundle = self._ema_bundle(ema_state).to(device)
         samples = [self.dataset[i] for i in range(0, len(self.dataset), max(1, len(self.dataset) // 2))][:2]
         stats = (
             torch.tensor(bundle.latent.latent_mean),
@@ -158,7 +160,7 @@ class TransferTask:
         target = denormalize_latents(torch.stack([s.target for s in samples]), *stats)
         rows = torch.stack([source, out, target], dim=1).flatten(0, 1)  # (3B, c, t, h, w)
         labels = [f"{kind} {s.condition.name}" for s in samples for kind in ("source, to", "transferred to", "true")]
-        write_grid_png(decode_latents(rows, bundle.latent.tokenizer), path, labels)
+        write_grid_png(decode_latents(rows, bundle.latent.tokenizer, device), path, labels)
 
 
 def train_transfer(
@@ -170,6 +172,7 @@ def train_transfer(
 ) -> dict:
     """Post-train a transfer model folder into ``out_dir`` from the Text2World folder ``init_dir``
     (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
+    resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     parent = Text2World.from_pretrained(init_dir)
     tokenizer = Path(parent.latent.tokenizer) if parent.latent.tokenizer else None
     cache = find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents)

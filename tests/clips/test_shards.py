@@ -31,7 +31,7 @@ def smooth_video(T=9, H=64, W=96, seed=0):
 
 
 def make_clip(key, T=9):
-    rig = load_rig("front3").scaled(96, 64)
+    rig = load_rig("front3").scaled(96, 64, fit="stretch")
     meta = ClipMeta(
         key=key,
         source_log="test.mcap",

@@ -37,7 +37,8 @@ def make_log(
     tags: dict | None = None,
 ) -> DriveLog:
     """A DriveLog (not written). ``drop``: camera -> frame indices missing; ``nan_poses``: pose
-    indices set to NaN; ``corrupt``: camera -> frame indices whose JPEG bytes are garbage; ``jitter_ns``: per-camera constant time offsets up to this."""
+    indices set to NaN; ``corrupt``: camera -> frame indices whose JPEG bytes are garbage; ``jitter_ns``:
+    per-camera constant time offsets up to this."""
     rig_ = load_rig(rig)
     W, H = rig_.cameras[0].width, rig_.cameras[0].height
     tex = texture(seed, H * 2, W * 8)

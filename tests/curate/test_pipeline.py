@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from synth import write_synth_log  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
-CONFIG = REPO / "datasets" / "curate" / "test.yaml"
+CONFIG = "test"
 
 
 def make_logs(folder: Path) -> list[Path]:
@@ -120,10 +120,11 @@ def _wait_for(pattern_dir: Path, proc: subprocess.Popen, timeout: float = 120.0)
         time.sleep(0.01)
 
 
+@pytest.mark.slow
 def test_sigkill_then_rerun_equals_uninterrupted(run, tmp_path):
     root, logs, cfg, report = run
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--config", str(CONFIG)]
+    cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--recipe", CONFIG]
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     _wait_for(out / "logs", proc)
@@ -142,6 +143,7 @@ def test_sigkill_then_rerun_equals_uninterrupted(run, tmp_path):
     assert not list(out.glob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_ray_executor_matches_local(run, tmp_path):
     pytest.importorskip("ray")
     root, logs, cfg, report = run

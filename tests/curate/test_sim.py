@@ -1,4 +1,4 @@
-"""Simulated nuscenes6 logs curated by the shared fixture (datasets/curate/test.yaml)."""
+"""Simulated nuscenes6 logs curated by the shared fixture (drivewm/recipes/curate/test.yaml)."""
 
 from pathlib import Path
 
@@ -9,7 +9,6 @@ from drivewm.curate import load_curate_config
 from drivewm.geometry import yaw_of
 from drivewm.logs.reader import read_log
 
-REPO = Path(__file__).resolve().parents[2]
 # Smoothing error bound on the simulator's exact poses with the default filter (measured: at most
 # 0.14 m and 0.33 deg, in highway-env's abrupt lane changes; the filter expects 0.3 m GNSS noise).
 MAX_POSITION_ERROR_M = 0.2
@@ -17,7 +16,7 @@ MAX_YAW_ERROR_DEG = 0.6
 
 
 def test_sim_clips_have_every_camera_synced_and_logged_poses(sim_log_dir, sim_clip_dir):
-    cfg = load_curate_config(REPO / "datasets/curate/test.yaml")
+    cfg = load_curate_config("test")
     logs = {p.stem: read_log(p) for p in sim_log_dir.glob("*.mcap")}
     clips = list(iter_clips(sim_clip_dir))
     assert {Path(c.meta.source_log).stem for c in clips} == set(logs)  # every drive gives clips (night too)

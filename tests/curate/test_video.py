@@ -1,14 +1,11 @@
 """Real video through import-video + curate: Sintel cuts and dark runs, a real dashcam drive."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from drivewm.curate import curate, load_curate_config
 from drivewm.curate.import_video import import_videos
 
-REPO = Path(__file__).resolve().parents[2]
 # Facts from ../shared/data/README.md (source frame indices at 24 fps, measured roughly)
 SINTEL_DARK_RUNS = [(99, 182), (214, 239)]  # test_clip_10s
 SINTEL_CUTS = [348, 372, 523, 573, 610, 624]  # test_video_30s
@@ -24,7 +21,7 @@ def curated(shared_data, tmp_path_factory):
     (root / "cam.yaml").write_text(CALIBRATION)
     videos = [shared_data / "video/sintel_cuts", shared_data / "video/dashcam_highway"]
     logs = import_videos(videos, root / "cam.yaml", root / "logs")
-    report = curate(logs, root / "out", load_curate_config(REPO / "datasets/curate/video.yaml"), progress=False)
+    report = curate(logs, root / "out", load_curate_config("video"), progress=False)
     from drivewm.clips import read_manifest
 
     rows = read_manifest(root / "out")
@@ -40,6 +37,7 @@ def _span_s(row):
     return t0, t0 + (row["num_frames"] - 1) / row["fps"]
 
 
+@pytest.mark.slow
 def test_sintel_loses_dark_runs(curated):
     report, rows = curated
     log = report["logs"]["test_clip_10s"]
@@ -53,6 +51,7 @@ def test_sintel_loses_dark_runs(curated):
         assert row["tags"]["ego_motion"] == "unknown"
 
 
+@pytest.mark.slow
 def test_sintel_clips_split_at_cuts(curated):
     report, rows = curated
     kept = _rows(rows, "test_video_30s")
@@ -66,6 +65,7 @@ def test_sintel_clips_split_at_cuts(curated):
     assert any(abs(s - 523 / 24) < 0.2 for s in starts)
 
 
+@pytest.mark.slow
 def test_dashcam_kept_as_consecutive_driving_clips(curated):
     report, rows = curated
     log = report["logs"]["solidWhiteRight"]

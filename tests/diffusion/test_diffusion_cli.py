@@ -39,7 +39,7 @@ def _save_tokenizer(path: Path, **changes) -> Tokenizer:
 
 def _write_cache(cache: Path, tok: Tokenizer, tok_dir: Path, n: int) -> None:
     """n clips of 5 frames at 16x32: latents (1, 16, 2, 2, 4) drawn at random."""
-    rig = load_rig("front1").scaled(32, 16).to_dict()
+    rig = load_rig("front1").scaled(32, 16, fit="stretch").to_dict()
     rows = []
     for i in range(n):
         meta = ClipMeta(
@@ -76,6 +76,7 @@ def _run(capsys, *argv: str) -> tuple[int, str, str]:
     return code, out.out, out.err
 
 
+@pytest.mark.slow
 def test_pretrain_then_generate_writes_clips_mp4_and_contact_sheet(clipdir, tmp_path, capsys):
     data, tok_dir = clipdir
     code, out, err = _run(
@@ -144,7 +145,7 @@ def test_dry_run_prints_resolved_config_with_overrides(clipdir, tmp_path, capsys
 @pytest.mark.parametrize(
     "extra, message",
     [
-        (["--preset", "huge"], "unknown preset 'huge'"),
+        (["--preset", "huge"], "invalid choice: 'huge'"),
         (["--set", "train.stepz=3"], "unknown key(s) ['stepz']"),
         (["--set", "train.steps=many"], "train.steps: expected an integer"),
         (["--set", "trainsteps"], "expected KEY=VALUE"),
@@ -170,3 +171,41 @@ def test_empty_cache_mismatched_tokenizer_and_wrong_model_are_refused(clipdir, t
     assert code == 2 and "no latent cache" in err
     code, _, err = _run(capsys, "generate", "--model", tok_dir, "--prompt", "snow", "--out", tmp_path / "g")
     assert code == 2 and "cannot generate from model_type 'drivewm-tokenizer'" in err
+
+
+def test_progressive_schedule_images_then_video_warm_starts_the_same_network(clipdir, tmp_path, capsys):
+    data, tok_dir = clipdir
+    flags = [a for o in TINY for a in ("--set", o)]
+    common = ("--data", data, "--tokenizer", tok_dir)
+    code, _, err = _run(capsys, "pretrain", *common, "--out", tmp_path / "img", "--set", "data.frames=1", *flags)
+    assert code == 0, err
+    image_model = json.loads((tmp_path / "img" / "config.json").read_text())
+    assert image_model["latent"]["latent_shape"] == [16, 1, 2, 4]  # the first latent frame: an image latent
+    code, _, err = _run(capsys, "pretrain", *common, "--out", tmp_path / "vid", "--init", tmp_path / "img", *flags)
+    assert code == 0, err
+    assert json.loads((tmp_path / "vid" / "config.json").read_text())["latent"]["latent_shape"] == [16, 2, 2, 4]
+    from safetensors.torch import load_file
+
+    from drivewm.diffusion.pretrain import warm_start
+    from drivewm.diffusion.text2world import Text2World
+
+    img = load_file(str(tmp_path / "img" / "model.safetensors"))
+    fresh = Text2World.from_pretrained(tmp_path / "vid")  # trained on from the image weights: differs from them
+    assert any(not torch.equal(fresh.dit.state_dict()[k], img[k]) for k in img)
+    warm_start(fresh, tmp_path / "img")  # what the video stage starts from: exactly the image model
+    assert all(torch.equal(fresh.dit.state_dict()[k], img[k]) for k in img)
+    state = torch.load(tmp_path / "vid" / "train_state.pt", weights_only=True)
+    assert state["config"]["init"] == str((tmp_path / "img").resolve())
+    code, _, err = _run(
+        capsys,
+        "pretrain",
+        *common,
+        "--out",
+        tmp_path / "bad",
+        "--init",
+        tmp_path / "img",
+        *flags,
+        "--set",
+        "model.depth=2",
+    )
+    assert code == 2 and "config differs from this run's at ['depth']" in err

@@ -8,10 +8,12 @@ import pytest
 import torch
 from torch import nn
 
+from drivewm.cli import main
 from drivewm.diffusion.blocks import SUBLAYERS, register_sublayer
 from drivewm.diffusion.dit import DiT, count_parameters, patchify, unpatchify
 from drivewm.diffusion.dit_config import DIT_PRESETS, DiTConfig, dit_preset
 from drivewm.diffusion.rope import apply_rope, grid_positions, rope_angles
+from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.errors import DrivewmError
 
 CFG = DiTConfig(in_channels=4, hidden_dim=64, depth=2, num_heads=4, text_dim=16, adaln_lora_dim=8)
@@ -49,6 +51,37 @@ def test_fresh_dit_outputs_zero_so_edm_starts_at_c_skip_x():
     assert DiT(CFG)(*_inputs()).abs().max() == 0
 
 
+def _rope_by_pairs(x: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
+    """RoFormer eq. 34 written out: (x_2j, x_2j+1) -> (x_2j cos - x_2j+1 sin, x_2j sin + x_2j+1 cos)."""
+    cos, sin = angles.cos().unsqueeze(1), angles.sin().unsqueeze(1)
+    even, odd = x[..., 0::2], x[..., 1::2]
+    return torch.stack([even * cos - odd * sin, even * sin + odd * cos], dim=-1).flatten(-2)
+
+
+def test_complex_rope_equals_the_pairwise_rotation():
+    pos = grid_positions(3, 2, 4, torch.tensor([10.0, 5.0]), base_fps=10.0)
+    ang = rope_angles(pos, 24)  # (2, 24, 12)
+    x = torch.randn(2, 3, 24, 24, generator=torch.Generator().manual_seed(0))  # (B, heads, N, hd)
+    assert torch.allclose(apply_rope(x, ang), _rope_by_pairs(x, ang), atol=1e-5)
+
+
+def test_rope_rotations_are_computed_once_per_grid_and_frame_rate():
+    model = DiT(CFG)
+    ten, five = torch.full((2,), 10.0), torch.full((2,), 5.0)
+    first = model.rope((3, 2, 3), ten)
+    assert model.rope((3, 2, 3), ten) is first and first.shape == (1, 18, 1, CFG.head_dim // 2)
+    assert not torch.allclose(model.rope((3, 2, 3), five), first)
+    # A batch of clips at different rates gets each clip's own rotations.
+    mixed = model.rope((3, 2, 3), torch.tensor([10.0, 5.0]))
+    assert torch.equal(mixed[:1], first) and torch.equal(mixed[1:], model.rope((3, 2, 3), five))
+    # Made under inference mode, the cached rotations still serve a training step afterwards.
+    fresh = _randomize(DiT(CFG))
+    with torch.inference_mode():
+        fresh(*_inputs())
+    fresh(*_inputs()).square().mean().backward()
+    assert fresh.patch_embed.weight.grad is not None
+
+
 def test_rope_is_relative_and_fps_scaled():
     # Rotating q and k by their positions makes q.k depend on the offset only.
     pos = grid_positions(4, 2, 2, torch.tensor([10.0]), base_fps=10.0)
@@ -62,8 +95,13 @@ def test_rope_is_relative_and_fps_scaled():
     assert torch.equal(slow[..., 1:], pos[..., 1:])
 
 
-def test_output_depends_on_text_fps_and_extra_conditions_but_not_masked_tokens():
-    model = _randomize(DiT(CFG)).eval()
+#: The two ways text enters a block: joint attention (default) and the older self- + cross-attention.
+LAYOUTS = [["joint_attn", "mlp"], ["self_attn", "cross_attn", "mlp"]]
+
+
+@pytest.mark.parametrize("layers", LAYOUTS, ids=["joint", "self+cross"])
+def test_output_depends_on_text_fps_and_extra_conditions_but_not_masked_tokens(layers):
+    model = _randomize(DiT(dataclasses.replace(CFG, block_layers=layers))).eval()
     x, noise, text, mask, fps = _inputs()
     base = model(x, noise, text, mask, fps)
     masked = mask.clone()
@@ -100,13 +138,23 @@ def test_inserting_a_sublayer_by_config_starts_as_the_original_model():
     try:
         base = _randomize(DiT(CFG)).eval()
         extended = DiT(
-            dataclasses.replace(CFG, block_layers=["self_attn", "toy_view_attn", "cross_attn", "mlp"])
+            dataclasses.replace(CFG, block_layers=[CFG.block_layers[0], "toy_view_attn", *CFG.block_layers[1:]])
         ).eval()
         missing, unexpected = extended.load_state_dict(base.state_dict(), strict=False)
         assert not unexpected and all(".toy_view_attn." in k for k in missing)
         assert torch.allclose(extended(*_inputs(), num_views=3), base(*_inputs()), atol=1e-6)
     finally:
         SUBLAYERS.pop("toy_view_attn")
+
+
+def test_unknown_sublayer_is_a_one_line_error(tmp_path, capsys):
+    with pytest.raises(DrivewmError, match="unknown block layer 'nope'.*registered: .*'self_attn'"):
+        DiT(dataclasses.replace(CFG, block_layers=["self_attn", "nope", "mlp"]))
+    cache = make_synthetic_latent_cache(tmp_path / "latents", clips_per_condition=1)
+    argv = ["pretrain", "--data", str(cache), "--out", str(tmp_path / "t2w"), "--set", "model.block_layers=[nope]"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "'nope'" in err
 
 
 def test_presets_span_debug_to_about_1b():
@@ -120,3 +168,21 @@ def test_presets_span_debug_to_about_1b():
         dit_preset("huge")
     with pytest.raises(DrivewmError, match="heads"):
         DiT(DiTConfig(hidden_dim=65, num_heads=4))
+
+
+def test_a_folder_saved_before_a_config_field_loads_as_it_was_trained(tmp_path):
+    """config.json written before ``mlp_activation`` existed: the tanh GELU those models were trained with."""
+    import json
+
+    from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+
+    old = Text2World(
+        Text2WorldConfig(dataclasses.replace(CFG, text_dim=256, mlp_activation="gelu_tanh")),
+        LatentInfo([4, 3, 4, 6], [0.0] * 4, [1.0] * 4),
+    )
+    old.save_pretrained(tmp_path)
+    info = json.loads((tmp_path / "config.json").read_text())
+    del info["config"]["dit"]["mlp_activation"]
+    (tmp_path / "config.json").write_text(json.dumps(info))
+    assert Text2World.from_pretrained(tmp_path).cfg.dit.mlp_activation == "gelu_tanh"
+    assert DiTConfig().mlp_activation == "gelu"  # new models: exact GELU (faster on the CPU)

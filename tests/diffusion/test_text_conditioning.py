@@ -26,6 +26,8 @@ from drivewm.diffusion.pretrain import pretrain, pretrain_config
 from drivewm.diffusion.text2world import Text2World
 from drivewm.eval.adherence import condition_scores
 
+pytestmark = pytest.mark.slow  # trains a Text2World model
+
 DRIVES = {"clear": "highway_clear", "snow": "highway_snow"}
 
 
@@ -106,7 +108,8 @@ def test_generated_clips_follow_the_prompted_condition_and_guidance_strengthens_
     acc_guided, gap_guided = _classify(trained, captions, threshold, snow > clear, guidance=4.0)
     acc_plain, gap_plain = _classify(trained, captions, threshold, snow > clear, guidance=1.0)
     print(
-        f"clear {clear:.3f} snow {snow:.3f}; accuracy guided {acc_guided:.2f} (gap {gap_guided:.3f}), plain {acc_plain:.2f} (gap {gap_plain:.3f})"
+        f"clear {clear:.3f} snow {snow:.3f}; accuracy guided {acc_guided:.2f} (gap {gap_guided:.3f}), plain "
+        f"{acc_plain:.2f} (gap {gap_plain:.3f})"
     )
     assert acc_guided >= 0.9, "chance is 0.5"
     assert gap_guided > gap_plain

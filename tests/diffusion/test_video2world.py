@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from drivewm.diffusion.data import LatentDataset, denormalize_latents
@@ -10,6 +11,7 @@ from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.diffusion.text2world import Text2World
 
 
+@pytest.mark.slow
 def test_video2world_training_and_sampling_keep_the_condition_frames(tmp_path):
     cache = make_synthetic_latent_cache(tmp_path / "lat", clips_per_condition=2)
     cfg = pretrain_config(

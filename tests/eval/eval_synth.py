@@ -47,7 +47,12 @@ def render(
     for cam in rig.cameras:
         big = cam.scaled(cam.width * supersample, cam.height * supersample)
         vv, uu = np.mgrid[0 : big.height, 0 : big.width]
-        rays = pixel_rays(big.K, np.stack([uu.ravel(), vv.ravel()], 1).astype(np.float64))
+        uv = np.stack([uu.ravel(), vv.ravel()], 1).astype(np.float64)
+        if np.any(cam.distortion):  # the ray through each pixel of a lens with OpenCV distortion
+            xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), big.K, cam.distortion).reshape(-1, 2)
+            rays = np.concatenate([xy, np.ones((len(xy), 1))], 1)
+        else:
+            rays = pixel_rays(big.K, uv)
         T_wc = T_world_from_ego @ cam.T_ego_from_cam
         dirs, origin = rays @ T_wc[:3, :3].T, T_wc[:3, 3]
         color = _cast(origin, dirs, textures).reshape(big.height, big.width, 3)
@@ -83,7 +88,7 @@ def _sample(texture: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def ego_path(num_frames: int, fps: float, speed_mps: float = 8.0, curve: float = 0.04) -> np.ndarray:
-    """T_world_from_ego (T, 4, 4): forward at ``speed_mps`` with a slow left curve (yaw rate ``curve`` rad/s... per m)."""
+    """T_world_from_ego (T, 4, 4): forward at ``speed_mps`` on a slow left curve (curvature ``curve`` / 2 per m)."""
     s = np.arange(num_frames) * speed_mps / fps
     yaw = curve * s / 2.0
     y = 0.5 * curve * s**2 / 4.0

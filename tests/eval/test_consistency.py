@@ -43,6 +43,7 @@ def baseline(synth_item, synth_videos):
     return tse(synth_videos, synth_item.rig, synth_item.T_world_from_ego), cse(synth_videos, synth_item.rig)
 
 
+@pytest.mark.slow
 def test_synthetic_clip_scores_low_tse_and_cse(baseline):
     t, c = baseline
     print(
@@ -60,6 +61,7 @@ def test_synthetic_clip_scores_low_tse_and_cse(baseline):
     assert 0.01 < c["calibrated"]["value_px"] < 0.6
 
 
+@pytest.mark.slow
 def test_perturbed_extrinsics_raise_calibrated_cse(synth_item, synth_videos, baseline):
     rig = synth_item.rig
     bad = "CAM_FRONT_LEFT"
@@ -77,6 +79,7 @@ def test_perturbed_extrinsics_raise_calibrated_cse(synth_item, synth_videos, bas
             assert value == pytest.approx(before[pair])
 
 
+@pytest.mark.slow
 def test_shuffled_frames_raise_tse(synth_item, synth_videos, baseline):
     order = np.array([0, 5, 2, 7, 4, 1, 8, 3, 6])
     shuffled = {c: v[order] for c, v in synth_videos.items()}
@@ -94,6 +97,7 @@ def test_shuffled_frames_raise_tse(synth_item, synth_videos, baseline):
     assert t["fitted"]["value_px"] > 1.15 * baseline[0]["fitted"]["value_px"]
 
 
+@pytest.mark.slow
 def test_simulated_clip_scores_low_tse_and_cse(sim_clip_dir):
     from drivewm.eval.inputs import load_items
     from drivewm.eval.suite import evaluate_item

@@ -1,3 +1,5 @@
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -16,7 +18,7 @@ from drivewm.eval.epipolar import (
     score_matches,
 )
 from drivewm.eval.matching import FrameMatcher, Matches
-from drivewm.geometry import rotation_angle_deg
+from drivewm.geometry import essential_from_T, rotation_angle_deg
 
 
 def test_sampson_equals_opencv_sampson_distance():
@@ -76,3 +78,32 @@ def test_euroc_relative_rotation_within_half_degree(euroc_matches):
         assert err < 0.5, err
         t_dir = T_1_from_0[:3, 3] / np.linalg.norm(T_1_from_0[:3, 3])
         assert float(T_est[:3, 3] @ t_dir) > 0.97  # baseline direction within ~14 deg (11 cm baseline, scene at metres)
+
+
+def test_far_field_stereo_pair_keeps_its_inliers():
+    """Two forward cameras 10 cm apart in the textured corridor (eval_synth): nearly every match is
+    farther than 50 baselines (5 m), where cv2.recoverPose's default cut-off drops it. relative_pose
+    keeps them as inliers, refines on them, and recovers the pose."""
+    from eval_synth import PLANES, make_texture, render
+
+    from drivewm.geometry import Rig, T_from_xyz_yaw, invert_T, load_rig, make_T
+
+    front = load_rig("nuscenes6").camera("CAM_FRONT")
+    left = dataclasses.replace(front, name="LEFT", T_ego_from_cam=make_T(np.eye(3), [0, 0.1, 0]) @ front.T_ego_from_cam)
+    rig = Rig("stereo", [front, left])
+    images = render(rig, T_from_xyz_yaw(-8.0, 0.0, 0.0, 0.0), [make_texture(i) for i in range(len(PLANES))])
+    K_c = canonical_K(EpipolarConfig())
+    m = rectify_matches(FrameMatcher(MatchConfig()).match(0, images["CAM_FRONT"], 1, images["LEFT"]), front, left, K_c)
+    T_true = invert_T(left.T_ego_from_cam) @ front.T_ego_from_cam
+    T_est, inliers = relative_pose(m, K_c, EpipolarConfig())
+    E = essential_from_T(T_true)
+    _, _, _, default_mask = cv2.recoverPose(E, m.uv_a, m.uv_b, K_c)  # OpenCV's 50-baseline cut-off
+    print(
+        f"far-field stereo: {len(m)} matches, {inliers.sum()} inliers, "
+        f"{int((default_mask > 0).sum())} within 50 baselines"
+    )
+    assert (default_mask > 0).sum() < 0.2 * len(m)  # the scene is far: the old mask lost most matches
+    assert inliers.sum() > 0.7 * len(m) and inliers.sum() > 100
+    assert rotation_angle_deg(T_est[:3, :3].T @ T_true[:3, :3]) < 0.1
+    t_dir = T_true[:3, 3] / np.linalg.norm(T_true[:3, 3])
+    assert float(T_est[:3, 3] @ t_dir) > 0.95

@@ -13,6 +13,8 @@ from drivewm.clips import Clip, ShardWriter
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.suite import evaluate
 
+pytestmark = pytest.mark.slow  # scores clips in two worker processes
+
 
 @pytest.fixture(scope="module")
 def two_clip_shard(tmp_path_factory, synth_clip6):

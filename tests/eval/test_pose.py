@@ -17,6 +17,7 @@ def front_sfm(synth_item, synth_videos):
     return rig, run_sfm({c: synth_videos[c] for c in FRONT3}, rig, PoseConfig())
 
 
+@pytest.mark.slow
 def test_synthetic_clip_registers_and_trajectory_matches(synth_item, front_sfm):
     rig, sfm = front_sfm
     assert sfm.all_registered and sfm.registered_fraction == 1.0
@@ -35,6 +36,7 @@ def test_synthetic_clip_registers_and_trajectory_matches(synth_item, front_sfm):
     assert sim.scale == pytest.approx(1.0, abs=0.05)  # rig-aware: the fixed rig baselines make it metric
 
 
+@pytest.mark.slow
 def test_noise_video_fails_pose_estimation(synth_item):
     rng = np.random.default_rng(0)
     rig = synth_item.rig.subset(FRONT3)
@@ -44,6 +46,7 @@ def test_noise_video_fails_pose_estimation(synth_item):
     assert not sfm.all_registered and sfm.registered_fraction < 0.5
 
 
+@pytest.mark.slow
 def test_simulated_clip_registers_fully(sim_clip_dir):
     """First 9 frames of the front three cameras of a simulated clear-weather clip (time budget)."""
     from drivewm.eval.inputs import load_items
@@ -57,6 +60,7 @@ def test_simulated_clip_registers_fully(sim_clip_dir):
     assert err < 0.5
 
 
+@pytest.mark.slow
 def test_single_camera_frames_give_trajectory_up_to_scale(synth_item, synth_videos):
     cam = synth_item.rig.camera("CAM_FRONT")
     ego = estimate_ego_trajectory(synth_videos["CAM_FRONT"], cam)

@@ -10,7 +10,8 @@ import pytest
 from drivewm.cli import main
 from drivewm.clips import ShardWriter
 from drivewm.clips.video import encode_mp4
-from drivewm.eval.config import EvalConfig
+from drivewm.config import load_yaml, to_dict
+from drivewm.eval.config import EVAL_RECIPES, EvalConfig
 from drivewm.eval.inputs import EvalItem
 from drivewm.eval.suite import aggregate, evaluate, evaluate_item
 from drivewm.geometry import load_rig
@@ -34,16 +35,20 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
     item = EvalItem("grey", rig, 10.0, poses)
     item.videos = lambda: grey  # the decoded frames of a flat grey video
     m = evaluate_item(item, EvalConfig(metrics=["tse", "cse", "pose", "traj"])).metrics
-    assert math.isnan(m["tse"]) and m["status"]["tse"] == {"too_few_matches": 8 * 3}
-    assert math.isnan(m["cse"]) and set(m["status"]["cse"]) == {"too_few_matches"}
+    # A pair that cannot be scored counts at failed_pair_px (issue 14: a constant frame must not win);
+    # the values were NaN before.
+    assert m["tse"] == 4.0 and m["status"]["tse"] == {"too_few_matches": 8 * 3} and m["tse_counted_fraction"] == 0
+    assert m["cse"] == 4.0 and set(m["status"]["cse"]) == {"too_few_matches"} and math.isnan(m["cse_counted"])
     assert m["pose_success"] == 0.0 and m["registered_fraction"] == 0.0
     assert math.isnan(m["ate"]) and m["status"]["traj"] == "not_registered"
     from drivewm.eval.suite import ClipResult
 
     agg = aggregate([ClipResult("grey", m, {})])
-    assert math.isnan(agg["tse"]) and agg["nan_clips"]["tse"] == 1 and agg["pose_success"] == 0.0
+    assert math.isnan(agg["ate"]) and agg["nan_clips"]["ate"] == 1 and agg["pose_success"] == 0.0
+    assert agg["tse"] == 4.0 and math.isnan(agg["tse_counted"]) and agg["nan_clips"]["tse_counted"] == 1
 
 
+@pytest.mark.slow
 def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path, capsys):
     out = tmp_path / "eval"
     rc = main(
@@ -57,11 +62,15 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
             "--workers",
             "2",
             "--reference",
-            "eval/reference/cosmos_paper.json",
+            "cosmos_paper",
         ]
     )
     assert rc == 0
     metrics = json.loads((out / "metrics.json").read_text())
+    # stdout's summary is strict JSON (no NaN) and equals metrics.json's top level.
+    stdout = capsys.readouterr().out
+    summary = json.loads(stdout[: stdout.rindex("}") + 1], parse_constant=lambda c: pytest.fail(f"{c} in stdout"))
+    assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
     assert metrics["num_clips"] == 2 and set(metrics["clips"]) == {"corridor", "corridor2"}
     assert 0 < metrics["tse"] < 0.3 and 0 < metrics["cse"] < 0.5
     # Same clip twice, scored in two processes: identical numbers.
@@ -72,6 +81,7 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
     assert (out / "eval.rrd").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_mp4_folder_and_grid_inputs_match_the_shard(shard_dir, synth_clip6, tmp_path):
     cfg = EvalConfig(metrics=["cse"])
     ref = evaluate(shard_dir, cfg=cfg, progress=False)["clips"]["corridor"]
@@ -113,15 +123,15 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
 
 
 def test_default_suite_yaml_pins_the_config_defaults():
-    from pathlib import Path
+    assert EVAL_RECIPES.recipe_names() == ["default", "quick"]
+    assert to_dict(EVAL_RECIPES.resolve(recipe="default")) == to_dict(EvalConfig())
+    written = load_yaml(EVAL_RECIPES.recipe_path("default"))["config"]
+    assert set(written) == set(to_dict(EvalConfig()))
+    assert all(set(v) == set(to_dict(EvalConfig())[k]) for k, v in written.items() if isinstance(v, dict))
+    assert EVAL_RECIPES.resolve(recipe="quick", overrides=["match.ratio=0.75"]).match.ratio == 0.75
 
-    from drivewm.config import load_yaml, to_dict
-    from drivewm.eval.config import eval_config_from_dict
 
-    suite = Path(__file__).resolve().parents[2] / "eval" / "suites" / "default.yaml"
-    assert to_dict(eval_config_from_dict(load_yaml(suite))) == to_dict(EvalConfig())
-
-
+@pytest.mark.slow
 def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
     import shutil
 
@@ -133,3 +143,23 @@ def test_corrupt_shard_is_reported_and_the_rest_scored(shard_dir, tmp_path):
     assert metrics["num_clips"] == 3 and metrics["num_failed_clips"] == 1
     assert "broken-000000.tar" in metrics["clips"]["broken-000000"]["error"]
     assert metrics["clips"]["corridor"]["cse"] < 0.5
+
+
+def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
+    """A flat grey video has no trajectory (ATE NaN in Python): stdout says null, as metrics.json does."""
+    folder = tmp_path / "grey"
+    folder.mkdir()
+    (folder / "CAM_FRONT.mp4").write_bytes(encode_mp4(np.full((5, 192, 320, 3), 128, np.uint8), 10.0))
+    out = tmp_path / "eval"
+    rc = main(
+        ["eval", str(folder), "--rig", "front1", "--metrics", "tse,pose,traj", "--no-pictures", "--out", str(out)]
+    )
+    assert rc == 0
+    stdout = capsys.readouterr().out
+    assert "NaN" not in stdout
+    resolved, _, rest = stdout.partition("\n")  # the resolved config's line comes first
+    assert json.loads(resolved)["metrics"] == ["tse", "pose", "traj"]
+    summary = json.loads(rest[: rest.rindex("}") + 1])
+    assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1 and summary["tse_counted"] is None
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}

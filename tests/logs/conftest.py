@@ -18,7 +18,7 @@ DT_NS = 100_000_000
 
 def synthetic_rig():
     """front3 at 64x48, with distortion on one camera so that D has to round-trip too."""
-    rig = load_rig("front3").scaled(64, 48)
+    rig = load_rig("front3").scaled(64, 48, fit="stretch")
     rig.cameras[2] = dataclasses.replace(rig.cameras[2], distortion=np.array([-0.1, 0.01, 1e-4, -2e-4, 0.003]))
     return rig
 

@@ -55,7 +55,8 @@ def test_topic_map_naming_a_missing_topic(shared_data):
     talker = shared_data / "mcap/rosbag2_tests/rosbag2_py/test/resources/mcap/talker/talker.mcap"
     with pytest.raises(
         DrivewmError,
-        match=rf"^{talker}: topic map \S+/datasets/topicmaps/reductstore_demo.yaml names topic\(s\) \['/nissan/gps/duro/current_pose'\]",
+        match=rf"^{talker}: topic map \S+/drivewm/topicmaps/reductstore_demo.yaml names topic\(s\) "
+        r"\['/nissan/gps/duro/current_pose'\]",
     ):
         read_log(talker, topic_map="reductstore_demo", require_images=False)
 

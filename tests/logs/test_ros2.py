@@ -55,7 +55,7 @@ def test_ros2_bag_without_map_discovers_cameras_by_frame(tmp_path, synthetic_log
 
 
 def test_shipped_nuscenes6_map_matches_the_exporter():
-    """datasets/topicmaps/drivewm_ros2_nuscenes6.yaml is the map the exporter's layout needs."""
+    """drivewm/topicmaps/drivewm_ros2_nuscenes6.yaml is the map the exporter's layout needs."""
     from drivewm.geometry import load_rig
     from drivewm.logs.topicmap import load_topic_map
     from drivewm.logs.types import DriveLog, SceneInfo

@@ -26,7 +26,7 @@ def test_rewrite_is_stable(synthetic_mcap, tmp_path, assert_same_log):
 
 
 def test_file_layout_is_the_contract(synthetic_mcap, synthetic_log):
-    """Topics, schemas, encodings and log times as apis.md states them."""
+    """Topics, schemas, encodings and log times as docs/DESIGN.md section 4 states them."""
     with open(synthetic_mcap, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
@@ -46,7 +46,7 @@ def test_file_layout_is_the_contract(synthetic_mcap, synthetic_log):
 def test_images_written_from_arrays_decode_close(tmp_path):
     from drivewm.geometry import load_rig
 
-    rig = load_rig("front1").scaled(64, 48)
+    rig = load_rig("front1").scaled(64, 48, fit="stretch")
     image = np.tile(np.arange(64, dtype=np.uint8)[None, :, None] * 4, (48, 1, 3))
     with LogWriter(tmp_path / "a.mcap", rig, SceneInfo({"weather": "clear"}), image_format="png") as w:
         w.write_pose(5, np.eye(4))
@@ -60,7 +60,7 @@ def test_images_written_from_arrays_decode_close(tmp_path):
 def test_writer_is_atomic(tmp_path):
     from drivewm.geometry import load_rig
 
-    rig = load_rig("front1").scaled(64, 48)
+    rig = load_rig("front1").scaled(64, 48, fit="stretch")
     path = tmp_path / "killed.mcap"
     with pytest.raises(RuntimeError):
         with LogWriter(path, rig, SceneInfo({})) as w:
@@ -72,7 +72,7 @@ def test_writer_is_atomic(tmp_path):
 def test_writer_refuses_bad_images(tmp_path):
     from drivewm.geometry import load_rig
 
-    rig = load_rig("front1").scaled(64, 48)
+    rig = load_rig("front1").scaled(64, 48, fit="stretch")
     with pytest.raises(DrivewmError, match="must be uint8 \\(48, 64, 3\\)"):
         with LogWriter(tmp_path / "b.mcap", rig, SceneInfo({})) as w:
             w.write_images(1, {rig.names[0]: np.zeros((48, 64), np.uint8)})
@@ -86,7 +86,7 @@ def test_two_writers_at_once_keep_their_own_channels(tmp_path):
     """Each writer has a private Foxglove context: interleaved writes never cross files."""
     from drivewm.geometry import load_rig
 
-    front, back = load_rig("front1").scaled(64, 48), load_rig("front3").scaled(32, 24)
+    front, back = load_rig("front1").scaled(64, 48, fit="stretch"), load_rig("front3").scaled(32, 24, fit="stretch")
     a, b = (
         LogWriter(tmp_path / "a.mcap", front, SceneInfo({"n": "a"})),
         LogWriter(tmp_path / "b.mcap", back, SceneInfo({"n": "b"})),

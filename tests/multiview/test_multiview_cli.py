@@ -13,11 +13,11 @@ from mv_standin import PoolTokenizer
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
-from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
+
+pytestmark = pytest.mark.slow  # post-trains a multi-view model
 
 FRONT3 = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
 
@@ -56,6 +56,22 @@ def test_posttrain_writes_a_multiview_folder(trained_mv):
     assert rows[-1]["step"] == 30 and np.isfinite(rows[-1]["loss"])
     assert 5 < model.cfg.multiview.speed_mps < 40  # the simulated drives' median speed, m/s
     assert (root / "mv" / "samples" / "step_0000030.png").is_file()
+
+
+def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
+    """--init a multi-view folder (the fleet fine-tuning path): its weights start the run, nothing new
+    is zero-initialised, and a structurally different config is refused in one line."""
+    root, cache = trained_mv
+    args = ["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--rig", "front3"]
+    assert main([*args, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
+    state = torch.load(tmp_path / "ft" / "train_state.pt", weights_only=True)
+    start = MultiView.from_pretrained(root / "mv").net.state_dict()
+    tuned = MultiView.from_pretrained(tmp_path / "ft").net.state_dict()
+    assert state["config"]["init"] == str((root / "mv").resolve()) and start.keys() == tuned.keys()
+    deltas = [float((tuned[k] - start[k]).abs().max()) for k in start if start[k].is_floating_point()]
+    assert 0 < max(deltas) < 0.05  # two small steps away from the multi-view model, not a fresh init
+    bad = [*args, "--out", str(tmp_path / "bad"), "--set", "multiview.camera_width=64"]
+    assert main(bad) == 2
 
 
 @pytest.mark.parametrize("rig,views", [("front3", 3), ("nuscenes6", 6)])
@@ -154,8 +170,8 @@ def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
         == 2
     )
     assert "nonexistent_rig" in capsys.readouterr().err
-    assert main(["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
-    assert "model_type" in capsys.readouterr().err
+    assert main(["posttrain", "--init", str(tmp_path), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
+    assert "not a drivewm model folder" in capsys.readouterr().err
 
 
 def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(trained_mv):
@@ -169,32 +185,6 @@ def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(
         for name in ("left", "right")
     ]
     assert (z[0] - z[1]).abs().mean() > 1e-3  # same seed, other trajectory: another sample
-
-
-@pytest.fixture(scope="module")
-def mv_with_tokenizer(tmp_path_factory) -> Path:
-    """An (untrained) multi-view model whose folder records a real debug tokenizer (4x8x8), front camera
-    only, with the reprojected first frame (multiview.warp_condition) on."""
-    import dataclasses
-
-    from drivewm.geometry import load_rig
-    from drivewm.multiview.init import from_text2world
-    from drivewm.tokenizer import Tokenizer, preset
-
-    root = tmp_path_factory.mktemp("mv_tok")
-    torch.manual_seed(0)
-    tok = Tokenizer(preset("debug"))
-    tok.save_pretrained(root / "tok")
-    parent = Text2World(
-        Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
-        LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}),
-    )
-    from drivewm.multiview.config import MultiViewConfig
-
-    mv = from_text2world(parent, MultiViewConfig(warp_condition=True))
-    mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
-    mv.save_pretrained(root / "mv")
-    return root / "mv"
 
 
 def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_tokenizer, sim_clip_dir, tmp_path):

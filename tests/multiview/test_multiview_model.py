@@ -4,6 +4,8 @@ trajectory / camera / Video2World conditioning reach the output."""
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -89,7 +91,7 @@ def test_trajectory_and_camera_conditioning_change_the_output(parent):
 def test_dropped_trajectory_is_no_trajectory_and_guidance_interpolates(parent):
     """A dropped trajectory (training dropout, guidance's free branch) is exactly the model given
     none: static rays, no waypoint embedding. Trajectory guidance w is D_free + w (D_traj - D_free)."""
-    from drivewm.multiview.model import TrajectoryGuidedDenoiser
+    from drivewm.diffusion.samplers import GuidedDenoiser
 
     mv = from_text2world(parent)
     rig = load_rig("front3")
@@ -105,7 +107,7 @@ def test_dropped_trajectory_is_no_trajectory_and_guidance_interpolates(parent):
         mixed = mv.net(x, sigma, cond.drop_trajectory(keep))
         torch.testing.assert_close(mixed[:3], with_traj[:3])
         torch.testing.assert_close(mixed[3:], free[3:])
-        guided = TrajectoryGuidedDenoiser(mv.net, 3.0)(x, sigma, cond)
+        guided = GuidedDenoiser(mv.net, 3.0, drop=lambda c: c.without_trajectory())(x, sigma, cond)
         torch.testing.assert_close(guided, free + 3.0 * (with_traj - free))
 
 
@@ -173,3 +175,13 @@ def test_plucker_rays_are_the_camera_rays_and_move_with_the_ego():
     rig_at_T = dc.replace(rig, cameras=[dc.replace(c, T_ego_from_cam=T @ c.T_ego_from_cam) for c in rig.cameras])
     torch.testing.assert_close(moved[:, 60:], plucker_rays(rig_at_T, (6, 10)).double(), atol=1e-6, rtol=1e-6)
     torch.testing.assert_close(moved[:, :60], rays)
+
+
+def test_importing_multiview_registers_no_sublayer():
+    """The cross-view sub-layer is registered where the multi-view network is built, not by an import."""
+    code = (
+        "from drivewm.diffusion.blocks import SUBLAYERS; import drivewm.multiview.model, drivewm.multiview.init; "
+        "print(sorted(SUBLAYERS))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "['cross_attn', 'joint_attn', 'mlp', 'self_attn']"

@@ -8,10 +8,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import torch
 
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.posttrain import posttrain, posttrain_config
+
+pytestmark = pytest.mark.slow  # post-trains under torchrun
 
 REPO = Path(__file__).resolve().parents[2]
 # Video2World on every step: which steps condition is then the same however the batch is split.

@@ -18,6 +18,8 @@ from drivewm.clips import iter_clips
 from drivewm.geometry import invert_T, yaw_of
 from drivewm.multiview.data import MultiViewDataset
 
+pytestmark = pytest.mark.slow  # codes and scores turned copies of every simulated clip
+
 
 @pytest.fixture(scope="session")
 def turned_latents(sim_clip_dir, tmp_path_factory):

@@ -2,20 +2,20 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+from drivewm import resources
 from drivewm.cli import main
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.logs.reader import read_log
-from drivewm.sim.recipe import load_recipe
+from drivewm.logs.types import TIMES_OF_DAY, TRAFFIC_DENSITIES, WEATHERS
+from drivewm.sim.config import ALL_SCENARIOS, SOURCES
+from drivewm.sim.recipe import RECIPES, load_recipe
 
-RECIPES = Path(__file__).resolve().parents[2] / "datasets" / "scenarios"
 
-
+@pytest.mark.slow
 def test_simulate_command_writes_logs(tmp_path) -> None:
     rc = main(
         [
@@ -89,6 +89,8 @@ def test_simulate_command_writes_logs(tmp_path) -> None:
         ["--duration", "-1"],
         ["--width", "100"],
         ["--rig", "no_such_rig"],
+        ["--set", "jpeg_qualty=80"],
+        ["--recipe", "no_such_recipe"],
     ],
 )
 def test_bad_input_is_one_clear_error(tmp_path, capsys, argv) -> None:
@@ -99,10 +101,19 @@ def test_bad_input_is_one_clear_error(tmp_path, capsys, argv) -> None:
 
 
 def test_recipes_are_valid() -> None:
-    for path in sorted(RECIPES.glob("*.yaml")):
-        plan = load_recipe(path)
+    assert resources.names(RECIPES) == [
+        "default",
+        "quickstart",
+        "smoke",
+        "transfer",
+        "transfer_heldout",
+        "worldmodel",
+        "worldmodel_heldout",
+    ]
+    for name in resources.names(RECIPES):
+        plan = load_recipe(name)
         assert plan and all(count >= 1 for _, count in plan)
-    default = load_recipe(RECIPES / "default.yaml")
+    default = load_recipe("default")
     assert {c.source for c, _ in default} == {"highway", "sumo"}
     assert {c.scenario for c, _ in default} == {
         "highway",
@@ -117,8 +128,35 @@ def test_recipes_are_valid() -> None:
     assert {c.time_of_day for c, _ in default} == {"day", "dusk", "night"}
 
 
+def test_worldmodel_heldout_drives_share_no_seed_with_training() -> None:
+    train, heldout = load_recipe("worldmodel"), load_recipe("worldmodel_heldout")
+    train_seeds = {c.seed + i for c, count in train for i in range(count)}
+    heldout_seeds = {c.seed + i for c, count in heldout for i in range(count)}
+    assert len(heldout_seeds) >= 12 and not train_seeds & heldout_seeds
+    assert {c.weather for c, _ in heldout} == {c.weather for c, _ in train}
+
+
 def test_bad_recipe_names_the_file(tmp_path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("drives:\n  - {source: highway, wheather: snow}\n")
     with pytest.raises(DrivewmError, match="bad.yaml.*wheather"):
         load_recipe(bad)
+
+
+def test_flags_and_set_apply_to_every_drive_of_a_recipe(tmp_path, capsys) -> None:
+    argv = ["simulate", "--recipe", "smoke", "--weather", "fog", "--set", "jpeg_quality=80", "--dry-run"]
+    assert main([*argv, "--out", str(tmp_path)]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.startswith("simulate ")]
+    assert len(lines) == 2 and all("'weather': 'fog'" in line and "'jpeg_quality': 80" in line for line in lines)
+    assert "'source': 'highway'" in lines[0] and "'source': 'sumo'" in lines[1]
+    assert not list(tmp_path.iterdir())  # a dry run writes nothing
+
+
+def test_choices_are_the_registries(capsys) -> None:
+    assert main(["simulate", "--help"]) == 0
+    page = " ".join(capsys.readouterr().out.split())
+    for names in (SOURCES, ALL_SCENARIOS, WEATHERS, TIMES_OF_DAY, TRAFFIC_DENSITIES, resources.names("rigs")):
+        assert ", ".join(names) in page
+    assert main(["simulate", "--weather", "hail", "--out", "x"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "invalid choice: 'hail'" in err[0]

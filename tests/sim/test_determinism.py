@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from drivewm.logs.reader import read_log
 from drivewm.sim import SimConfig, simulate
 from drivewm.sim.simulate import record
+
+pytestmark = pytest.mark.slow  # simulates drives twice
 
 
 def test_same_seed_same_pixels(tmp_path) -> None:

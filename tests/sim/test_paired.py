@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,15 +11,13 @@ from drivewm.cli import main
 from drivewm.clips import iter_clips, read_manifest
 from drivewm.errors import DrivewmError
 from drivewm.eval.config import MatchConfig
-from drivewm.eval.matching import detect_sift, match_features
+from drivewm.eval.matching import FrameMatcher
 from drivewm.logs.reader import read_log
 from drivewm.sim import SimConfig
 from drivewm.sim.paired import drive_id, parse_conditions
 from drivewm.sim.props import place_props
 from drivewm.sim.recipe import load_recipe
 from drivewm.sim.simulate import record
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 def _agents(rec) -> list:
@@ -66,18 +63,15 @@ def test_simulate_conditions_renders_pixel_aligned_pairs_and_curation_pairs_them
     ]
     assert a.scene.tags["drive_id"] == b.scene.tags["drive_id"]
     # same geometry, pixel for pixel: SIFT features of one frame in two conditions sit on the same pixels
-    cfg = MatchConfig()
+    matcher = FrameMatcher(MatchConfig())
     shifts = []
     for cam in a.rig.names:
-        fa, fb = detect_sift(a.images[cam][8].decode(), cfg), detect_sift(b.images[cam][8].decode(), cfg)
-        m = match_features(fa, fb, cfg)
+        m = matcher.match(("a", cam), a.images[cam][8].decode(), ("b", cam), b.images[cam][8].decode())
         shifts += list(np.linalg.norm(m.uv_a - m.uv_b, axis=1))
     assert len(shifts) > 50 and np.median(shifts) < 0.5, (len(shifts), np.median(shifts))
 
     clips = tmp_path / "clips"
-    assert (
-        main(["curate", str(logs), "--out", str(clips), "--config", str(REPO / "datasets/curate/transfer.yaml")]) == 0
-    )
+    assert main(["curate", str(logs), "--out", str(clips), "--recipe", "transfer"]) == 0
     by_weather = {c.meta.tags["weather"]: c.meta for c in iter_clips(clips)}
     assert set(by_weather) == {"clear", "overcast", "fog"}
     ids = {m.pair_id for m in by_weather.values()}
@@ -98,7 +92,7 @@ def test_recipe_conditions_expand_to_one_drive_per_condition(tmp_path) -> None:
         ("highway", 5, "snow", "night", 2),
         ("sumo", 9, "fog", "day", 1),
     ]
-    plan = load_recipe(REPO / "datasets/scenarios/transfer.yaml")
+    plan = load_recipe("transfer")
     assert len({drive_id(c) for c, _ in plan}) == len({(c.source, c.scenario, c.seed) for c, _ in plan})
 
 

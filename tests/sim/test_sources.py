@@ -60,6 +60,7 @@ def test_highway_env_scenarios(scenario: str) -> None:
     assert rec.tags["source"] == "highway-env" and rec.tags["road_type"] == scenario
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["spider", "random"])
 def test_sumo_networks_generated_from_nothing(scenario: str) -> None:
     cfg = SimConfig(source="sumo", scenario=scenario, duration_s=3.0, seed=7)

@@ -23,6 +23,8 @@ from drivewm.sim.render import Renderer
 from drivewm.sim.simulate import record
 from drivewm.sim.world import TEXTURE_MARGIN_M, sim_rig
 
+pytestmark = pytest.mark.slow  # renders one drive in every condition
+
 CONDITIONS = [
     ("clear", "day"),
     ("snow", "day"),

@@ -1,13 +1,12 @@
 """Training on simulated clips, held-out reconstruction, FSQ codebook use, exact resume, CLI.
 
-PSNR bound (held-out simulated clips, debug-4x8x8, 100 steps of 4 crops of 64x96x9): the
-untrained network is by construction a block-average codec (identity-initialized ends,
-zero-initialized residual branches, averaging shortcuts), which scores about 20 dB on these
-clips; 100 steps must add at least 1.5 dB and reach 21.5 dB (measured: ~22.8 dB; 150 steps
-~23.0 dB; an 8x8 block mean with bilinear upsampling, which keeps 3 values per 8x8 block of
-every frame where the tokenizer keeps 16 per 4 frames, scores 24.7 dB). Bounded CPU training
-gets no closer to Cosmos' 37 dB; the bound proves that training reduces held-out error well
-beyond its starting codec, which a broken loss, causal mask or data path would not.
+PSNR bound (held-out simulated clips, debug-4x8x8 (0.12M parameters), 100 steps of 4 crops of
+64x96x9 at the preset's lr 3e-3): the untrained network is by construction a block-average codec
+(identity-initialized ends, zero-initialized residual branches, averaging shortcuts), which
+scores 21.3 dB (SSIM 0.49) on these clips; 100 steps must add at least 1.5 dB and reach 23 dB
+(measured: 24.2 dB, SSIM 0.68). The bound proves that training reduces held-out error well
+beyond its starting codec, which a broken loss, causal mask or data path would not; the shipped
+tokenizer's quality is measured by benchmarks/bench_tokenizer.py and its model card.
 """
 
 import json
@@ -25,24 +24,26 @@ from drivewm.tokenizer.evaluate import evaluate_tokenizer
 from drivewm.tokenizer.latent_cache import clip_video
 from drivewm.tokenizer.losses import LossConfig, TokenizerLoss
 from drivewm.tokenizer.metrics import psnr
+from drivewm.tokenizer.recipe import RECIPES, TokenizerTrainConfig
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
-from drivewm.tokenizer.train import TokenizerTrainConfig, train
+from drivewm.tokenizer.train import tokenizer_train
+
+pytestmark = pytest.mark.slow  # trains tokenizers
 
 HOLDOUT = 25  # percent of clips held out by key hash: 3 of the 12 simulated clips
 VIEWS = 2  # cameras scored per held-out clip (evaluation at 192x320 dominates the test time)
 
 
-def run_config(name: str, steps: int, **fields) -> TokenizerTrainConfig:
-    base = dict(
-        steps=steps, batch_size=4, frames=9, crop=[64, 96], holdout_percent=HOLDOUT, checkpoint_every=50, log_every=10
-    )
-    return TokenizerTrainConfig(model=preset(name), **{**base, **fields})
+def run_config(name: str, steps: int, *overrides: str) -> TokenizerTrainConfig:
+    base = ["train.batch_size=4", "data.frames=9", "data.crop=[64,96]", f"data.holdout_percent={HOLDOUT}"]
+    base += [f"train.steps={steps}", "train.checkpoint_every=50", "train.log_every=10"]
+    return RECIPES.resolve(name, None, [*base, *overrides])
 
 
 @pytest.fixture(scope="module")
 def trained(sim_clip_dir, tmp_path_factory):
     out = tmp_path_factory.mktemp("tok") / "debug"
-    train(sim_clip_dir, out, run_config("debug-4x8x8", 100), progress=False)
+    tokenizer_train(run_config("debug-4x8x8", 100), sim_clip_dir, out)
     return out
 
 
@@ -56,8 +57,8 @@ def test_trained_debug_model_reconstructs_heldout_sim_clips(trained, sim_clip_di
         trained, sim_clip_dir, tmp_path / "e1", "holdout", HOLDOUT, max_views=VIEWS, progress=False
     )
     assert after["clips_scored"] == 3
-    assert after["psnr"] > 21.5 and after["psnr"] > before["psnr"] + 1.5, (before["psnr"], after["psnr"])
-    assert after["ssim"] > before["ssim"] + 0.2
+    assert after["psnr"] > 23.0 and after["psnr"] > before["psnr"] + 1.5, (before["psnr"], after["psnr"])
+    assert after["ssim"] > before["ssim"] + 0.15
     assert after["temporal_l1"] < before["temporal_l1"]
     assert after["compression_ratio"] == pytest.approx(3 * 17 * 64 / (16 * 5))
     assert (tmp_path / "e1" / "side_by_side.png").stat().st_size > 10_000
@@ -84,7 +85,7 @@ def test_tiled_and_chunked_equal_one_pass_on_trained_model(trained, sim_clip_dir
 def test_fsq_variant_uses_its_codebook(sim_clip_dir, tmp_path):
     # 40 steps; the 1,000-code debug codebook ([8, 5, 5, 5]) on 3 held-out clips x 2 views (14,400 code positions):
     # measured ~11% of the codes used (14.5% with all 6 views); a collapsed quantizer would use a handful
-    train(sim_clip_dir, tmp_path / "fsq", run_config("debug-4x8x8-fsq", 40), progress=False)
+    tokenizer_train(run_config("debug-4x8x8-fsq", 40), sim_clip_dir, tmp_path / "fsq")
     metrics = evaluate_tokenizer(
         tmp_path / "fsq", sim_clip_dir, tmp_path / "eval", "holdout", HOLDOUT, max_views=VIEWS, progress=False
     )
@@ -96,25 +97,28 @@ def test_fsq_variant_uses_its_codebook(sim_clip_dir, tmp_path):
 
 def test_resume_continues_exactly(sim_clip_dir, tmp_path):
     # with the adversarial term on from step 1, so the discriminator and its optimizer resume too
-    loss = LossConfig(adversarial=0.1, adversarial_start=1)
-    small = dict(batch_size=2, frames=5, crop=[32, 48], checkpoint_every=2, stats_batches=1, loss=loss)
-    train(sim_clip_dir, tmp_path / "straight", run_config("debug-4x8x8", 4, **small), progress=False)
-    train(sim_clip_dir, tmp_path / "resumed", run_config("debug-4x8x8", 2, **small), progress=False)  # "killed" at 2
-    summary = train(sim_clip_dir, tmp_path / "resumed", run_config("debug-4x8x8", 4, **small), progress=False)
-    assert summary["resumed_from"] == 2
+    small = ["train.batch_size=2", "data.frames=5", "data.crop=[32,48]", "train.checkpoint_every=2"]
+    small += ["data.stats_batches=1", "loss.adversarial=0.1", "loss.adversarial_start=1", "train.log_every=1"]
+    cfg = run_config("debug-4x8x8", 4, *small)
+    tokenizer_train(cfg, sim_clip_dir, tmp_path / "straight")
+    tokenizer_train(cfg, sim_clip_dir, tmp_path / "resumed", stop_after=2)  # "killed" after the step-2 checkpoint
+    assert torch.load(tmp_path / "resumed" / "train_state.pt", weights_only=True)["step"] == 2
+    tokenizer_train(cfg, sim_clip_dir, tmp_path / "resumed")
     a = torch.load(tmp_path / "straight" / "train_state.pt", weights_only=True)
     b = torch.load(tmp_path / "resumed" / "train_state.pt", weights_only=True)
+    assert a["step"] == b["step"] == 4
     for part in ("model", "ema"):
         for key in a[part]:
             assert torch.equal(a[part][key], b[part][key]), (part, key)
-    for key in a["adversary"]["disc"]:
-        assert torch.equal(a["adversary"]["disc"][key], b["adversary"]["disc"][key]), key
+    for key in a["task"]["adversary"]["disc"]:
+        assert torch.equal(a["task"]["adversary"]["disc"][key], b["task"]["adversary"]["disc"][key]), key
     rows = [json.loads(line) for line in (tmp_path / "straight" / "metrics.jsonl").read_text().splitlines()]
-    assert "adversarial" in rows[-1] and "discriminator" in rows[-1]
-    with pytest.raises(DrivewmError, match="different model config"):
-        train(
-            sim_clip_dir, tmp_path / "resumed", run_config("debug-8x8x8", 6, **{**small, "frames": 9}), progress=False
-        )
+    resumed = [json.loads(line) for line in (tmp_path / "resumed" / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in resumed] == [1, 2, 3, 4]  # no duplicated rows past the resume step
+    assert [r["loss"] for r in rows] == [r["loss"] for r in resumed]
+    assert "adversarial" in rows[-1] and "discriminator" in rows[-1] and "psnr" in rows[-1]
+    with pytest.raises(DrivewmError, match="different model"):
+        tokenizer_train(run_config("debug-8x8x8", 6, *small, "data.frames=9"), sim_clip_dir, tmp_path / "resumed")
 
 
 def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
@@ -190,28 +194,41 @@ def test_cli_train_overrides_and_bad_config(sim_clip_dir, tmp_path, capsys):
                 str(sim_clip_dir),
                 "--out",
                 str(tmp_path / "t"),
-                "--steps",
-                "1",
                 "--set",
-                "frames=9",
+                "train.steps=1",
                 "--set",
-                "crop=[32,48]",
+                "data.frames=9",
                 "--set",
-                "batch_size=1",
+                "data.crop=[32,48]",
                 "--set",
-                "stats_batches=1",
+                "train.batch_size=1",
+                "--set",
+                "data.stats_batches=1",
             ]
         )
         == 0
     )
     assert json.loads((tmp_path / "t" / "config.json").read_text())["config"]["temporal_compression"] == 8
     assert (
-        main(["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "frames=8"])
+        main(
+            ["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "data.frames=8"]
+        )
         == 2
     )
-    assert "frames=8 must be 1 + k*4" in capsys.readouterr().err
+    assert "data.frames=8 must be 1 + k*4" in capsys.readouterr().err
     assert (
-        main(["tokenizer", "train", "--data", str(sim_clip_dir), "--out", str(tmp_path / "u"), "--set", "lr_typo=1"])
+        main(
+            [
+                "tokenizer",
+                "train",
+                "--data",
+                str(sim_clip_dir),
+                "--out",
+                str(tmp_path / "u"),
+                "--set",
+                "train.lr_typo=1",
+            ]
+        )
         == 2
     )
 
@@ -244,3 +261,17 @@ def test_perceptual_term_needs_local_weights(tmp_path):
     _, same = loss(x, x)
     _, diff = loss(x.flip(-1), x)
     assert same["perceptual"] == pytest.approx(0.0, abs=1e-6) and diff["perceptual"] > 0.01
+
+
+def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_path):
+    """init + freeze_encoder: only the decoder trains, so latents (and latent caches made with the
+    parent) stay valid while reconstructions improve."""
+    cfg = run_config("debug-4x8x8", 20, f"init={trained}", "freeze_encoder=true", "train.checkpoint_every=20")
+    tokenizer_train(cfg, sim_clip_dir, tmp_path / "dec")
+    parent, tuned = Tokenizer.from_pretrained(trained), Tokenizer.from_pretrained(tmp_path / "dec")
+    for (name, a), (_, b) in zip(parent.encoder.state_dict().items(), tuned.encoder.state_dict().items()):
+        assert torch.equal(a, b), name
+    assert torch.allclose(parent.latent_std, tuned.latent_std) and torch.allclose(parent.latent_mean, tuned.latent_mean)
+    assert any(not torch.equal(a, b) for a, b in zip(parent.decoder.parameters(), tuned.decoder.parameters()))
+    with pytest.raises(DrivewmError, match="freeze_encoder needs init"):
+        run_config("debug-4x8x8", 1, "freeze_encoder=true")

@@ -16,6 +16,8 @@ from drivewm.diffusion.pretrain import pretrain, pretrain_config
 from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.train.loop import global_batch
 
+pytestmark = pytest.mark.slow  # trains models, under torchrun too
+
 REPO = Path(__file__).resolve().parents[2]
 TINY = [
     "model.hidden_dim=32",

@@ -9,12 +9,13 @@ from pathlib import Path
 import pytest
 import torch
 
+from drivewm.diffusion.sampling import sample
 from drivewm.errors import DrivewmError
 from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.init import from_text2world
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
-from drivewm.transfer.sampling import network_evaluations, sample_from
+from drivewm.transfer.sampling import network_evaluations
 from drivewm.transfer.sdedit import sdedit_latents
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -97,7 +98,9 @@ def test_network_evaluations_are_counted_right(sampler, steps, guidance) -> None
     start = torch.zeros(2, 4, 3, 4, 6)
     for s in (None, 2.0):  # from noise, or SDEdit from a noised start: the same count
         calls.clear()
-        sample_from(counting, (2, 4, 3, 4, 6), [0, 1], cond, steps, guidance, sampler, start if s else None, s)
+        sample(
+            counting, cond, (4, 3, 4, 6), [0, 1], steps, guidance, sampler, start=start if s else None, start_sigma=s
+        )
         assert len(calls) == network_evaluations(steps, guidance, sampler)
 
 

@@ -7,7 +7,7 @@ defeat the pixel-level must-holds for any method, the truth included: SIFT on 8x
 ambiguously (median displacement 10-25 px even between the coded truth and itself transferred),
 and the adherence classifier does not call the coded true snow clip snow. So this test asserts the
 image must-holds (PSNR and SSIM against the truth, over SDEdit) and leaves SIFT, CSE and adherence
-to benchmarks/bench_transfer.py on real models (drivewm/transfer/README.md has the figures)."""
+to benchmarks/bench_transfer.py on real models (docs/transfer.md has the figures)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,6 @@ from drivewm.transfer.train import RECIPES, train_transfer
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "multiview"))
 from mv_standin import PoolTokenizer, write_pooled_cache  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[2]
 CLEAR, SNOW = TargetCondition("clear", "day"), TargetCondition("snow", "day")
 
 
@@ -37,9 +36,7 @@ def _paired_clips(root: Path, seed: int) -> Path:
     logs, clips = root / f"logs{seed}", root / f"clips{seed}"
     sim = ["simulate", "--scenario", "highway", "--duration", "1.7", "--width", "160", "--height", "96"]
     assert main([*sim, "--seed", str(seed), "--conditions", "clear:day,snow:day", "--out", str(logs)]) == 0
-    assert (
-        main(["curate", str(logs), "--out", str(clips), "--config", str(REPO / "datasets/curate/transfer.yaml")]) == 0
-    )
+    assert main(["curate", str(logs), "--out", str(clips), "--recipe", "transfer"]) == 0
     return clips
 
 

@@ -18,7 +18,6 @@ from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfi
 from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.init import from_text2world
 
-REPO = Path(__file__).resolve().parents[2]
 KEPT_FIELDS = ("source_log", "start_time_ns", "fps", "timestamps_ns", "trajectory_ego", "trajectory_dt_s", "pair_id")
 
 
@@ -81,7 +80,9 @@ def test_transfer_keeps_every_label(models, inputs, tmp_path) -> None:
         rig, src_rig = clip.meta.get_rig(), src.meta.get_rig()
         assert rig.names == src_rig.names
         for cam, src_cam in zip(rig.cameras, src_rig.cameras):
-            np.testing.assert_allclose(cam.K[:2], src_cam.K[:2] / 2)  # 320x192 -> the model's 160x96
+            # 320x192 -> the model's 160x96, pixel centres at integers: f' = f / 2, c' = (c + 0.5) / 2 - 0.5
+            np.testing.assert_allclose(cam.K[:2, :2], src_cam.K[:2, :2] / 2)
+            np.testing.assert_allclose(cam.K[:2, 2], (src_cam.K[:2, 2] + 0.5) / 2 - 0.5)
             np.testing.assert_array_equal(cam.T_ego_from_cam, src_cam.T_ego_from_cam)
         assert clip.videos().shape == (6, 17, 96, 160, 3)
         assert clip.meta.extra["transfer"]["method"] == "transfer" and clip.meta.extra["speed_mps"] > 0
@@ -125,7 +126,7 @@ def test_transfer_of_a_real_dashcam_video(models, shared_data, tmp_path) -> None
     video = shared_data / "video/dashcam_highway/solidWhiteRight.mp4"
     logs, clips, out = tmp_path / "logs", tmp_path / "clips", tmp_path / "out"
     assert main(["import-video", str(video), "--calibration", str(tmp_path / "cam.yaml"), "--out", str(logs)]) == 0
-    assert main(["curate", str(logs), "--out", str(clips), "--config", str(REPO / "datasets/curate/video.yaml")]) == 0
+    assert main(["curate", str(logs), "--out", str(clips), "--recipe", "video"]) == 0
     argv = ["transfer", str(clips), "--model", str(models["transfer"]), "--to", "snow", "--steps", "1"]
     assert main([*argv, "--out", str(out)]) == 0
     sources = {c.key: c for c in iter_clips(clips)}

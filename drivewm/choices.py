@@ -1,0 +1,42 @@
+"""Command-line choices read from the registries they name, when argparse first needs them.
+
+``--sampler`` takes the keys of ``drivewm.diffusion.samplers.SAMPLERS``, ``--weather`` the entries
+of ``drivewm.logs.types.WEATHERS``, and so on: the CLI never repeats a registry by hand. The
+registry's module is imported only when a value is checked or a help page is printed, so building
+the parser (``drivewm --help``) imports no stage code and no PyTorch.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import importlib
+from collections.abc import Iterator
+
+
+class RegistryChoices:
+    """The names in a registry (a mapping's keys or a sequence), given as ``"module:ATTRIBUTE"``."""
+
+    def __init__(self, registry: str):
+        self.registry = registry
+
+    @functools.cached_property
+    def names(self) -> list[str]:
+        module, attribute = self.registry.split(":")
+        return list(getattr(importlib.import_module(module), attribute))
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.names
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.names)
+
+
+def add_registry_argument(parser: argparse.ArgumentParser, flag: str, registry: str, help: str, **kwargs) -> None:
+    """``parser.add_argument(flag, ...)`` whose choices are the names in ``registry`` (``"module:ATTRIBUTE"``).
+
+    The metavar keeps argparse from listing the choices while the parser is built; the help page
+    lists them (``%(choices)s``), and a bad value is refused with the registry's names.
+    """
+    metavar = flag.lstrip("-").replace("-", "_").upper()
+    parser.add_argument(flag, choices=RegistryChoices(registry), metavar=metavar, help=f"{help}: %(choices)s", **kwargs)

@@ -1,0 +1,89 @@
+"""The weights drivewm ships: export of a ``drivewm worldmodel train`` run, and where they are found.
+
+``export_run(RUN, DIR)`` writes ``DIR/tokenizer``, ``DIR/text2world`` and ``DIR/multiview`` as model
+folders with fp16 weights (loaders cast them to the network's dtype), the diffusion models pointing
+at the tokenizer by the relative path ``../tokenizer`` (resolved against the model folder, so the
+package works wherever it is installed), plus ``DIR/MANIFEST.json`` (sha256 and size of every file,
+training steps and seconds of every stage), which the model card (MODEL_CARD.md) quotes.
+``shipped_model(kind)`` is the installed copy that ``drivewm generate`` and ``drivewm rollout``
+use when no ``--model`` is given.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import torch
+
+from drivewm.atomic import write_json
+from drivewm.errors import DrivewmError
+from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, save_model_folder
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+#: Model folders of a run, by the name they ship under.
+RUN_FOLDERS = {"tokenizer": "tokenizer", "text2world": "text2world", "multiview": "multiview"}
+MAX_FILE_BYTES = 16 * 1000 * 1000
+MAX_TOTAL_BYTES = 40 * 1000 * 1000
+
+
+def shipped_model(kind: str) -> Path:
+    """The installed model folder ``kind`` (tokenizer, text2world or multiview)."""
+    path = WEIGHTS_DIR / kind
+    if not (path / WEIGHTS_NAME).is_file():
+        raise DrivewmError(f"this drivewm has no shipped {kind} weights at {path}; give --model")
+    return path
+
+
+def sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def export_folder(src: Path, dst: Path) -> dict:
+    """Copy a model folder with fp16 weights and a package-relative tokenizer path; returns its training record."""
+    info, state = load_model_folder(src, ("drivewm-tokenizer", "text2world", "multiview"))
+    half = {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
+    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    if "latent" in extra and extra["latent"].get("tokenizer"):
+        extra["latent"] = {**extra["latent"], "tokenizer": "../tokenizer"}
+    save_model_folder(dst, info["model_type"], info["config"], half, extra)
+    train_state = src / "train_state.pt"
+    record = {}
+    if train_state.is_file():
+        saved = torch.load(train_state, map_location="cpu", weights_only=True)
+        record = {"steps": int(saved["step"]), "train_seconds": float(saved.get("train_seconds", 0.0))}
+    return record
+
+
+def export_run(run: str | Path, out: str | Path) -> list[Path]:
+    """Export the three model folders of ``run`` into ``out`` and write the manifest; returns the files."""
+    run, out = Path(run), Path(out)
+    records = {name: export_folder(run / folder, out / name) for name, folder in RUN_FOLDERS.items()}
+    files = sorted(p for name in RUN_FOLDERS for p in (out / name).iterdir() if p.is_file())
+    sizes = {str(p.relative_to(out)): p.stat().st_size for p in files}
+    too_big = [k for k, v in sizes.items() if v > MAX_FILE_BYTES]
+    if too_big or sum(sizes.values()) > MAX_TOTAL_BYTES:
+        raise DrivewmError(f"{out}: shipped weights must be <= 16 MB a file, 40 MB in all; got {sizes}")
+    manifest = {
+        "files": {str(p.relative_to(out)): {"sha256": sha256(p), "bytes": p.stat().st_size} for p in files},
+        "training": records,
+    }
+    write_json(out / "MANIFEST.json", manifest)
+    return [*files, out / "MANIFEST.json"]
+
+
+def check_manifest(root: Path = WEIGHTS_DIR) -> dict:
+    """The shipped manifest, after checking every file's sha256 against it (DrivewmError on a mismatch)."""
+    manifest = json.loads((root / "MANIFEST.json").read_text())
+    for name, entry in manifest["files"].items():
+        if sha256(root / name) != entry["sha256"]:
+            raise DrivewmError(f"{root / name}: sha256 differs from MANIFEST.json (a corrupt or replaced file)")
+    return manifest
+
+
+__all__ = ["CONFIG_NAME", "check_manifest", "export_run", "shipped_model"]

@@ -1,0 +1,56 @@
+"""The shared training loop's settings (no heavy imports: recipes and the CLI read it cheaply)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+from drivewm.errors import DrivewmError
+
+Parallel = Literal["auto", "ddp", "fsdp"]
+
+
+@dataclasses.dataclass
+class TrainConfig:
+    """Optimisation and run settings (model and data settings live with the task)."""
+
+    steps: int = 1000
+    """Total optimizer steps of the run (a resumed run continues up to this)."""
+    batch_size: int = 8
+    """Global batch: samples per step summed over all ranks (must divide by the world size)."""
+    lr: float = 3e-4
+    """AdamW peak learning rate."""
+    warmup_steps: int = 50
+    """Linear learning-rate warm-up from 0."""
+    weight_decay: float = 0.0
+    """AdamW weight decay."""
+    betas: list[float] = dataclasses.field(default_factory=lambda: [0.9, 0.99])
+    """AdamW betas."""
+    grad_clip: float = 1.0
+    """Clip the global gradient norm to this (0 = off)."""
+    ema_decay: float = 0.999
+    """EMA decay of the shipped weights."""
+    seed: int = 0
+    """Seeds initialisation, data order and every per-sample draw."""
+    log_every: int = 10
+    """Steps between metrics.jsonl rows."""
+    checkpoint_every: int = 200
+    """Steps between checkpoints (model folder + train_state.pt); always at the end."""
+    sample_every: int = 0
+    """Steps between sample grids in OUT/samples/ (0 = only at the end)."""
+    precision: Literal["auto", "fp32", "bf16"] = "auto"
+    """``auto``: bf16 autocast on CUDA, fp32 on the CPU (bf16 is ~200x slower there)."""
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    """Where to train."""
+    activation_checkpointing: bool = False
+    """Recompute block activations in the backward pass (saves memory)."""
+    compile: bool = False
+    """torch.compile each block (20-45 s up front on this CPU, ~10% faster)."""
+    parallel: Parallel = "auto"
+    """Under torchrun: ``ddp`` (= auto) or ``fsdp`` (FSDP2, for large presets)."""
+
+    def validate(self) -> None:
+        if self.steps < 1 or self.batch_size < 1:
+            raise DrivewmError("train: steps and batch_size must be >= 1")
+        if len(self.betas) != 2:
+            raise DrivewmError(f"train.betas: expected two numbers, got {self.betas}")

@@ -1,0 +1,203 @@
+"""``drivewm worldmodel``: the one-command recipe that trains the models drivewm ships, and their export.
+
+``drivewm worldmodel train --profile cpu --out RUN`` runs every stage through the public commands
+(printed before each runs), resumable by stage like the quickstart (``RUN/.stages/``) and inside
+each training stage by its own train state:
+
+1. simulate the training drives and the held-out drives (packaged simulate recipes ``worldmodel``
+   and ``worldmodel_heldout``);
+2. curate both (curate recipe ``worldmodel``: 160x96 per camera, 17 frames at 10 fps);
+3. train the tokenizer, score it on the held-out drives, encode both clip sets;
+4. Text2World pretraining in Cosmos' progressive order: images (the first latent frame of every
+   view), then video warm-started from the image model;
+5. multi-view post-training of the nuScenes-like rig from the video model, with Video2World and
+   trajectory conditioning;
+6. generate the benchmark clips (prompts and trajectories the training captions never use
+   verbatim, fixed seeds) and score them next to the held-out clips with ``drivewm eval``.
+
+Profiles (``drivewm/recipes/worldmodel.yaml``) change only sizes and steps: ``cpu`` is what the shipped
+weights were trained with on 2 cores; ``gpu`` is the same recipe sized for one GPU in about 25
+minutes (``scripts/gpu-recipe.sh``). ``drivewm worldmodel export RUN --out DIR`` writes the three
+model folders in fp16 safetensors with a model card (what ``drivewm/weights/`` ships).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from drivewm import resources
+from drivewm.errors import DrivewmError
+
+PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
+
+
+@dataclasses.dataclass
+class Benchmark:
+    """One generated set of the benchmark: a prompt under a named trajectory, ``samples`` seeds."""
+
+    name: str
+    """Folder name under RUN/generated/."""
+    prompt: str
+    """Caption for every view (never a training caption verbatim)."""
+    trajectory: str = "straight"
+    """straight|left|right|stop."""
+    seed: int = 0
+    """First sampler seed."""
+
+
+@dataclasses.dataclass
+class WorldModelProfile:
+    """Extra arguments per stage (paths are filled in by :func:`stage_commands`)."""
+
+    rig: str
+    """Rig of the dataset, post-training, generation and eval."""
+    simulate_train: list[str]
+    simulate_heldout: list[str]
+    curate: list[str]
+    tokenizer_train: list[str]
+    pretrain_image: list[str]
+    pretrain_video: list[str]
+    posttrain: list[str]
+    generate: list[str]
+    eval: list[str]
+    samples_per_benchmark: int = 2
+    """Seeds per benchmark entry (24+ generated clips in all for the issue's figures)."""
+    benchmarks: list[Benchmark] = dataclasses.field(default_factory=list)
+    """What is generated and scored."""
+
+
+def load_profile(name: str, path: Path = PROFILES) -> WorldModelProfile:
+    from drivewm.config import from_dict, load_yaml
+
+    profiles = load_yaml(path)
+    if name not in profiles:
+        raise DrivewmError(f"{path}: no worldmodel profile {name!r} (has {sorted(profiles)})")
+    return from_dict(WorldModelProfile, profiles[name], f"{path}:{name}")
+
+
+def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]]]:
+    """The recipe as (stage name, drivewm argv) in order."""
+    logs, clips, tok = run / "logs", run / "clips", run / "tokenizer"
+    img, vid, mv, gen, ev = (
+        run / "text2world_image",
+        run / "text2world",
+        run / "multiview",
+        run / "generated",
+        run / "eval",
+    )
+    stages = [
+        ("simulate-train", ["simulate", *p.simulate_train, "--rig", p.rig, "--out", str(logs / "train")]),
+        ("simulate-heldout", ["simulate", *p.simulate_heldout, "--rig", p.rig, "--out", str(logs / "heldout")]),
+        ("curate-train", ["curate", str(logs / "train"), "--out", str(clips / "train"), *p.curate]),
+        ("curate-heldout", ["curate", str(logs / "heldout"), "--out", str(clips / "heldout"), *p.curate]),
+        (
+            "tokenizer-train",
+            ["tokenizer", "train", "--data", str(clips / "train"), "--out", str(tok), *p.tokenizer_train],
+        ),
+        (
+            "tokenizer-eval",
+            [
+                "tokenizer",
+                "eval",
+                "--model",
+                str(tok),
+                "--data",
+                str(clips / "heldout"),
+                "--out",
+                str(ev / "tokenizer"),
+            ],
+        ),
+        ("encode-train", ["tokenizer", "encode", "--model", str(tok), "--data", str(clips / "train")]),
+        ("encode-heldout", ["tokenizer", "encode", "--model", str(tok), "--data", str(clips / "heldout")]),
+        (
+            "pretrain-image",
+            [
+                "pretrain",
+                "--data",
+                str(clips / "train"),
+                "--tokenizer",
+                str(tok),
+                "--out",
+                str(img),
+                "--set",
+                "data.frames=1",
+                *p.pretrain_image,
+            ],
+        ),
+        (
+            "pretrain-video",
+            [
+                "pretrain",
+                "--data",
+                str(clips / "train"),
+                "--tokenizer",
+                str(tok),
+                "--init",
+                str(img),
+                "--out",
+                str(vid),
+                *p.pretrain_video,
+            ],
+        ),
+        (
+            "posttrain",
+            [
+                "posttrain",
+                "--init",
+                str(vid),
+                "--data",
+                str(clips / "train"),
+                "--rig",
+                p.rig,
+                "--out",
+                str(mv),
+                *p.posttrain,
+            ],
+        ),
+    ]
+    for b in p.benchmarks:
+        argv = ["generate", "--model", str(mv), "--rig", p.rig, "--prompt", b.prompt, "--trajectory", b.trajectory]
+        argv += ["--seed", str(b.seed), "--num-samples", str(p.samples_per_benchmark), "--out", str(gen / b.name)]
+        stages.append((f"generate-{b.name}", [*argv, *p.generate]))
+    stages.append(
+        ("eval-heldout", ["eval", str(clips / "heldout"), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval])
+    )
+    reference = ["--reference", str(ev / "heldout" / "metrics.json")]
+    stages.append(
+        ("eval-generated", ["eval", str(gen), "--rig", p.rig, "--out", str(ev / "generated"), *reference, *p.eval])
+    )
+    return stages
+
+
+def train_worldmodel(run: Path, profile_name: str) -> None:
+    """Run (or resume) every stage of the recipe into ``run``."""
+    from drivewm.quickstart import run_stage
+
+    profile = load_profile(profile_name)
+    stages = stage_commands(profile, run)
+    print(f"[worldmodel] profile {profile_name}: {len(stages)} stages into {run}", flush=True)
+    for name, argv in stages:
+        run_stage(name, argv, run, "worldmodel")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("worldmodel", help="train the models drivewm ships (one recipe, resumable), or export them")
+    wsub = p.add_subparsers(dest="worldmodel_command", metavar="ACTION", required=True)
+    t = wsub.add_parser("train", help="simulate, curate, train tokenizer/Text2World/multi-view, generate, evaluate")
+    t.add_argument("--profile", default="cpu", help="cpu (the shipped weights) or gpu (one GPU, ~25 minutes)")
+    t.add_argument("--out", required=True, type=Path, help="run folder (a rerun resumes in it)")
+    t.set_defaults(func=lambda args: train_worldmodel(args.out, args.profile))
+    e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")
+    e.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
+    e.add_argument("--out", required=True, type=Path, help="where to write tokenizer/, text2world/, multiview/")
+    e.set_defaults(func=_export)
+
+
+def _export(args: argparse.Namespace) -> int:
+    from drivewm.release import export_run
+
+    for path in export_run(args.run, args.out):
+        print(path)
+    return 0

@@ -1,0 +1,125 @@
+"""One sampling function for Text2World and multi-view models: outputs unchanged from the two copies
+it replaced, per-sample seeding, and the guidance terms it composes."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import torch
+
+from drivewm.diffusion.denoiser import Conditioning, EDMConfig
+from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.diffusion.sampling import guided
+from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+from drivewm.geometry import load_rig
+from drivewm.multiview.config import MultiViewConfig
+from drivewm.multiview.init import from_text2world
+from drivewm.multiview.trajectories import resolve_trajectory
+
+#: (sum, sum of squares, first six values) of each sample below, recorded with the code before the
+#: sampling function was shared (commit c5bca50: Text2World.sample_latents and MultiView.sample_latents
+#: each with its own noise/guidance/sampler code), on the model layout of that time (self + cross attn).
+RECORDED = {
+    "t2w": [106.182036, 8616.919967, [-0.498339, 4.000095, -3.393855, 2.253785, 2.00132, -1.627855]],
+    "t2w_v2w_euler": [24.199014, 91.276254, [-0.410067, 0.197816, 0.449454, -0.694202, -0.083498, 0.142575]],
+    "mv": [-356.547507, 14750.641839, [-2.400354, -2.238795, 3.956546, -9.536656, 7.503395, -3.090447]],
+    "mv_v2w_traj_guided": [
+        -320.288818,
+        9767.935905,
+        [-0.594601, 0.696617, 1.052949, -0.177284, 0.185495, 0.547842],
+    ],
+}
+CAPTIONS = [["front left snow", "front snow", "front right snow"]]
+
+
+def tiny(seed: int, cond_frames: int = 0) -> Text2World:
+    """A random Text2World model in the layout of c5bca50, every weight perturbed (as after training)."""
+    torch.manual_seed(seed)
+    dit = DiTConfig(
+        in_channels=4,
+        hidden_dim=48,
+        depth=2,
+        num_heads=4,
+        adaln_lora_dim=8,
+        block_layers=["self_attn", "cross_attn", "mlp"],
+        mlp_activation="gelu_tanh",
+        cond_mask_channel=cond_frames > 0,
+    )
+    rig = load_rig("front1").to_dict()
+    model = Text2World(
+        Text2WorldConfig(dit, EDMConfig(cond_frames=cond_frames)),
+        LatentInfo([4, 3, 4, 6], [0.1] * 4, [0.9] * 4, 10.0, None, rig),
+    )
+    with torch.no_grad():
+        for p in model.dit.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    return model
+
+
+def tiny_multiview():
+    mv = from_text2world(tiny(2), MultiViewConfig(), cond_frames=1)
+    with torch.no_grad():
+        for p in mv.net.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    return mv
+
+
+def _assert_recorded(z: torch.Tensor, name: str) -> None:
+    total, squares, first = RECORDED[name]
+    z = z.double()
+    # Sums over ~10^3 values of magnitude ~1-10: float32 reordering (fused ops, complex RoPE) moves them ~1e-5.
+    assert z.sum().item() == pytest.approx(total, rel=1e-4, abs=1e-3), name
+    assert (z**2).sum().item() == pytest.approx(squares, rel=1e-5), name
+    torch.testing.assert_close(z.flatten()[:6], torch.tensor(first, dtype=torch.float64), rtol=1e-4, atol=2e-4)
+
+
+def test_text2world_samples_are_unchanged_for_fixed_seeds():
+    model = tiny(0)
+    _assert_recorded(model.sample_latents(["clear day on a highway", "heavy snow at night"], [3, 4], 3, 3.0), "t2w")
+    model = tiny(1, cond_frames=1)
+    cond = 0.5 * torch.randn(2, 4, 3, 4, 6, generator=torch.Generator().manual_seed(7))
+    z = model.sample_latents(["fog", "rain"], [5, 6], 3, 2.0, "euler", cond_latents=cond)
+    _assert_recorded(z, "t2w_v2w_euler")
+
+
+def test_multiview_samples_are_unchanged_for_fixed_seeds():
+    mv = tiny_multiview()
+    rig, waypoints = load_rig("front3"), resolve_trajectory("left", 16, 0.1, 10.0)[None]
+    _assert_recorded(mv.sample_latents(rig, CAPTIONS, waypoints, [9], steps=3, guidance=3.0), "mv")
+    cond = 0.5 * torch.randn(1, 3, 4, 3, 4, 6, generator=torch.Generator().manual_seed(8))
+    z = mv.sample_latents(rig, CAPTIONS, waypoints, [10], 3, 2.0, cond_latents=cond, trajectory_guidance=2.0)
+    _assert_recorded(z, "mv_v2w_traj_guided")
+
+
+def test_a_sample_does_not_depend_on_its_batch():
+    model = tiny(0)
+    both = model.sample_latents(["fog", "snow"], [11, 12], steps=2, guidance=2.0)
+    alone = model.sample_latents(["snow"], [12], steps=2, guidance=2.0)
+    torch.testing.assert_close(both[1:], alone, rtol=1e-4, atol=1e-4)  # batched matmuls round differently
+    mv, rig = tiny_multiview(), load_rig("front3")
+    waypoints = resolve_trajectory("right", 16, 0.1, 10.0)[None]
+    pair = mv.sample_latents(rig, CAPTIONS * 2, waypoints.repeat(2, 0), [3, 4], steps=2, guidance=2.0)
+    single = mv.sample_latents(rig, CAPTIONS, waypoints, [4], steps=2, guidance=2.0)
+    torch.testing.assert_close(pair[1:], single, rtol=1e-3, atol=1e-2)  # values ~4 rms; other seeds: O(1) apart
+
+
+def test_guidance_terms_compose_caption_then_trajectory():
+    """With D = base + caption term + trajectory term, caption guidance w_c and trajectory guidance
+    w_t give base + w_c * caption + w_t * trajectory (each branch of the trajectory term caption-guided)."""
+
+    @dataclasses.dataclass
+    class Cond(Conditioning):
+        has_trajectory: bool = True
+
+        def without_trajectory(self):
+            return dataclasses.replace(self, has_trajectory=False)
+
+    class Toy(torch.nn.Module):
+        def forward(self, x, sigma, cond):
+            return x + cond.text_mask.float().any(1).view(-1, 1) * 1.0 + float(cond.has_trajectory) * 10.0
+
+    cond = Cond(torch.zeros(2, 3, 4), torch.ones(2, 3, dtype=torch.bool), torch.full((2,), 10.0))
+    x = torch.zeros(2, 1)
+    assert torch.allclose(guided(Toy(), 3.0, 2.0)(x, torch.ones(2), cond), torch.full((2, 1), 3.0 + 20.0))
+    assert torch.allclose(guided(Toy(), 3.0)(x, torch.ones(2), cond), torch.full((2, 1), 3.0 + 10.0))

@@ -1,0 +1,45 @@
+"""Degenerate copies of real videos that a consistency benchmark must not prefer (issue 14, item 8):
+blurred, noised, frozen and shuffled, each a uint8 (T, H, W, 3) per camera, like the original."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+#: Headline metrics and which way is better; a missing value (NaN: could not be computed) ranks worst.
+LOWER_IS_BETTER = ("tse", "tse_calibrated", "cse", "cse_calibrated", "ate", "rpe_trans", "rpe_rot", "tfe")
+HIGHER_IS_BETTER = ("pose_success", "registered_fraction")
+
+
+def blurred(videos: dict[str, np.ndarray], sigma_px: float = 2.5) -> dict[str, np.ndarray]:
+    return {c: np.stack([cv2.GaussianBlur(f, (0, 0), sigma_px) for f in v]) for c, v in videos.items()}
+
+
+def noised(videos: dict[str, np.ndarray], sigma: float = 20.0, seed: int = 0) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return {c: np.clip(v + rng.normal(0, sigma, v.shape), 0, 255).astype(np.uint8) for c, v in videos.items()}
+
+
+def frozen(videos: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every frame the first."""
+    return {c: np.repeat(v[:1], len(v), axis=0) for c, v in videos.items()}
+
+
+def shuffled(videos: dict[str, np.ndarray], seed: int = 0) -> dict[str, np.ndarray]:
+    """Each camera's frames in its own random order (a permutation shared by all cameras would keep
+    every same-time view pair, which no cross-view score can or should notice)."""
+    rng = np.random.default_rng(seed)
+    return {c: v[rng.permutation(len(v))] for c, v in videos.items()}
+
+
+DEGRADATIONS = {"blurred": blurred, "noised": noised, "frozen": frozen, "shuffled": shuffled}
+
+
+def worse(key: str, degraded: float | None, real: float | None) -> bool:
+    """True when ``degraded`` scores worse than ``real`` on ``key`` (a missing value is the worst)."""
+    missing = lambda v: v is None or not np.isfinite(v)  # noqa: E731
+    if missing(real):
+        raise AssertionError(f"{key}: the real clip has no value to compare with")
+    if missing(degraded):
+        return True
+    return degraded > real if key in LOWER_IS_BETTER else degraded < real

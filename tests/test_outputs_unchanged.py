@@ -1,0 +1,192 @@
+"""Outputs of simulate, curate, train and eval equal the ones recorded before a refactor (fixed seeds).
+
+``tests/outputs_unchanged.json`` holds digests of each stage's output, recorded with the pinned
+environment (torch 2.13.0 CPU, the libx264 of the PyAV wheel, OpenCV's JPEG coder). A digest covers
+what a stage writes, not the container around it: the JPEG bytes, poses, calibration, scene and
+boxes of a drive log (not the MCAP header, which names library versions); every member of every
+clip shard (JSON with the source log's folder removed); the ``model.safetensors`` of a trained
+model; the metrics of an eval. A change that means to alter outputs re-records them with
+``python tests/test_outputs_unchanged.py --record`` and says so in its commit; a refactor leaves
+them as they are.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import tarfile
+from pathlib import Path
+
+import pytest
+
+from drivewm.cli import main
+from drivewm.diffusion.synthetic import make_synthetic_latent_cache
+from drivewm.logs.reader import read_log
+
+GOLDEN = Path(__file__).with_name("outputs_unchanged.json")
+
+#: Two short drives of the CLI chain: 18 frames each, one 17-frame clip per drive.
+SIMULATE = [
+    "simulate", "--source", "highway", "--scenario", "merge", "--weather", "rain", "--time-of-day", "dusk",
+    "--duration", "1.8", "--width", "160", "--height", "96", "--seed", "11", "--drives", "2",
+]  # fmt: skip
+TOKENIZER = [
+    "--preset",
+    "debug",
+    "--set",
+    "train.steps=3",
+    "--set",
+    "train.batch_size=2",
+    "--set",
+    "data.stats_batches=1",
+]
+PRETRAIN = [
+    "--preset", "debug", "--set", "model.hidden_dim=32", "--set", "model.depth=1", "--set", "model.num_heads=2",
+    "--set", "model.adaln_lora_dim=8", "--set", "text.dim=16", "--set", "train.steps=3",
+    "--set", "train.batch_size=2", "--set", "sample_steps=2",
+]  # fmt: skip
+
+
+def _sha(*chunks: bytes) -> str:
+    digest = hashlib.sha256()
+    for chunk in chunks:
+        digest.update(len(chunk).to_bytes(8, "little"))
+        digest.update(chunk)
+    return digest.hexdigest()[:20]
+
+
+def _json_bytes(obj) -> bytes:
+    return json.dumps(obj, sort_keys=True, default=lambda a: a.tolist()).encode()
+
+
+def log_digest(path: Path) -> str:
+    """A drive log's content: images (JPEG bytes and times), poses, rig, scene, boxes and road."""
+    log = read_log(path)
+    parts = [_json_bytes(log.rig.to_dict()), _json_bytes([log.scene.tags, log.scene.description])]
+    for cam in log.rig.names:
+        parts += [f.timestamp_ns.to_bytes(8, "little") + f.data for f in log.images[cam]]
+    parts += [log.pose_timestamps_ns.tobytes(), log.T_world_from_ego.tobytes()]
+    for tick, boxes in log.agents:
+        fields = [(b.track_id, b.category, b.center_xyz, b.size_lwh, b.yaw_rad, b.color_rgb) for b in boxes]
+        parts.append(_json_bytes([tick, fields]))
+    parts += [_json_bytes([r.kind, r.points_xyz, r.line_type]) for r in log.road]
+    return _sha(*parts)
+
+
+def _portable(name: str, data: bytes) -> bytes:
+    """A shard member with the source log's folder dropped (it names a temporary directory)."""
+    if not name.endswith(".json"):
+        return data
+    meta = json.loads(data)
+    meta["source_log"] = Path(meta["source_log"]).name
+    return _json_bytes(meta)
+
+
+def clips_digest(clip_dir: Path) -> dict[str, str]:
+    """Per shard: every member's name and bytes; and the manifest's rows (source log folder dropped)."""
+    out = {}
+    for shard in sorted(clip_dir.glob("*.tar")):
+        with tarfile.open(shard) as tar:
+            members = sorted(tar.getmembers(), key=lambda m: m.name)
+            out[shard.name] = _sha(*[m.name.encode() + _portable(m.name, tar.extractfile(m).read()) for m in members])
+    rows = [json.loads(line) for line in (clip_dir / "manifest.jsonl").read_text().splitlines()]
+    out["manifest.jsonl"] = _sha(*[_portable(".json", _json_bytes(r)) for r in rows])
+    return out
+
+
+def metrics_digest(eval_dir: Path) -> dict:
+    """metrics.json without timings or paths: the aggregates (rounded to 9 digits), a digest of the per-clip values."""
+
+    def clean(obj):
+        if isinstance(obj, dict):
+            dropped = ("config", "location")
+            return {k: clean(v) for k, v in obj.items() if not k.startswith("seconds") and k not in dropped}
+        if isinstance(obj, list):
+            return [clean(v) for v in obj]
+        return float(f"{obj:.9g}") if isinstance(obj, float) else obj
+
+    metrics = clean(json.loads((eval_dir / "metrics.json").read_text()))
+    return {**metrics, "clips": _sha(_json_bytes(metrics["clips"]))}
+
+
+def model_digest(model_dir: Path) -> str:
+    return _sha((model_dir / "model.safetensors").read_bytes())
+
+
+def _run(*argv) -> None:
+    assert main([str(a) for a in argv]) == 0, argv
+
+
+def cli_chain(root: Path) -> dict:
+    """simulate -> curate -> eval -> tokenizer train through the command line; the digests of each."""
+    logs, clips, ev, tok = root / "logs", root / "clips", root / "eval", root / "tok"
+    _run(*SIMULATE, "--out", logs)
+    _run("curate", logs, "--out", clips, "--recipe", "test")
+    _run("eval", clips, "--out", ev, "--recipe", "quick", "--no-pictures")
+    _run("tokenizer", "train", "--data", clips, "--out", tok, *TOKENIZER)
+    return {
+        "logs": {p.name: log_digest(p) for p in sorted(logs.glob("*.mcap"))},
+        "clips": clips_digest(clips),
+        "eval": metrics_digest(ev),
+        "tokenizer": model_digest(tok),
+    }
+
+
+def pretrain_digest(root: Path) -> str:
+    """Text2World pretraining of a tiny DiT for 3 steps on the seeded synthetic latent cache."""
+    cache = make_synthetic_latent_cache(root / "latents", clips_per_condition=2)
+    _run("pretrain", "--data", cache, "--out", root / "t2w", *PRETRAIN)
+    return model_digest(root / "t2w")
+
+
+def fixture_digests(sim_log_dir: Path, sim_clip_dir: Path) -> dict:
+    """The shared simulated logs and their clips (tests/conftest.py)."""
+    return {
+        "logs": {p.name: log_digest(p) for p in sorted(sim_log_dir.glob("*.mcap"))},
+        "clips": clips_digest(sim_clip_dir),
+    }
+
+
+@pytest.fixture(scope="module")
+def golden() -> dict:
+    return json.loads(GOLDEN.read_text())
+
+
+def test_fixture_logs_and_clips_unchanged(golden, sim_log_dir, sim_clip_dir):
+    assert fixture_digests(sim_log_dir, sim_clip_dir) == golden["fixtures"]
+
+
+@pytest.mark.slow
+def test_cli_chain_outputs_unchanged(golden, tmp_path):
+    got = cli_chain(tmp_path)
+    assert got["logs"] == golden["cli"]["logs"]
+    assert got["clips"] == golden["cli"]["clips"]
+    assert got["eval"] == golden["cli"]["eval"]
+    assert got["tokenizer"] == golden["cli"]["tokenizer"]
+
+
+@pytest.mark.slow
+def test_pretrain_output_unchanged(golden, tmp_path):
+    import torch
+
+    torch.set_num_threads(1)
+    assert pretrain_digest(tmp_path) == golden["pretrain"]
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--record"]:
+        raise SystemExit(f"usage: python {sys.argv[0]} --record   (rewrites {GOLDEN.name} from this checkout)")
+    import tempfile
+
+    import conftest  # the shared fixtures' builders
+
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        record = {
+            "fixtures": fixture_digests(conftest.sim_logs(), conftest.sim_clips()),
+            "cli": cli_chain(root / "cli"),
+            "pretrain": pretrain_digest(root / "t2w"),
+        }
+    GOLDEN.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
+    print(f"wrote {GOLDEN}")
