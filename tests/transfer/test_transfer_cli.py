@@ -112,6 +112,17 @@ def test_a_missing_model_is_one_clear_error(inputs, tmp_path, capsys) -> None:
     assert len(err) == 1 and err[0].startswith("error: ") and "nope" in err[0]
 
 
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error on machines without CUDA")
+def test_cuda_without_cuda_is_a_one_line_error_before_any_output(models, inputs, tmp_path, capsys) -> None:
+    transfer = ["transfer", str(inputs / "one"), "--model", str(models["transfer"]), "--to", "snow"]
+    train = ["transfer-train", "--init", str(models["t2w"]), "--data", str(inputs)]
+    for argv in (transfer, train):
+        assert main([*argv, "--device", "cuda", "--out", str(tmp_path / "out")]) == 2, argv[0]
+        err = capsys.readouterr().err
+        assert "CUDA is not available" in err and err.count("\n") == 1, err
+        assert not (tmp_path / "out").exists()
+
+
 DASHCAM_CALIBRATION = """name: dashcam
 cameras:
   - {name: CAM_FRONT, width: 320, height: 180, hfov_deg: 60, xyz: [1.5, 0.0, 1.3], yaw_deg: 0}
