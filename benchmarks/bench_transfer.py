@@ -41,6 +41,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--sdedit-sigmas", default="0.5,1,2,4,8")
     p.add_argument("--max-pairs", type=int, default=None, help="pairs per target (default: all)")
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where the networks run")
     p.add_argument("--out", type=Path, help="write the per-clip rows and the summary here (JSON)")
     return p.parse_args(argv)
 
@@ -50,8 +51,8 @@ def build_methods(args, targets):
     from drivewm.transfer.model import Transfer
     from drivewm.transfer.sdedit import sdedit_latents
 
-    model = Transfer.from_pretrained(args.model)
-    parent = Text2World.from_pretrained(args.parent or model.parent)
+    model = Transfer.from_pretrained(args.model).to(args.device)
+    parent = Text2World.from_pretrained(args.parent or model.parent).to(args.device)
     o = args
 
     def transfer(latents, captions, target, seeds):
@@ -108,6 +109,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     import torch
 
+    from drivewm.atomic import write_text
     from drivewm.diffusion.dit import count_parameters
     from drivewm.sim.paired import parse_conditions
     from drivewm.tokenizer import Tokenizer
@@ -119,14 +121,14 @@ def main(argv=None) -> int:
     source = TargetCondition(*parse_conditions(args.source)[0])
     targets = [TargetCondition(w, t) for w, t in parse_conditions(args.targets)]
     model, parent, methods = build_methods(args, targets)
-    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer)
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
     cases = paired_cases(args.data, source, targets, args.max_pairs)
     nfe = network_evaluations(args.steps, args.guidance, args.sampler)
     params = f"{count_parameters(model.net) / 1e6:.2f}M parameters, parent {count_parameters(parent.dit) / 1e6:.2f}M"
     print(
         f"transfer model {params}; "
         f"{len(cases)} held-out pairs from {source.name}; {nfe} network evaluations per sample ({args.sampler}, "
-        f"{args.steps} steps, guidance {args.guidance})"
+        f"{args.steps} steps, guidance {args.guidance}) on {model.device}"
     )
     t0 = time.perf_counter()
     cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
@@ -135,20 +137,15 @@ def main(argv=None) -> int:
         cells = " ".join(f"{r['method']} {r['psnr']:.1f}dB/{r['adherence']:.0f}" for r in rows)
         print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
 
-    rows = run_cases(cases, methods, tokenizer, progress=progress, cse_for=cse_for)
+    rows = run_cases(cases, methods, tokenizer, progress=progress, cse_for=cse_for, device=model.device)
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
     print_table(summary, nfe)
     for line in verdict(summary):
         print(line)
     if args.out:
-        args.out.write_text(
-            json.dumps(
-                {"args": {k: str(v) for k, v in vars(args).items()}, "summary": summary, "rows": rows},
-                indent=1,
-                default=str,
-            )
-        )
+        record = {"args": {k: str(v) for k, v in vars(args).items()}, "summary": summary, "rows": rows}
+        write_text(args.out, json.dumps(record, indent=1, default=str))
     return 0
 
 

@@ -80,20 +80,22 @@ def run_cases(
     seed: int = 0,
     progress=None,
     cse_for: set[str] | None = None,
+    device: torch.device | str = "cpu",
 ) -> list[dict]:
     """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
-    ``cse_for`` (None: all)."""
+    ``cse_for`` (None: all). The tokenizer codes on ``device`` (where it is); methods take and return
+    latents on the CPU."""
     rows = []
     for case in cases:
         src = case.source.videos()
-        latents = encode_views(tokenizer, src, src.shape[2:4])
+        latents = encode_views(tokenizer, src, src.shape[2:4], device)
         _, views = target_captions(case.source.meta, case.condition)
         captions = [views[c] for c in case.source.meta.cameras]
         seeds = [seed + v for v in range(len(captions))]
         source_cse = cross_view_error(src, case.source.meta.get_rig())  # {cse, cse_calibrated} of the source
-        outputs = {"identity": src, "tokenizer": _reconstruction(tokenizer, case.target.videos())}
+        outputs = {"identity": src, "tokenizer": _reconstruction(tokenizer, case.target.videos(), device)}
         for name, method in methods.items():
-            outputs[name] = decode_views(tokenizer, method(latents, captions, case.condition, seeds))
+            outputs[name] = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()}
@@ -103,8 +105,8 @@ def run_cases(
     return rows
 
 
-def _reconstruction(tokenizer, frames: np.ndarray) -> np.ndarray:
-    return decode_views(tokenizer, encode_views(tokenizer, frames, frames.shape[2:4]))
+def _reconstruction(tokenizer, frames: np.ndarray, device: torch.device | str = "cpu") -> np.ndarray:
+    return decode_views(tokenizer, encode_views(tokenizer, frames, frames.shape[2:4], device), device)
 
 
 def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
