@@ -57,6 +57,16 @@ class TransferOptions:
     """Tokenizer folder; None = the one recorded in the model folder."""
     device: str = "cpu"
     """Where the networks run: ``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
+    max_clips: int | None = None
+    """Transfer only the first N clips of the inputs (a preview; None: all)."""
+
+    def validate(self) -> None:
+        if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
+            raise DrivewmError(f"transfer: --steps ({self.steps}) and --max-clips ({self.max_clips}) must be >= 1")
+
+    def is_done(self, written: int) -> bool:
+        """True once ``written`` clips reach ``max_clips``."""
+        return self.max_clips is not None and written >= self.max_clips
 
     def target_for(self, clip: Clip) -> TargetCondition:
         """The target of one clip: the weather asked for, the time asked for or the clip's own."""
@@ -145,8 +155,10 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
 def transfer_clips(
     model_dir: str | Path, inputs: list[str | Path], options: TransferOptions, out_dir: str | Path
 ) -> dict:
-    """Transfer every clip of ``inputs`` (shards or clip folders) into ``out_dir``; returns the report
-    (also ``report.json``): clips written, and clips or shards skipped with the reason."""
+    """Transfer every clip of ``inputs`` (shards or clip folders; the first ``options.max_clips``) into
+    ``out_dir``; returns the report (also ``report.json``): clips written, and clips or shards skipped
+    with the reason."""
+    options.validate()
     transferer = load_transferer(model_dir, options)
     tokenizer = load_tokenizer(options.tokenizer or transferer.latent.tokenizer, model_dir, transferer.device)
     out = Path(out_dir)
@@ -154,8 +166,12 @@ def transfer_clips(
     rows, failed, sheet = [], [], []
     with ShardWriter(out, "transferred") as writer:
         for shard in tqdm(list_shards(inputs), desc="transfer", unit="shard"):
+            if options.is_done(len(rows)):
+                break
             try:
                 for clip in iter_shard(shard):
+                    if options.is_done(len(rows)):
+                        break
                     try:
                         result, source = transfer_clip(clip, transferer, tokenizer, options)
                     except DrivewmError as exc:

@@ -31,6 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
+    p.add_argument("--max-clips", type=int, default=None, help="transfer only the first N clips (a preview)")
     p.set_defaults(func=transfer_command)
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
@@ -62,6 +63,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.start_sigma,
         args.tokenizer,
         args.device,
+        args.max_clips,
     )
     report = transfer_clips(args.model, args.clips, options, args.out)
     for item in report["failed"]:

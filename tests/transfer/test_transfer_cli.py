@@ -96,6 +96,15 @@ def test_transfer_keeps_each_clips_time_of_day_unless_told(models, inputs, tmp_p
     assert {c.meta.tags["time_of_day"] for c in iter_clips(tmp_path)} == {"day"}
 
 
+def test_max_clips_transfers_only_the_first_clips(models, inputs, tmp_path, capsys) -> None:
+    argv = ["transfer", str(inputs / "good-000000.tar"), "--model", str(models["transfer"]), "--to", "rain"]
+    assert main([*argv, "--steps", "1", "--max-clips", "1", "--out", str(tmp_path / "a")]) == 0
+    first = next(iter_clips(inputs / "good-000000.tar"))
+    assert [c.meta.extra["transfer"]["source"]["key"] for c in iter_clips(tmp_path / "a")] == [first.key]
+    assert main([*argv, "--max-clips", "0", "--out", str(tmp_path / "b")]) == 2
+    assert "max-clips" in capsys.readouterr().err and not (tmp_path / "b").exists()
+
+
 def test_sdedit_baseline_through_the_same_command(models, inputs, tmp_path, capsys) -> None:
     argv = ["transfer", str(inputs / "one"), "--model", str(models["t2w"]), "--to", "snow", "--steps", "1"]
     assert main([*argv, "--out", str(tmp_path / "x")]) == 2
