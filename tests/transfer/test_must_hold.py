@@ -71,7 +71,8 @@ def test_transfer_beats_sdedit_against_the_truth(trained) -> None:
     summary = summarize(run_cases(cases, methods, PoolTokenizer(8)))["all"]
     best = max((m for m in summary if m.startswith("sdedit@")), key=lambda m: summary[m]["psnr"])
     ours = summary["transfer"]
-    # measured: transfer 16.4 dB, best SDEdit 9.6, identity (clear vs snow) 8.6, coded truth 17.9
+    # measured after the merge of main (studies/transfer_conditioning.py): transfer 16.1 dB, best SDEdit 9.6,
+    # identity (clear vs snow) 8.6, coded truth 17.9
     assert ours["psnr"] >= summary[best]["psnr"] + 3.0, summary
     assert ours["ssim"] > summary[best]["ssim"], summary
     assert ours["psnr"] >= summary["identity"]["psnr"] + 3.0, summary
