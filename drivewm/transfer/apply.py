@@ -146,7 +146,9 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
     captions = [views[name] for name in clip.meta.cameras]
     seeds = [options.seed + v for v in range(len(captions))]
     out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
-    rig = clip.meta.get_rig().scaled(w * sc, h * sc)
+    # frames_to_video resizes each image to the model's size (cv2.resize, no crop): the rig says so, so a
+    # 16:9 dashcam at 160x96 gets fx != fy rather than a silently wrong calibration
+    rig = clip.meta.get_rig().scaled(w * sc, h * sc, fit="stretch")
     meta = dataclasses.replace(clip.meta, rig=rig.to_dict())
     meta = retarget_meta(meta, target, f"{clip.key}-{target.weather}-{target.time_of_day}", transferer.record)
     return clip_from_arrays(meta, dict(zip(rig.names, out)), clip.T_world_from_ego), small
