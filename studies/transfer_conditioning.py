@@ -25,10 +25,7 @@ from pathlib import Path
 import torch
 
 from drivewm.atomic import write_text
-from drivewm.cli import main
 from drivewm.diffusion.dit import count_parameters
-from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.transfer.benchmark import paired_cases, run_cases, summarize
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
@@ -37,6 +34,9 @@ from drivewm.transfer.train import RECIPES, train_transfer
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "multiview"))
 from mv_standin import PoolTokenizer, write_pooled_cache  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "transfer"))
+from transfer_tiny import paired_clips, pooled_parent  # noqa: E402
 
 CLEAR, SNOW = TargetCondition("clear", "day"), TargetCondition("snow", "day")
 
@@ -48,29 +48,10 @@ VARIANTS = {
 }
 
 
-def paired_clips(root: Path, seed: int) -> Path:
-    """One highway drive rendered clear and in snow at 160x96, curated with the transfer recipe."""
-    logs, clips = root / f"logs{seed}", root / f"clips{seed}"
-    sim = ["simulate", "--scenario", "highway", "--duration", "1.7", "--width", "160", "--height", "96"]
-    assert main([*sim, "--seed", str(seed), "--conditions", "clear:day,snow:day", "--out", str(logs)]) == 0
-    assert main(["curate", str(logs), "--out", str(clips), "--recipe", "transfer"]) == 0
-    return clips
-
-
-def tiny_parent(folder: Path) -> Text2World:
-    torch.manual_seed(0)
-    parent = Text2World(
-        Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=64, depth=2, num_heads=4, adaln_lora_dim=8)),
-        LatentInfo([3, 5, 12, 20], [0.0] * 3, [0.5] * 3, 10.0, None, {}),
-    )
-    parent.save_pretrained(folder)
-    return parent
-
-
 def run(out: Path, steps: int) -> dict:
     train_clips, test_clips = paired_clips(out, 21), paired_clips(out, 22)
     cache = write_pooled_cache(train_clips, out / "latents", PoolTokenizer(8))
-    parent = tiny_parent(out / "t2w")
+    parent = pooled_parent(out / "t2w")
     methods, params = {}, {}
     for name, overrides in VARIANTS.items():
         folder = out / name.replace(" ", "_").replace(",", "").replace("+", "and")

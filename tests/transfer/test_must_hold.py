@@ -15,11 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
-import torch
 
-from drivewm.cli import main
-from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.transfer.benchmark import paired_cases, run_cases, summarize
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
@@ -29,28 +25,18 @@ from drivewm.transfer.train import RECIPES, train_transfer
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "multiview"))
 from mv_standin import PoolTokenizer, write_pooled_cache  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from transfer_tiny import paired_clips, pooled_parent  # noqa: E402
+
 CLEAR, SNOW = TargetCondition("clear", "day"), TargetCondition("snow", "day")
-
-
-def _paired_clips(root: Path, seed: int) -> Path:
-    logs, clips = root / f"logs{seed}", root / f"clips{seed}"
-    sim = ["simulate", "--scenario", "highway", "--duration", "1.7", "--width", "160", "--height", "96"]
-    assert main([*sim, "--seed", str(seed), "--conditions", "clear:day,snow:day", "--out", str(logs)]) == 0
-    assert main(["curate", str(logs), "--out", str(clips), "--recipe", "transfer"]) == 0
-    return clips
 
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     root = tmp_path_factory.mktemp("must_hold")
-    train_clips, test_clips = _paired_clips(root, 21), _paired_clips(root, 22)
+    train_clips, test_clips = paired_clips(root, 21), paired_clips(root, 22)
     cache = write_pooled_cache(train_clips, root / "latents", PoolTokenizer(8))
-    torch.manual_seed(0)
-    parent = Text2World(
-        Text2WorldConfig(DiTConfig(in_channels=3, hidden_dim=64, depth=2, num_heads=4, adaln_lora_dim=8)),
-        LatentInfo([3, 5, 12, 20], [0.0] * 3, [0.5] * 3, 10.0, None, {}),
-    )
-    parent.save_pretrained(root / "t2w")
+    parent = pooled_parent(root / "t2w")
     cfg = RECIPES.resolve("debug", overrides=["train.steps=150", "train.lr=2e-3", "train.checkpoint_every=150"])
     train_transfer(cfg, root / "t2w", cache, root / "transfer")
     return Transfer.from_pretrained(root / "transfer"), parent, test_clips
