@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "drivewm.diffusion.commands",  # pretrain, generate
     "drivewm.multiview.commands",  # posttrain, rollout
     "drivewm.eval.commands",  # eval
+    "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.quickstart",  # quickstart
     "drivewm.worldmodel",  # worldmodel train|export
 )

@@ -58,6 +58,12 @@ class Profile:
     generate: list[str]
     eval: list[str]
     generations: list[Generation]
+    paired: list[str]
+    """``drivewm simulate`` arguments of the paired drives (with ``--conditions``) the transfer model trains on."""
+    transfer_train: list[str]
+    """``drivewm transfer-train`` arguments (post-trained from the quickstart's Text2World model)."""
+    transfer: list[str]
+    """``drivewm transfer`` arguments: the target condition and how many of the curated clips (the report shows one)."""
 
 
 def load_profile(name: str, recipe: Path = RECIPE) -> Profile:
@@ -118,6 +124,7 @@ def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
             *p.generate,
         ]
         stages.append((f"generate-{g.name}", argv))
+    stages += transfer_stages(p, out)
     stages.append(("eval-real", ["eval", str(clips), "--rig", p.rig, "--out", str(out / "eval" / "real"), *p.eval]))
     for g in p.generations:
         stages.append(
@@ -137,6 +144,26 @@ def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
             )
         )
     return stages
+
+
+def transfer_stages(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
+    """Weather / time-of-day transfer (docs/transfer.md): paired drives, their latents, a transfer model
+    post-trained from the Text2World model, and the first curated clips transferred."""
+    logs, clips, model = out / "paired_logs", out / "paired_clips", out / "transfer_model"
+    tok, t2w = out / "tokenizer", out / "text2world"
+    return [
+        ("simulate-paired", ["simulate", *p.paired, "--rig", p.rig, "--out", str(logs)]),
+        ("curate-paired", ["curate", str(logs), "--out", str(clips), "--recipe", "transfer"]),
+        ("tokenizer-encode-paired", ["tokenizer", "encode", "--model", str(tok), "--data", str(clips)]),
+        (
+            "transfer-train",
+            ["transfer-train", "--init", str(t2w), "--data", str(clips), "--out", str(model), *p.transfer_train],
+        ),
+        (
+            "transfer",
+            ["transfer", str(out / "clips"), "--model", str(model), "--out", str(out / "transfer"), *p.transfer],
+        ),
+    ]
 
 
 def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") -> float:

@@ -44,7 +44,8 @@ def _fmt(value) -> str:
 
 def training_curves(out: Path, dest: Path) -> Path | None:
     """Plot loss against step for every stage that wrote metrics.jsonl; None if there are none."""
-    runs = {name: read_jsonl(out / name / "metrics.jsonl") for name in ("tokenizer", "text2world", "multiview")}
+    names = ("tokenizer", "text2world", "multiview", "transfer_model")
+    runs = {name: read_jsonl(out / name / "metrics.jsonl") for name in names}
     runs = {k: v for k, v in runs.items() if v}
     if not runs:
         return None
@@ -71,6 +72,10 @@ def gather(out: Path, rig: str, generations: list[str]) -> dict:
         figures["Training curves"] = curves
     for name in generations:
         figures[f"Generated: {name}"] = out / "generated" / name / "contact_sheet.png"
+    transferred = _read_json(out / "transfer" / "report.json")
+    if transferred.get("written"):
+        what = f"Transferred: {transferred['written'][0]} (source above, transferred below, all views)"
+        figures[what] = out / "transfer" / "contact_sheet.png"
     return {
         "rig": rig,
         "curate": curate,

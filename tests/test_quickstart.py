@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from drivewm.clips import iter_clips
+from drivewm.clips import iter_clips, read_manifest
 from drivewm.quickstart import load_profile
 
 pytestmark = pytest.mark.slow  # runs every stage of the pipeline (minutes)
@@ -63,6 +63,17 @@ def test_every_stage_ran_and_generated_clips_are_scored(quickstart_dir):
     assert real["tse"] is not None and 0 < real["tse"] < 2.0  # simulated clips are geometrically consistent
     tok = json.loads((out / "tokenizer_eval" / "metrics.json").read_text())
     assert tok["psnr"] > 8.0  # even 20 steps beat a constant grey image (about 6 dB on these renders)
+
+
+def test_one_curated_clip_is_transferred_to_snow_with_its_labels_and_shown_in_the_report(quickstart_dir):
+    out, _ = quickstart_dir
+    source = next(iter_clips(out / "clips"))
+    (done,) = list(iter_clips(out / "transfer"))  # --max-clips 1: the first curated clip
+    assert done.meta.extra["transfer"]["source"]["key"] == source.key
+    assert done.meta.cameras == source.meta.cameras and done.videos().shape[:2] == source.videos().shape[:2]
+    assert done.meta.tags["weather"] == "snow" and done.meta.timestamps_ns == source.meta.timestamps_ns
+    assert {r["pair_id"] for r in read_manifest(out / "paired_clips")} != {""}  # the model trained on pairs
+    assert f"Transferred: {done.key}" in (out / "report.md").read_text()
 
 
 def test_report_lists_real_and_generated_numbers(quickstart_dir):

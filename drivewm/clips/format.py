@@ -33,6 +33,8 @@ class ClipMeta:
     (and omitted from the JSON) when every camera's frames are exactly at ``timestamps_ns``. Read
     it through :meth:`camera_times_ns`, which falls back to ``timestamps_ns``.
     ``extra``: anything else (generated clips record model, prompt, seed, trajectory name).
+    ``pair_id``: the same drive window in other conditions has the same id (simulated drives:
+    ``<drive_id>-t<start tick>``, see drivewm.sim.paired); "" = no known partner.
     """
 
     key: str
@@ -50,6 +52,7 @@ class ClipMeta:
     trajectory_ego: list[list[float]] = dataclasses.field(default_factory=list)
     trajectory_dt_s: float = 0.0
     extra: dict = dataclasses.field(default_factory=dict)
+    pair_id: str = ""
     format_version: int = CLIP_FORMAT_VERSION
 
     @property

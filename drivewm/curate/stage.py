@@ -134,7 +134,7 @@ def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, cl
             with clock.step("write"):
                 writer.write(clip)
             embeddings.add(emb)
-            kept_rows.append(_manifest_row(clip.meta))
+            kept_rows.append(manifest_row(clip.meta))
     shard_of = dict((k, s) for s, k in writer.written)
     for row in kept_rows:
         row["shard"] = shard_of[row["key"]]
@@ -375,7 +375,15 @@ def _meta(
         trajectory_ego=np.round(waypoints, 4).tolist(),
         trajectory_dt_s=dt_s,
         extra={"speed_mps": motion["speed_mps"], "description": ctx.log.scene.description},
+        pair_id=pair_id(ctx.log.scene.tags, start),
     )
+
+
+def pair_id(scene_tags: dict[str, str], start_tick: int) -> str:
+    """``<drive_id>-t<start tick>``: the clip of the same window of the same drive in every condition
+    (the scene tag ``drive_id`` of simulated logs, drivewm.sim.paired); "" when the log has none."""
+    drive = scene_tags.get("drive_id", "")
+    return f"{drive}-t{start_tick:06d}" if drive else ""
 
 
 def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
@@ -388,7 +396,7 @@ def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
     return {"manoeuvre": classify_manoeuvre(xyz_ego0, yaw, speed), "speed_mps": round(float(speed.mean()), 3)}
 
 
-def _manifest_row(meta: ClipMeta) -> dict:
+def manifest_row(meta: ClipMeta) -> dict:
     """One manifest.jsonl row: enough to filter and balance without opening shards."""
     return {
         "key": meta.key,
@@ -403,6 +411,7 @@ def _manifest_row(meta: ClipMeta) -> dict:
         "quality": meta.quality,
         "caption": meta.caption,
         "sync_error_ns": meta.sync_error_ns,
+        "pair_id": meta.pair_id,
     }
 
 

@@ -19,6 +19,7 @@ from drivewm.logs.types import RoadLine, SceneInfo
 from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
 from drivewm.sim.exposure import exposure_offsets_ns, state_at
+from drivewm.sim.paired import drive_id
 from drivewm.sim.scene import SceneRecording
 from drivewm.sim.world import build_renderer, sim_rig
 from drivewm.workers import process_pool
@@ -36,7 +37,9 @@ def record(cfg: SimConfig) -> SceneRecording:
         from drivewm.sim.source_sumo import record_sumo
 
         rec = record_sumo(cfg)
-    rec.tags.update(weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density)
+    rec.tags.update(
+        weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density, drive_id=drive_id(cfg)
+    )
     rec.description = describe(cfg, rec)
     return rec
 
