@@ -134,6 +134,19 @@ def items_from_clips(location: Path, rig: Rig | None, fit: str = "same") -> list
     return items
 
 
+def _shard_folders(location: Path) -> list[Path]:
+    return sorted(p for p in location.iterdir() if p.is_dir() and any(p.glob("*.tar")))
+
+
+def items_from_clip_folders(location: Path, rig: Rig | None, fit: str = "same") -> list[EvalItem]:
+    """A folder of clip-shard folders (e.g. ``drivewm generate`` outputs, one folder per prompt):
+    every folder's clips, keyed ``FOLDER/KEY`` so that equal keys of different folders stay apart."""
+    items = []
+    for folder in _shard_folders(location):
+        items += [dataclasses.replace(i, key=f"{folder.name}/{i.key}") for i in items_from_clips(folder, rig, fit)]
+    return items
+
+
 def _clip_item(clip: Clip | BadClip, rig: Rig | None, fit: str) -> EvalItem:
     if isinstance(clip, BadClip):
         raise DrivewmError(clip.reason)
@@ -204,6 +217,8 @@ def load_items(
         raise DrivewmError(f"{location}: no such file or folder")
     if location.suffix == ".tar" or (location.is_dir() and any(location.glob("*.tar"))):
         return items_from_clips(location, rig_obj, fit)
+    if location.is_dir() and _shard_folders(location):
+        return items_from_clip_folders(location, rig_obj, fit)
     if rig_obj is None:
         raise DrivewmError(f"{location}: mp4 inputs need --rig (camera names, intrinsics and extrinsics)")
     if location.is_file() and location.suffix == ".mp4":

@@ -174,3 +174,18 @@ def test_max_clips_spreads_the_subset_over_the_input():
     assert spread(items, None) == items and spread(items, 12) == items
     with pytest.raises(DrivewmError, match="max_clips"):
         spread(items, 0)
+
+
+def test_a_folder_of_shard_folders_is_scored_with_folder_prefixed_keys(shard_dir, tmp_path):
+    """`drivewm eval RUN/generated` (one shard folder per prompt, equal sample keys in each): every
+    clip of every folder, none replacing another; a folder without shards is not an input."""
+    import shutil
+
+    from drivewm.eval.inputs import load_items
+
+    for name in ("snow_left", "fog_right"):
+        shutil.copytree(shard_dir, tmp_path / "generated" / name)
+    (tmp_path / "generated" / "notes").mkdir()
+    keys = [i.key for i in load_items(tmp_path / "generated")]
+    inner = sorted(i.key for i in load_items(shard_dir))
+    assert keys == [f"fog_right/{k}" for k in inner] + [f"snow_left/{k}" for k in inner]
