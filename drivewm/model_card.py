@@ -70,20 +70,30 @@ def _stages(run: Path) -> list[str]:
     for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
         m = _json(marker)
         seconds = "" if m.get("seconds") is None else f"{m['seconds']:.0f}"
-        rows.append(f"| {marker.stem} | {seconds} | `drivewm {shlex.join(m.get('argv', []))}` |")
+        command = shlex.join(m.get("argv", [])).replace(str(run), "RUN")  # paste-able for another run folder
+        rows.append(f"| {marker.stem} | {seconds} | `drivewm {command}` |")
+    return rows
+
+
+def _compute(run: Path) -> list[str]:
+    """Steps and wall seconds of every trained folder of the run (intermediate stages included:
+    the image-pretrained Text2World model is compute the shipped one was built on)."""
+    import torch
+
+    rows = []
+    for state in sorted(run.glob("*/train_state.pt"), key=lambda p: p.stat().st_mtime):
+        saved = torch.load(state, map_location="cpu", weights_only=True)
+        seconds = saved.get("train_seconds")
+        wall, hours = ("not recorded", "") if seconds is None else (f"{seconds:.0f}", f"{seconds / 3600:.2f}")
+        rows.append(f"| {state.parent.name}/ | {int(saved['step'])} | {wall} | {hours} |")
     return rows
 
 
 def write_model_card(run: Path, out: Path, manifest: dict, notes: str = "") -> Path:
     """Write ``out/MODEL_CARD.md`` for the weights exported from ``run``; returns its path."""
     run, out = Path(run), Path(out)
-    training = manifest.get("training", {})
-    compute = ["| model | steps | training wall seconds | wall hours |", "|---|---|---|---|"]
-    for name, rec in training.items():
-        if rec:
-            seconds = rec.get("train_seconds")
-            wall, hours = ("not recorded", "") if seconds is None else (f"{seconds:.0f}", f"{seconds / 3600:.2f}")
-            compute.append(f"| {name} | {rec['steps']} | {wall} | {hours} |")
+    compute = ["| run folder | steps | training wall seconds | wall hours |", "|---|---|---|---|"]
+    compute += _compute(run)
     files = ["| file | bytes | sha256 |", "|---|---|---|"]
     files += [f"| {name} | {e['bytes']} | `{e['sha256']}` |" for name, e in manifest["files"].items()]
     figures = (run / "eval" / "figures.md").read_text() if (run / "eval" / "figures.md").is_file() else "not measured\n"

@@ -1,0 +1,110 @@
+"""The weights drivewm ships (drivewm/weights/): intact, within the size limits, loadable, and
+generating what they generated when they were exported (fixed seed, stored statistics).
+
+``tests/shipped_generation.json`` holds per-camera pixel statistics of a small fixed-seed generation
+with the shipped multi-view model. Replacing the shipped weights re-records it with
+``python tests/test_shipped_weights.py --record`` in the same commit.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from safetensors import safe_open
+
+from drivewm.cli import main
+from drivewm.clips import iter_clips
+from drivewm.errors import DrivewmError
+from drivewm.release import MAX_FILE_BYTES, MAX_TOTAL_BYTES, WEIGHTS_DIR, check_manifest, export_run, shipped_model
+
+STATS = Path(__file__).with_name("shipped_generation.json")
+GENERATE = [
+    "generate", "--prompt", "a snowy highway at dusk, the car ahead brakes", "--rig", "nuscenes6",
+    "--trajectory", "left", "--steps", "3", "--guidance", "3", "--seed", "7", "--num-samples", "1", "--device", "cpu",
+]  # fmt: skip
+KINDS = ("tokenizer", "text2world", "multiview")
+
+
+def test_every_shipped_file_is_in_the_manifest_with_its_sha256_and_within_the_limits():
+    manifest = check_manifest()  # raises on any sha256 mismatch
+    on_disk = {str(p.relative_to(WEIGHTS_DIR)) for p in WEIGHTS_DIR.rglob("*") if p.is_file()}
+    assert on_disk - set(manifest["files"]) == {"MANIFEST.json", "MODEL_CARD.md"}
+    sizes = [e["bytes"] for e in manifest["files"].values()]
+    assert max(sizes) <= MAX_FILE_BYTES and sum(sizes) <= MAX_TOTAL_BYTES
+    card = (WEIGHTS_DIR / "MODEL_CARD.md").read_text()
+    assert all(e["sha256"] in card for e in manifest["files"].values())
+    for kind in KINDS:
+        with safe_open(str(shipped_model(kind) / "model.safetensors"), "pt") as f:
+            dtypes = {f.get_slice(k).get_dtype() for k in f.keys()}
+        assert dtypes <= {"F16", "I64", "BOOL"}, (kind, dtypes)
+        assert manifest["training"][kind]["steps"] > 0
+
+
+def test_a_changed_byte_is_refused(tmp_path):
+    copy = tmp_path / "weights"
+    shutil.copytree(WEIGHTS_DIR, copy)
+    target = copy / "multiview" / "model.safetensors"
+    data = bytearray(target.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    target.write_bytes(bytes(data))
+    with pytest.raises(DrivewmError, match="multiview/model.safetensors: sha256 differs"):
+        check_manifest(copy)
+
+
+def test_export_of_a_run_writes_fp16_folders_manifest_and_card(tmp_path):
+    """Round trip: a run made of the shipped folders exports to the same tensors, a manifest that
+    checks, and a card naming every sha256; a file over the limit is refused."""
+    run = tmp_path / "run"
+    for kind in KINDS:
+        shutil.copytree(shipped_model(kind), run / kind)
+    files = export_run(run, tmp_path / "out", notes="trained for a test")
+    manifest = check_manifest(tmp_path / "out")
+    card = (tmp_path / "out" / "MODEL_CARD.md").read_text()
+    assert all(e["sha256"] in card for e in manifest["files"].values()) and "trained for a test" in card
+    assert {p.name for p in files} >= {"model.safetensors", "config.json", "MANIFEST.json", "MODEL_CARD.md"}
+    for kind in KINDS:
+        assert (tmp_path / "out" / kind / "model.safetensors").read_bytes() == (
+            shipped_model(kind) / "model.safetensors"
+        ).read_bytes()
+
+
+def generation_stats(out: Path) -> dict[str, list[float]]:
+    """Per camera of the generated clip: mean and std of the pixels, and the mean of the top and
+    bottom thirds (sky and road, in a model that learned where they are)."""
+    stats = {}
+    for clip in iter_clips(out):
+        for cam in clip.meta.cameras:
+            frames = clip.video(cam).astype(np.float64)  # (T, H, W, 3)
+            third = frames.shape[1] // 3
+            stats[cam] = [frames.mean(), frames.std(), frames[:, :third].mean(), frames[:, -third:].mean()]
+    return stats
+
+
+@pytest.mark.slow
+def test_fixed_seed_generation_matches_the_stored_statistics(tmp_path):
+    """No --model: generate uses the shipped multi-view model (and its shipped tokenizer)."""
+    assert main([*GENERATE, "--out", str(tmp_path)]) == 0
+    got = generation_stats(tmp_path)
+    want = json.loads(STATS.read_text())
+    assert sorted(got) == sorted(want) and len(got) == 6  # one mp4 per nuScenes camera
+    for cam, values in want.items():
+        np.testing.assert_allclose(got[cam], values, atol=2.0, err_msg=cam)  # 8-bit levels
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--record"]:
+        raise SystemExit(f"usage: python {sys.argv[0]} --record   (rewrites {STATS.name} from the shipped weights)")
+    import tempfile
+
+    import torch
+
+    torch.set_num_threads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        assert main([*GENERATE, "--out", tmp]) == 0
+        STATS.write_text(json.dumps(generation_stats(Path(tmp)), indent=1) + "\n")
+    print(f"wrote {STATS}")
