@@ -4,19 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from drivewm import release
 from drivewm.cli import build_parser, main
-from drivewm.train.checkpoint import WEIGHTS_NAME
-
-
-@pytest.fixture
-def weights_dir(tmp_path, monkeypatch):
-    """A stand-in drivewm/weights/ holding a multiview and a tokenizer folder."""
-    for kind in ("multiview", "tokenizer"):
-        (tmp_path / kind).mkdir()
-        (tmp_path / kind / WEIGHTS_NAME).write_bytes(b"weights")
-    monkeypatch.setattr(release, "WEIGHTS_DIR", tmp_path)
-    return tmp_path
 
 
 @pytest.mark.parametrize(
@@ -28,12 +16,12 @@ def weights_dir(tmp_path, monkeypatch):
         (["pretrain", "--tokenizer", "shipped:tokenizer", "--data", "c", "--out", "t"], "tokenizer", "tokenizer"),
     ],
 )
-def test_shipped_names_resolve_to_the_installed_folders(weights_dir, argv, flag, kind):
+def test_shipped_names_resolve_to_the_installed_folders(fake_shipped_weights, argv, flag, kind):
     args = build_parser().parse_args(argv)
-    assert getattr(args, flag) == weights_dir / kind
+    assert getattr(args, flag) == fake_shipped_weights / kind
 
 
-def test_a_plain_path_stays_a_path(weights_dir):
+def test_a_plain_path_stays_a_path(fake_shipped_weights):
     args = build_parser().parse_args(["posttrain", "--init", "runs/mv", "--data", "c", "--out", "m"])
     assert str(args.init) == "runs/mv"
 
@@ -42,7 +30,7 @@ def test_a_plain_path_stays_a_path(weights_dir):
     "value, message",
     [("shipped:text2world", "no shipped text2world weights at"), ("shipped:../x", "no shipped model '../x'")],
 )
-def test_missing_or_unknown_shipped_models_are_one_line_errors(weights_dir, capsys, value, message):
+def test_missing_or_unknown_shipped_models_are_one_line_errors(fake_shipped_weights, capsys, value, message):
     code = main(["posttrain", "--init", value, "--data", "c", "--out", "m"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and message in err and len(err.splitlines()) == 1
