@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from drivewm.clips import iter_clips
 from drivewm.curate.contact_sheet import THUMB_W
 from drivewm.geometry import load_rig
-from drivewm.multiview.writer import GeneratedSample, write_samples
+from drivewm.multiview.writer import GeneratedSample, prompted_tags, write_samples
 
 
 def _sample(rig, seed: int) -> GeneratedSample:
@@ -18,7 +19,7 @@ def _sample(rig, seed: int) -> GeneratedSample:
     colours = np.random.default_rng(seed).integers(0, 256, (v, 3))
     videos = np.broadcast_to(colours[:, None, None, None, :], (v, 5, 96, 160, 3)).astype(np.uint8)
     waypoints = np.stack([np.arange(1, 6) * 1.0, np.zeros(5), np.zeros(5)], axis=1)
-    return GeneratedSample(videos, rig, "snow", ["snow"] * v, waypoints, 0.5, {"seed": seed})
+    return GeneratedSample(videos, rig, "snowy night", ["snowy night"] * v, waypoints, 0.5, {"seed": seed})
 
 
 def test_contact_sheet_has_a_row_per_camera_like_the_curated_one(tmp_path):
@@ -38,3 +39,18 @@ def test_contact_sheet_has_a_row_per_camera_like_the_curated_one(tmp_path):
             assert np.abs(patch - s.videos[view, 0, 0, 0]).max() <= 3, (i, view)
     clips = list(iter_clips(tmp_path))
     assert [c.meta.cameras for c in clips] == [rig.names, rig.names]
+    assert clips[0].meta.tags == {"weather": "snow", "time_of_day": "night"}  # what eval's adherence checks
+
+
+@pytest.mark.parametrize(
+    "prompt, tags",
+    [
+        ("heavy snow on a highway, daytime, the ego car turns left", {"weather": "snow", "time_of_day": "day"}),
+        ("thick fog over a divided highway", {"weather": "fog"}),
+        ("a dark night drive past lit houses", {"time_of_day": "night"}),
+        ("a clear day, then rain", {"time_of_day": "day"}),  # two weathers named: no weather asked for
+        ("a drive on a road", {}),
+    ],
+)
+def test_prompted_tags_name_the_conditions_a_prompt_asks_for(prompt, tags):
+    assert prompted_tags(prompt) == tags
