@@ -123,6 +123,9 @@ def _missing_reason(metrics: dict, key: str) -> str:
     given, e.g. 'too_few_matches (2 of 2 clips)'."""
     reasons: Counter = Counter()
     clips = (metrics.get("clips") or {}).values()
+    field = key.removeprefix("adherence_")
+    if field != key and not any(f"{field}_match" in (c.get("adherence") or {}) for c in clips):
+        return f"no prompt or clip tag names a {field.replace('_', ' ')}"
     for clip in clips:
         statuses = clip.get("status") or {}
         status = statuses.get(STATUS_OF.get(key, key)) or statuses.get(key.split("_")[0])
