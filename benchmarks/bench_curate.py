@@ -1,100 +1,303 @@
-"""Curation throughput in camera-frames/s against the raw decode rate of the same logs (the
-practical limit: curation must at least decode every JPEG once), and the local executor's
-speed-up from 1 to 2 workers. All three are measured in this run, on the same input.
+"""Curation throughput against raw decoding, where the time goes, output quality, 1 vs 2 workers,
+and (``--hour``) an hour-long 6-camera log in bounded memory.
 
-    python benchmarks/bench_curate.py            # 4 simulated nuscenes6 drives of 4 s (small)
-    python benchmarks/bench_curate.py --full     # 8 drives of 10 s
-    python benchmarks/bench_curate.py --logs DIR # your own MCAP logs
+Everything is measured in this run on the same input, in interleaved rounds (medians):
+
+- raw decode: drivewm's image stream of every log (MCAP + protobuf) and one JPEG decode per
+  image (``ImageFrame.decode``): the least any curation must do;
+- ``drivewm curate`` with the packaged ``default`` and ``fleet`` recipes (drivewm/recipes/curate/) on
+  one local worker, and the fleet recipe on two;
+- per step CPU seconds per camera-frame (the stage's own StepClock: index, read, decode, resize,
+  shots, filters, encode, write);
+- PSNR of the encoded clips against the log's frames at each camera's exposure times, with the
+  H.264 settings that produced them.
+
+On a machine shared with other jobs, wall-clock ratios move with the load; CPU seconds per
+camera-frame (this process and its workers) move much less, so both are printed.
+
+    python benchmarks/bench_curate.py                 # 4 simulated nuscenes6 drives of 20 s
+    python benchmarks/bench_curate.py --hour          # + a 1 h, 6-camera log (looped frames)
+    python benchmarks/bench_curate.py --logs DIR      # your own MCAP logs instead of simulating
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import resource
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
+REPO = Path(__file__).resolve().parents[1]
+RECIPES = ("default", "fleet")  # packaged curate recipes (drivewm/recipes/curate/)
+SCENARIOS = ["highway", "roundabout", "merge", "intersection"]
 
 
 def simulate_logs(out: Path, drives: int, duration_s: float) -> list[Path]:
+    """``drives`` nuscenes6 highway-env drives (kept in ``out`` for reruns)."""
     from drivewm.sim import SimConfig, simulate
 
-    scenarios = ["highway", "roundabout", "merge", "intersection"]
-    return [
-        simulate(
-            SimConfig(source="highway", scenario=scenarios[i % 4], rig="nuscenes6", duration_s=duration_s, seed=i),
-            out / f"drive{i}.mcap",
-        )
-        for i in range(drives)
-    ]
+    paths = []
+    for i in range(drives):
+        path = out / f"drive{i}_{duration_s:g}s.mcap"
+        if not path.is_file():
+            cfg = SimConfig(source="highway", scenario=SCENARIOS[i % 4], duration_s=duration_s, seed=i)
+            simulate(cfg, path, progress=False)
+        paths.append(path)
+    return paths
 
 
-def decode_rate(logs: list[Path]) -> tuple[int, float, float]:
-    """(camera frames, seconds to read every log and decode every image once, seconds to encode
-    those frames as 17-frame H.264 clips with drivewm.clips.video.encode_mp4)."""
-    import numpy as np
+class Meter:
+    """Wall seconds and CPU seconds of this process plus its finished children (pool workers)."""
 
-    from drivewm.clips.video import encode_mp4
-    from drivewm.logs.reader import read_log
+    def __enter__(self) -> Meter:
+        self.wall, self.cpu = time.perf_counter(), self._cpu()
+        return self
 
-    start, frames, decoded = time.perf_counter(), 0, []
+    def __exit__(self, *exc) -> None:
+        self.wall, self.cpu = time.perf_counter() - self.wall, self._cpu() - self.cpu
+
+    @staticmethod
+    def _cpu() -> float:
+        kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return time.process_time() + kids.ru_utime + kids.ru_stime
+
+
+def raw_decode(logs: list[Path]) -> int:
+    """Stream every image of every log and decode it once; returns the camera-frame count."""
+    from drivewm.logs.reader import LogStream
+
+    frames = 0
     for path in logs:
-        log = read_log(path)
-        for cam_frames in log.images.values():
-            decoded.append(np.stack([f.decode() for f in cam_frames]))
-            frames += len(cam_frames)
-    t_decode = time.perf_counter() - start
-    start = time.perf_counter()
-    for video in decoded:
-        for i in range(0, len(video) - 16, 17):
-            encode_mp4(video[i : i + 17], 10.0)
-    encoded = sum((len(v) // 17) * 17 for v in decoded)
-    return frames, t_decode, (time.perf_counter() - start) * frames / max(encoded, 1)
+        for _, (_, frame) in LogStream(path).stream(("image",)):
+            frame.decode()
+            frames += 1
+    return frames
 
 
-def curate_time(logs: list[Path], out: Path, workers: int) -> tuple[float, int]:
+def curate_run(logs: list[Path], out: Path, recipe: str, workers: int, overrides: list[str] = ()) -> dict:
     from drivewm.curate import curate, load_curate_config
 
-    cfg = load_curate_config("default")
-    start = time.perf_counter()
-    report = curate(logs, out, cfg, executor="local", workers=workers, progress=False)
-    return time.perf_counter() - start, report["kept"]
+    shutil.rmtree(out, ignore_errors=True)
+    cfg = load_curate_config(recipe, list(overrides))
+    return curate(logs, out, cfg, executor="local", workers=workers, progress=False)
+
+
+def step_ms(report: dict, frames: int) -> dict[str, float]:
+    """CPU ms per camera-frame by step, summed over the report's logs."""
+    from drivewm.curate.timing import STEPS
+
+    total = {k: 0.0 for k in STEPS}
+    for log in report["logs"].values():
+        for k, v in log.get("cpu_s", {}).items():
+            total[k] += v
+    return {k: 1e3 * v / frames for k, v in total.items() if v}
+
+
+def clip_psnr(out: Path, logs: list[Path], max_clips: int = 6) -> tuple[float, float, float]:
+    """(mean PSNR dB, min PSNR dB, mean kB per camera video) of up to ``max_clips`` clips against
+    the log frames at each camera's exposure times."""
+    from drivewm.clips import iter_clips
+    from drivewm.logs.reader import read_log
+
+    by_name = {p.name: read_log(p) for p in logs}
+    psnrs, sizes = [], []
+    for clip in list(iter_clips(out))[:max_clips]:
+        log = by_name[Path(clip.meta.source_log).name]
+        for cam in clip.meta.cameras:
+            frames = {f.timestamp_ns: f for f in log.images[cam]}
+            source = np.stack([frames[t].decode() for t in clip.meta.camera_times_ns(cam)])
+            mse = np.mean((clip.video(cam).astype(np.float64) - source) ** 2, axis=(1, 2, 3))
+            psnrs += list(10 * np.log10(255.0**2 / np.maximum(mse, 1e-12)))
+            sizes.append(len(clip.mp4[cam]) / 1e3)
+    return float(np.mean(psnrs)), float(np.min(psnrs)), float(np.mean(sizes))
+
+
+def throughput(logs: list[Path], work: Path, rounds: int) -> None:
+    import cv2
+
+    cv2.setNumThreads(1)  # one core per worker, as the pool's workers run
+    runs = {"raw decode": None, "default, 1 worker": ("default", 1), "fleet, 1 worker": ("fleet", 1)}
+    runs["fleet, 2 workers"] = ("fleet", 2)
+    wall = {k: [] for k in runs}
+    cpu = {k: [] for k in runs}
+    steps: dict[str, list[dict]] = {"default": [], "fleet": []}
+    stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
+    frames, reports = 0, {}
+    for r in range(rounds):
+        for name, spec in runs.items():
+            with Meter() as m:
+                if spec is None:
+                    frames = raw_decode(logs)
+                else:
+                    reports[name] = curate_run(logs, work / name.replace(", ", "_").replace(" ", ""), *spec)
+            wall[name].append(m.wall)
+            cpu[name].append(m.cpu)
+            if spec is not None and spec[1] == 1:
+                steps[spec[0]].append(step_ms(reports[name], frames))
+            if spec is not None:
+                stage_cpu[name].append(sum(step_ms(reports[name], frames).values()))
+        print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
+    kept = {k: reports[k]["kept"] for k in reports}
+    print(f"\ninput: {len(logs)} logs, {frames} camera-frames; clips kept {kept}")
+    print(f"{'':22s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s}")
+    for k in runs:
+        print(
+            f"{k:22s} {frames / med[k]:12.1f} {med['raw decode'] / med[k]:12.2f} "
+            f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f}"
+        )
+    speedup = med["fleet, 1 worker"] / med["fleet, 2 workers"]
+    steady = {k: float(np.median(v)) for k, v in stage_cpu.items()}
+    print(
+        f"1 -> 2 workers (fleet): {speedup:.2f}x wall on {os.cpu_count()} CPUs (load average now "
+        f"{os.getloadavg()[0]:.1f}); stage CPU ms per camera-frame per worker (StepClock, no process start-up): "
+        f"{steady['fleet, 1 worker']:.3f} with 1 worker, {steady['fleet, 2 workers']:.3f} with 2"
+    )
+    startup = worker_startup_cpu_s()
+    print(
+        f"a pool worker's start-up (spawn + importing the stage) costs {startup:.2f} CPU s, i.e. "
+        f"{1e3 * 2 * startup / frames:.3f} ms per camera-frame of this input for 2 workers (1 worker runs in-process)"
+    )
+    print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock):")
+    names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
+    print(f"{'recipe':10s} " + " ".join(f"{k:>8s}" for k in names) + f" {'total':>8s}")
+    for recipe, rows in steps.items():
+        vals = [float(np.median([row.get(k, 0.0) for row in rows])) for k in names]
+        print(f"{recipe:10s} " + " ".join(f"{v:8.3f}" for v in vals) + f" {sum(vals):8.3f}")
+    print(f"raw decode total {1e3 * med_cpu['raw decode'] / frames:.3f} ms per camera-frame (read + decode)")
+    print("\nH.264 output (yuv420p, no B-frames, tune zerolatency) against the source frames:")
+    from drivewm.curate import load_curate_config
+
+    for recipe, run in (("default", "default, 1 worker"), ("fleet", "fleet, 1 worker")):
+        cfg = load_curate_config(recipe)
+        mean, low, kb = clip_psnr(work / run.replace(", ", "_").replace(" ", ""), logs)
+        threads = cfg.h264_threads or "x264 auto"
+        print(
+            f"  {recipe:8s} preset {cfg.h264_preset}, crf {cfg.crf}, threads {threads}, RGB->YUV "
+            f"{cfg.h264_yuv_converter}: "
+            f"PSNR mean {mean:.2f} dB, min {low:.2f} dB, {kb:.0f} kB per camera per {cfg.clip_frames}-frame clip"
+        )
+
+
+def worker_startup_cpu_s() -> float:
+    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does."""
+    code = "import time; import drivewm.curate.executors; print(time.process_time())"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return float(proc.stdout.split()[-1])
+
+
+def _step_order(name: str) -> int:
+    from drivewm.curate.timing import STEPS
+
+    return STEPS.index(name) if name in STEPS else len(STEPS)
+
+
+def write_hour_log(source: Path, out: Path, seconds: float) -> Path:
+    """A long log from a short one: its images again and again with advancing timestamps, the ego
+    pose continuing rigidly from where the last loop ended (written message by message)."""
+    from drivewm.geometry import invert_T
+    from drivewm.logs.reader import read_log
+    from drivewm.logs.writer import LogWriter
+
+    log = read_log(source)
+    ts, T = log.pose_timestamps_ns, log.T_world_from_ego
+    period = int(np.median(np.diff(ts)))
+    n, loops = len(ts), int(np.ceil(seconds * 1e9 / (period * len(ts))))
+    step = T[-1] @ invert_T(T[0])  # loop k starts where loop k - 1 ended
+    frames = {cam: {f.timestamp_ns: f for f in fs} for cam, fs in log.images.items()}
+    with LogWriter(out, log.rig, log.scene) as writer:
+        D = np.eye(4)
+        for k in range(loops):
+            for i in range(n):
+                t = int(ts[0] + (k * n + i) * period)
+                writer.write_pose(t, D @ T[i])
+                for cam in log.rig.names:
+                    f = frames[cam].get(int(ts[i]))
+                    if f is not None:
+                        writer.write_encoded_image(cam, t, f.data, f.format)
+            D = step @ D
+    return out
+
+
+HOUR_SCRIPT = """
+import json, resource, sys, time
+import cv2
+cv2.setNumThreads(1)
+from drivewm.curate import curate, load_curate_config
+cfg = load_curate_config(sys.argv[3], sys.argv[4:])
+t0, c0 = time.perf_counter(), time.process_time()
+report = curate([sys.argv[1]], sys.argv[2], cfg, progress=False)
+log = next(iter(report["logs"].values()))
+print(json.dumps({"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0, "kept": report["kept"],
+                  "dropped": report["dropped"], "frames": log.get("camera_frames"), "status": log["status"],
+                  "error": log.get("error"), "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def hour(source: Path, work: Path, seconds: float, recipe: str) -> None:
+    log = work / f"hour_{seconds:g}s.mcap"
+    if not log.is_file():
+        print(f"writing a {seconds:g} s log from {source.name} ...", flush=True)
+        write_hour_log(source, log, seconds)
+    gb = log.stat().st_size / 2**30
+    with Meter() as m:
+        frames = raw_decode([log])
+    # within-log dedup would drop every repeated loop before encoding; off, so every window costs what new footage would
+    overrides = ["filters.dedup_cosine=1.0"]
+    out = work / "hour_out"
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [sys.executable, "-c", HOUR_SCRIPT, str(log), str(out), recipe, *overrides]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+    if proc.returncode != 0:
+        raise SystemExit(proc.stderr[-3000:])
+    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    print(
+        f"\nhour-long log: {seconds / 3600:.2f} h, 6 cameras, {frames} camera-frames, {gb:.2f} GB "
+        f"({recipe} recipe, {overrides})"
+    )
+    print(f"  status {res['status']} {res['error'] or ''}; kept {res['kept']} clips, dropped {res['dropped']}")
+    print(f"  peak RSS {res['peak_rss_mb']:.0f} MB (limit 2048 MB)")
+    print(
+        f"  curate {frames / res['wall_s']:.1f} camera-frames/s wall ({res['wall_s']:.0f} s), "
+        f"{1e3 * res['cpu_s'] / frames:.3f} CPU ms per camera-frame; raw decode {frames / m.wall:.1f} camera-frames/s, "
+        f"{1e3 * m.cpu / frames:.3f} CPU ms; ratio {m.wall / res['wall_s']:.2f}x wall, {m.cpu / res['cpu_s']:.2f}x CPU"
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--full", action="store_true", help="8 drives of 10 s instead of 4 of 4 s")
     parser.add_argument("--logs", type=Path, help="benchmark these MCAP logs instead of simulating")
+    parser.add_argument("--drives", type=int, default=4, help="simulated drives (default 4)")
+    parser.add_argument("--duration", type=float, default=20.0, help="seconds per simulated drive (default 20)")
+    parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds (default 3)")
+    parser.add_argument("--hour", action="store_true", help="also curate an hour-long log in a fresh process")
+    parser.add_argument("--hour-seconds", type=float, default=3600.0, help="length of that log (default 3600)")
+    parser.add_argument("--hour-recipe", choices=sorted(RECIPES), default="fleet")
+    parser.add_argument("--skip-throughput", action="store_true", help="only the hour-long log")
+    parser.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "drivewm_bench_curate")
     args = parser.parse_args()
-    tmp = Path(tempfile.mkdtemp(prefix="bench_curate_"))
-    try:
-        if args.logs:
-            logs = sorted(args.logs.glob("*.mcap"))
-        else:
-            drives, duration = (8, 10.0) if args.full else (4, 4.0)
-            print(f"simulating {drives} nuscenes6 drives of {duration:.0f} s ...")
-            logs = simulate_logs(tmp / "logs", drives, duration)
-        frames, t_decode, t_encode = decode_rate(logs)
-        t1, kept = curate_time(logs, tmp / "out1", workers=1)
-        t2, kept2 = curate_time(logs, tmp / "out2", workers=2)
-        assert kept == kept2, "1 and 2 workers must keep the same clips"
-        print(f"input: {len(logs)} logs, {frames} camera frames; kept {kept} clips")
-        print(f"raw decode (read_log + JPEG decode): {frames / t_decode:8.1f} camera-frames/s")
-        print(f"H.264 encode only (encode_mp4):     {frames / t_encode:8.1f} camera-frames/s  (the other fixed cost)")
-        print(
-            f"curate, local, 1 worker:            {frames / t1:8.1f} camera-frames/s  = {t_decode / t1:.2f} x raw "
-            "decode"
-        )
-        print(
-            f"curate, local, 2 workers:           {frames / t2:8.1f} camera-frames/s  = {t_decode / t2:.2f} x raw "
-            "decode"
-        )
-        print(f"speed-up 1 -> 2 workers: {t1 / t2:.2f} x (on {os.cpu_count()} CPUs)")
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    args.work.mkdir(parents=True, exist_ok=True)
+    if args.logs:
+        logs = sorted(args.logs.glob("*.mcap"))
+    else:
+        print(f"simulating {args.drives} nuscenes6 drives of {args.duration:g} s (kept in {args.work}) ...", flush=True)
+        logs = simulate_logs(args.work, args.drives, args.duration)
+    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
+    if not args.skip_throughput:
+        throughput(logs, args.work, args.rounds)
+    if args.hour:
+        hour(logs[0], args.work, args.hour_seconds, args.hour_recipe)
+    print(f"load average {os.getloadavg()[0]:.1f} at the end")
 
 
 if __name__ == "__main__":

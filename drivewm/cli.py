@@ -3,7 +3,8 @@
 Each stage owns a small ``commands.py`` module with ``register(subparsers)``: it adds its
 sub-parser(s) and sets ``func(args) -> int | None``. Those modules import only argparse-level
 things at the top, so ``drivewm --help`` stays fast; the heavy imports happen inside ``func``.
-This file parses, dispatches and turns :class:`DrivewmError` into one line and exit status 2.
+This file parses, dispatches and turns :class:`DrivewmError` into one line and exit status 2 (a
+:class:`BatchError`, a batch that produced nothing usable, adds one line per failed item).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import importlib
 import sys
 
 from drivewm import __version__
-from drivewm.errors import DrivewmError
+from drivewm.errors import BatchError, DrivewmError
 
 #: Modules that register sub-commands, in help order.
 COMMAND_MODULES = (
@@ -24,6 +25,7 @@ COMMAND_MODULES = (
     "drivewm.diffusion.commands",  # pretrain, generate
     "drivewm.multiview.commands",  # posttrain, rollout
     "drivewm.eval.commands",  # eval
+    "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.quickstart",  # quickstart
     "drivewm.worldmodel",  # worldmodel train|export
 )
@@ -65,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except DrivewmError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        for line in exc.failures if isinstance(exc, BatchError) else ():
+            print(f"  {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -1,13 +1,18 @@
 """Typed configs: dataclasses built from dicts/YAML, validated at the boundary, with overrides.
 
-Every stage owns small config dataclasses. ``from_dict`` refuses unknown keys and wrong types
-with a :class:`DrivewmError` naming the key, so a typo in a recipe or an override never runs
-silently with a default.
+Every stage owns small config dataclasses. ``from_dict`` is the one place a config is checked:
+it refuses unknown keys, wrong types and non-finite numbers, then runs the dataclass's own
+``validate()`` (ranges: ``lr > 0``, ``steps >= 1``, ...; written with :func:`require`,
+:func:`at_least`, :func:`above` and :func:`in_range`), nested configs included. Every failure is a
+one-line :class:`DrivewmError` naming the field (``pretrain.train: lr must be > 0, got -0.1``), so a
+typo or a bad value in a recipe, a YAML file or a ``--set`` override never runs silently and never
+ends in a traceback.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import types
 import typing
@@ -28,8 +33,8 @@ def load_yaml(path: str | Path) -> dict:
     if not path.is_file():
         raise DrivewmError(f"{path}: config file not found")
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError, RecursionError) as exc:
         raise DrivewmError(f"{path}: not valid YAML ({exc.__class__.__name__})") from None
     if data is None:
         return {}
@@ -38,8 +43,9 @@ def load_yaml(path: str | Path) -> dict:
     return data
 
 
-def _coerce(value: Any, tp: Any, where: str) -> Any:
-    """Check ``value`` against the annotation ``tp`` (recursing into dataclasses, lists, dicts)."""
+def _coerce(value: Any, tp: Any, where: str, finite: bool = True) -> Any:
+    """Check ``value`` against the annotation ``tp`` (recursing into dataclasses, lists, dicts);
+    ``finite``: refuse NaN and infinity where a float is expected."""
     origin = typing.get_origin(tp)
     if tp is Any:
         return value
@@ -52,7 +58,7 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
             if arg is type(None):
                 continue
             try:
-                return _coerce(value, arg, where)
+                return _coerce(value, arg, where, finite)
             except DrivewmError as exc:
                 errors.append(str(exc))
         raise DrivewmError(errors[0] if errors else f"{where}: bad value {value!r}")
@@ -65,23 +71,31 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
             return value
         if not isinstance(value, dict):
             raise DrivewmError(f"{where}: expected a mapping, got {value!r}")
-        return from_dict(tp, value, where)
+        return from_dict(tp, value, where, finite)
     if origin in (list, tuple):
         if not isinstance(value, (list, tuple)):
             raise DrivewmError(f"{where}: expected a list, got {value!r}")
         args = typing.get_args(tp)
         item_tp = args[0] if args else Any
-        items = [_coerce(v, item_tp, f"{where}[{i}]") for i, v in enumerate(value)]
+        items = [_coerce(v, item_tp, f"{where}[{i}]", finite) for i, v in enumerate(value)]
         return tuple(items) if origin is tuple else items
     if origin is dict:
         if not isinstance(value, dict):
             raise DrivewmError(f"{where}: expected a mapping, got {value!r}")
-        _, v_tp = typing.get_args(tp) or (Any, Any)
-        return {k: _coerce(v, v_tp, f"{where}.{k}") for k, v in value.items()}
+        k_tp, v_tp = typing.get_args(tp) or (Any, Any)
+        return {
+            _coerce(k, k_tp, f"{where} key", finite): _coerce(v, v_tp, f"{where}.{k}", finite) for k, v in value.items()
+        }
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise DrivewmError(f"{where}: expected a number, got {value!r}")
-        return float(value)
+        try:
+            number = float(value)
+        except OverflowError:  # an int too large for a float
+            raise DrivewmError(f"{where}: number {value} is out of range") from None
+        if finite and not math.isfinite(number):
+            raise DrivewmError(f"{where}: expected a finite number, got {value!r}")
+        return number
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise DrivewmError(f"{where}: expected an integer, got {value!r}")
@@ -93,19 +107,61 @@ def _coerce(value: Any, tp: Any, where: str) -> Any:
     return value
 
 
-def from_dict(cls: type[C], data: dict, where: str = "config") -> C:
-    """Build dataclass ``cls`` from ``data``; unknown keys and wrong types raise DrivewmError."""
+def from_dict(cls: type[C], data: dict, where: str = "config", finite: bool = True) -> C:
+    """Build dataclass ``cls`` from ``data`` and run its ``validate()``; unknown keys, wrong types,
+    non-finite floats (unless ``finite`` is False) and values ``validate()`` refuses raise DrivewmError
+    naming the field."""
+    if not isinstance(data, dict):
+        raise DrivewmError(f"{where}: expected a mapping, got {data!r}")
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(data) - names)
+    unknown = sorted(str(k) for k in data if k not in names)
     if unknown:
         raise DrivewmError(f"{where}: unknown key(s) {unknown}; known: {sorted(names)}")
-    kwargs = {k: _coerce(v, hints[k], f"{where}.{k}") for k, v in data.items()}
+    required = [
+        f.name
+        for f in dataclasses.fields(cls)
+        if f.init and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    missing = [k for k in required if k not in data]
+    if missing:
+        raise DrivewmError(f"{where}: missing key(s) {missing}")
+    kwargs = {k: _coerce(v, hints[k], f"{where}.{k}", finite) for k, v in data.items()}
     obj = cls(**kwargs)
     validate = getattr(obj, "validate", None)
     if callable(validate):
-        validate()
+        try:
+            validate()
+        except DrivewmError as exc:
+            raise DrivewmError(f"{where}: {exc}") from None
     return obj
+
+
+def require(ok: bool, field: str, value: Any, rule: str) -> None:
+    """For ``validate()`` methods: raise ``DrivewmError("FIELD must be RULE, got VALUE")`` unless ``ok``."""
+    if not ok:
+        raise DrivewmError(f"{field} must be {rule}, got {value!r}")
+
+
+def at_least(cfg: Any, low: float, *fields: str) -> None:
+    """Every named field of ``cfg`` is >= ``low`` (NaN fails)."""
+    for name in fields:
+        value = getattr(cfg, name)
+        require(value >= low, name, value, f">= {low}")
+
+
+def above(cfg: Any, low: float, *fields: str) -> None:
+    """Every named field of ``cfg`` is > ``low`` (NaN fails)."""
+    for name in fields:
+        value = getattr(cfg, name)
+        require(value > low, name, value, f"> {low}")
+
+
+def in_range(cfg: Any, name: str, low: float, high: float, high_open: bool = False) -> None:
+    """``low <= cfg.name <= high`` (``< high`` with ``high_open``)."""
+    value = getattr(cfg, name)
+    ok = low <= value < high if high_open else low <= value <= high
+    require(ok, name, value, f"in [{low}, {high}{')' if high_open else ']'}")
 
 
 def to_dict(obj: Any) -> dict:
@@ -120,7 +176,10 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     key, raw = text.split("=", 1)
     if not key:
         raise DrivewmError(f"override {text!r}: empty key")
-    value = yaml.safe_load(raw)
+    try:
+        value = yaml.safe_load(raw)
+    except (yaml.YAMLError, RecursionError) as exc:
+        raise DrivewmError(f"override {text!r}: value is not valid YAML ({exc.__class__.__name__})") from None
     if isinstance(value, str) and _SCIENTIFIC.fullmatch(value.strip()):
         value = float(value)  # YAML 1.1 reads 1e-3 (no dot) as a string; users mean the number
     return key.split("."), value

@@ -11,10 +11,11 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from drivewm import resources
+from drivewm.config import load_yaml
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name
 
 RIGS_ENV = "DRIVEWM_RIGS"
 """Environment variable: folders (os.pathsep-separated) of the user's own NAME.yaml rigs, searched first."""
@@ -141,6 +142,18 @@ def check_pose(T: np.ndarray, where: str) -> None:
 # ----------------------------------------------------------------------------- pinhole
 
 
+def check_intrinsics(K: np.ndarray, where: str) -> None:
+    """Raise DrivewmError unless ``K`` is a finite, invertible pinhole matrix
+    [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0 (H&Z eq. 6.10)."""
+    K = np.asarray(K)
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+        raise DrivewmError(f"{where}: K must be a finite 3x3 matrix")
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise DrivewmError(f"{where}: K is singular or flipped (fx={K[0, 0]:g}, fy={K[1, 1]:g}; both must be > 0)")
+    if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0:
+        raise DrivewmError(f"{where}: K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}")
+
+
 def project(K: np.ndarray, points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pinhole projection of camera-frame points (N, 3) -> pixels (N, 2) and depth z (N,).
 
@@ -218,6 +231,20 @@ class Camera:
     T_ego_from_cam: np.ndarray
     distortion: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
 
+    def __post_init__(self) -> None:
+        """Every camera is checked where it is made (rig files, logs, clips), so a bad calibration is
+        one clear error at the input, never a LinAlgError deep inside a metric."""
+        where = f"camera {self.name!r}"
+        check_name(self.name, "camera name")
+        if isinstance(self.width, bool) or not isinstance(self.width, (int, np.integer)) or self.width <= 0:
+            raise DrivewmError(f"{where}: width must be a positive integer, got {self.width!r}")
+        if isinstance(self.height, bool) or not isinstance(self.height, (int, np.integer)) or self.height <= 0:
+            raise DrivewmError(f"{where}: height must be a positive integer, got {self.height!r}")
+        check_intrinsics(self.K, where)
+        check_pose(self.T_ego_from_cam, f"{where} T_ego_from_cam")
+        if not np.all(np.isfinite(self.distortion)):
+            raise DrivewmError(f"{where}: distortion coefficients must be finite")
+
     def scaled(self, width: int, height: int, fit: str = "same") -> Camera:
         """The same camera after its images were resized to ``width`` x ``height``.
 
@@ -291,11 +318,7 @@ class Rig:
 def load_rig(name_or_path: str | Path) -> Rig:
     """Load a rig by name (``nuscenes6``) or YAML path. See ``drivewm/rigs/README.md``."""
     path = resources.find("rigs", name_or_path, "rig", env=RIGS_ENV)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError:
-        raise DrivewmError(f"{path}: not valid YAML") from None
-    return rig_from_dict(data, str(path))
+    return rig_from_dict(load_yaml(path), str(path))
 
 
 def rig_from_dict(data: dict, where: str = "rig") -> Rig:
@@ -304,38 +327,62 @@ def rig_from_dict(data: dict, where: str = "rig") -> Rig:
     if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
         raise DrivewmError(f"{where}: a rig needs a non-empty 'cameras' list")
     defaults = data.get("defaults", {})
-    cams = [_camera_from_dict({**defaults, **c}, f"{where}: camera {i}") for i, c in enumerate(data["cameras"])]
+    if not isinstance(defaults, dict) or not all(isinstance(c, dict) for c in data["cameras"]):
+        raise DrivewmError(f"{where}: 'defaults' and every entry of 'cameras' must be mappings")
+    cams = [_camera_from_dict({**defaults, **c}, where, i) for i, c in enumerate(data["cameras"])]
     names = [c.name for c in cams]
     if len(set(names)) != len(names):
         raise DrivewmError(f"{where}: duplicate camera names {names}")
     return Rig(str(data.get("name", Path(where).stem)), cams)
 
 
-def _camera_from_dict(d: dict, where: str) -> Camera:
-    try:
-        name, width, height = str(d["name"]), int(d["width"]), int(d["height"])
-    except KeyError as exc:
-        raise DrivewmError(f"{where}: missing key {exc.args[0]!r}") from None
-    if width <= 0 or height <= 0:
-        raise DrivewmError(f"{where} ({name}): image size must be positive")
+def _camera_from_dict(d: dict, rig_where: str, index: int) -> Camera:
+    """Camera ``index`` of a rig file; every value is checked, so a bad file is one DrivewmError naming the field."""
+    if not isinstance(d.get("name"), str):
+        raise DrivewmError(f"{rig_where}: camera {index}: 'name' must be a string, got {d.get('name')!r}")
+    where = f"{rig_where}: camera {d['name']!r}"
+    width, height = _integer(d, "width", where), _integer(d, "height", where)
     if "K" in d:
-        K = np.asarray(d["K"], dtype=np.float64)
+        K = _numbers(d["K"], (3, 3), f"{where} K")
     elif "hfov_deg" in d:
-        f = 0.5 * width / np.tan(np.radians(float(d["hfov_deg"])) / 2)
+        hfov = float(_numbers(d["hfov_deg"], (), f"{where} hfov_deg"))
+        if not 0 < hfov < 180:
+            raise DrivewmError(f"{where}: hfov_deg must be in (0, 180), got {hfov}")
+        f = 0.5 * width / np.tan(np.radians(hfov) / 2)
         K = np.array([[f, 0, (width - 1) / 2], [0, f, (height - 1) / 2], [0, 0, 1.0]])
     else:
-        raise DrivewmError(f"{where} ({name}): give K or hfov_deg")
+        raise DrivewmError(f"{where}: give K or hfov_deg")
     if "T_ego_from_cam" in d:
-        T = np.asarray(d["T_ego_from_cam"], dtype=np.float64)
+        T = _numbers(d["T_ego_from_cam"], (4, 4), f"{where} T_ego_from_cam")
     elif "xyz" in d:
-        R_ego_from_body = euler_to_R(
-            *np.radians([d.get("roll_deg", 0.0), d.get("pitch_deg", 0.0), d.get("yaw_deg", 0.0)])
-        )
-        T = make_T(R_ego_from_body @ R_BODY_FROM_OPENCV, d["xyz"])
+        angles = [float(_numbers(d.get(k, 0.0), (), f"{where} {k}")) for k in ("roll_deg", "pitch_deg", "yaw_deg")]
+        R_ego_from_body = euler_to_R(*np.radians(angles))
+        T = make_T(R_ego_from_body @ R_BODY_FROM_OPENCV, _numbers(d["xyz"], (3,), f"{where} xyz"))
     else:
-        raise DrivewmError(f"{where} ({name}): give T_ego_from_cam or xyz + yaw_deg")
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)):
-        raise DrivewmError(f"{where} ({name}): K must be a finite 3x3 matrix")
-    check_pose(T, f"{where} ({name}) T_ego_from_cam")
-    dist = np.asarray(d.get("distortion", []), dtype=np.float64).reshape(-1)
-    return Camera(name, K, width, height, T, dist)
+        raise DrivewmError(f"{where}: give T_ego_from_cam or xyz + yaw_deg")
+    dist = _numbers(d.get("distortion", []), None, f"{where} distortion").reshape(-1)
+    try:
+        return Camera(d["name"], K, width, height, T, dist)
+    except DrivewmError as exc:
+        raise DrivewmError(f"{rig_where}: {exc}") from None
+
+
+def _integer(d: dict, key: str, where: str) -> int:
+    value = d.get(key)
+    if isinstance(value, bool) or not isinstance(value, int) or value <= 0:
+        raise DrivewmError(f"{where}: {key} must be a positive integer, got {value!r}")
+    return value
+
+
+def _numbers(value: object, shape: tuple[int, ...] | None, where: str) -> np.ndarray:
+    """``value`` as a finite float64 array of ``shape`` (None: any 1-D length); ragged or non-numeric
+    input is refused."""
+    if isinstance(value, (str, bytes, bool)):
+        raise DrivewmError(f"{where}: expected numbers, got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (ValueError, TypeError, OverflowError):
+        raise DrivewmError(f"{where}: expected {'x'.join(map(str, shape or ['N']))} numbers, got {value!r}") from None
+    if (shape is not None and arr.shape != shape) or (shape is None and arr.ndim > 1) or not np.all(np.isfinite(arr)):
+        raise DrivewmError(f"{where}: expected finite numbers of shape {shape or '(N,)'}, got {value!r}")
+    return arr

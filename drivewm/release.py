@@ -15,11 +15,9 @@ import hashlib
 import json
 from pathlib import Path
 
-import torch
-
 from drivewm.atomic import write_json
 from drivewm.errors import DrivewmError
-from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, save_model_folder
+from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, load_train_state, save_model_folder
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 #: Model folders of a run, by the name they ship under.
@@ -54,16 +52,18 @@ def export_folder(src: Path, dst: Path) -> dict:
     if "latent" in extra and extra["latent"].get("tokenizer"):
         extra["latent"] = {**extra["latent"], "tokenizer": "../tokenizer"}
     save_model_folder(dst, info["model_type"], info["config"], half, extra)
-    train_state = src / "train_state.pt"
-    record = {}
-    if train_state.is_file():
-        saved = torch.load(train_state, map_location="cpu", weights_only=True)
-        record = {"steps": int(saved["step"]), "train_seconds": float(saved.get("train_seconds", 0.0))}
-    return record
+    saved = load_train_state(src)
+    if saved is None:
+        return {}
+    seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock
+    return {"steps": int(saved["step"]), "train_seconds": None if seconds is None else float(seconds)}
 
 
-def export_run(run: str | Path, out: str | Path) -> list[Path]:
-    """Export the three model folders of ``run`` into ``out`` and write the manifest; returns the files."""
+def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
+    """Export the three model folders of ``run`` into ``out``, write the manifest and the model card
+    (drivewm.model_card, with ``notes`` as its last section); returns the files."""
+    from drivewm.model_card import write_model_card
+
     run, out = Path(run), Path(out)
     records = {name: export_folder(run / folder, out / name) for name, folder in RUN_FOLDERS.items()}
     files = sorted(p for name in RUN_FOLDERS for p in (out / name).iterdir() if p.is_file())
@@ -76,7 +76,7 @@ def export_run(run: str | Path, out: str | Path) -> list[Path]:
         "training": records,
     }
     write_json(out / "MANIFEST.json", manifest)
-    return [*files, out / "MANIFEST.json"]
+    return [*files, out / "MANIFEST.json", write_model_card(run, out, manifest, notes)]
 
 
 def check_manifest(root: Path = WEIGHTS_DIR) -> dict:

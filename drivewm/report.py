@@ -4,10 +4,11 @@ It reads only the files the stages wrote (curation report.json, tokenizer metric
 metrics.jsonl, eval metrics.json, contact sheets), so it can be rebuilt at any time. Real clips, the
 shipped model's and the fine-tuned model's samples stand side by side: one metrics column each (a
 metric eval could not compute is a dash with a footnote saying why) and their contact sheets in
-one row per prompt. "Commands run" is a block a user pastes into a shell in the output folder:
-shlex-quoted, paths relative to that folder, shipped models spelled ``shipped:KIND``. Figures are
-linked relatively; the page counts its own loaded figures on ``load`` (``data-figures-loaded``),
-which the browser test reads.
+one row per prompt. The first curated clip transferred to snow (``drivewm transfer``) is a figure,
+and the transfer model's training curve sits beside the fine-tuning one. "Commands run" is a block
+a user pastes into a shell in the output folder: shlex-quoted, paths relative to that folder,
+shipped models spelled ``shipped:KIND``. Figures are linked relatively; the page counts its own
+loaded figures on ``load`` (``data-figures-loaded``), which the browser test reads.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from drivewm.atomic import write_text  # noqa: E402
+from drivewm.atomic import atomic_path, read_jsonl, write_text  # noqa: E402
 
 #: Eval metrics shown in the real-vs-generated table, with their meaning and unit.
 EVAL_ROWS = {
@@ -49,10 +50,6 @@ def _read_json(path: Path) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 
 
-def _read_jsonl(path: Path) -> list[dict]:
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.is_file() else []
-
-
 def _fmt(value) -> str:
     if isinstance(value, float):
         return f"{value:.3f}"
@@ -61,7 +58,8 @@ def _fmt(value) -> str:
 
 def training_curves(out: Path, dest: Path) -> Path | None:
     """Plot loss against step for every stage that wrote metrics.jsonl; None if there are none."""
-    runs = {name: _read_jsonl(out / name / "metrics.jsonl") for name in ("tokenizer", "text2world", "multiview")}
+    names = ("tokenizer", "text2world", "multiview", "transfer_model")
+    runs = {name: read_jsonl(out / name / "metrics.jsonl") for name in names}
     runs = {k: v for k, v in runs.items() if v}
     if not runs:
         return None
@@ -71,7 +69,8 @@ def training_curves(out: Path, dest: Path) -> Path | None:
         ax.set(title=name, xlabel="step", ylabel="training loss", yscale="log")
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(dest, dpi=110)
+    with atomic_path(dest) as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
     return dest
 
@@ -99,6 +98,10 @@ def gather(out: Path, rig: str, generations: list[str], models: list[str]) -> di
         | {m: out / "generated" / m / name / "contact_sheet.png" for m in models}
         for name in generations
     }
+    transferred = _read_json(out / "transfer" / "report.json")
+    if transferred.get("written"):
+        what = f"Transferred: {transferred['written'][0]} (source above, transferred below, all views)"
+        figures[what] = out / "transfer" / "contact_sheet.png"
     return {
         "rig": rig,
         "curate": _read_json(out / "clips" / "report.json"),

@@ -13,7 +13,9 @@ each training stage by its own train state:
 5. multi-view post-training of the nuScenes-like rig from the video model, with Video2World and
    trajectory conditioning;
 6. generate the benchmark clips (prompts and trajectories the training captions never use
-   verbatim, fixed seeds) and score them next to the held-out clips with ``drivewm eval``.
+   verbatim, fixed seeds) and score them next to the held-out clips with ``drivewm eval``;
+7. the must-hold figures against their goals (``drivewm worldmodel figures``,
+   drivewm/worldmodel_figures.py): ``RUN/eval/figures.json`` and ``figures.md``.
 
 Profiles (``drivewm/recipes/worldmodel.yaml``) change only sizes and steps: ``cpu`` is what the shipped
 weights were trained with on 2 cores; ``gpu`` is the same recipe sized for one GPU in about 25
@@ -62,6 +64,8 @@ class WorldModelProfile:
     posttrain: list[str]
     generate: list[str]
     eval: list[str]
+    eval_heldout: list[str] = dataclasses.field(default_factory=list)
+    """Extra arguments of the held-out reference eval (e.g. ``--max-clips``)."""
     samples_per_benchmark: int = 2
     """Seeds per benchmark entry (24+ generated clips in all for the issue's figures)."""
     benchmarks: list[Benchmark] = dataclasses.field(default_factory=list)
@@ -162,12 +166,16 @@ def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]
         argv += ["--seed", str(b.seed), "--num-samples", str(p.samples_per_benchmark), "--out", str(gen / b.name)]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
-        ("eval-heldout", ["eval", str(clips / "heldout"), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval])
+        (
+            "eval-heldout",
+            ["eval", str(clips / "heldout"), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout],
+        )
     )
     reference = ["--reference", str(ev / "heldout" / "metrics.json")]
     stages.append(
         ("eval-generated", ["eval", str(gen), "--rig", p.rig, "--out", str(ev / "generated"), *reference, *p.eval])
     )
+    stages.append(("figures", ["worldmodel", "figures", str(run)]))
     return stages
 
 
@@ -189,15 +197,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.add_argument("--profile", default="cpu", help="cpu (the shipped weights) or gpu (one GPU, ~25 minutes)")
     t.add_argument("--out", required=True, type=Path, help="run folder (a rerun resumes in it)")
     t.set_defaults(func=lambda args: train_worldmodel(args.out, args.profile))
+    f = wsub.add_parser("figures", help="the must-hold figures of a run's evals: RUN/eval/figures.json and .md")
+    f.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
+    f.set_defaults(func=_figures)
     e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")
     e.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
     e.add_argument("--out", required=True, type=Path, help="where to write tokenizer/, text2world/, multiview/")
+    e.add_argument("--notes", type=Path, help="Markdown file: the model card's notes (deviations, predictions)")
     e.set_defaults(func=_export)
+
+
+def _figures(args: argparse.Namespace) -> int:
+    from drivewm.worldmodel_figures import write_figures
+
+    write_figures(args.run)
+    return 0
 
 
 def _export(args: argparse.Namespace) -> int:
     from drivewm.release import export_run
 
-    for path in export_run(args.run, args.out):
+    notes = args.notes.read_text() if args.notes else ""
+    for path in export_run(args.run, args.out, notes):
         print(path)
     return 0

@@ -5,8 +5,9 @@ its outputs; the report's command block is shell-quoted with paths relative to t
 Slow (end to end, ``--profile smoke`` from the shipped weights in drivewm/weights/): the fine-tuned
 weights differ from the shipped ones, which stay byte-identical; the report has a number or a
 footnoted reason in each of its real / shipped / fine-tuned columns; generated contact sheets have
-a row per camera; the report's commands can be pasted in the output folder; figures load in a real
-headless Chromium; a rerun reuses every stage.
+a row per camera; a transfer model post-trained from the shipped Text2World model turns the first
+curated clip to snow (shown in the report); the report's commands can be pasted in the output folder;
+figures load in a real headless Chromium; a rerun reuses every stage.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from safetensors.torch import load_file
 
 from drivewm import release
 from drivewm.cli import build_parser
-from drivewm.clips import iter_clips
+from drivewm.clips import iter_clips, read_manifest
 from drivewm.curate.contact_sheet import THUMB_W
 from drivewm.quickstart import FINETUNED, FIRST_LOG, MODELS, load_profile, stage_commands
 from drivewm.report import command_lines
@@ -46,7 +47,7 @@ CHROMIUM_FLAGS = [
 ]
 #: Flags whose value is a path (or ``shipped:KIND``); with the positional inputs of these commands.
 PATH_FLAGS = {"--out", "--data", "--model", "--init", "--tokenizer", "--reference"}
-POSITIONAL_INPUT = {"view", "curate", "eval"}
+POSITIONAL_INPUT = {"view", "curate", "eval", "transfer"}
 
 
 def named_paths(tokens: list[str]) -> list[str]:
@@ -69,6 +70,8 @@ def command_block(markdown: str) -> list[list[str]]:
 
 @pytest.mark.parametrize("profile", ["full", "smoke"])
 def test_every_stage_parses_and_starts_from_the_shipped_models(profile, fake_shipped_weights, tmp_path):
+    (fake_shipped_weights / "text2world").mkdir()  # the transfer model's parent
+    (fake_shipped_weights / "text2world" / WEIGHTS_NAME).write_bytes(b"weights")
     stages = stage_commands(load_profile(profile), tmp_path / "qs")
     parser = build_parser()
     for name, argv in stages:
@@ -80,6 +83,11 @@ def test_every_stage_parses_and_starts_from_the_shipped_models(profile, fake_shi
     assert argv["tokenizer-encode"][argv["tokenizer-encode"].index("--model") + 1] == "shipped:tokenizer"
     assert argv["posttrain"][argv["posttrain"].index("--init") + 1] == "shipped:multiview"
     assert parser.parse_args(argv["posttrain"]).init == fake_shipped_weights / "multiview"
+    encode_paired, transfer_train = argv["tokenizer-encode-paired"], argv["transfer-train"]
+    assert encode_paired[encode_paired.index("--model") + 1] == "shipped:tokenizer"
+    assert transfer_train[transfer_train.index("--init") + 1] == "shipped:text2world"
+    assert parser.parse_args(transfer_train).init == fake_shipped_weights / "text2world"
+    assert names.index("tokenizer-encode-paired") < names.index("transfer-train") < names.index("transfer")
     for g in load_profile(profile).generations:  # both models draw the same prompt with the same seed
         shipped, tuned = argv[f"generate-shipped-{g.name}"], argv[f"generate-finetuned-{g.name}"]
         assert shipped[shipped.index("--model") + 1] == "shipped:multiview"
@@ -165,6 +173,22 @@ def test_fine_tuning_changes_a_copy_and_leaves_the_shipped_weights_alone(quickst
     shipped_cfg = json.loads((release.shipped_model("multiview") / "config.json").read_text())["config"]
     tuned_cfg = json.loads((out / FINETUNED / "config.json").read_text())["config"]
     assert tuned_cfg["dit"] == shipped_cfg["dit"]  # the shipped architecture, whatever its preset
+
+
+@pytest.mark.slow
+def test_one_curated_clip_is_transferred_to_snow_by_a_model_from_the_shipped_text2world(quickstart_dir):
+    out, _ = quickstart_dir
+    source = next(iter_clips(out / "clips"))
+    (done,) = list(iter_clips(out / "transfer"))  # --max-clips 1: the first curated clip
+    assert done.meta.extra["transfer"]["source"]["key"] == source.key
+    assert done.meta.cameras == source.meta.cameras and done.videos().shape[:2] == source.videos().shape[:2]
+    assert done.meta.tags["weather"] == "snow" and done.meta.timestamps_ns == source.meta.timestamps_ns
+    assert {r["pair_id"] for r in read_manifest(out / "paired_clips")} != {""}  # the model trained on pairs
+    shipped_t2w = release.shipped_model("text2world")
+    transfer_model = json.loads((out / "transfer_model" / "config.json").read_text())
+    assert transfer_model["parent"] == str(shipped_t2w.resolve())  # post-trained from the shipped Text2World
+    assert transfer_model["config"]["dit"] == json.loads((shipped_t2w / "config.json").read_text())["config"]["dit"]
+    assert f"Transferred: {done.key}" in (out / "report.md").read_text()
 
 
 @pytest.mark.slow

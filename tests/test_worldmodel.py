@@ -28,3 +28,78 @@ def test_every_stage_parses_and_chains_its_outputs(profile, tmp_path):
     for _, argv in stages:  # packaged recipes, found by name for their stage
         if "--recipe" in argv:
             assert resources.find(f"recipes/{argv[0]}", argv[argv.index("--recipe") + 1], "recipe").is_file()
+
+
+def _clip(weather, time_of_day, cond_yaw, yaw, tfe=1.0, match_w=1.0, match_t=1.0):
+    prompted = {"weather": weather, "time_of_day": time_of_day}
+    adherence = {"prompted": prompted, "weather_match": match_w, "time_of_day_match": match_t}
+    return {"adherence": adherence, "conditioned_yaw_change_deg": cond_yaw, "yaw_change_deg": yaw, "tfe": tfe}
+
+
+def _write_run(run, clips, gen_top, real_top, psnr):
+    from drivewm.atomic import write_json
+
+    write_json(run / "eval" / "generated" / "metrics.json", {**gen_top, "clips": dict(enumerate(clips))})
+    write_json(run / "eval" / "heldout" / "metrics.json", {**real_top, "num_clips": 20})
+    write_json(run / "eval" / "tokenizer" / "metrics.json", {"psnr": psnr})
+
+
+GOOD_CLIPS = [
+    _clip("snow", "day", 20.0, 14.0),
+    _clip("fog", "day", -25.0, -9.0),
+    _clip("rain", "dusk", 0.0, 1.0),
+    _clip("clear", "night", 0.0, -0.5),
+    _clip("clear", "day", 18.0, 3.0),
+]
+REAL = {"tfe": 1.0, "tse_calibrated": 0.5, "cse_calibrated": 1.0}
+GOOD = {"pose_success": 0.8, "tse_calibrated": 0.7, "cse_calibrated": 1.5, "tse_calibrated_matches": 40,
+        "cse_calibrated_matches": 30}  # fmt: skip
+
+
+def test_figures_hold_on_a_run_that_meets_them(tmp_path):
+    from drivewm.worldmodel_figures import figures
+
+    _write_run(tmp_path, GOOD_CLIPS, GOOD, REAL, 33.0)
+    figs = figures(tmp_path)
+    failing = [k for k, f in figs.items() if isinstance(f, dict) and not f["holds"]]
+    assert failing == [] and figs["generated_clips"] == 5
+    assert figs["turn_sign_rate"]["value"] == 1.0 and figs["turn_sign_rate"]["clips"] == 3
+    assert figs["adherence_night"]["clips"] == 1
+
+
+@pytest.mark.parametrize(
+    "change, broken",
+    [
+        (lambda c, g, r: c[0].update(yaw_change_deg=-3.0), "turn_sign_rate"),  # a left sample turning right
+        (lambda c, g, r: c[2].update(yaw_change_deg=40.0), "straight_abs_yaw_deg"),  # straight turns most
+        (lambda c, g, r: c[0]["adherence"].update(weather_match=0.0), "adherence_snow"),
+        (lambda c, g, r: c[3]["adherence"].update(time_of_day_match=0.0), "adherence_night"),
+        (lambda c, g, r: [x.update(tfe=3.5) for x in c], "tfe_ratio_to_real"),
+        (lambda c, g, r: g.update(pose_success=0.4), "pose_success"),
+        (lambda c, g, r: g.update(cse_calibrated=2.5), "cse_calibrated_ratio_to_real"),
+        (
+            lambda c, g, r: g.update(tse_calibrated_matches=10),
+            "tse_calibrated_ratio_to_real",
+        ),  # blur wins on few matches
+        (lambda c, g, r: g.pop("pose_success"), "pose_success"),  # not measured never holds
+    ],
+)
+def test_each_figure_can_fail(tmp_path, change, broken):
+    import copy
+
+    from drivewm.worldmodel_figures import figures
+
+    clips, gen, real = copy.deepcopy(GOOD_CLIPS), dict(GOOD), dict(REAL)
+    change(clips, gen, real)
+    _write_run(tmp_path, clips, gen, real, 33.0)
+    figs = figures(tmp_path)
+    assert [k for k, f in figs.items() if isinstance(f, dict) and not f["holds"]] == [broken]
+
+
+def test_tokenizer_psnr_below_goal_does_not_hold(tmp_path):
+    from drivewm.worldmodel_figures import figures, figures_markdown
+
+    _write_run(tmp_path, GOOD_CLIPS, GOOD, REAL, 28.4)
+    figs = figures(tmp_path)
+    assert figs["tokenizer_psnr_db"] == {"value": 28.4, "goal": ">= 32", "holds": False}
+    assert "| tokenizer_psnr_db | 28.4 | >= 32 | no |" in figures_markdown(figs)

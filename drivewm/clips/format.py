@@ -8,16 +8,16 @@ Generated samples use the same format, so the benchmark scores real and generate
 from __future__ import annotations
 
 import dataclasses
-import re
 
 import numpy as np
 
 from drivewm.clips.video import decode_mp4, encode_mp4
+from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
+from drivewm.paths import check_name
 
 CLIP_FORMAT_VERSION = 1
-KEY_PATTERN = re.compile(r"^[A-Za-z0-9_\-]+$")
 
 
 @dataclasses.dataclass
@@ -33,6 +33,8 @@ class ClipMeta:
     (and omitted from the JSON) when every camera's frames are exactly at ``timestamps_ns``. Read
     it through :meth:`camera_times_ns`, which falls back to ``timestamps_ns``.
     ``extra``: anything else (generated clips record model, prompt, seed, trajectory name).
+    ``pair_id``: the same drive window in other conditions has the same id (simulated drives:
+    ``<drive_id>-t<start tick>``, see drivewm.sim.paired); "" = no known partner.
     """
 
     key: str
@@ -50,6 +52,7 @@ class ClipMeta:
     trajectory_ego: list[list[float]] = dataclasses.field(default_factory=list)
     trajectory_dt_s: float = 0.0
     extra: dict = dataclasses.field(default_factory=dict)
+    pair_id: str = ""
     format_version: int = CLIP_FORMAT_VERSION
 
     @property
@@ -61,6 +64,7 @@ class ClipMeta:
         return [c["name"] for c in self.rig["cameras"]]
 
     def get_rig(self) -> Rig:
+        """The rig, checked (camera names, finite invertible K, rigid poses)."""
         return rig_from_dict(self.rig, f"clip {self.key}")
 
     def camera_times_ns(self, camera: str) -> list[int]:
@@ -75,14 +79,16 @@ class ClipMeta:
 
     @classmethod
     def from_json(cls, data: dict, where: str) -> ClipMeta:
+        """Parse and check ``KEY.json`` (types, key, cameras, rig); fields of newer writers are ignored."""
+        if not isinstance(data, dict):
+            raise DrivewmError(f"{where}: clip metadata is not a JSON object")
         version = data.get("format_version")
         if version != CLIP_FORMAT_VERSION:
             raise DrivewmError(f"{where}: clip format_version {version!r}, this drivewm reads {CLIP_FORMAT_VERSION}")
         names = {f.name for f in dataclasses.fields(cls)}
-        try:
-            return cls(**{k: v for k, v in data.items() if k in names})
-        except TypeError as exc:
-            raise DrivewmError(f"{where}: bad clip metadata ({exc})") from None
+        meta = from_dict(cls, {k: v for k, v in data.items() if k in names}, f"{where} metadata", finite=False)
+        validate_meta(meta, where)
+        return meta
 
 
 @dataclasses.dataclass
@@ -113,22 +119,31 @@ class Clip:
 
 
 def clip_from_arrays(
-    meta: ClipMeta, frames: dict[str, np.ndarray], T_world_from_ego: np.ndarray, crf: int = 18
+    meta: ClipMeta,
+    frames: dict[str, np.ndarray],
+    T_world_from_ego: np.ndarray,
+    crf: int = 18,
+    preset: str = "veryfast",
+    threads: int = 0,
+    yuv_converter: str = "swscale",
 ) -> Clip:
-    """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta)."""
+    """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta);
+    ``crf``, ``preset``, ``threads``, ``yuv_converter``: the H.264 settings of
+    :func:`drivewm.clips.video.encode_mp4`."""
     validate_meta(meta)
-    mp4 = {c: encode_mp4(frames[c], meta.fps, crf) for c in meta.cameras}
+    mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads, yuv_converter) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
     clip._decoded.update({c: frames[c] for c in meta.cameras})
     return clip
 
 
-def validate_meta(meta: ClipMeta) -> None:
-    """Raise DrivewmError if the metadata breaks the contract."""
-    if not KEY_PATTERN.match(meta.key):
-        raise DrivewmError(f"clip key {meta.key!r}: use only letters, digits, '_' and '-' (no dots)")
-    if meta.fps <= 0 or meta.num_frames == 0:
-        raise DrivewmError(f"clip {meta.key}: needs fps > 0 and at least one timestamp")
+def validate_meta(meta: ClipMeta, where: str = "") -> None:
+    """Raise DrivewmError if the metadata breaks the contract: the key and camera names become file
+    names (``KEY.CAMERA.mp4``), so both must be safe names (drivewm.paths); the rig must load."""
+    prefix = f"{where}: " if where else ""
+    check_name(meta.key, f"{prefix}clip key")
+    if not meta.fps > 0 or not np.isfinite(meta.fps) or meta.num_frames == 0:
+        raise DrivewmError(f"{prefix}clip {meta.key}: needs a finite fps > 0 and at least one timestamp")
     meta.get_rig()
     for camera, times in meta.camera_timestamps_ns.items():
         if camera not in meta.cameras or len(times) != meta.num_frames:

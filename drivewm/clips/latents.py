@@ -25,8 +25,19 @@ from safetensors.torch import load_file, save_file
 from drivewm.atomic import atomic_path, write_json
 from drivewm.clips.format import ClipMeta
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name, child_path, file_name, sanitize_name
 
 LATENT_CACHE_VERSION = 1
+
+
+def latent_cache_dir(clip_dir: str | Path, name: str | None = None, model_dir: str | Path | None = None) -> Path:
+    """``CLIPDIR/latents/NAME``: ``name`` must be a safe name (drivewm.paths); without one, the
+    tokenizer folder's name made safe. Both the writer (encode) and the readers (pretrain, posttrain) use this."""
+    if name is None:
+        if model_dir is None:
+            raise DrivewmError(f"{clip_dir}: name the latent cache or the tokenizer folder")
+        name = sanitize_name(Path(model_dir).resolve().name, "latents")
+    return child_path(Path(clip_dir) / "latents", check_name(name, "latent cache name"))
 
 
 @dataclasses.dataclass
@@ -44,7 +55,7 @@ def write_latent_clip(
     """Atomically write one clip's latents; returns its index row."""
     if latents.ndim != 5:
         raise DrivewmError(f"clip {meta.key}: latents must be (V, c, t, h, w), got {tuple(latents.shape)}")
-    path = Path(cache_dir) / f"{meta.key}.safetensors"
+    path = child_path(cache_dir, meta.key, ext="safetensors", what="clip key")
     tensors = {
         "latents": latents.detach().to(torch.float32).contiguous().cpu(),
         "T_world_from_ego": torch.as_tensor(np.asarray(T_world_from_ego, dtype=np.float64)),
@@ -68,7 +79,7 @@ def find_latent_cache(data_dir: Path, tokenizer_dir: Path | None, name: str | No
         return data_dir
     if name is None and tokenizer_dir is None:
         raise DrivewmError(f"{data_dir}: name the latent cache (data.latents=NAME) or the tokenizer")
-    cache = data_dir / "latents" / (name or Path(tokenizer_dir).resolve().name)
+    cache = latent_cache_dir(data_dir, name, tokenizer_dir)
     if not (cache / "index.json").is_file():
         raise DrivewmError(
             f"{cache}: no latent cache; run 'drivewm tokenizer encode --model TOKDIR --data {data_dir}' first"
@@ -84,11 +95,16 @@ class LatentCache:
         index_path = self.dir / "index.json"
         if not index_path.is_file():
             raise DrivewmError(f"{self.dir}: not a latent cache (no index.json); run 'drivewm tokenizer encode' first")
-        index = json.loads(index_path.read_text())
-        if index.get("format_version") != LATENT_CACHE_VERSION:
-            raise DrivewmError(f"{index_path}: latent cache version {index.get('format_version')!r} unsupported")
+        try:
+            index = json.loads(index_path.read_text())
+        except ValueError:
+            raise DrivewmError(f"{index_path}: not valid JSON") from None
+        if not isinstance(index, dict) or index.get("format_version") != LATENT_CACHE_VERSION:
+            raise DrivewmError(f"{index_path}: not a latent cache index of version {LATENT_CACHE_VERSION}")
+        if not isinstance(index.get("tokenizer"), dict) or not isinstance(index.get("clips"), list):
+            raise DrivewmError(f"{index_path}: needs 'tokenizer' (a mapping) and 'clips' (a list)")
         self.tokenizer: dict = index["tokenizer"]
-        self.rows: list[dict] = index["clips"]
+        self.rows: list[dict] = [_check_row(row, index_path) for row in index["clips"]]
         if not self.rows:
             raise DrivewmError(f"{self.dir}: latent cache holds no clips")
 
@@ -105,10 +121,22 @@ class LatentCache:
 
     def __getitem__(self, i: int) -> LatentClip:
         row = self.rows[i]
-        path = self.dir / row["file"]
+        path = child_path(self.dir, row["key"], ext="safetensors", what="clip key")
         try:
             tensors = load_file(str(path))
         except Exception as exc:  # safetensors raises several types for bad files
             raise DrivewmError(f"{path}: cannot read latents ({exc.__class__.__name__})") from None
         meta = ClipMeta.from_json(row["meta"], str(path))
+        if set(tensors) != {"latents", "T_world_from_ego"} or tensors["latents"].ndim != 5:
+            raise DrivewmError(f"{path}: expected tensors latents (V, c, t, h, w) and T_world_from_ego")
         return LatentClip(meta, tensors["latents"], tensors["T_world_from_ego"].numpy())
+
+
+def _check_row(row: object, index_path: Path) -> dict:
+    """An index row names a clip whose file is exactly ``KEY.safetensors`` inside the cache."""
+    if not isinstance(row, dict) or not isinstance(row.get("meta"), dict):
+        raise DrivewmError(f"{index_path}: every clip row needs 'key', 'file' and 'meta'")
+    key = check_name(row.get("key"), f"{index_path}: clip key")
+    if row.get("file") != file_name(key, ext="safetensors") or row["meta"].get("key") != key:
+        raise DrivewmError(f"{index_path}: clip {key}: file {row.get('file')!r} or meta key does not match the key")
+    return row

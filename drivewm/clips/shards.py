@@ -3,11 +3,16 @@
 Tars are written with the standard library's ``tarfile`` (members ``KEY.CAMERA.mp4``,
 ``KEY.json``, ``KEY.ego.npy``, grouped by key as WebDataset expects) to a temporary name and
 renamed when complete, so a killed run never leaves a partial shard. Readers refuse members
-with unsafe paths and never unpickle (``np.load(allow_pickle=False)``).
+with unsafe paths, check that ``KEY.json`` names the key of its members (a key becomes a file name
+downstream, so it must be a safe name: drivewm.paths) and never unpickle
+(``np.load(allow_pickle=False)``). Batch readers use :func:`read_clips`, which puts a
+:class:`BadClip` in place of each unreadable clip (or damaged rest of a shard) and goes on.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import io
 import json
 import tarfile
@@ -19,6 +24,7 @@ import numpy as np
 from drivewm.atomic import atomic_path, write_text
 from drivewm.clips.format import Clip, ClipMeta, validate_meta
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name, child_path, file_name
 
 MANIFEST_NAME = "manifest.jsonl"
 
@@ -26,16 +32,19 @@ MANIFEST_NAME = "manifest.jsonl"
 class ShardWriter:
     """Write clips into ``OUT/NAME-000000.tar``, ``NAME-000001.tar``, ... (``max_clips`` per tar).
 
-    Use as a context manager; each shard appears atomically when it is full or on close.
-    ``written`` lists (shard path, clip key) for the manifest.
+    Use as a context manager. Each clip's members are appended to the open shard as it is
+    written (nothing is held per clip), and the shard appears atomically when it is full or on
+    close; leaving on an exception discards the open shard. ``written`` lists (shard path, clip
+    key) of the shards that appeared, for the manifest.
     """
 
     def __init__(self, out_dir: str | Path, name: str, max_clips: int = 64):
         self.out_dir = Path(out_dir)
-        self.name = name
+        self.name = check_name(name, "shard name")
         self.max_clips = max_clips
         self.written: list[tuple[str, str]] = []
-        self._pending: list[Clip] = []
+        self._open: tuple[contextlib.ExitStack, tarfile.TarFile, Path] | None = None
+        self._keys: list[str] = []
         self._index = 0
 
     def __enter__(self) -> ShardWriter:
@@ -44,25 +53,36 @@ class ShardWriter:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
             self.flush()
+        elif self._open is not None:
+            stack, tar, _ = self._open
+            tar.close()
+            stack.__exit__(exc_type, exc, tb)  # atomic_path removes the temporary
+            self._open = None
 
     def write(self, clip: Clip) -> None:
         validate_meta(clip.meta)
         missing = [c for c in clip.meta.cameras if c not in clip.mp4]
         if missing:
             raise DrivewmError(f"clip {clip.key}: no video for cameras {missing}")
-        self._pending.append(clip)
-        if len(self._pending) >= self.max_clips:
+        if self._open is None:
+            path = child_path(self.out_dir, f"{self.name}-{self._index:06d}", ext="tar")
+            stack = contextlib.ExitStack()
+            tmp = stack.enter_context(atomic_path(path))
+            self._open = (stack, tarfile.open(tmp, "w"), path)
+        _add_clip(self._open[1], clip)
+        self._keys.append(clip.key)
+        if len(self._keys) >= self.max_clips:
             self.flush()
 
     def flush(self) -> None:
-        if not self._pending:
+        """Close the open shard (renaming it into place)."""
+        if self._open is None:
             return
-        path = self.out_dir / f"{self.name}-{self._index:06d}.tar"
-        with atomic_path(path) as tmp, tarfile.open(tmp, "w") as tar:
-            for clip in self._pending:
-                _add_clip(tar, clip)
-        self.written += [(path.name, c.key) for c in self._pending]
-        self._pending = []
+        stack, tar, path = self._open
+        tar.close()
+        stack.close()
+        self.written += [(path.name, key) for key in self._keys]
+        self._open, self._keys = None, []
         self._index += 1
 
 
@@ -75,12 +95,12 @@ def _add_member(tar: tarfile.TarFile, name: str, data: bytes) -> None:
 
 def _add_clip(tar: tarfile.TarFile, clip: Clip) -> None:
     key = clip.key
-    _add_member(tar, f"{key}.json", json.dumps(clip.meta.to_json()).encode())
+    _add_member(tar, file_name(key, ext="json"), json.dumps(clip.meta.to_json()).encode())
     ego = io.BytesIO()
     np.save(ego, np.asarray(clip.T_world_from_ego, dtype=np.float64), allow_pickle=False)
-    _add_member(tar, f"{key}.ego.npy", ego.getvalue())
+    _add_member(tar, file_name(key, "ego", ext="npy"), ego.getvalue())
     for cam in clip.meta.cameras:
-        _add_member(tar, f"{key}.{cam}.mp4", clip.mp4[cam])
+        _add_member(tar, file_name(key, cam, ext="mp4"), clip.mp4[cam])
 
 
 def list_shards(location: str | Path | Iterable[str | Path]) -> list[Path]:
@@ -105,43 +125,84 @@ def _safe_member(name: str, shard: Path) -> str:
     return name
 
 
-def iter_shard(shard: Path) -> Iterator[Clip]:
-    """Clips of one tar in order. A corrupt tar or clip raises DrivewmError naming the shard."""
+@dataclasses.dataclass
+class BadClip:
+    """A clip that could not be read (``name``: its key), or the damaged rest of a shard (``name``: the
+    shard's file name); ``reason`` is the one-line error."""
+
+    name: str
+    reason: str
+
+
+def read_shard(shard: Path) -> Iterator[Clip | BadClip]:
+    """Clips of one tar in order, a :class:`BadClip` in place of each one that cannot be read. A
+    truncated or corrupt tar yields the clips before the damage, then one BadClip (named after the
+    shard's stem) for the rest; an unsafe member path refuses the whole shard."""
     groups: dict[str, dict[str, bytes]] = {}
-    order: list[str] = []
+    damage = None
     try:
         with tarfile.open(shard, "r") as tar:
             for member in tar:
-                if not member.isfile():
-                    continue
-                name = _safe_member(member.name, shard)
-                key, _, suffix = name.partition(".")
-                if key not in groups:
-                    groups[key] = {}
-                    order.append(key)
-                groups[key][suffix] = tar.extractfile(member).read()
+                if member.isfile():
+                    key, _, suffix = _safe_member(member.name, shard).partition(".")
+                    groups.setdefault(key, {})[suffix] = tar.extractfile(member).read()
     except (tarfile.TarError, OSError, EOFError) as exc:
-        raise DrivewmError(f"{shard}: corrupt or truncated shard ({exc})") from None
-    for key in order:
-        yield _clip_from_members(key, groups[key], shard)
+        damage = BadClip(shard.stem, f"{shard}: corrupt or truncated shard ({exc})")
+        if groups:
+            groups.popitem()  # the clip being read when the damage came is part of the damage
+    except DrivewmError as exc:
+        yield BadClip(shard.stem, str(exc))
+        return
+    for key, members in groups.items():
+        try:
+            yield _clip_from_members(key, members, shard)
+        except DrivewmError as exc:
+            yield BadClip(key, str(exc))
+    if damage is not None:
+        yield damage
+
+
+def iter_shard(shard: Path) -> Iterator[Clip]:
+    """Clips of one tar in order. A corrupt tar or clip raises DrivewmError naming the shard."""
+    for item in read_shard(shard):
+        if isinstance(item, BadClip):
+            raise DrivewmError(item.reason)
+        yield item
 
 
 def _clip_from_members(key: str, members: dict[str, bytes], shard: Path) -> Clip:
     where = f"{shard}: clip {key}"
+    check_name(key, f"{shard}: member key")
     if "json" not in members or "ego.npy" not in members:
         raise DrivewmError(f"{where}: missing {key}.json or {key}.ego.npy")
-    meta = ClipMeta.from_json(json.loads(members["json"]), where)
-    ego = np.load(io.BytesIO(members["ego.npy"]), allow_pickle=False)
-    if ego.shape != (meta.num_frames, 4, 4):
-        raise DrivewmError(f"{where}: ego poses have shape {ego.shape}, expected ({meta.num_frames}, 4, 4)")
+    try:
+        data = json.loads(members["json"])
+    except (ValueError, RecursionError):  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise DrivewmError(f"{where}: {key}.json is not valid JSON") from None
+    meta = ClipMeta.from_json(data, where)
+    if meta.key != key:  # the key names output files downstream: it must be the one the members carry
+        raise DrivewmError(f"{where}: {key}.json names key {meta.key!r}, not its members' {key!r}")
+    try:
+        ego = np.load(io.BytesIO(members["ego.npy"]), allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise DrivewmError(f"{where}: {key}.ego.npy is not a plain numpy array ({exc.__class__.__name__})") from None
+    if ego.shape != (meta.num_frames, 4, 4) or ego.dtype.kind != "f":
+        raise DrivewmError(f"{where}: ego poses are {ego.dtype} {ego.shape}, expected float ({meta.num_frames}, 4, 4)")
     missing = [c for c in meta.cameras if f"{c}.mp4" not in members]
     if missing:
         raise DrivewmError(f"{where}: missing camera video(s) {missing}")
     return Clip(meta, {c: members[f"{c}.mp4"] for c in meta.cameras}, ego)
 
 
+def read_clips(location: str | Path | Iterable[str | Path]) -> Iterator[Clip | BadClip]:
+    """Every clip of a dataset folder, tar or list of them, in shard order, with a :class:`BadClip` in
+    place of each unreadable clip or damaged shard: what batch commands (encode, decode, eval) read."""
+    for shard in list_shards(location):
+        yield from read_shard(shard)
+
+
 def iter_clips(location: str | Path | Iterable[str | Path]) -> Iterator[Clip]:
-    """Every clip of a dataset folder, tar or list of them, in shard order."""
+    """Every clip of a dataset folder, tar or list of them, in shard order; any unreadable clip raises."""
     for shard in list_shards(location):
         yield from iter_shard(shard)
 
@@ -158,4 +219,7 @@ def read_manifest(out_dir: str | Path) -> list[dict]:
     path = Path(out_dir) / MANIFEST_NAME
     if not path.is_file():
         raise DrivewmError(f"{out_dir}: no {MANIFEST_NAME} (not a curated clip folder?)")
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    try:
+        return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    except ValueError:
+        raise DrivewmError(f"{path}: not valid JSON lines") from None

@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from drivewm.choices import add_registry_argument
 from drivewm.config import to_dict
 from drivewm.curate.config import CURATE_RECIPES
-from drivewm.errors import DrivewmError
+from drivewm.errors import BatchError, DrivewmError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,13 +68,25 @@ def _curate(args: argparse.Namespace) -> int:
     report = curate(
         _expand(args.logs), args.out, cfg, executor=args.executor, workers=args.workers, ray_address=args.ray_address
     )
-    print(f"kept {report['kept']} clips, dropped {report['dropped']}; ", end="")
-    print(f"logs ok {report['logs_ok']}, failed {report['logs_failed']}")
+    print(
+        f"kept {report['kept']} clips, dropped {report['dropped']}; "
+        f"logs ok {report['logs_ok']}, failed {report['logs_failed']}; report: {args.out / 'report.json'}"
+    )
+    failed = [f"{name}: {log['error']}" for name, log in report["logs"].items() if log["status"] == "failed"]
+    if not report["kept"]:
+        lines = [f"{name}: {_why_nothing(log)}" for name, log in report["logs"].items()]
+        raise BatchError(f"curate: no clip kept from {len(report['logs'])} log(s)", lines)
+    for line in report["warnings"] + failed:
+        print(f"warning: {line}", file=sys.stderr)
     for name, log in report["logs"].items():
-        if log["status"] == "failed":
-            print(f"  {name}: {log['error']}")
-    print(f"report: {args.out / 'report.json'}")
-    return 0 if report["logs_ok"] else 2
+        for warning in log.get("warnings", []):
+            print(f"warning: {name}: {warning}", file=sys.stderr)
+    return 0
+
+
+def _why_nothing(log: dict) -> str:
+    """Why a log of report.json gave no clip: its error, or what the filters dropped."""
+    return log["error"] if log["status"] == "failed" else f"no clip kept (dropped {log['dropped']})"
 
 
 def _import_video(args: argparse.Namespace) -> int:
@@ -85,6 +98,9 @@ def _import_video(args: argparse.Namespace) -> int:
             raise DrivewmError(f"--tag {t!r}: expected KEY=VALUE")
         k, val = t.split("=", 1)
         tags[k] = val
-    for path in import_videos(args.videos, args.calibration, args.out, tags):
+    report = import_videos(args.videos, args.calibration, args.out, tags)
+    for path in report.logs:
         print(path)
+    for line in report.warnings + [f"skipped {reason}" for reason in report.failed]:
+        print(f"warning: {line}", file=sys.stderr)
     return 0

@@ -9,7 +9,9 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from drivewm.config import above, at_least, in_range, require
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
 
 
@@ -39,6 +41,12 @@ class FilterConfig:
     dedup_cosine: float = 0.985
     """Near-duplicate clips: cosine similarity of clip embeddings at or above this drops the later clip. 1 disables."""
 
+    def validate(self) -> None:
+        at_least(self, 0, "min_ego_distance_m", "min_sharpness", "dark_luma", "dark_highlight", "frozen_diff")
+        at_least(self, 0, "min_camera_motion_px")
+        for name in ("bright_fraction", "max_bad_exposure_fraction", "max_frozen_fraction", "dedup_cosine"):
+            in_range(self, name, 0, 1)
+
 
 @dataclasses.dataclass
 class PrivacyConfig:
@@ -57,6 +65,10 @@ class PrivacyConfig:
     blur_kernel_frac: float = 0.5
     """Gaussian kernel size as a fraction of the box's shorter side."""
 
+    def validate(self) -> None:
+        in_range(self, "face_score", 0, 1)
+        above(self, 0, "blur_kernel_frac")
+
 
 @dataclasses.dataclass
 class TrajectoryConfig:
@@ -72,6 +84,9 @@ class TrajectoryConfig:
     """Process noise: white yaw acceleration (rad/s^2)."""
     gate_chi2: float = 25.0
     """Innovation gate: a measurement whose squared Mahalanobis distance exceeds this is rejected as jitter."""
+
+    def validate(self) -> None:
+        above(self, 0, "position_sigma_m", "yaw_sigma_rad", "accel_sigma_mps2", "yaw_accel_sigma_radps2", "gate_chi2")
 
 
 @dataclasses.dataclass
@@ -94,6 +109,10 @@ class CurateConfig:
     sync_tolerance_ms: float = 25.0
     """A camera frame belongs to a tick when it is within this of the tick plus the camera's exposure
     offset (must be < half a clip frame)."""
+    max_gap_ms: float = 1000.0
+    """A camera's clock moving forward by more than this between frames (a recorder pause, a clock
+    jump) ends a span of ticks, the next starts afresh; moving back by more than this drops frames
+    until it passes its earlier maximum. Shorter gaps are dropped frames (invalid ticks)."""
     per_camera_offsets: bool = True
     """Estimate each camera's steady exposure offset from the reference (first) camera (rigs that fire
     cameras in turn) and apply the tolerance around it; false: around the tick for every camera."""
@@ -105,6 +124,16 @@ class CurateConfig:
     """Minimum shot length in clip frames for the detector."""
     crf: int = 18
     """H.264 constant rate factor of the clip videos."""
+    h264_preset: str = "veryfast"
+    """libx264 preset: encoding is most of curation's CPU time; "ultrafast" takes about a third of
+    "veryfast"'s at the same crf, with higher PSNR and ~1.5x larger files (benchmarks/bench_curate.py)."""
+    h264_threads: int = 0
+    """libx264 threads per clip video: 0 lets x264 choose (slices over the machine's cores: the bytes
+    depend on the machine, and workers oversubscribe the cores); 1: one core per worker, same bytes everywhere."""
+    h264_yuv_converter: str = "swscale"
+    """Who converts the RGB frames to the encoder's yuv420p: "swscale" (FFmpeg, through PyAV) or "opencv"
+    (cv2.cvtColor: the same BT.601 limited range within 1-3 levels, ~0.3 dB lower PSNR, ~18 % less encode CPU
+    with "ultrafast")."""
     clips_per_shard: int = 32
     """Clips per tar shard."""
     filters: FilterConfig = dataclasses.field(default_factory=FilterConfig)
@@ -116,17 +145,41 @@ class CurateConfig:
     """Sample clips shown in contact_sheet.png."""
 
     def validate(self) -> None:
-        if self.clip_frames < 2 or self.stride_frames < 1 or self.fps <= 0:
-            raise DrivewmError("curate config: need clip_frames >= 2, stride_frames >= 1 and fps > 0")
+        at_least(self, 2, "clip_frames")
+        at_least(self, 1, "stride_frames", "trajectory_waypoints", "shot_min_frames", "clips_per_shard")
+        at_least(self, 0, "shot_threshold", "sync_tolerance_ms", "contact_sheet_clips")
+        above(self, 0, "fps")
+        in_range(self, "crf", 0, 51)  # libx264's range
+        if self.cameras is not None:
+            require(
+                len(self.cameras) > 0 and len(set(self.cameras)) == len(self.cameras),
+                "cameras",
+                self.cameras,
+                "a non-empty list of distinct names",
+            )
+            for name in self.cameras:
+                check_name(name, "cameras: camera name")
         if self.sync_tolerance_ms * 1e-3 >= 0.5 / self.fps:
             raise DrivewmError(
-                f"curate config: sync_tolerance_ms {self.sync_tolerance_ms} must be below half a frame "
-                f"({500 / self.fps:.1f} ms)"
+                f"sync_tolerance_ms must be below half a frame ({500 / self.fps:.1f} ms), got {self.sync_tolerance_ms}"
+            )
+        if self.max_gap_ms <= 1000.0 / self.fps:
+            raise DrivewmError(
+                f"curate config: max_gap_ms {self.max_gap_ms} must exceed a clip frame ({1000 / self.fps:g} ms)"
             )
         if self.resolution is not None and (len(self.resolution) != 2 or any(v <= 0 or v % 2 for v in self.resolution)):
             raise DrivewmError(f"curate config: resolution {self.resolution} must be [W, H] with even positive values")
-        if self.trajectory_waypoints < 1:
-            raise DrivewmError("curate config: trajectory_waypoints must be >= 1")
+        from drivewm.clips.video import X264_PRESETS, YUV_CONVERTERS
+
+        if self.h264_preset not in X264_PRESETS or self.h264_threads < 0:
+            raise DrivewmError(
+                f"curate config: h264_preset {self.h264_preset!r} must be one of {list(X264_PRESETS)} "
+                f"and h264_threads ({self.h264_threads}) >= 0"
+            )
+        if self.h264_yuv_converter not in YUV_CONVERTERS:
+            raise DrivewmError(
+                f"curate config: h264_yuv_converter {self.h264_yuv_converter!r} must be one of {list(YUV_CONVERTERS)}"
+            )
 
     @property
     def period_ns(self) -> float:

@@ -1,13 +1,14 @@
 """``curate``: drive logs -> clip shards, manifest.jsonl, report.json and contact_sheet.png.
 
-The orchestration in one place: name the logs, run the per-log stage on an executor, drop
-near-duplicates across logs (deterministically, in log-name order), then write the manifest,
-the report and the contact sheet atomically. Rerunning after a kill redoes only unfinished logs.
+The orchestration in one place: lock the output folder (drivewm.lock: a second run on the same
+``--out`` is refused), give every distinct log a distinct name (a log given twice is curated once),
+run the per-log stage on an executor, drop near-duplicates across logs (deterministically, in
+log-name order), then write the manifest (checked against the shards), the report and the contact
+sheet atomically. Rerunning after a kill redoes only unfinished logs.
 """
 
 from __future__ import annotations
 
-import hashlib
 import io
 import shutil
 import tarfile
@@ -23,19 +24,17 @@ from drivewm.curate import executors
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.contact_sheet import write_contact_sheet
 from drivewm.curate.dedup import near_duplicates
-from drivewm.curate.stage import log_name
 from drivewm.errors import DrivewmError
+from drivewm.lock import folder_lock
+from drivewm.paths import child_path, distinct_paths, unique_names
 
 EXECUTORS = ("local", "ray")
 
 
 def name_logs(log_paths: list[Path]) -> list[str]:
-    """Unique shard names: the stem, plus a short hash of the folder where two logs share a stem."""
-    stems = [log_name(p) for p in log_paths]
-    return [
-        s if stems.count(s) == 1 else f"{s}_{hashlib.sha1(str(Path(p).resolve().parent).encode()).hexdigest()[:6]}"
-        for s, p in zip(stems, log_paths)
-    ]
+    """Distinct shard names for distinct logs: the file stem made safe, plus a short hash of the resolved
+    path where two logs would share a name (``drive a.mcap`` and ``drive_a.mcap``, ``x/a.mcap`` and ``y/a.mcap``)."""
+    return unique_names([Path(p).stem for p in log_paths], [str(Path(p).resolve()) for p in log_paths], "log")
 
 
 def curate(
@@ -53,16 +52,20 @@ def curate(
     if not log_paths:
         raise DrivewmError("curate: no logs given")
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    remove_leftovers(out_dir)
-    jobs = [(str(p), n) for p, n in zip(log_paths, name_logs(log_paths))]
-    results = _run(jobs, out_dir, cfg, executor, workers, ray_address, progress)
-    rows, cross = dedup_across_logs(results, cfg.filters.dedup_cosine)
-    prune_shards(out_dir, results, set(cross))
-    write_manifest(out_dir, rows)
-    sheet = write_contact_sheet(out_dir, rows, cfg.contact_sheet_clips)
-    report = build_report(results, rows, cross, cfg, sheet)
-    write_json(out_dir / "report.json", report)
+    logs, warnings = distinct_paths(log_paths)
+    with folder_lock(out_dir, "curate"):
+        remove_leftovers(out_dir)
+        jobs = [(str(p), n) for p, n in zip(logs, name_logs(logs))]
+        results = _run(jobs, out_dir, cfg, executor, workers, ray_address, progress)
+        remove_leftovers(out_dir)  # a worker killed mid-log (then retried) left its temporary shard
+        rows, cross = dedup_across_logs(results, cfg.filters.dedup_cosine)
+        prune_shards(out_dir, results, set(cross))
+        check_manifest(out_dir, rows)
+        write_manifest(out_dir, rows)
+        sheet = write_contact_sheet(out_dir, rows, cfg.contact_sheet_clips)
+        report = build_report(results, rows, cross, cfg, sheet)
+        report["warnings"] = warnings
+        write_json(out_dir / "report.json", report)
     return report
 
 
@@ -99,12 +102,16 @@ def dedup_across_logs(results: list[dict], threshold: float) -> tuple[list[dict]
     across logs the dropped clips are then removed from their shards by :func:`prune_shards`.
     """
     rows, cross, pool, pool_keys = [], {}, [], []
-    for res in sorted((r for r in results if r["status"] == "ok"), key=lambda r: r["name"]):
+    ok = sorted((r for r in results if r["status"] == "ok"), key=lambda r: r["name"])
+    names = [r["name"] for r in ok]
+    if len(set(names)) != len(names):  # one log twice would drop every clip as a duplicate of itself
+        raise DrivewmError(f"curate: two logs share a name in {names}")
+    for res in ok:
         emb = np.asarray(res.get("embeddings", []), dtype=np.float32)
         dups = near_duplicates(emb, threshold, np.stack(pool) if pool else None) if threshold < 1 and len(emb) else []
         dup_of = {i: j for i, j, _ in dups if j < 0}
         for i, row in enumerate(res["rows"]):
-            if i in dup_of:
+            if i in dup_of and pool_keys[-1 - dup_of[i]] != row["key"]:
                 cross[row["key"]] = pool_keys[-1 - dup_of[i]]
                 continue
             rows.append(row)
@@ -118,7 +125,7 @@ def prune_shards(out_dir: Path, results: list[dict], drop: set[str]) -> None:
     deleted. Idempotent, so a run killed half-way converges on the rerun."""
     shards = sorted({row["shard"] for r in results if r["status"] == "ok" for row in r["rows"] if row["key"] in drop})
     for name in shards:
-        path = out_dir / name
+        path = child_path(out_dir, name.removesuffix(".tar"), ext="tar")
         if not path.is_file():
             continue
         with tarfile.open(path) as tar:
@@ -132,6 +139,21 @@ def prune_shards(out_dir: Path, results: list[dict], drop: set[str]) -> None:
         with atomic_path(path) as tmp, tarfile.open(tmp, "w") as out:
             for member, data in kept:
                 out.addfile(member, io.BytesIO(data))
+
+
+def check_manifest(out_dir: Path, rows: list[dict]) -> None:
+    """Every manifest row must name a shard that exists and holds its clip: a manifest listing a
+    deleted shard (or a clip pruned from one) would break every reader of the dataset."""
+    members: dict[str, set[str]] = {}
+    for shard in sorted({r["shard"] for r in rows}):
+        try:
+            with tarfile.open(child_path(out_dir, shard.removesuffix(".tar"), ext="tar")) as tar:
+                members[shard] = {m.name.partition(".")[0] for m in tar}
+        except (tarfile.TarError, OSError):
+            members[shard] = set()
+    lost = [f"{r['key']} ({r['shard']})" for r in rows if r["key"] not in members[r["shard"]]]
+    if lost:
+        raise DrivewmError(f"{out_dir}: manifest rows without their clip in a shard: {lost[:5]}")
 
 
 def build_report(

@@ -1,25 +1,30 @@
 """The per-log stage: one drive log in, one shard set plus a done-marker out.
 
-Every executor runs exactly this function per log. Its steps, in order: read the log, sync
-the cameras, smooth the ego poses, split into clip windows (gaps, shot cuts), score and filter
-each window, de-duplicate within the log, blur, caption, encode, write shards
-``OUT/<name>-NNNNNN.tar``, and last, atomically, the done-marker ``OUT/logs/<name>.json`` that
-lets a rerun skip the log. A log that fails leaves no marker and no shards of its own.
+Every executor runs exactly this function per log. Its steps, in order: index the log (every
+timestamp, pose and calibration, no image payloads), sync the cameras, smooth the ego poses;
+then stream the images once, assembling complete ticks, and as each clip window becomes final
+(valid runs cut at shot boundaries, :mod:`drivewm.curate.windows`) score and filter it,
+de-duplicate within the log, blur, caption, encode and append it to the shards
+``OUT/<name>-NNNNNN.tar``; last, atomically, the done-marker ``OUT/logs/<name>.json`` that lets
+a rerun skip the log. Only the ticks of the window being built are held, so memory does not
+grow with the log's length. A log that fails leaves no marker and no shards of its own.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
+import io
 import json
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from drivewm.atomic import write_json
+from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
 from drivewm.config import to_dict
@@ -27,17 +32,21 @@ from drivewm.curate import dedup, filters, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.privacy import Anonymizer
+from drivewm.curate.ticks import TickAssembler, TickImages
+from drivewm.curate.timing import StepClock
+from drivewm.curate.windows import WindowStream
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
-from drivewm.logs.reader import read_log
-from drivewm.logs.types import DriveLog, ImageFrame
+from drivewm.logs.reader import LogStream
+from drivewm.logs.types import LogIndex
+from drivewm.paths import child_path, sanitize_name
 
 MARKER_DIR = "logs"
 
 
 def log_name(path: str | Path) -> str:
-    """Shard/marker name of a log: its file stem with anything but [A-Za-z0-9_-] replaced by '_'."""
-    return re.sub(r"[^A-Za-z0-9_\-]", "_", Path(path).stem) or "log"
+    """Shard/marker name of a log: its file stem made a safe name (drivewm.paths.sanitize_name)."""
+    return sanitize_name(Path(path).stem, "log")
 
 
 def config_fingerprint(cfg: CurateConfig) -> str:
@@ -46,7 +55,7 @@ def config_fingerprint(cfg: CurateConfig) -> str:
 
 
 def marker_path(out_dir: Path, name: str) -> Path:
-    return Path(out_dir) / MARKER_DIR / f"{name}.json"
+    return child_path(Path(out_dir) / MARKER_DIR, name, ext="json", what="log name")
 
 
 def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
@@ -56,9 +65,17 @@ def read_marker(out_dir: Path, name: str, cfg: CurateConfig) -> dict | None:
         return None
     try:
         result = json.loads(path.read_text())
-    except json.JSONDecodeError:
+    except ValueError:  # a marker that is not JSON: redo the log
         return None
-    return result if result.get("config") == config_fingerprint(cfg) else None
+    if not isinstance(result, dict) or result.get("config") != config_fingerprint(cfg):
+        return None
+    shard = re.compile(rf"{re.escape(name)}-\d{{6}}\.tar")  # a marker only ever names this log's shards
+    rows = result.get("rows")
+    if not isinstance(rows, list) or not all(
+        isinstance(r, dict) and shard.fullmatch(str(r.get("shard"))) for r in rows
+    ):
+        return None
+    return result
 
 
 def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None = None) -> dict:
@@ -68,9 +85,9 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
     done = read_marker(out, name, cfg)
     if done is not None:
         return {**done, "resumed": True}
+    clock = StepClock()
     try:
-        log = read_log(log_path, cfg.topic_map)
-        result = curate_drive_log(log, out, name, cfg)
+        result = curate_stream(LogStream(log_path, cfg.topic_map), out, name, cfg, clock)
     except DrivewmError as exc:
         for shard in _stale_shards(out, name):  # shards flushed before the failure: not part of the dataset
             shard.unlink()
@@ -87,64 +104,182 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
     return result
 
 
-def curate_drive_log(log: DriveLog, out: Path, name: str, cfg: CurateConfig) -> dict:
-    """Curate an in-memory log into ``out`` (shards only; the caller writes the marker)."""
-    log.validate()
-    ctx = _context(log, cfg)
+def embeddings_path(out_dir: Path, name: str) -> Path:
+    """Where a log's kept-clip embeddings live (float32 (N, D), beside its done-marker)."""
+    return Path(out_dir) / MARKER_DIR / f"{name}.emb.npy"
+
+
+def load_embeddings(out_dir: str | Path, result: dict) -> dict:
+    """``result`` with its "embeddings" file name replaced by the (N, D) float32 array, for the
+    cross-log de-duplication (results and markers carry the file name: an hour of clips is
+    ~20 MB of float32, not a JSON list)."""
+    if result.get("status") != "ok" or not isinstance(result.get("embeddings"), str):
+        return result
+    return {**result, "embeddings": np.load(Path(out_dir) / result["embeddings"], allow_pickle=False)}
+
+
+def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, clock: StepClock) -> dict:
+    """Curate one streamed log into ``out`` (shards only; the caller writes the marker)."""
+    with clock.step("index"):
+        ctx = _context(reader.index(), cfg)
     for f in _stale_shards(out, name):
         f.unlink()
-    kept_rows, embeddings, dropped = [], [], {}
+    kept_rows, embeddings, dropped = [], _Embeddings(), {}
     with ShardWriter(out, name, cfg.clips_per_shard) as writer:
-        for start, end in _windows(ctx):
-            clip, reason, emb = _make_clip(ctx, name, start, end, embeddings)
+        for start, ticks in _stream_windows(reader, ctx, clock):
+            clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock)
             if reason:
                 dropped[reason] = dropped.get(reason, 0) + 1
                 continue
-            writer.write(clip)
-            embeddings.append(emb)
-            kept_rows.append(_manifest_row(clip.meta))
+            with clock.step("write"):
+                writer.write(clip)
+            embeddings.add(emb)
+            kept_rows.append(manifest_row(clip.meta))
     shard_of = dict((k, s) for s, k in writer.written)
     for row in kept_rows:
         row["shard"] = shard_of[row["key"]]
-    return _result(log, name, cfg, ctx, kept_rows, embeddings, dropped)
+    rows = embeddings.rows()
+    buf = io.BytesIO()  # rounded as the JSON lists of earlier versions were: the same dedup decisions
+    np.save(buf, np.round(rows, 5) if rows is not None else np.zeros((0, 0), np.float32), allow_pickle=False)
+    write_bytes(embeddings_path(out, name), buf.getvalue())
+    return _result(ctx, name, kept_rows, dropped, clock)
 
 
 @dataclasses.dataclass
 class _LogContext:
     """What every window of one log needs."""
 
-    log: DriveLog
+    log: LogIndex
     rig: Rig  # the output cameras, at the output image size
     table: sync.SyncResult
-    frames: dict[str, list[ImageFrame]]  # per camera, de-duplicated: table.frame_index points here
+    sorted_ns: dict[str, np.ndarray]  # per camera, sorted and de-duplicated: table.frame_index points here
     smooth: trajectory.SmoothedTrajectory | None  # None: ego motion unknown
     cfg: CurateConfig
     captioner: Captioner
     anonymizer: Callable[[np.ndarray], np.ndarray] | None
-
-    def image(self, v: int, tick: int) -> np.ndarray:
-        """Decoded uint8 RGB frame of camera ``v`` at ``tick``, at the output size."""
-        cam = self.rig.cameras[v]
-        img = self.frames[cam.name][self.table.frame_index[tick, v]].decode()
-        if img.shape[:2] != (cam.height, cam.width):
-            img = cv2.resize(img, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
-        return img
+    clocks: _ClockReport
 
 
-def _context(log: DriveLog, cfg: CurateConfig) -> _LogContext:
-    """Sync the cameras and smooth the poses of one log."""
+def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
+    """Sync the cameras and smooth the poses of one log, keeping what went wrong with its clocks."""
     rig = log.rig.subset(cfg.cameras) if cfg.cameras else log.rig
     if cfg.resolution:
-        rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (_LogContext.image)
-    raw = {c: log.images.get(c, []) for c in rig.names}
-    times = {c: np.array([f.timestamp_ns for f in raw[c]], dtype=np.int64) for c in rig.names}
-    table = sync.synchronize(times, rig.names, cfg.period_ns, cfg.sync_tolerance_ms * 1e6, cfg.per_camera_offsets)
-    frames = {c: [raw[c][i] for i in sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
+        rig = rig.scaled(*cfg.resolution, fit="stretch")  # frames are cv2.resize-d to it (TickImages)
+    empty = np.zeros(0, dtype=np.int64)
+    silent = [c for c in rig.names if not len(log.image_timestamps_ns.get(c, empty))]
+    if silent:
+        raise DrivewmError(
+            f"{log.path}: camera(s) {silent} have a calibration but no images; curate the others with cameras=[...]"
+        )
+    gap_ns, tol_ns = cfg.max_gap_ms * 1e6, cfg.sync_tolerance_ms * 1e6
+    times, jumps, dropped = {}, {}, {}
+    for c in rig.names:
+        arrival = log.image_timestamps_ns.get(c, empty)
+        keep, jumps[c] = sync.clock_jumps_back(arrival, gap_ns)
+        times[c], dropped[c] = np.sort(arrival[keep], kind="stable"), int((~keep).sum())
+    twice = [(to, high) for c in rig.names for _, high, to in jumps[c]]  # times the clock went through twice
+    table = sync.synchronize(times, rig.names, cfg.period_ns, tol_ns, cfg.per_camera_offsets, gap_ns, twice)
+    sorted_ns = {c: times[c][sync.dedupe_timestamps(times[c])[0]] for c in rig.names}
     smooth = trajectory.smooth_poses(log.pose_timestamps_ns, log.T_world_from_ego, cfg.trajectory)
+    no_pose = np.zeros(len(table.tick_ns), dtype=bool)
+    if smooth is not None:  # poses_at clamps at the ends: a tick beyond the poses has no ego motion
+        no_pose = (table.tick_ns < smooth.t_ns[0] - tol_ns) | (table.tick_ns > smooth.t_ns[-1] + tol_ns)
+        table.valid &= ~no_pose
     anonymizer = None
     if cfg.privacy.enabled:
         anonymizer = Anonymizer(cfg.privacy)
-    return _LogContext(log, rig, table, frames, smooth, cfg, load_captioner(cfg.captioner), anonymizer)
+    clocks = _ClockReport(jumps, dropped, int(no_pose.sum()))
+    return _LogContext(log, rig, table, sorted_ns, smooth, cfg, load_captioner(cfg.captioner), anonymizer, clocks)
+
+
+@dataclasses.dataclass
+class _ClockReport:
+    """What the log's clocks did: per camera its backward jumps [(arrival index, from_ns, to_ns)]
+    and the frames dropped for them; ticks outside the ego-pose span."""
+
+    jumps_back: dict[str, list[tuple[int, int, int]]]
+    dropped_frames: dict[str, int]
+    ticks_without_pose: int
+
+    def warnings(self, table: sync.SyncResult, fps: float) -> list[str]:
+        """Reasons, one line each, for the clock troubles of a real rig."""
+        out = []
+        for cam, jumps in self.jumps_back.items():
+            if jumps:
+                _, high, to = jumps[0]
+                out.append(
+                    f"{cam}: timestamps jump back {len(jumps)} time(s) (first {(to - high) / 1e9:+.3f} s at "
+                    f"{high} ns); {self.dropped_frames[cam]} frames dropped until the clock passed its earlier "
+                    "maximum, ticks in the repeated time invalid"
+                )
+        for cam, st in table.stats.items():
+            if st.get("gaps"):
+                out.append(
+                    f"{cam}: {st['gaps']} gap(s) longer than max_gap_ms (recorder pause or clock jump): "
+                    "clips split, ticks re-anchored after each"
+                )
+            lo, hi = st.get("rate_p5_hz", 0.0), st.get("rate_p95_hz", 0.0)
+            if lo and hi > 1.2 * lo:
+                out.append(
+                    f"{cam}: variable frame rate ({lo:.2f}-{hi:.2f} Hz, 5th-95th percentile; median "
+                    f"{st['rate_hz']:.2f} Hz), resampled to {fps:g} fps by nearest frame"
+                )
+        if self.ticks_without_pose:
+            out.append(f"{self.ticks_without_pose} ticks outside the ego-pose time span: invalid (no ego motion there)")
+        return out
+
+
+def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> Iterator[tuple[int, list[TickImages]]]:
+    """(first tick, [TickImages]) of every final clip window, in order, reading the images once.
+
+    Ticks are kept from the oldest one a future window may use to the newest complete one."""
+    cfg, cam = ctx.cfg, ctx.rig.cameras[0]
+    runs = [(a, b) for a, b in split.valid_runs(ctx.table.valid) if b - a >= cfg.clip_frames]
+    needed = np.zeros(len(ctx.table.tick_ns), dtype=bool)
+    for a, b in runs:
+        needed[a:b] = True
+    assembler = TickAssembler(ctx.table, ctx.sorted_ns, needed)
+    blank = _small(np.zeros((cam.height, cam.width, 3), np.uint8))
+    windows = WindowStream(
+        runs, cfg.clip_frames, cfg.stride_frames, cfg.fps, cfg.shot_threshold, cfg.shot_min_frames, blank
+    )
+    buffer: dict[int, TickImages] = {}
+    stream = reader.stream(("image",))
+    while True:
+        with clock.step("read"):
+            item = next(stream, None)
+        if item is None:
+            break
+        for tick, frames in assembler.add(*item[1]):
+            buffer[tick] = TickImages(frames, ctx.rig.cameras, clock.step)
+            with clock.step("shots"):
+                final = windows.push(tick, functools.partial(_reference_frame, buffer[tick]))
+            for start, end in final:
+                yield start, [buffer[t] for t in range(start, end)]
+            for t in [t for t in buffer if t < windows.oldest_needed]:
+                del buffer[t]
+    assembler.finish(ctx.log.path)
+
+
+class _Embeddings:
+    """Embeddings of the clips kept so far, as rows of one growing matrix (no re-stacking per clip)."""
+
+    def __init__(self) -> None:
+        self._rows: np.ndarray | None = None
+        self.count = 0
+
+    def add(self, emb: np.ndarray) -> None:
+        if self._rows is None or self.count == len(self._rows):
+            grown = np.zeros((max(16, 2 * self.count), emb.shape[0]), np.float32)
+            if self._rows is not None:
+                grown[: self.count] = self._rows[: self.count]
+            self._rows = grown
+        self._rows[self.count] = emb
+        self.count += 1
+
+    def rows(self) -> np.ndarray | None:
+        """(count, D) float32, or None before the first clip."""
+        return None if self._rows is None else self._rows[: self.count]
 
 
 def _stale_shards(out: Path, name: str) -> list[Path]:
@@ -152,35 +287,13 @@ def _stale_shards(out: Path, name: str) -> list[Path]:
     return [p for p in out.glob(f"{name}-*.tar") if re.fullmatch(rf"{re.escape(name)}-\d{{6}}\.tar", p.name)]
 
 
-def _windows(ctx: _LogContext) -> list[tuple[int, int]]:
-    """Clip windows (tick ranges) inside valid runs, cut at shot boundaries of the reference camera."""
-    cfg, segments = ctx.cfg, []
-    for a, b in split.valid_runs(ctx.table.valid):
-        if b - a < cfg.clip_frames:
-            continue
-        cuts: list[int] = []
-        if cfg.shot_threshold > 0:
-            cuts = [
-                a + c
-                for c in split.shot_boundaries(
-                    _reference_frames(ctx, a, b), cfg.fps, cfg.shot_threshold, cfg.shot_min_frames
-                )
-            ]
-        segments += split.split_segment(a, b, cuts)
-    return split.clip_windows(segments, cfg.clip_frames, cfg.stride_frames)
-
-
-def _reference_frames(ctx: _LogContext, a: int, b: int):
-    """Reference-camera frames of ticks [a, b) for shot detection, downscaled; an undecodable frame
-    repeats the previous one (its clip is dropped later as undecodable_frame)."""
-    last = None
-    for t in range(a, b):
-        try:
-            last = _small(ctx.image(0, t))
-        except DrivewmError:
-            cam = ctx.rig.cameras[0]
-            last = last if last is not None else _small(np.zeros((cam.height, cam.width, 3), np.uint8))
-        yield last
+def _reference_frame(tick: TickImages) -> np.ndarray | None:
+    """The reference camera's frame, downscaled for shot detection; None if undecodable (the shot
+    detector then sees the previous frame again; the clip is dropped later as undecodable_frame)."""
+    try:
+        return _small(tick.image(0))
+    except DrivewmError:
+        return None
 
 
 def _small(img: np.ndarray, width: int = 320) -> np.ndarray:
@@ -188,29 +301,32 @@ def _small(img: np.ndarray, width: int = 320) -> np.ndarray:
     return cv2.resize(img, (width, h), interpolation=cv2.INTER_AREA) if img.shape[1] > width else img
 
 
-def _make_clip(ctx: _LogContext, name: str, start: int, end: int, kept_embeddings: list[np.ndarray]):
-    """(clip or None, drop reason or None, embedding) for ticks [start, end)."""
-    cfg, ticks = ctx.cfg, np.arange(start, end)
+def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages], kept: _Embeddings, clock: StepClock):
+    """(clip or None, drop reason or None, embedding) for the ticks [start, start + len(ticks))."""
+    cfg, V, T = ctx.cfg, len(ctx.rig.cameras), len(ticks)
     try:
-        frames = np.stack(
-            [np.stack([ctx.image(v, t) for t in ticks]) for v in range(len(ctx.rig.cameras))]
-        )  # (V, T, H, W, 3)
+        frames = np.stack([tick.image(v) for v in range(V) for tick in ticks])
     except DrivewmError:  # one corrupt JPEG costs its clip, not the log
         return None, "undecodable_frame", None
-    t_ns = ctx.table.tick_ns[ticks]
-    poses = ctx.smooth.poses_at(t_ns) if ctx.smooth is not None else np.tile(np.eye(4), (len(ticks), 1, 1))
-    scores = filters.score_clip(frames, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)
-    reason = filters.judge(scores, cfg.filters)
-    emb = dedup.clip_embedding(frames)
-    if reason is None and cfg.filters.dedup_cosine < 1 and kept_embeddings:
-        if dedup.near_duplicates(emb[None], cfg.filters.dedup_cosine, np.stack(kept_embeddings)):
-            reason = "near_duplicate"
+    frames = frames.reshape(V, T, *frames.shape[1:])  # (V, T, H, W, 3)
+    t_ns = ctx.table.tick_ns[start : start + T]
+    poses = ctx.smooth.poses_at(t_ns) if ctx.smooth is not None else np.tile(np.eye(4), (T, 1, 1))
+    with clock.step("filters"):
+        scores = filters.score_clip(frames, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)
+        reason = filters.judge(scores, cfg.filters)
+        emb = dedup.clip_embedding(frames)
+        if reason is None and cfg.filters.dedup_cosine < 1 and kept.count:
+            if dedup.near_duplicates(emb[None], cfg.filters.dedup_cosine, kept.rows()):
+                reason = "near_duplicate"
     if reason:
         return None, reason, emb
     if ctx.anonymizer is not None:
-        frames = np.stack([[ctx.anonymizer(f) for f in cam] for cam in frames])
+        with clock.step("filters"):
+            frames = np.stack([[ctx.anonymizer(f) for f in cam] for cam in frames])
     meta = _meta(ctx, name, start, t_ns, poses, scores, frames)
-    clip = clip_from_arrays(meta, {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}, poses, cfg.crf)
+    with clock.step("encode"):
+        videos = {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}
+        clip = clip_from_arrays(meta, videos, poses, cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
     return clip, None, emb
 
 
@@ -259,7 +375,15 @@ def _meta(
         trajectory_ego=np.round(waypoints, 4).tolist(),
         trajectory_dt_s=dt_s,
         extra={"speed_mps": motion["speed_mps"], "description": ctx.log.scene.description},
+        pair_id=pair_id(ctx.log.scene.tags, start),
     )
+
+
+def pair_id(scene_tags: dict[str, str], start_tick: int) -> str:
+    """``<drive_id>-t<start tick>``: the clip of the same window of the same drive in every condition
+    (the scene tag ``drive_id`` of simulated logs, drivewm.sim.paired); "" when the log has none."""
+    drive = scene_tags.get("drive_id", "")
+    return f"{drive}-t{start_tick:06d}" if drive else ""
 
 
 def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
@@ -272,7 +396,7 @@ def _motion(poses: np.ndarray, t_ns: np.ndarray) -> dict:
     return {"manoeuvre": classify_manoeuvre(xyz_ego0, yaw, speed), "speed_mps": round(float(speed.mean()), 3)}
 
 
-def _manifest_row(meta: ClipMeta) -> dict:
+def manifest_row(meta: ClipMeta) -> dict:
     """One manifest.jsonl row: enough to filter and balance without opening shards."""
     return {
         "key": meta.key,
@@ -287,15 +411,27 @@ def _manifest_row(meta: ClipMeta) -> dict:
         "quality": meta.quality,
         "caption": meta.caption,
         "sync_error_ns": meta.sync_error_ns,
+        "pair_id": meta.pair_id,
     }
 
 
-def _result(
-    log: DriveLog, name: str, cfg: CurateConfig, ctx: _LogContext, rows: list[dict], embeddings: list, dropped: dict
-) -> dict:
+def _span_warnings(ctx: _LogContext) -> list[str]:
+    """Cameras that start late or stop early by more than a clip frame: clips only cover the span where
+    every camera runs, so a camera whose clock jumped (or that died) silently shortens the drive."""
+    starts = {c: int(t[0]) for c, t in ctx.sorted_ns.items() if len(t)}
+    ends = {c: int(t[-1]) for c, t in ctx.sorted_ns.items() if len(t)}
+    out = []
+    for c in starts:
+        late, early = (starts[c] - min(starts.values())) * 1e-9, (max(ends.values()) - ends[c]) * 1e-9
+        if max(late, early) * ctx.cfg.fps > 1:
+            out.append(f"{c}: starts {late:.2f} s late and stops {early:.2f} s early; clips cover only the common span")
+    return out
+
+
+def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock: StepClock) -> dict:
     """The per-log result (also the done-marker's content)."""
     table, smooth = ctx.table, ctx.smooth
-    warnings = [
+    warnings = list(ctx.log.warnings) + [
         f"{c}: {s['missing_ticks']} of {len(table.tick_ns)} ticks without a frame within tolerance"
         for c, s in table.stats.items()
         if s["missing_ticks"]
@@ -305,6 +441,8 @@ def _result(
         for c, s in table.stats.items()
         if s.get("duplicate_timestamps")
     ]
+    warnings += _span_warnings(ctx)
+    warnings += ctx.clocks.warnings(table, ctx.cfg.fps)
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")
     elif smooth.missing or smooth.rejected:
@@ -314,10 +452,10 @@ def _result(
     if not rows:
         warnings.append("no clip kept")
     return {
-        "log": str(log.path),
+        "log": str(ctx.log.path),
         "name": name,
         "status": "ok",
-        "config": config_fingerprint(cfg),
+        "config": config_fingerprint(ctx.cfg),
         "kept": len(rows),
         "dropped": dropped,
         "warnings": warnings,
@@ -328,5 +466,7 @@ def _result(
             "worst_skew_ns": table.worst_skew_ns,
             "cameras": table.stats,
         },
-        "embeddings": [np.round(e, 5).tolist() for e in embeddings],
+        "camera_frames": int(sum(len(ctx.log.image_timestamps_ns.get(c, ())) for c in ctx.rig.names)),
+        "cpu_s": clock.totals(),
+        "embeddings": embeddings_path(Path("."), name).as_posix(),
     }

@@ -82,6 +82,36 @@ def reference_ticks(
     return start + np.round(np.arange(count) * period_ns).astype(np.int64)
 
 
+def covered_spans(times_ns: list[np.ndarray], max_gap_ns: float) -> list[tuple[int, int]]:
+    """[first, last] time spans (ns) where every sequence (sorted) has frames no more than
+    ``max_gap_ns`` apart: a longer gap in any camera (a recorder pause, a clock jumping forward)
+    ends a span."""
+    spans = [(int(times_ns[0][0]), int(times_ns[0][-1]))] if len(times_ns[0]) else []
+    for t in times_ns:
+        breaks = np.flatnonzero(np.diff(t) > max_gap_ns)
+        own = list(zip(t[np.r_[0, breaks + 1]].tolist(), t[np.r_[breaks, len(t) - 1]].tolist()))
+        spans = [(max(a, c), min(b, d)) for a, b in spans for c, d in own if max(a, c) <= min(b, d)]
+    return spans
+
+
+def clock_jumps_back(arrival_ns: np.ndarray, threshold_ns: float) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """Frames of one camera, in log (arrival) order, whose clock jumped back by more than
+    ``threshold_ns`` (a reset, a re-synchronization): each such frame and every later one until
+    the clock passes its earlier maximum are dropped (two time bases cannot share one tick grid).
+    Returns (keep mask, [(arrival index, from_ns, to_ns) per jump]). Smaller steps back are
+    out-of-order delivery and are kept."""
+    keep = np.ones(len(arrival_ns), dtype=bool)
+    jumps, high, dropping = [], None, False
+    for i, t in enumerate(np.asarray(arrival_ns, dtype=np.int64).tolist()):
+        if high is not None and (t < high - threshold_ns or (dropping and t <= high)):
+            if not dropping:
+                jumps.append((i, high, t))
+            keep[i], dropping = False, True
+            continue
+        dropping, high = False, t if high is None else max(high, t)
+    return keep, jumps
+
+
 def exposure_offset_ns(frame_ns: np.ndarray, reference_ns: np.ndarray, tolerance_ns: float) -> int:
     """A camera's steady exposure offset from the reference camera (ns): the median time from each
     reference frame to the camera's nearest frame, or 0 when those times spread (interquartile
@@ -100,12 +130,18 @@ def synchronize(
     period_ns: float,
     tolerance_ns: float,
     per_camera_offsets: bool = True,
+    max_gap_ns: float = np.inf,
+    exclude_ns: list[tuple[int, int]] = (),
 ) -> SyncResult:
     """Build the tick table for ``cameras`` (the first is the reference) from each camera's sorted frame times.
 
     ``per_camera_offsets``: apply the tolerance around each camera's estimated exposure offset
-    (False: around the tick for every camera). ``frame_index`` refers to the de-duplicated frame
-    order: use :func:`dedupe_timestamps` on the same arrays to map back to the log's frames.
+    (False: around the tick for every camera). ``max_gap_ns``: a longer gap in any camera ends a
+    span of the grid; the next span starts again at a reference frame (its phase after a clock
+    jump is its own), one invalid tick apart, so a jump of hours costs no empty ticks.
+    ``exclude_ns``: [start, end] ranges whose ticks are invalid (e.g. times a clock went through
+    twice). ``frame_index`` refers to the de-duplicated frame order: use :func:`dedupe_timestamps`
+    on the same arrays to map back to the log's frames.
     """
     unique = {
         c: np.asarray(camera_timestamps_ns[c], dtype=np.int64)[
@@ -119,18 +155,45 @@ def synchronize(
     ref = unique[cameras[0]]
     offsets = {c: exposure_offset_ns(unique[c], ref, tolerance_ns) if per_camera_offsets else 0 for c in cameras}
     shifted = {c: unique[c] - offsets[c] for c in cameras}  # each camera's frames on the reference clock
-    ticks = reference_ticks(
-        [int(shifted[c][0]) for c in cameras], [int(shifted[c][-1]) for c in cameras], ref, period_ns, tolerance_ns
-    )
+    ticks = _span_ticks(covered_spans([shifted[c] for c in cameras], max_gap_ns), ref, period_ns, tolerance_ns)
     index = np.full((len(ticks), len(cameras)), -1, dtype=np.int64)
     for v, cam in enumerate(cameras):
         index[:, v] = nearest_frames(shifted[cam], ticks, tolerance_ns)[0]
     frame_ns = np.stack([np.where(index[:, v] >= 0, unique[c][index[:, v]], -1) for v, c in enumerate(cameras)], 1)
-    valid = (index >= 0).all(axis=1)
+    excluded = np.zeros(len(ticks), dtype=bool)
+    for a, b in exclude_ns:
+        excluded |= (ticks >= a - tolerance_ns) & (ticks <= b + tolerance_ns)
+    valid = (index >= 0).all(axis=1) & ~excluded
     dts = np.abs(frame_ns - ticks[:, None])
     skew = np.where(index >= 0, dts, 0).max(axis=1) if len(ticks) else np.zeros(0, dtype=np.int64)
-    stats = _stats(camera_timestamps_ns, cameras, unique, index, offsets)
+    stats = _stats(camera_timestamps_ns, cameras, unique, index, offsets, period_ns, max_gap_ns)
     return SyncResult(list(cameras), ticks, index, frame_ns.reshape(len(ticks), -1), valid, skew, offsets, stats)
+
+
+def _span_ticks(spans: list[tuple[int, int]], ref_ns: np.ndarray, period_ns: float, tolerance_ns: float) -> np.ndarray:
+    """The tick grid of each span (anchored at its first reference frame), one invalid tick
+    (a period after the span's last) between consecutive spans."""
+    parts = []
+    for a, b in spans:
+        ticks = reference_ticks([a], [b], ref_ns, period_ns, tolerance_ns)
+        if len(ticks):
+            parts += [ticks, ticks[-1:] + int(round(period_ns))]
+    return np.concatenate(parts[:-1]) if parts else np.zeros(0, dtype=np.int64)
+
+
+def frame_rate(times_ns: np.ndarray, max_gap_ns: float) -> dict[str, float]:
+    """Median rate (Hz) and its 5th-95th percentile range from a camera's frame intervals (gaps
+    longer than ``max_gap_ns`` excluded): a real rig's rate drifts and stutters."""
+    dt = np.diff(times_ns)
+    dt = dt[(dt > 0) & (dt <= max_gap_ns)]
+    if len(dt) == 0:
+        return {"rate_hz": 0.0, "rate_p5_hz": 0.0, "rate_p95_hz": 0.0}
+    p5, p50, p95 = np.percentile(dt, [5, 50, 95])
+    return {
+        "rate_hz": round(1e9 / float(p50), 3),
+        "rate_p5_hz": round(1e9 / float(p95), 3),
+        "rate_p95_hz": round(1e9 / float(p5), 3),
+    }
 
 
 def _stats(
@@ -139,7 +202,9 @@ def _stats(
     unique: dict[str, np.ndarray],
     index: np.ndarray,
     offsets: dict[str, int],
-) -> dict[str, dict[str, int]]:
+    period_ns: float,
+    max_gap_ns: float,
+) -> dict[str, dict]:
     start = min(int(unique[c][0]) for c in cameras)
     return {
         cam: {
@@ -148,6 +213,8 @@ def _stats(
             "late_start_ns": int(unique[cam][0] - start),
             "exposure_offset_ns": int(offsets[cam]),
             "missing_ticks": int((index[:, v] < 0).sum()),
+            "gaps": int((np.diff(unique[cam]) > max_gap_ns).sum()),
+            **frame_rate(unique[cam], max_gap_ns),
         }
         for v, cam in enumerate(cameras)
     }

@@ -84,10 +84,11 @@ def smooth_poses(t_ns: np.ndarray, T_world_from_ego: np.ndarray, cfg: Trajectory
     first = int(np.flatnonzero(valid)[0])
     kf.x = np.concatenate([z[first], np.zeros(4)])
     kf.P = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2] + [100.0] * 3 + [1.0])
-    xs, Ps, Fs, Qs, rejected = [], [], [], [], 0
-    for k in range(len(t_ns)):
-        dt = 0.0 if k == 0 else (t_ns[k] - t_ns[k - 1]) * 1e-9
-        F, Q = _transition(dt, cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
+    n, rejected = len(t_ns), 0
+    dts = np.concatenate([[0.0], np.diff(t_ns) * 1e-9])
+    xs, Ps = np.empty((n, 8)), np.empty((n, 8, 8))  # filtered states, smoothed in place below
+    for k in range(n):
+        F, Q = _transition(float(dts[k]), cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
         kf.predict(F=F, Q=Q)
         if valid[k]:
             y = z[k] - kf.H @ kf.x
@@ -96,14 +97,28 @@ def smooth_poses(t_ns: np.ndarray, T_world_from_ego: np.ndarray, cfg: Trajectory
                 kf.update(z[k])
             else:
                 rejected += 1
-        xs.append(kf.x.copy())
-        Ps.append(kf.P.copy())
-        Fs.append(F)
-        Qs.append(Q)
-    xs_s, _, _, _ = kf.rts_smoother(np.array(xs), np.array(Ps), Fs=np.array(Fs), Qs=np.array(Qs))
+        xs[k], Ps[k] = kf.x, kf.P
+    xs_s = rts_smooth(xs, Ps, dts, cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
     idx = np.arange(len(t_ns))
     fill = lambda a: np.interp(idx, idx[valid], a[valid])  # noqa: E731 - roll/pitch across NaN samples
     return SmoothedTrajectory(t_ns, xs_s[:, :3], xs_s[:, 3], fill(roll), fill(pitch), rejected, int((~valid).sum()))
+
+
+def rts_smooth(xs: np.ndarray, Ps: np.ndarray, dts: np.ndarray, q_pos: float, q_yaw: float) -> np.ndarray:
+    """Rauch-Tung-Striebel backward pass (Rauch, Tung & Striebel 1965), in place on the filtered
+    states ``xs`` (n, 8) and covariances ``Ps`` (n, 8, 8); returns ``xs`` smoothed.
+
+    Step for step filterpy's ``KalmanFilter.rts_smoother`` (same products, same order: the same
+    numbers), but F and Q are rebuilt from each step's ``dts`` (s) instead of stored, and no
+    per-step gains are kept: 72 floats per pose, so an hour of 100 Hz poses stays ~200 MB.
+    """
+    for k in range(len(xs) - 2, -1, -1):
+        F, Q = _transition(float(dts[k + 1]), q_pos, q_yaw)
+        Pp = np.dot(np.dot(F, Ps[k]), F.T) + Q
+        K = np.dot(np.dot(Ps[k], F.T), np.linalg.inv(Pp))
+        xs[k] += np.dot(K, xs[k + 1] - np.dot(F, xs[k]))
+        Ps[k] += np.dot(np.dot(K, Ps[k + 1] - Pp), K.T)
+    return xs
 
 
 def future_waypoints(T_world_from_ego: np.ndarray, t_ns: np.ndarray, n: int) -> tuple[np.ndarray, float]:

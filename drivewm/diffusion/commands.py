@@ -90,15 +90,13 @@ def pretrain_command(args: argparse.Namespace) -> int:
 
 def generate_command(args: argparse.Namespace) -> int | None:
     from drivewm.errors import DrivewmError
+    from drivewm.train.checkpoint import read_model_config
 
     if args.model is None:
         from drivewm.release import shipped_model
 
         args.model = shipped_model("multiview")
-    cfg_path = args.model / "config.json"
-    if not cfg_path.is_file():
-        raise DrivewmError(f"{args.model}: not a drivewm model folder (no config.json)")
-    model_type = json.loads(cfg_path.read_text()).get("model_type")
+    model_type = read_model_config(args.model).get("model_type")
     if model_type not in GENERATORS:
         raise DrivewmError(f"{args.model}: cannot generate from model_type {model_type!r}; known: {sorted(GENERATORS)}")
     module, func = GENERATORS[model_type].split(":")

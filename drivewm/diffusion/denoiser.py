@@ -19,8 +19,8 @@ from typing import Literal
 import torch
 from torch import nn
 
+from drivewm.config import above, at_least, in_range, require
 from drivewm.diffusion.flow import flow_loss_weight, flow_scalings
-from drivewm.errors import DrivewmError
 
 #: Default (P_mean, P_std) of ln(sigma) in training: EDM Table 1; flow: SD3's logit-normal(0, 1)
 #: (ln sigma = logit t, drivewm.diffusion.flow).
@@ -56,14 +56,17 @@ class EDMConfig:
         return mean + math.log(self.sigma_shift), std if self.p_std is None else self.p_std
 
     def validate(self) -> None:
-        if self.parameterization not in LOG_SIGMA_DEFAULTS:
-            raise DrivewmError(
-                f"edm.parameterization: {self.parameterization!r} is not one of {list(LOG_SIGMA_DEFAULTS)}"
-            )
-        if self.sigma_data <= 0 or self.sigma_shift <= 0 or (self.p_std is not None and self.p_std <= 0):
-            raise DrivewmError("edm: sigma_data, sigma_shift and p_std must be > 0")
-        if not 0 <= self.text_dropout <= 1 or self.cond_frames < 0:
-            raise DrivewmError("edm: text_dropout must be in [0, 1] and cond_frames >= 0")
+        require(
+            self.parameterization in LOG_SIGMA_DEFAULTS,
+            "parameterization",
+            self.parameterization,
+            f"one of {list(LOG_SIGMA_DEFAULTS)}",
+        )
+        above(self, 0, "sigma_data", "sigma_shift")
+        if self.p_std is not None:
+            above(self, 0, "p_std")
+        in_range(self, "text_dropout", 0, 1)
+        at_least(self, 0, "cond_frames")
 
 
 @dataclasses.dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+from drivewm.config import above, at_least
 from drivewm.errors import DrivewmError
 
 #: DiTConfig fields added after model folders were first written, with the value those folders were
@@ -54,12 +55,13 @@ class DiTConfig:
         return self.hidden_dim // self.num_heads
 
     def validate(self) -> None:
+        at_least(self, 1, "in_channels", "patch_size", "patch_t", "hidden_dim", "depth", "num_heads", "text_dim")
+        at_least(self, 1, "adaln_lora_dim")
+        above(self, 0, "mlp_ratio", "rope_theta", "rope_base_fps")
         if self.hidden_dim % self.num_heads or self.head_dim % 2:
             raise DrivewmError(
                 f"dit: hidden_dim {self.hidden_dim} must split into {self.num_heads} heads of even width"
             )
-        if min(self.patch_size, self.patch_t, self.depth, self.in_channels) < 1:
-            raise DrivewmError("dit: patch_size, patch_t, depth and in_channels must be >= 1")
         if not self.block_layers or len(set(self.block_layers)) != len(self.block_layers):
             raise DrivewmError(f"dit: block_layers must be non-empty and unique, got {self.block_layers}")
 

@@ -8,6 +8,7 @@ sample and ``contact_sheet.png``.
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,8 @@ class GenerateOptions:
     def __post_init__(self) -> None:
         if not self.prompts or self.steps < 1 or self.num_samples < 1 or self.batch_size < 1:
             raise DrivewmError("generate: needs at least one prompt, steps >= 1 and num_samples >= 1")
+        if not math.isfinite(self.guidance) or self.guidance < 0:
+            raise DrivewmError(f"generate: --guidance must be a finite number >= 0, got {self.guidance}")
 
 
 def latents_preview(latents: torch.Tensor, upscale: int = 8) -> np.ndarray:

@@ -8,21 +8,22 @@ on the latent cache ``CLIPDIR/latents/NAME`` written by ``drivewm tokenizer enco
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import torch
 
 from drivewm.clips.latents import LatentCache, find_latent_cache
-from drivewm.config import to_dict
+from drivewm.config import at_least, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.errors import DrivewmError
+from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
 from drivewm.text import TextConfig
+from drivewm.train.checkpoint import read_model_config
 from drivewm.train.loop import TrainConfig, TrainTask, train
 
 
@@ -38,8 +39,9 @@ class DataConfig:
     schedule starts with images: many more samples per second, the same network)."""
 
     def validate(self) -> None:
-        if self.frames < 0:
-            raise DrivewmError(f"pretrain data.frames must be >= 0, got {self.frames}")
+        at_least(self, 0, "frames")
+        if self.latents is not None:
+            check_name(self.latents, "latents (cache name)")
 
 
 @dataclasses.dataclass
@@ -64,6 +66,9 @@ class PretrainConfig:
     """Text2World model folder whose DiT weights start the run (warm start: the next stage of a
     progressive schedule, or fine-tuning shipped weights on a fleet's logs); None = random init.
     Its DiT and text settings must equal this run's."""
+
+    def validate(self) -> None:
+        at_least(self, 1, "sample_steps")
 
 
 #: Per-preset training defaults (copy-and-change of the base TrainConfig).
@@ -112,14 +117,9 @@ def pretrain_config(preset: str, overrides: list[str] | None = None) -> Pretrain
 
 def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     """The cache must have been encoded by ``tokenizer_dir`` (same config and latent statistics)."""
-    cfg_path = tokenizer_dir / "config.json"
-    if not cfg_path.is_file():
-        raise DrivewmError(f"{tokenizer_dir}: not a tokenizer model folder (no config.json)")
     from drivewm.tokenizer.model import MODEL_TYPE
 
-    info = json.loads(cfg_path.read_text())
-    if info.get("model_type") != MODEL_TYPE:
-        raise DrivewmError(f"{tokenizer_dir}: model_type is {info.get('model_type')!r}, expected {MODEL_TYPE!r}")
+    info = read_model_config(tokenizer_dir, MODEL_TYPE)
     recorded = cache.tokenizer
     same_config = "config" not in recorded or info.get("config") == recorded["config"]
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
@@ -131,10 +131,13 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
 
 
 def _close(a: list[float] | None, b: list[float] | None) -> bool:
+    """Equal up to half precision: shipped tokenizers store their statistics' buffers in fp16 (an 11-bit
+    significand, so rounding moves a value by up to 2^-11 = 4.9e-4 of it) while their config.json keeps
+    the fp32 values, and a cache records the statistics the loaded tokenizer encoded with."""
     return (
         a is None
         or b is None
-        or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-4, atol=1e-6))
+        or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-3, atol=1e-6))
     )
 
 

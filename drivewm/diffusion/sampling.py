@@ -4,7 +4,10 @@ It owns what is the same for all of them: noise drawn per sample on the CPU from
 seed (so a sample does not depend on its batch or on the device), then moved to the device;
 classifier-free guidance on the caption and, for models conditioned on an ego trajectory, on the
 trajectory; bf16 autocast on CUDA; the Karras schedule and the sampler (drivewm.diffusion.samplers).
-Video2World needs nothing here: its clean latents travel in the conditioning. The model bundles
+Video2World needs nothing here: its clean latents travel in the conditioning. SDEdit-style starts
+(Meng et al. 2022, arXiv 2108.01073, sec. 3: a guide x_g perturbed to x_g + sigma(t0) z, then the
+reverse process from t0) are ``start`` / ``start_sigma``: the schedule then runs from ``start_sigma``
+down, so N steps cost the same network evaluations from any start. The model bundles
 build the conditioning and (de)normalise latents; nothing here knows a tokenizer or a rig.
 """
 
@@ -39,6 +42,8 @@ def sample(
     sampler: str = "heun",
     trajectory_guidance: float = 1.0,
     device: torch.device | str = "cpu",
+    start: torch.Tensor | None = None,
+    start_sigma: float | None = None,
 ) -> torch.Tensor:
     """Normalised latents (B, *shape) float32 on the CPU; sample b starts from noise seeded ``seeds[b]``.
 
@@ -46,14 +51,20 @@ def sample(
     ``shape``: one sample, (c, t, h, w), or (V, c, t, h, w) for V camera views, which the denoiser sees
     folded into its batch as (B V, c, t, h, w). ``cond``: the conditioning of that (folded) batch, its
     ``cond_latents`` normalised (Video2World). ``guidance`` / ``trajectory_guidance``: classifier-free
-    guidance weights on the caption / the ego trajectory (1 = off).
+    guidance weights on the caption / the ego trajectory (1 = off). ``start`` (B, *shape) normalised
+    latents (None: pure noise at sigma_max 80): sampling starts from them noised to ``start_sigma`` (SDEdit).
     """
     if sampler not in SAMPLERS:
         raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
+    if steps < 1 or (start is not None and not start_sigma):
+        raise DrivewmError(
+            f"sampling: needs steps >= 1 and a start_sigma > 0 with a start (got {steps}, {start_sigma})"
+        )
     device = resolve_device(device)
-    sigmas = karras_sigmas(steps).to(device)
+    sigmas = (karras_sigmas(steps, sigma_max=start_sigma) if start is not None else karras_sigmas(steps)).to(device)
     noise = seeded_noise((len(seeds), *shape), seeds)  # on the CPU: the same sample on every device
-    x = noise.reshape(-1, *shape[-4:]).to(device) * sigmas[0]  # (B [V], c, t, h, w)
+    x = noise * sigmas[0].cpu() + (start.float().cpu() if start is not None else 0.0)
+    x = x.reshape(-1, *shape[-4:]).to(device)  # (B [V], c, t, h, w)
     model = guided(denoiser, guidance, trajectory_guidance)
     with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
         x = SAMPLERS[sampler](model, x, sigmas, extra_args={"cond": cond.to(device)})

@@ -158,8 +158,9 @@ def adherence(scores: dict[str, float], prompted: dict[str, str], calibration: d
     """Per-clip adherence: for each prompted field (weather, time_of_day) whether the classifier
     agrees (1.0 / 0.0) and the probability it gives the prompted class."""
     pred = classify_condition(scores, calibration)
-    out: dict = {"predicted": {"weather": pred["weather"], "time_of_day": pred["time_of_day"]}}
+    out: dict = {"predicted": {"weather": pred["weather"], "time_of_day": pred["time_of_day"]}, "prompted": {}}
     for field in ("weather", "time_of_day"):
+        out["prompted"][field] = prompted.get(field)
         want = prompted.get(field)
         if want and want in pred[f"{field}_prob"]:
             out[f"{field}_match"] = float(pred[field] == want)

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from drivewm import resources
 from drivewm.config import to_dict
+from drivewm.errors import BatchError
 from drivewm.eval.config import ALL_METRICS, EVAL_RECIPES
 
 
@@ -47,6 +49,7 @@ def register(subparsers) -> None:
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
+    p.add_argument("--max-clips", type=int, default=None, help="score N clips spread evenly over the input")
     p.set_defaults(func=run_eval)
 
 
@@ -72,9 +75,18 @@ def run_eval(args: argparse.Namespace) -> int:
         reference=args.reference,
         pictures=not args.no_pictures,
         rig_fit=args.rig_fit,
+        max_clips=args.max_clips,
     )
     # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
     summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})
     print(json.dumps(summary, indent=2, allow_nan=False))
     print(f"wrote {args.out}/metrics.json and metrics.md")
+    failed = [m["error"] for m in metrics["clips"].values() if "error" in m]
+    if len(failed) == metrics["num_clips"]:
+        raise BatchError(f"eval: every input failed ({len(failed)} of {metrics['num_clips']})", failed)
+    for line in failed:
+        print(f"warning: failed {line}", file=sys.stderr)
+    for key, m in metrics["clips"].items():
+        for line in m.get("warnings", []):
+            print(f"warning: {key}: {line}", file=sys.stderr)
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from drivewm.config import above, at_least, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.recipe import RecipeBook
 
@@ -37,6 +38,17 @@ class MatchConfig:
     """Lowe's ratio test: keep a match when best/second-best descriptor distance < ratio (Lowe 2004, sec. 7.1)."""
     mutual: bool = True
     """Keep only matches that are each other's nearest neighbour in both directions."""
+
+    def validate(self) -> None:
+        require(self.matcher in ("sift", "learned"), "matcher", self.matcher, "'sift' or 'learned'")
+        require(
+            self.matcher != "learned" or bool(self.learned_weights),
+            "learned_weights",
+            self.learned_weights,
+            "a local file for matcher='learned'",
+        )
+        at_least(self, 1, "max_features")
+        require(0 < self.ratio <= 1, "ratio", self.ratio, "in (0, 1]")
 
 
 @dataclasses.dataclass
@@ -70,6 +82,14 @@ class EpipolarConfig:
     error in the clip value: the worst a verified match may have (``verify_threshold_px``). A blurred,
     frozen or shuffled video loses pairs and so scores worse, instead of scoring only its easy pairs."""
 
+    def validate(self) -> None:
+        at_least(self, 16, "canonical_width", "canonical_height")
+        require(0 < self.canonical_hfov_deg < 180, "canonical_hfov_deg", self.canonical_hfov_deg, "in (0, 180)")
+        above(self, 0, "ransac_threshold_px", "verify_threshold_px")
+        require(0 < self.ransac_confidence < 1, "ransac_confidence", self.ransac_confidence, "in (0, 1)")
+        at_least(self, 1, "ransac_max_iters")
+        at_least(self, 8, "min_matches")  # the fundamental matrix needs 8 correspondences (H&Z 11.1)
+
 
 @dataclasses.dataclass
 class ConsistencyConfig:
@@ -89,6 +109,17 @@ class ConsistencyConfig:
     compensate_exposure: bool = True
     """Calibrated TSE / CSE use the ego pose at each camera's own exposure time
     (``ClipMeta.camera_timestamps_ns``, drivewm.eval.exposure), not at the clip's tick."""
+
+    def validate(self) -> None:
+        at_least(self, 1, "frame_gap")
+        at_least(self, 2, "overlap_grid")
+        in_range(self, "overlap_min_fraction", 0, 1)
+        require(
+            len(self.overlap_depths_m) > 0 and min(self.overlap_depths_m) > 0,
+            "overlap_depths_m",
+            self.overlap_depths_m,
+            "a non-empty list of depths > 0",
+        )
 
 
 @dataclasses.dataclass
@@ -130,6 +161,22 @@ class PoseConfig:
     at 10 fps rarely reaches it between nearby frames)."""
     seed: int = 0
     """pycolmap random seed (deterministic RANSAC)."""
+
+    def validate(self) -> None:
+        require(self.features in ("colmap", "shared"), "features", self.features, "'colmap' or 'shared'")
+        require(self.verify in ("colmap", "drivewm"), "verify", self.verify, "'colmap' or 'drivewm'")
+        for name in ("temporal_gaps", "cross_gaps"):
+            gaps = getattr(self, name)
+            require(all(g >= 1 for g in gaps), name, gaps, "a list of frame gaps >= 1")
+        at_least(self, 1, "max_features", "sequential_overlap", "min_model_size", "abs_pose_min_num_inliers")
+        at_least(self, 1, "verify_max_trials")
+        at_least(self, 0, "min_pair_inliers")
+        above(self, 1, "ba_global_frames_ratio")
+        in_range(self, "abs_pose_min_inlier_ratio", 0, 1)
+        require(
+            0 < self.init_min_tri_angle_deg < 180, "init_min_tri_angle_deg", self.init_min_tri_angle_deg, "in (0, 180)"
+        )
+        in_range(self, "seed", 0, 2**31 - 1)
 
 
 @dataclasses.dataclass
@@ -184,6 +231,7 @@ class EvalConfig:
         unknown = sorted(set(self.metrics) - set(ALL_METRICS))
         if unknown:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
+        require(len(self.metrics) > 0, "metrics", self.metrics, f"a non-empty subset of {list(ALL_METRICS)}")
         self.trajectory.validate()
 
 

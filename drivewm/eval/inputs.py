@@ -13,7 +13,7 @@ import av
 import numpy as np
 
 from drivewm.clips.format import Clip
-from drivewm.clips.shards import iter_shard, list_shards
+from drivewm.clips.shards import BadClip, list_shards, read_shard
 from drivewm.clips.video import decode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
@@ -70,8 +70,10 @@ class EvalItem:
         if self.grid is not None:
             return split_grid(_decode_file(self.grid_path), self.grid, self.grid_path)
         videos = {c: _decode_file(p) for c, p in self.mp4_paths.items()}
-        n = min(len(v) for v in videos.values())
-        return {c: v[:n] for c, v in videos.items()}
+        counts = {c: len(v) for c, v in videos.items()}
+        if len(set(counts.values())) > 1:  # cutting all to the shortest would score a different clip
+            raise DrivewmError(f"{self.key}: the cameras' videos have different frame counts {counts}")
+        return videos
 
 
 def _decode_file(path: str) -> np.ndarray:
@@ -115,39 +117,56 @@ def _video_size(path: Path) -> tuple[int, int, float]:
 
 def items_from_clips(location: Path, rig: Rig | None, fit: str = "same") -> list[EvalItem]:
     """Clip shards (a folder of .tar or one .tar); ``rig`` (optional) overrides the clips' own.
-    A shard that cannot be read becomes one failed item named after it; the others are kept."""
-    items = []
+    A clip (or damaged part of a shard) that cannot be read becomes one failed item named after it;
+    the others are kept."""
+    items, seen = [], set()
     for shard in list_shards(location):
-        try:
-            items += _shard_items(shard, rig, fit)
-        except DrivewmError as exc:
-            items.append(EvalItem(shard.stem, rig or Rig("unknown", []), 0.0, error=str(exc)))
+        for clip in read_shard(shard):
+            name = clip.name if isinstance(clip, BadClip) else clip.key
+            try:
+                if name in seen:  # results are keyed by clip: a second clip of one key would replace the first
+                    name = f"{shard.stem}/{name}"
+                    raise DrivewmError(f"{shard}: clip key {name.split('/')[-1]!r} seen before in this input")
+                items.append(_clip_item(clip, rig, fit))
+            except DrivewmError as exc:
+                items.append(EvalItem(name, rig or Rig("unknown", []), 0.0, error=str(exc)))
+            seen.add(name)
     return items
 
 
-def _shard_items(shard: Path, rig: Rig | None, fit: str) -> list[EvalItem]:
+def _shard_folders(location: Path) -> list[Path]:
+    return sorted(p for p in location.iterdir() if p.is_dir() and any(p.glob("*.tar")))
+
+
+def items_from_clip_folders(location: Path, rig: Rig | None, fit: str = "same") -> list[EvalItem]:
+    """A folder of clip-shard folders (e.g. ``drivewm generate`` outputs, one folder per prompt):
+    every folder's clips, keyed ``FOLDER/KEY`` so that equal keys of different folders stay apart."""
     items = []
-    for clip in iter_shard(shard):
-        clip_rig = clip.meta.get_rig()
-        if rig is not None:
-            c0 = clip_rig.cameras[0]
-            clip_rig = _rig_for(rig, [n for n in rig.names if n in clip.meta.cameras], c0.width, c0.height, fit)
-        m = clip.meta
-        items.append(
-            EvalItem(
-                m.key,
-                clip_rig,
-                m.fps,
-                clip.T_world_from_ego,
-                dict(m.tags),
-                list(m.trajectory_ego),
-                m.trajectory_dt_s,
-                clip=clip,
-                timestamps_ns=list(m.timestamps_ns),
-                camera_timestamps_ns=dict(m.camera_timestamps_ns),
-            )
-        )
+    for folder in _shard_folders(location):
+        items += [dataclasses.replace(i, key=f"{folder.name}/{i.key}") for i in items_from_clips(folder, rig, fit)]
     return items
+
+
+def _clip_item(clip: Clip | BadClip, rig: Rig | None, fit: str) -> EvalItem:
+    if isinstance(clip, BadClip):
+        raise DrivewmError(clip.reason)
+    m = clip.meta
+    clip_rig = m.get_rig()
+    if rig is not None:
+        c0 = clip_rig.cameras[0]
+        clip_rig = _rig_for(rig, [n for n in rig.names if n in m.cameras], c0.width, c0.height, fit)
+    return EvalItem(
+        m.key,
+        clip_rig,
+        m.fps,
+        clip.T_world_from_ego,
+        dict(m.tags),
+        list(m.trajectory_ego),
+        m.trajectory_dt_s,
+        clip=clip,
+        timestamps_ns=list(m.timestamps_ns),
+        camera_timestamps_ns=dict(m.camera_timestamps_ns),
+    )
 
 
 def items_from_mp4_folder(location: Path, rig: Rig, fit: str = "same") -> list[EvalItem]:
@@ -155,16 +174,20 @@ def items_from_mp4_folder(location: Path, rig: Rig, fit: str = "same") -> list[E
     folders = [location] if any(location.glob("*.mp4")) else sorted(p for p in location.iterdir() if p.is_dir())
     items = []
     for folder in folders:
-        paths = {c: folder / f"{c}.mp4" for c in rig.names if (folder / f"{c}.mp4").is_file()}
-        if not paths:
-            raise DrivewmError(f"{folder}: no mp4 named after the rig's cameras {rig.names}")
-        w, h, fps = _video_size(next(iter(paths.values())))
-        items.append(
-            EvalItem(
-                folder.name, _rig_for(rig, list(paths), w, h, fit), fps, mp4_paths={c: str(p) for c, p in paths.items()}
-            )
-        )
+        try:
+            items.append(_folder_item(folder, rig, fit))
+        except DrivewmError as exc:  # one bad folder is one failed item
+            items.append(EvalItem(folder.name, rig, 0.0, error=str(exc)))
     return items
+
+
+def _folder_item(folder: Path, rig: Rig, fit: str) -> EvalItem:
+    paths = {c: folder / f"{c}.mp4" for c in rig.names if (folder / f"{c}.mp4").is_file()}
+    if not paths:
+        raise DrivewmError(f"{folder}: no mp4 named after the rig's cameras {rig.names}")
+    w, h, fps = _video_size(next(iter(paths.values())))
+    mp4_paths = {c: str(p) for c, p in paths.items()}
+    return EvalItem(folder.name, _rig_for(rig, list(paths), w, h, fit), fps, mp4_paths=mp4_paths)
 
 
 def items_from_grid(path: Path, rig: Rig, grid: GridLayout, fit: str = "same") -> list[EvalItem]:
@@ -194,6 +217,8 @@ def load_items(
         raise DrivewmError(f"{location}: no such file or folder")
     if location.suffix == ".tar" or (location.is_dir() and any(location.glob("*.tar"))):
         return items_from_clips(location, rig_obj, fit)
+    if location.is_dir() and _shard_folders(location):
+        return items_from_clip_folders(location, rig_obj, fit)
     if rig_obj is None:
         raise DrivewmError(f"{location}: mp4 inputs need --rig (camera names, intrinsics and extrinsics)")
     if location.is_file() and location.suffix == ".mp4":

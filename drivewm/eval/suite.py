@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import traceback
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import cv2
@@ -30,7 +30,8 @@ from drivewm.eval.matching import FrameMatcher
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
 from drivewm.eval.trajectory import ego_from_sfm
-from drivewm.eval.trajectory_errors import ate, relative_pose_errors, tfe
+from drivewm.eval.trajectory_errors import ate, heading_change_deg, relative_pose_errors, tfe, waypoint_heading_deg
+from drivewm.workers import process_pool
 
 #: Figures reported beside each Sampson metric (drivewm.eval.suite._put_sampson).
 SAMPSON_SUFFIXES = ("_native", "_counted", "_counted_fraction", "_matches")
@@ -64,14 +65,22 @@ class ClipResult:
 
 
 def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
-    """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised."""
+    """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised;
+    so is an unexpected exception (a bug or an input no check foresaw): the batch goes on."""
+    try:
+        return _evaluate_item(item, cfg)
+    except DrivewmError as exc:
+        return ClipResult(item.key, {"error": str(exc)}, {})
+    except Exception as exc:  # noqa: BLE001 - one clip's failure must not end the batch
+        detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return ClipResult(item.key, {"error": f"{item.key}: unexpected error: {detail}"}, {})
+
+
+def _evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
     cv2.setNumThreads(1)
     metrics: dict = {"status": {}, "seconds": {}}
     artifacts: dict = {}
-    try:
-        videos = item.videos()
-    except DrivewmError as exc:
-        return ClipResult(item.key, {"error": str(exc)}, {})
+    videos = item.videos()
 
     matcher = FrameMatcher(cfg.match)
     for name, fn in (("tse", _tse), ("cse", _cse), ("pose", _pose), ("traj", _traj), ("adherence", _adherence)):
@@ -86,6 +95,14 @@ def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
     K_c = canonical_K(cfg.epipolar)
     metrics["native_px_per_canonical_px"] = {c.name: native_px_per_canonical_px(c, K_c) for c in item.rig.cameras}
 
+    frames = min(len(v) for v in videos.values())
+    if frames <= cfg.consistency.frame_gap:  # no frame pair to score: say so, do not leave a silent gap
+        metrics["tse"] = metrics["tse_calibrated"] = math.nan
+        metrics["status"]["tse"] = "too_few_frames"
+        metrics.setdefault("warnings", []).append(
+            f"tse: {frames} frame(s), needs {cfg.consistency.frame_gap + 1} (frame_gap {cfg.consistency.frame_gap})"
+        )
+        return
     ego = _ego_at_cameras(item, cfg)
     r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego)
     _put_sampson(metrics, "tse", r)
@@ -156,6 +173,9 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         metrics["status"]["traj"] = "not_registered"
         return
     est = ego.T_world_from_ego[reg]
+    metrics["yaw_change_deg"] = heading_change_deg(est)  # the turn the video shows (first to last registered)
+    if item.trajectory_ego:
+        metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
         metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
@@ -217,15 +237,22 @@ def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress
             results[i] = evaluate_item(item, cfg)
             bar.update()
     else:
-        # spawn, not fork: a caller that already ran torch or OpenCV (quickstart runs every stage in
-        # one process) holds thread-pool locks a forked child inherits locked, and the child hangs.
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with process_pool(workers) as pool:  # spawned workers that exit if this process is killed
             futures = {pool.submit(evaluate_item, item, cfg): i for i, item in enumerate(items)}
             for fut in as_completed(futures):
                 results[futures[fut]] = fut.result()
                 bar.update()
     bar.close()
     return [results[i] for i in range(len(items))]
+
+
+def spread(items: list, n: int | None) -> list:
+    """``n`` items evenly spaced over ``items`` (all of them when n is None or not smaller)."""
+    if n is None or n >= len(items):
+        return items
+    if n < 1:
+        raise DrivewmError(f"max_clips must be >= 1, got {n}")
+    return [items[i * len(items) // n] for i in range(n)]
 
 
 def evaluate(
@@ -240,6 +267,7 @@ def evaluate(
     progress: bool = True,
     pictures: bool = True,
     rig_fit: str = "same",
+    max_clips: int | None = None,
 ) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
@@ -247,9 +275,11 @@ def evaluate(
     also writes metrics.json, metrics.md (beside ``reference`` values), error-distribution plots
     and a Rerun recording (eval.rrd). ``rig_fit``: how videos of another aspect ratio than the rig
     were resized from it ('same' refuses them, 'stretch', 'crop'; drivewm.geometry.Camera.scaled).
+    ``max_clips``: score that many clips spread evenly over the (sorted) input, e.g. a reference
+    subset of a large held-out set.
     """
     cfg = cfg or EvalConfig()
-    items = load_items(location, rig, grid, cameras, rig_fit)
+    items = spread(load_items(location, rig, grid, cameras, rig_fit), max_clips)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
     results = run_items(items, cfg, workers, progress)

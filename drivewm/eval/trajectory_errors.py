@@ -188,3 +188,19 @@ def tfe(est_T_world_from_ego: np.ndarray, fps: float, waypoints_ego: np.ndarray,
     denom = float(np.sum(q * q))
     s = float(np.sum(q * w)) / denom if denom > 0 else 1.0
     return float(np.mean(np.linalg.norm(s * q - w, axis=1)))
+
+
+def heading_change_deg(T_world_from_ego: np.ndarray) -> float:
+    """Yaw of the last ego pose in the first one's ego frame (degrees; ego is x forward, y left, z up,
+    so a left turn is positive). Invariant to the world frame's gauge, so it reads a recovered
+    (structure-from-motion) trajectory as well as a reference one."""
+    R = T_world_from_ego[0, :3, :3].T @ T_world_from_ego[-1, :3, :3]
+    return float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
+
+
+def waypoint_heading_deg(waypoints_ego: np.ndarray) -> float:
+    """Heading of the last segment of ego-frame waypoints (N, >=2), origin first (degrees, left
+    positive): the turn a trajectory conditions, comparable with :func:`heading_change_deg`."""
+    w = np.concatenate([np.zeros((1, 2)), np.asarray(waypoints_ego, dtype=np.float64)[:, :2]])
+    d = w[-1] - w[-2]
+    return float(np.degrees(np.arctan2(d[1], d[0])))

@@ -26,15 +26,13 @@ def register(subparsers) -> None:
 
 
 def run_view(args: argparse.Namespace) -> int:
-    from drivewm.logs.reader import read_log
+    from drivewm.logs.reader import LogStream
     from drivewm.logs.viewer import write_recording
 
-    log = read_log(args.log, topic_map=args.topic_map, require_images=False)
     out = Path(args.out) if args.out else Path(args.log).with_suffix(".rrd")
-    write_recording(log, out)
-    frames = sum(len(f) for f in log.images.values())
+    n = write_recording(LogStream(args.log, topic_map=args.topic_map), out)
     print(
-        f"{args.log}: {len(log.rig.cameras)} cameras, {frames} images, {len(log.pose_timestamps_ns)} poses, "
-        f"{len(log.agents)} agent ticks -> {out} (open with: rerun {out})"
+        f"{args.log}: {n['cameras']} cameras, {n['image']} images, {n['poses']} poses, "
+        f"{n['agents']} agent ticks -> {out} (open with: rerun {out})"
     )
     return 0

@@ -1,15 +1,23 @@
-"""Read a drive log (MCAP file, or a folder of split-bag files) into a :class:`DriveLog`.
+"""Read a drive log (MCAP file, or a folder of split-bag files): whole, or streamed in bounded memory.
 
 Accepted: drivewm's own Foxglove protobuf logs, Foxglove JSON-encoded logs and ROS 2 logs
 (sensor_msgs CompressedImage/Image + CameraInfo, tf2_msgs/TFMessage, and optionally a
 PoseStamped/Odometry ego pose), mapped onto cameras and frames by a topic map
 (:mod:`drivewm.logs.topicmap`). The flow: route each channel to a kind by schema and topic
 map, decode only those channels, collect, then assemble the rig, poses and images.
+
+Two ways in: :func:`read_log` holds the whole drive (:class:`DriveLog`, for small logs and
+tests). :class:`LogStream` reads an hour-long log in bounded memory: :meth:`LogStream.index`
+collects everything but image payloads and agent boxes (calibration, transforms, ego poses,
+scene, road, and each image's camera and timestamp: a few bytes per image), then
+:meth:`LogStream.stream` yields the images (and agents) one message at a time in log order,
+so a consumer holds only what its own window needs. Both share the routing and assembly below.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,11 +31,12 @@ from drivewm.logs import names
 from drivewm.logs.frames import FrameGraph
 from drivewm.logs.mcap_source import ChannelInfo, Message, iter_messages, list_channels, log_files, read_metadata
 from drivewm.logs.topicmap import TopicMap, load_topic_map
-from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, RoadLine, SceneInfo
+from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, LogIndex, RoadLine, SceneInfo
 
 _IMAGE_SCHEMAS = (fox.IMAGE,) + ros.COMPRESSED_IMAGE + ros.RAW_IMAGE
 _CALIBRATION_SCHEMAS = (fox.CALIBRATION,) + ros.CAMERA_INFO
 _TF_SCHEMAS = (fox.TRANSFORMS, fox.TRANSFORM) + ros.TF_MESSAGE
+_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; "agents", "road" on request
 
 
 @dataclasses.dataclass
@@ -41,8 +50,11 @@ class _Calibration:
 
 @dataclasses.dataclass
 class _Collected:
-    """Everything read from the messages, before assembly."""
+    """Everything read from the messages, before assembly. ``keep``: the optional kinds whose
+    payloads are decoded and kept ("image", "agents", "road"); image timestamps are always recorded."""
 
+    keep: tuple[str, ...] = ("image", "agents", "road")
+    image_stamps: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     images: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
     calibrations: dict[str, _Calibration] = dataclasses.field(default_factory=dict)
     frames: FrameGraph = dataclasses.field(default_factory=FrameGraph)
@@ -50,33 +62,88 @@ class _Collected:
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     road: list[RoadLine] = dataclasses.field(default_factory=list)
     scene: dict | None = None
+    ros2: bool = False  # any CDR channel: ROS 2 frame names by default
 
 
 def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, require_images: bool = True) -> DriveLog:
-    """Read one drive. ``topic_map``: a TopicMap, a YAML path or a name in drivewm/topicmaps/.
+    """Read one whole drive into memory. ``topic_map``: a TopicMap, a YAML path or a name in drivewm/topicmaps/.
 
     ``require_images``: raise unless the log has camera images and ego poses (the contract of
     :meth:`DriveLog.validate`); False loads pose-only or sensor-only logs as they are.
     Raises DrivewmError naming the file for non-MCAP, truncated or corrupt files, a topic map
     naming a topic the log lacks, and images of a camera without calibration.
     """
-    tmap = topic_map if isinstance(topic_map, TopicMap) else load_topic_map(topic_map) if topic_map else TopicMap()
-    files = log_files(path)
-    channels = {c for f in files for c in list_channels(f)}
-    col = _Collected()
-    route = _router(tmap)
-    for f in files:
-        for msg in iter_messages(f, lambda info: route(info) is not None):
-            _handle(col, route(msg.channel), msg, tmap)
-            channels.add(msg.channel)
-    _check_topics(path, tmap, {c.topic for c in channels})
-    ros2 = any(c.encoding == "cdr" for c in channels)  # ROS 2 frame names by default (REP 105)
-    world = tmap.world_frame or ("map" if ros2 else names.WORLD_FRAME)
-    ego = tmap.ego_frame or ("base_link" if ros2 else names.EGO_FRAME)
-    log = _assemble(path, files, col, tmap, world, ego)
+    reader = LogStream(path, topic_map)
+    col = reader.collect(keep=("image", "agents", "road"))
+    index = reader.assemble(col)
+    images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in index.rig.names}
+    agents = sorted(col.agents, key=lambda a: a[0])
+    log = DriveLog(
+        index.path,
+        index.rig,
+        images,
+        index.pose_timestamps_ns,
+        index.T_world_from_ego,
+        index.scene,
+        agents,
+        index.road,
+        index.warnings,
+    )
     if require_images:
         log.validate()
     return log
+
+
+class LogStream:
+    """One drive log read in passes, holding no images: :meth:`index` first, then :meth:`stream`.
+
+    ``topic_map``: a TopicMap, a YAML path or a name in drivewm/topicmaps/. Errors are those of
+    :func:`read_log`, raised by :meth:`index`.
+    """
+
+    def __init__(self, path: str | Path, topic_map: str | Path | TopicMap | None = None):
+        self.path = path
+        tm = topic_map
+        self.tmap = tm if isinstance(tm, TopicMap) else load_topic_map(tm) if tm else TopicMap()
+        self.files = log_files(path)
+        self._route = _router(self.tmap)
+
+    def index(self, require_images: bool = True, road: bool = False) -> LogIndex:
+        """Calibration, poses, scene and every image's (camera, timestamp), without payloads; the
+        road polylines only if ``road`` (a viewer draws them; they cost as much as the poses)."""
+        index = self.assemble(self.collect(keep=("road",) if road else ()))
+        if require_images:
+            index.validate()
+        return index
+
+    def stream(self, kinds: tuple[str, ...] = ("image",)) -> Iterator[tuple[str, Any]]:
+        """Messages of ``kinds`` one at a time in log order: ("image", (camera, ImageFrame)) and
+        ("agents", (timestamp_ns, [AgentBox])). A camera's images come in the order
+        :meth:`index` recorded their timestamps."""
+        for f in self.files:
+            for msg in iter_messages(f, lambda info: (self._route(info) or ("",))[0] in kinds):
+                kind, camera = self._route(msg.channel)
+                yield kind, _image(camera, msg, self.tmap) if kind == "image" else _agents(msg, self.tmap)
+
+    def collect(self, keep: tuple[str, ...]) -> _Collected:
+        """One pass over every routed message (payloads kept for the kinds in ``keep``)."""
+        channels = {c for f in self.files for c in list_channels(f)}
+        col = _Collected(keep=keep)
+        kinds = set(_ALWAYS) | set(keep)  # other kinds' messages are not even decoded
+        for f in self.files:
+            for msg in iter_messages(f, lambda info: (self._route(info) or ("",))[0] in kinds):
+                _handle(col, self._route(msg.channel), msg, self.tmap)
+                channels.add(msg.channel)
+        _check_topics(self.path, self.tmap, {c.topic for c in channels})
+        col.ros2 = any(c.encoding == "cdr" for c in channels)
+        return col
+
+    def assemble(self, col: _Collected) -> LogIndex:
+        """The index of the log from what one pass collected."""
+        # ROS 2 frame names by default (REP 105)
+        world = self.tmap.world_frame or ("map" if col.ros2 else names.WORLD_FRAME)
+        ego = self.tmap.ego_frame or ("base_link" if col.ros2 else names.EGO_FRAME)
+        return _assemble(self.path, self.files, col, self.tmap, world, ego)
 
 
 # ----------------------------------------------------------------------------- routing
@@ -122,8 +189,10 @@ def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap:
     kind, camera = routed
     schema, data = msg.channel.schema_name, msg.data
     if kind == "image":
-        frame_id, stamp, payload, fmt = _decode_image(schema, data)
-        col.images.setdefault(camera or frame_id, []).append(ImageFrame(_stamp(tmap, stamp, msg), payload, fmt))
+        name, frame = _image(camera, msg, tmap)
+        col.image_stamps.setdefault(name, []).append(frame.timestamp_ns)
+        if "image" in col.keep:
+            col.images.setdefault(name, []).append(frame)
     elif kind == "calibration":
         frame_id, K, D, w, h = ros.camera_info(data) if schema in ros.CAMERA_INFO else fox.calibration(data)
         col.calibrations.setdefault(camera or frame_id, _Calibration(frame_id, K, D, w, h))
@@ -136,11 +205,21 @@ def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap:
         col.poses.append((_stamp(tmap, stamp, msg), T))
     elif kind == "scene":
         col.scene = data if col.scene is None else col.scene
-    elif kind == "agents":
-        stamp, boxes = fox.agents(data)
-        col.agents.append((_stamp(tmap, stamp, msg), boxes))
-    elif kind == "road":
+    elif kind == "agents" and "agents" in col.keep:
+        col.agents.append(_agents(msg, tmap))
+    elif kind == "road" and "road" in col.keep:
         col.road += fox.road_lines(data)
+
+
+def _image(camera: str | None, msg: Message, tmap: TopicMap) -> tuple[str, ImageFrame]:
+    """(camera name, frame) of an image message; unmapped cameras are named by their frame_id."""
+    frame_id, stamp, payload, fmt = _decode_image(msg.channel.schema_name, msg.data)
+    return camera or frame_id, ImageFrame(_stamp(tmap, stamp, msg), payload, fmt)
+
+
+def _agents(msg: Message, tmap: TopicMap) -> tuple[int, list[AgentBox]]:
+    stamp, boxes = fox.agents(msg.data)
+    return _stamp(tmap, stamp, msg), boxes
 
 
 def _decode_image(schema: str, data: Any) -> tuple[str, int, bytes, str]:
@@ -160,25 +239,41 @@ def _check_topics(path: str | Path, tmap: TopicMap, topics: set[str]) -> None:
 # ----------------------------------------------------------------------------- assembly
 
 
-def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicMap, world: str, ego: str) -> DriveLog:
+def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicMap, world: str, ego: str) -> LogIndex:
     meta = read_metadata(files[0]).get(names.METADATA_NAME, {})
-    without = sorted(set(col.images) - set(col.calibrations))
+    without = sorted(set(col.image_stamps) - set(col.calibrations))
     if without:
         raise DrivewmError(f"{path}: images of camera(s) {without} have no calibration")
     order = _camera_order(meta, tmap, col)
     cameras = [_camera(path, name, col, tmap, ego) for name in order]
     rig = Rig(meta.get("rig") or tmap.rig_name or Path(path).stem, cameras)
-    images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in order}
+    warnings = _order_warnings(col, order)
+    listed = [n for n in meta.get("cameras", "").split(",") if n and n not in col.calibrations]
+    if listed:
+        warnings.append(f"the log's metadata lists camera(s) {listed} but it has no calibration or images for them")
+    stamps = {name: np.asarray(col.image_stamps.get(name, []), dtype=np.int64) for name in order}
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
-    agents = sorted(col.agents, key=lambda a: a[0])
-    return DriveLog(str(path), rig, images, pose_ts, T_world_from_ego, _scene(col, tmap), agents, col.road)
+    return LogIndex(str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road, warnings)
+
+
+def _order_warnings(col: _Collected, cameras: list[str]) -> list[str]:
+    """One line per camera (and the ego poses) whose timestamps go backwards in log order: the reader
+    sorts them by time, which mends swapped stamps but interleaves a clock that jumped back."""
+    series = {f"camera {c}": col.image_stamps.get(c, []) for c in cameras}
+    series["ego poses"] = [t for t, _ in col.poses]
+    out = []
+    for what, stamps in series.items():
+        back = int((np.diff(np.asarray(stamps, dtype=np.int64)) < 0).sum()) if len(stamps) > 1 else 0
+        if back:
+            out.append(f"{what}: timestamps go backwards {back} time(s) in log order; sorted by time")
+    return out
 
 
 def _camera_order(meta: dict, tmap: TopicMap, col: _Collected) -> list[str]:
     """Rig order: the file's own record, else the topic map's, else first calibration seen."""
     listed = [n for n in meta.get("cameras", "").split(",") if n]
-    if listed and set(listed) == set(col.calibrations):
-        return listed
+    if listed and set(col.calibrations) <= set(listed):  # cameras listed but absent are warned about
+        return [n for n in listed if n in col.calibrations]
     if tmap.cameras:
         return [n for n in tmap.cameras if n in col.calibrations]
     return list(col.calibrations)
@@ -196,7 +291,10 @@ def _camera(path: str | Path, name: str, col: _Collected, tmap: TopicMap, ego: s
     T_ego_from_cam = col.frames.static_transform(ego, frame)
     if T_ego_from_cam is None:
         raise DrivewmError(f"{path}: camera {name!r}: no transform from {ego!r} to its frame {frame!r} in the log")
-    return Camera(name, cal.K.reshape(3, 3), cal.width, cal.height, T_ego_from_cam, cal.D)
+    try:
+        return Camera(name, cal.K.reshape(3, 3), cal.width, cal.height, T_ego_from_cam, cal.D)
+    except DrivewmError as exc:  # a singular K, an unusable camera name, ...
+        raise DrivewmError(f"{path}: {exc}") from None
 
 
 def _ego_poses(col: _Collected, world: str, ego: str) -> tuple[np.ndarray, np.ndarray]:

@@ -85,6 +85,8 @@ class DriveLog:
     ``pose_timestamps_ns`` (N,) int64 and ``T_world_from_ego`` (N, 4, 4): the per-tick ego pose.
     ``agents``: optional (timestamp_ns, boxes) per tick, for viewers (simulated logs have them).
     ``road``: optional static road polylines (lane centres, boundaries, edges), for viewers.
+    ``warnings``: what the reader repaired or left out (e.g. frames sorted back into time order), one
+    line each; curation reports them per log.
     """
 
     path: str
@@ -95,6 +97,7 @@ class DriveLog:
     scene: SceneInfo
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     road: list[RoadLine] = dataclasses.field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
 
     @property
     def camera_names(self) -> list[str]:
@@ -102,12 +105,44 @@ class DriveLog:
 
     def validate(self) -> None:
         """Raise DrivewmError naming the file if the log breaks the contract."""
-        if not any(self.images.get(n) for n in self.camera_names):
-            raise DrivewmError(f"{self.path}: log has no camera images")
-        for name in self.images:
-            if name not in self.camera_names:
-                raise DrivewmError(f"{self.path}: images for camera {name!r} without calibration")
-        if len(self.pose_timestamps_ns) == 0:
-            raise DrivewmError(f"{self.path}: log has no ego poses (T_world_from_ego)")
-        if self.T_world_from_ego.shape != (len(self.pose_timestamps_ns), 4, 4):
-            raise DrivewmError(f"{self.path}: ego pose array has shape {self.T_world_from_ego.shape}")
+        counts = {n: len(f) for n, f in self.images.items()}
+        _check_contract(self.path, self.rig, counts, self.pose_timestamps_ns, self.T_world_from_ego)
+
+
+@dataclasses.dataclass
+class LogIndex:
+    """A drive without its image payloads: what a streaming reader knows before the images.
+
+    As :class:`DriveLog`, but ``image_timestamps_ns``: camera name -> (M,) int64 timestamps of its
+    images in log (arrival) order, where DriveLog has the frames; and no agent boxes.
+    """
+
+    path: str
+    rig: Rig
+    image_timestamps_ns: dict[str, np.ndarray]
+    pose_timestamps_ns: np.ndarray
+    T_world_from_ego: np.ndarray
+    scene: SceneInfo
+    road: list[RoadLine] = dataclasses.field(default_factory=list)
+    warnings: list[str] = dataclasses.field(default_factory=list)
+    """What the reader repaired or left out, one line each (as :class:`DriveLog`)."""
+
+    def validate(self) -> None:
+        """Raise DrivewmError naming the file if the log breaks the contract."""
+        counts = {n: len(t) for n, t in self.image_timestamps_ns.items()}
+        _check_contract(self.path, self.rig, counts, self.pose_timestamps_ns, self.T_world_from_ego)
+
+
+def _check_contract(
+    path: str, rig: Rig, image_counts: dict[str, int], pose_timestamps_ns: np.ndarray, T_world_from_ego: np.ndarray
+) -> None:
+    """Images of some calibrated camera, none of an uncalibrated one, and (N, 4, 4) ego poses, N > 0."""
+    if not any(image_counts.get(n) for n in rig.names):
+        raise DrivewmError(f"{path}: log has no camera images")
+    for name in image_counts:
+        if name not in rig.names:
+            raise DrivewmError(f"{path}: images for camera {name!r} without calibration")
+    if len(pose_timestamps_ns) == 0:
+        raise DrivewmError(f"{path}: log has no ego poses (T_world_from_ego)")
+    if T_world_from_ego.shape != (len(pose_timestamps_ns), 4, 4):
+        raise DrivewmError(f"{path}: ego pose array has shape {T_world_from_ego.shape}")

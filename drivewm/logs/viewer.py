@@ -10,6 +10,9 @@ Entity tree (world z up; timeline ``log_time`` = the log's ``timestamp_ns``):
 - ``world/agents``: the other road users per tick (Boxes3D, labelled category:id);
 - ``world/road/KIND``: the road polylines of each kind, if the log has them (static);
 - ``scene``: the tags and description (static TextDocument).
+
+The log is streamed (:class:`drivewm.logs.reader.LogStream`): images and agent boxes go to the
+recording one message at a time, so an hour-long log needs no more memory than a short one.
 """
 
 from __future__ import annotations
@@ -20,8 +23,9 @@ import numpy as np
 import rerun as rr
 
 from drivewm.atomic import atomic_path
+from drivewm.logs.reader import LogStream
 from drivewm.logs.transforms import quat_xyzw_from_yaw
-from drivewm.logs.types import DriveLog
+from drivewm.logs.types import LogIndex
 
 TIMELINE = "log_time"  # the MCAP log time; Rerun's own wall-clock "log_time"/"log_tick" are switched off
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
@@ -32,7 +36,7 @@ def _set_time(rec, timestamp_ns: int) -> None:
     rec.set_time(TIMELINE, timestamp=np.datetime64(int(timestamp_ns), "ns"))
 
 
-def log_static(rec, log: DriveLog) -> None:
+def log_static(rec, log: LogIndex) -> None:
     """World axes, camera mounts and pinholes, ego trajectory, scene text."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     for cam in log.rig.cameras:
@@ -67,19 +71,24 @@ def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:
     return [xyz[r[finite[r]]] for r in runs if finite[r].sum() > 1]
 
 
-def log_ticks(rec, log: DriveLog) -> None:
-    """Ego poses, images and agent boxes on the ``log_time`` timeline."""
+def log_ticks(rec, log: LogIndex, stream: LogStream) -> dict[str, int]:
+    """Ego poses, then images and agent boxes as streamed, on the ``log_time`` timeline; returns
+    how many images and agent ticks were logged."""
     for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
         if np.all(np.isfinite(T)):
             _set_time(rec, ts)
             rec.log("world/ego", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
-    for name, frames in log.images.items():
-        for frame in frames:
+    counts = {"image": 0, "agents": 0}
+    for kind, item in stream.stream(("image", "agents")):
+        counts[kind] += 1
+        if kind == "image":
+            name, frame = item
             _set_time(rec, frame.timestamp_ns)
             rec.log(f"world/ego/{name}", rr.EncodedImage(contents=frame.data, media_type=MEDIA_TYPES.get(frame.format)))
-    for ts, boxes in log.agents:
-        _set_time(rec, ts)
-        rec.log("world/agents", _boxes(boxes))
+        else:
+            _set_time(rec, item[0])
+            rec.log("world/agents", _boxes(item[1]))
+    return counts
 
 
 def _boxes(boxes):
@@ -94,8 +103,10 @@ def _boxes(boxes):
     )
 
 
-def write_recording(log: DriveLog, out_path: str | Path) -> Path:
-    """Write ``log`` as a Rerun recording at ``out_path`` (atomic)."""
+def write_recording(stream: LogStream, out_path: str | Path) -> dict[str, int]:
+    """Write the streamed log as a Rerun recording at ``out_path`` (atomic); returns the counts of
+    cameras, images, poses and agent ticks."""
+    log = stream.index(require_images=False, road=True)
     out_path = Path(out_path)
     with atomic_path(out_path) as tmp:
         rec = rr.RecordingStream("drivewm", recording_id=Path(log.path).stem)
@@ -103,7 +114,7 @@ def write_recording(log: DriveLog, out_path: str | Path) -> Path:
         rec.set_log_tick_enabled(False)
         rec.save(tmp)
         log_static(rec, log)
-        log_ticks(rec, log)
+        counts = log_ticks(rec, log, stream)
         rec.flush()
         rec.disconnect()
-    return out_path
+    return {"cameras": len(log.rig.cameras), "poses": len(log.pose_timestamps_ns), **counts}

@@ -192,21 +192,26 @@ class LogWriter:
         for camera, image in images.items():
             self.write_image(camera, timestamp_ns, image)
 
-    def write_encoded_image(self, camera: str, timestamp_ns: int, data: bytes, format: str) -> None:
-        """Log already-compressed image bytes (``format`` "jpeg" or "png") unchanged."""
+    def write_encoded_image(
+        self, camera: str, timestamp_ns: int, data: bytes, format: str, log_time_ns: int | None = None
+    ) -> None:
+        """Log already-compressed image bytes (``format`` "jpeg" or "png") unchanged. ``log_time_ns``:
+        the MCAP log time when the recorder's clock differs from the image stamp (default: the stamp)."""
         if camera not in self._image_ch:
             raise DrivewmError(f"{self.path}: camera {camera!r} is not in rig {self.rig.name} ({self.rig.names})")
         self._ensure_static(timestamp_ns)
         msg = messages.CompressedImage(
             timestamp=self._timestamp(timestamp_ns), frame_id=camera, data=bytes(data), format=format
         )
-        self._image_ch[camera].log(msg, log_time=int(timestamp_ns))
+        self._image_ch[camera].log(msg, log_time=int(timestamp_ns if log_time_ns is None else log_time_ns))
 
-    def write_pose(self, timestamp_ns: int, T_world_from_ego: np.ndarray) -> None:
-        """Log the ego pose (4x4, NaN allowed for a gap) as a world -> ego FrameTransform."""
+    def write_pose(self, timestamp_ns: int, T_world_from_ego: np.ndarray, log_time_ns: int | None = None) -> None:
+        """Log the ego pose (4x4, NaN allowed for a gap) as a world -> ego FrameTransform (``log_time_ns``
+        as for :meth:`write_encoded_image`)."""
         self._ensure_static(timestamp_ns)
         tf = self._transform_msg(timestamp_ns, names.WORLD_FRAME, names.EGO_FRAME, T_world_from_ego)
-        self._tf_ch.log(messages.FrameTransforms(transforms=[tf]), log_time=int(timestamp_ns))
+        log_time = int(timestamp_ns if log_time_ns is None else log_time_ns)
+        self._tf_ch.log(messages.FrameTransforms(transforms=[tf]), log_time=log_time)
 
     def write_agents(self, timestamp_ns: int, boxes: list[AgentBox]) -> None:
         """Log the other road users at one tick: the scene is replaced (delete all, then cubes)."""

@@ -5,9 +5,9 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+from drivewm.config import above, at_least, in_range, require
 from drivewm.diffusion.denoiser import EDMConfig
 from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.errors import DrivewmError
 from drivewm.text import TextConfig
 
 
@@ -59,22 +59,12 @@ class MultiViewConfig:
     (the rest are plain text-to-multi-view steps, so one model does both)."""
 
     def validate(self) -> None:
-        if self.cross_view not in ("joint", "neighbors") or self.neighbors < 0:
-            raise DrivewmError(
-                f"multiview: cross_view must be joint|neighbors and neighbors >= 0, got {self.cross_view!r}, "
-                f"{self.neighbors}"
-            )
-        if (
-            self.trajectory_waypoints < 0
-            or min(self.trajectory_scale_m, self.trajectory_dt_s, self.ray_scale_m, self.temporal_compression) <= 0
-            or not 0 <= self.video2world_prob <= 1
-            or not 0 <= self.trajectory_dropout < 1
-            or self.warp_ground_m < 0
-        ):
-            raise DrivewmError(
-                "multiview: needs trajectory_waypoints >= 0, trajectory_scale_m and trajectory_dt_s > 0, 0 <= "
-                "video2world_prob <= 1, 0 <= trajectory_dropout < 1, warp_ground_m >= 0"
-            )
+        require(self.cross_view in ("joint", "neighbors"), "cross_view", self.cross_view, "'joint' or 'neighbors'")
+        at_least(self, 0, "neighbors", "trajectory_waypoints", "warp_ground_m", "speed_mps")
+        at_least(self, 1, "camera_width", "trajectory_width", "temporal_compression")
+        above(self, 0, "trajectory_scale_m", "trajectory_dt_s", "ray_scale_m")
+        in_range(self, "video2world_prob", 0, 1)
+        in_range(self, "trajectory_dropout", 0, 1, high_open=True)
 
 
 @dataclasses.dataclass

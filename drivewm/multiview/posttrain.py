@@ -14,7 +14,7 @@ from pathlib import Path
 import torch
 
 from drivewm.clips.latents import find_latent_cache
-from drivewm.config import to_dict
+from drivewm.config import at_least, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig
@@ -50,6 +50,10 @@ class PosttrainConfig:
     """Latent cache selection."""
     sample_steps: int = 12
     """Sampler steps for the sample grids written during training."""
+
+    def validate(self) -> None:
+        at_least(self, 0, "cond_frames")
+        at_least(self, 1, "sample_steps")
 
 
 #: Per-preset training defaults. Batches are clips of V views, so they are V times the tokens of

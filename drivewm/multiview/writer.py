@@ -5,13 +5,13 @@ rig order, first/middle/last frame, the caption above), so generated and real sh
 Each generated clip carries its rig (at the decoded image size), per-view captions, the
 conditioned trajectory (``trajectory_ego``, ``trajectory_dt_s``), as ego poses that trajectory
 integrated at the video frame rate, and as scene ``tags`` the weather and time of day its prompt
-names (so ``drivewm eval`` scores adherence to them, as it does for curated clips' tags).
+names (``drivewm.text.conditions.caption_conditions``; so ``drivewm eval`` scores adherence to them,
+as it does for curated clips' tags).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import re
 from pathlib import Path
 
 import numpy as np
@@ -24,9 +24,9 @@ from drivewm.clips.video import encode_mp4
 from drivewm.curate.contact_sheet import write_clips_sheet
 from drivewm.diffusion.generate import clip_meta
 from drivewm.geometry import Rig
-from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
 from drivewm.multiview.cross_view import viewing_azimuth_rad
 from drivewm.multiview.trajectories import poses_from_waypoints
+from drivewm.text.conditions import caption_conditions
 
 
 @dataclasses.dataclass
@@ -88,18 +88,6 @@ def write_samples(
     return files
 
 
-def prompted_tags(prompt: str) -> dict[str, str]:
-    """Scene tags a prompt asks for: a field (weather, time_of_day) is tagged when the prompt's words
-    name exactly one of its classes (a word starting with the class: 'snowy' -> snow, 'nighttime' -> night)."""
-    words = re.findall(r"[a-z]+", prompt.lower())
-    tags = {}
-    for field, classes in (("weather", WEATHERS), ("time_of_day", TIMES_OF_DAY)):
-        named = {c for c in classes if any(w.startswith(c) for w in words)}
-        if len(named) == 1:
-            tags[field] = named.pop()
-    return tags
-
-
 def sample_clip(key: str, s: GeneratedSample, fps: float):
     """A :class:`drivewm.clips.Clip` of one sample (rig scaled to the decoded image size)."""
     _, t, h, w, _ = s.videos.shape
@@ -110,7 +98,7 @@ def sample_clip(key: str, s: GeneratedSample, fps: float):
         view_captions=dict(zip(rig.names, s.view_captions)),
         trajectory_ego=np.asarray(s.trajectory_ego).tolist(),
         trajectory_dt_s=s.trajectory_dt_s,
-        tags=prompted_tags(s.caption),
+        tags={**meta.tags, **caption_conditions(s.caption)},  # what was asked for, for eval's adherence
     )
     poses = poses_from_waypoints(s.trajectory_ego, t, s.trajectory_dt_s, fps)
     return clip_from_arrays(meta, dict(zip(rig.names, s.videos)), poses)

@@ -31,6 +31,11 @@ def register(subparsers) -> None:
     add_registry_argument(p, "--weather", "drivewm.logs.types:WEATHERS", "weather (default clear)")
     add_registry_argument(p, "--time-of-day", "drivewm.logs.types:TIMES_OF_DAY", "time of day (default day)")
     add_registry_argument(p, "--traffic", "drivewm.logs.types:TRAFFIC_DENSITIES", "traffic density (default medium)")
+    p.add_argument(
+        "--conditions",
+        default=None,
+        help="render every drive once per WEATHER:TIME (e.g. clear:day,snow:day,clear:night): same traffic, geometry",
+    )
     p.add_argument("--duration", type=float, default=None, help="seconds per drive (default 10)")
     p.add_argument("--fps", type=float, default=None, help="frames per second (default 10)")
     p.add_argument("--width", type=int, default=None, help="image width (default: the rig's)")
@@ -78,15 +83,20 @@ FLAG_FIELDS = {
 
 def run_simulate(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
+    from drivewm.errors import DrivewmError
     from drivewm.sim import simulate_many
     from drivewm.sim.recipe import load_recipe, plan_drives
     from drivewm.sim.world import sim_rig
 
+    if args.drives < 1:
+        raise DrivewmError(f"--drives must be >= 1, got {args.drives}")
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
-        plan = load_recipe(args.recipe, given, args.overrides)
+        plan = load_recipe(
+            args.recipe, given | ({"conditions": args.conditions} if args.conditions else {}), args.overrides
+        )
     else:
-        plan = plan_drives(given, args.overrides, args.drives)
+        plan = plan_drives(given, args.overrides, args.drives, args.conditions)
     for cfg, _ in plan:
         sim_rig(cfg)  # every rig loads before the first drive starts
     for cfg, count in plan:

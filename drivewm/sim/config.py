@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from drivewm.config import above, at_least, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY, TRAFFIC_DENSITIES, WEATHERS
 
@@ -71,10 +72,11 @@ class SimConfig:
                 f"sim config: scenario {self.scenario!r} is not one of {list(SCENARIOS[self.source])} "
                 f"for source {self.source}"
             )
-        if self.exposure_stagger_ms < 0:
-            raise DrivewmError(f"sim config: exposure_stagger_ms ({self.exposure_stagger_ms}) must be >= 0")
-        if self.duration_s <= 0 or self.fps <= 0:
-            raise DrivewmError(f"sim config: duration_s ({self.duration_s}) and fps ({self.fps}) must be positive")
+        at_least(self, 0, "exposure_stagger_ms")
+        above(self, 0, "duration_s", "fps", "max_range_m")
+        require(self.num_ticks >= 1, "duration_s * fps", self.duration_s * self.fps, ">= 0.5 (at least one frame)")
+        in_range(self, "jpeg_quality", 1, 100)
+        in_range(self, "seed", 0, 2**31 - 1)  # SUMO takes a 32-bit signed seed
         if (self.width is None) != (self.height is None) or (
             self.width is not None and min(self.width, self.height) < 16
         ):

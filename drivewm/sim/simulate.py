@@ -7,9 +7,8 @@ brings pygame; libsumo is the other source), not at the top.
 from __future__ import annotations
 
 import dataclasses
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import cv2
@@ -20,8 +19,10 @@ from drivewm.logs.types import RoadLine, SceneInfo
 from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
 from drivewm.sim.exposure import exposure_offsets_ns, state_at
+from drivewm.sim.paired import drive_id
 from drivewm.sim.scene import SceneRecording
 from drivewm.sim.world import build_renderer, sim_rig
+from drivewm.workers import process_pool
 
 
 def record(cfg: SimConfig) -> SceneRecording:
@@ -36,7 +37,9 @@ def record(cfg: SimConfig) -> SceneRecording:
         from drivewm.sim.source_sumo import record_sumo
 
         rec = record_sumo(cfg)
-    rec.tags.update(weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density)
+    rec.tags.update(
+        weather=cfg.weather, time_of_day=cfg.time_of_day, traffic_density=cfg.traffic_density, drive_id=drive_id(cfg)
+    )
     rec.description = describe(cfg, rec)
     return rec
 
@@ -132,9 +135,7 @@ def simulate_many(
             simulate(c, p, progress)
             bar.update()
     else:
-        with ProcessPoolExecutor(
-            workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init
-        ) as pool:
+        with process_pool(workers, _worker_init) as pool:
             for future in as_completed([pool.submit(simulate, c, p, False) for c, p in missing]):
                 future.result()
                 bar.update()

@@ -14,6 +14,7 @@ from typing import Literal
 
 import torch
 
+from drivewm.config import at_least
 from drivewm.errors import DrivewmError
 
 
@@ -38,8 +39,9 @@ class TextConfig:
     def validate(self) -> None:
         if self.kind != "hashed" and not self.path:
             raise DrivewmError(f"text: kind {self.kind!r} needs path= a local model folder")
-        if self.max_length < 1 or self.dim < 2:
-            raise DrivewmError("text: max_length must be >= 1 and dim >= 2")
+        at_least(self, 1, "max_length")
+        at_least(self, 2, "dim")
+        at_least(self, 0, "cache_size")
 
 
 class TextEncoder(abc.ABC):

@@ -12,6 +12,7 @@ import dataclasses
 import math
 from typing import Literal
 
+from drivewm.config import at_least, require
 from drivewm.errors import DrivewmError
 
 
@@ -21,9 +22,9 @@ class TokenizerConfig:
 
     base_channels: int = 32
     """Channels of the first (highest-resolution) stage."""
-    channel_multipliers: list[int] = dataclasses.field(default_factory=lambda: [1, 2, 4])
+    channel_multipliers: list[int] = dataclasses.field(default_factory=lambda: [1, 2])
     """Per-stage channel multiplier; one stage per spatial resolution after the Haar patch
-    (so ``len == log2(spatial_compression / 2) + 1``)."""
+    (so ``len == log2(spatial_compression / patch_size) + 1``)."""
     num_res_blocks: int = 1
     """Residual blocks per stage (encoder and decoder alike)."""
     encoder_mid_blocks: int = 1
@@ -98,11 +99,11 @@ class TokenizerConfig:
             raise DrivewmError("tokenizer config: more temporal than spatial downsampling steps is not supported")
         if self.quantizer == "fsq" and (not self.fsq_levels or min(self.fsq_levels) < 2):
             raise DrivewmError(f"tokenizer config: fsq_levels must be integers >= 2, got {self.fsq_levels}")
-        if self.temporal_kernel < 1:
-            raise DrivewmError(f"tokenizer config: temporal_kernel must be >= 1, got {self.temporal_kernel}")
+        at_least(self, 1, "base_channels", "temporal_kernel", "latent_channels")
+        at_least(self, 0, "num_res_blocks", "encoder_mid_blocks", "decoder_mid_blocks")
+        require(min(self.channel_multipliers) >= 1, "channel_multipliers", self.channel_multipliers, "integers >= 1")
 
 
-#: Network sizes; the compression and quantizer variants are derived from these.
 @dataclasses.dataclass
 class LossConfig:
     """Weights of the loss terms."""
@@ -125,6 +126,7 @@ class LossConfig:
     """Optional local discriminator state dict (.safetensors) to start from; empty = from scratch."""
 
     def validate(self) -> None:
+        at_least(self, 0, "l1", "ssim", "temporal", "perceptual", "adversarial", "adversarial_start")
         if self.perceptual > 0 and not self.perceptual_weights:
             raise DrivewmError(
                 "loss.perceptual > 0 needs loss.perceptual_weights: a local VGG16 state dict "
@@ -132,6 +134,7 @@ class LossConfig:
             )
 
 
+#: Network sizes; the compression and quantizer variants are derived from these.
 #: Parameter counts at 8x8x8 (continuous); Cosmos-architecture peers of matched size are in
 #: benchmarks/bench_tokenizer.py (tiny ~ diffusers AutoencoderKLCosmos at (32, 64, 64, 64), 1.75M;
 #: small ~ (32, 64, 128, 128), 5.1M).

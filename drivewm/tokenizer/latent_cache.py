@@ -9,10 +9,11 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from drivewm.clips import Clip, iter_clips
-from drivewm.clips.latents import write_latent_clip, write_latent_index
+from drivewm.clips import Clip
+from drivewm.clips.latents import latent_cache_dir, write_latent_clip, write_latent_index
+from drivewm.clips.shards import BadClip, read_clips
 from drivewm.config import to_dict
-from drivewm.errors import DrivewmError
+from drivewm.errors import BatchError, DrivewmError
 from drivewm.tokenizer.data import to_model_range
 from drivewm.tokenizer.model import Tokenizer
 from drivewm.tokenizer.tiling import TilingConfig, encode_tiled
@@ -33,23 +34,23 @@ def encode_clips(
     """Encode every clip of ``clip_dir`` with the tokenizer in ``model_dir``.
 
     A clip the tokenizer cannot take (frames not 1 + k*f, size not a multiple of the spatial
-    compression, an unreadable video) is skipped and reported; the rest are kept.
+    compression, an unreadable clip or shard, a key seen before) is skipped and reported; the rest
+    are kept. No clip encoded raises :class:`BatchError` with one line per skipped clip.
     Returns {"cache": path, "encoded": n, "skipped": [{"key", "reason"}]}.
     """
     tok = Tokenizer.from_pretrained(model_dir)
-    cache_dir = Path(clip_dir) / "latents" / (name or Path(model_dir).resolve().name)
+    cache_dir = latent_cache_dir(clip_dir, name, model_dir)
     cache_dir.mkdir(parents=True, exist_ok=True)
     tiling = tiling or TilingConfig(chunk_latent_frames=None, tile_latent=None)
     rows, skipped = [], []
-    for clip in tqdm(iter_clips(clip_dir), desc="tokenizer encode", disable=not progress):
+    for clip in tqdm(read_clips(clip_dir), desc="tokenizer encode", disable=not progress):
         try:
-            latents = encode_tiled(tok, clip_video(clip), tiling)  # (V, c, t, h, w)
+            rows.append(_encode_one(tok, clip, tiling, cache_dir, {r["key"] for r in rows}))
         except DrivewmError as exc:
-            skipped.append({"key": clip.key, "reason": str(exc)})
-            continue
-        rows.append(write_latent_clip(cache_dir, clip.meta, latents, clip.T_world_from_ego))
+            skipped.append({"key": clip.name if isinstance(clip, BadClip) else clip.key, "reason": str(exc)})
     if not rows:
-        raise DrivewmError(f"{clip_dir}: no clip could be encoded ({skipped[0]['reason'] if skipped else 'no clips'})")
+        lines = [s["reason"] for s in skipped]
+        raise BatchError(f"{clip_dir}: no clip could be encoded ({len(skipped)} failed)", lines or ["no clips found"])
     info = {
         "path": str(Path(model_dir).resolve()),
         "config": to_dict(tok.config),
@@ -58,3 +59,13 @@ def encode_clips(
     }
     write_latent_index(cache_dir, info, rows)
     return {"cache": str(cache_dir), "encoded": len(rows), "skipped": skipped}
+
+
+def _encode_one(tok: Tokenizer, clip: Clip | BadClip, tiling: TilingConfig, cache_dir: Path, done: set[str]) -> dict:
+    """Encode and write one clip; its index row. Raises DrivewmError for a clip to skip."""
+    if isinstance(clip, BadClip):
+        raise DrivewmError(clip.reason)
+    if clip.key in done:  # two shards with one key would overwrite one latent file with another clip
+        raise DrivewmError(f"clip {clip.key}: key seen before in {clip.meta.source_log!r}'s dataset; kept the first")
+    latents = encode_tiled(tok, clip_video(clip), tiling)  # (V, c, t, h, w)
+    return write_latent_clip(cache_dir, clip.meta, latents, clip.T_world_from_ego)

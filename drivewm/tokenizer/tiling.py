@@ -15,6 +15,7 @@ import dataclasses
 
 import torch
 
+from drivewm.config import at_least
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer.causal import CausalContext
 from drivewm.tokenizer.model import Tokenizer
@@ -34,6 +35,7 @@ class TilingConfig:
     def validate(self) -> None:
         if self.chunk_latent_frames is not None and self.chunk_latent_frames < 1:
             raise DrivewmError(f"tiling: chunk_latent_frames must be >= 1, got {self.chunk_latent_frames}")
+        at_least(self, 0, "overlap_latent")
         if self.tile_latent is not None and not 0 <= self.overlap_latent < self.tile_latent:
             raise DrivewmError(
                 f"tiling: need 0 <= overlap_latent < tile_latent, got {self.overlap_latent}, {self.tile_latent}"

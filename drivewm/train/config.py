@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-from drivewm.errors import DrivewmError
+from drivewm.config import above, at_least, in_range, require
 
 Parallel = Literal["auto", "ddp", "fsdp"]
 
@@ -50,7 +50,10 @@ class TrainConfig:
     """Under torchrun: ``ddp`` (= auto) or ``fsdp`` (FSDP2, for large presets)."""
 
     def validate(self) -> None:
-        if self.steps < 1 or self.batch_size < 1:
-            raise DrivewmError("train: steps and batch_size must be >= 1")
-        if len(self.betas) != 2:
-            raise DrivewmError(f"train.betas: expected two numbers, got {self.betas}")
+        at_least(self, 1, "steps", "batch_size", "log_every", "checkpoint_every")
+        at_least(self, 0, "warmup_steps", "weight_decay", "grad_clip", "sample_every")
+        above(self, 0, "lr")
+        in_range(self, "ema_decay", 0, 1, high_open=True)
+        require(
+            len(self.betas) == 2 and all(0 <= b < 1 for b in self.betas), "betas", self.betas, "two numbers in [0, 1)"
+        )

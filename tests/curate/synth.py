@@ -83,3 +83,34 @@ def write_synth_log(path: str | Path, **kwargs) -> Path:
     from drivewm.logs.writer import write_log
 
     return write_log(make_log(path, **kwargs), path)
+
+
+def write_long_log(
+    path: str | Path, seconds: float, moving_s: float, rig: str = "nuscenes6", fps: float = 10.0, seed: int = 0
+) -> Path:
+    """A long drive written message by message (nothing held): every camera cycles through 25
+    pre-encoded crops of a sliding texture; the ego drives at 8 m/s for ``moving_s`` seconds and
+    then stands still (those clips are dropped as standing still, after decoding and filtering)."""
+    from drivewm.logs.writer import LogWriter
+
+    rig_ = load_rig(rig)
+    W, H = rig_.cameras[0].width, rig_.cameras[0].height
+    tex = texture(seed, H * 2, W * 8)
+    jpegs = {}
+    for v, cam in enumerate(rig_.cameras):
+        crops = [
+            np.ascontiguousarray(tex[H // 2 : H // 2 + H, (v * W + 2 * i) % (tex.shape[1] - W) :][:, :W])
+            for i in range(25)
+        ]
+        jpegs[cam.name] = [
+            cv2.imencode(".jpg", c[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 92])[1].tobytes() for c in crops
+        ]
+    scene = SceneInfo({"weather": "clear", "time_of_day": "day", "source": "synthetic"}, "a long synthetic drive")
+    period = int(round(1e9 / fps))
+    with LogWriter(path, rig_, scene) as writer:
+        for i in range(int(round(seconds * fps))):
+            t = T0_NS + i * period
+            writer.write_pose(t, T_from_xyz_yaw(8.0 * min(i / fps, moving_s), 0.0, 0.0, 0.0))
+            for cam in rig_.cameras:
+                writer.write_encoded_image(cam.name, t, jpegs[cam.name][i % 25], "jpeg")
+    return Path(path)

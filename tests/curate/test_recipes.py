@@ -29,7 +29,15 @@ def _keys(d: dict, prefix: str = "") -> set[str]:
 
 
 def test_packaged_recipes_resolve_and_default_spells_out_the_defaults():
-    assert CURATE_RECIPES.recipe_names() == ["default", "quickstart", "test", "video", "worldmodel"]
+    assert CURATE_RECIPES.recipe_names() == [
+        "default",
+        "fleet",
+        "quickstart",
+        "test",
+        "transfer",
+        "video",
+        "worldmodel",
+    ]
     for name in CURATE_RECIPES.recipe_names():
         assert isinstance(CURATE_RECIPES.resolve(recipe=name), CurateConfig)
     assert to_dict(CURATE_RECIPES.resolve(recipe="default")) == to_dict(CurateConfig())
@@ -38,6 +46,10 @@ def test_packaged_recipes_resolve_and_default_spells_out_the_defaults():
     assert CURATE_RECIPES.resolve(recipe="video").filters.min_camera_motion_px == 0.5
     worldmodel = CURATE_RECIPES.resolve(recipe="worldmodel")
     assert (worldmodel.resolution, worldmodel.clip_frames, worldmodel.stride_frames) == ([160, 96], 17, 9)
+    fleet = CURATE_RECIPES.resolve(recipe="fleet")
+    assert (fleet.h264_preset, fleet.h264_threads, fleet.crf) == ("ultrafast", 1, 18)
+    transfer = CURATE_RECIPES.resolve(recipe="transfer")  # windows on the same ticks in every condition
+    assert (transfer.resolution, transfer.shot_threshold, transfer.filters.dedup_cosine) == ([160, 96], 0.0, 1.0)
 
 
 def test_cli_dry_run_prints_the_resolved_config(tmp_path, capsys):

@@ -20,7 +20,7 @@ def curated(shared_data, tmp_path_factory):
     root = tmp_path_factory.mktemp("video")
     (root / "cam.yaml").write_text(CALIBRATION)
     videos = [shared_data / "video/sintel_cuts", shared_data / "video/dashcam_highway"]
-    logs = import_videos(videos, root / "cam.yaml", root / "logs")
+    logs = import_videos(videos, root / "cam.yaml", root / "logs").logs
     report = curate(logs, root / "out", load_curate_config("video"), progress=False)
     from drivewm.clips import read_manifest
 

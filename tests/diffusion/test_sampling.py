@@ -10,8 +10,10 @@ import torch
 
 from drivewm.diffusion.denoiser import Conditioning, EDMConfig
 from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.sampling import guided
+from drivewm.diffusion.samplers import seeded_noise
+from drivewm.diffusion.sampling import guided, sample
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.init import from_text2world
@@ -123,3 +125,22 @@ def test_guidance_terms_compose_caption_then_trajectory():
     x = torch.zeros(2, 1)
     assert torch.allclose(guided(Toy(), 3.0, 2.0)(x, torch.ones(2), cond), torch.full((2, 1), 3.0 + 20.0))
     assert torch.allclose(guided(Toy(), 3.0)(x, torch.ones(2), cond), torch.full((2, 1), 3.0 + 10.0))
+
+
+def test_an_sdedit_start_is_the_guide_noised_to_start_sigma_with_each_samples_own_noise():
+    """SDEdit (Meng et al. 2022, sec. 3): the first call sees x_g + sigma(t0) z at sigma(t0), z from the
+    sample's seed, and the schedule runs down from there in ``steps`` calls."""
+    guide = torch.randn(2, 4, 3, 4, 6, generator=torch.Generator().manual_seed(1))
+    cond = tiny(0).conditioning(["snow", "fog"])
+    calls = []
+
+    def record(x, sigma, cond):
+        calls.append((x.clone(), sigma.clone()))
+        return torch.zeros_like(x)
+
+    sample(record, cond, (4, 3, 4, 6), [5, 6], steps=3, guidance=1.0, sampler="euler", start=guide, start_sigma=2.0)
+    (x_first, sigma_first), (_, sigma_second) = calls[0], calls[1]
+    assert len(calls) == 3 and torch.equal(sigma_first, torch.full((2,), 2.0)) and (sigma_second < 2.0).all()
+    torch.testing.assert_close(x_first, guide + 2.0 * seeded_noise((2, 4, 3, 4, 6), [5, 6]))
+    with pytest.raises(DrivewmError, match="start_sigma"):
+        sample(record, cond, (4, 3, 4, 6), [5, 6], steps=3, start=guide)

@@ -31,7 +31,7 @@ def synced_and_staggered(tmp_path_factory):
     from drivewm.sim import SimConfig, simulate
 
     root = tmp_path_factory.mktemp("exposure")
-    cfg = load_curate_config(REPO / "datasets" / "curate" / "test.yaml")
+    cfg = load_curate_config("test")
     out = {}
     for name, stagger in (("synced", 0.0), ("staggered", 8.0)):
         sim = SimConfig(source="highway", scenario="highway", duration_s=1.9, seed=5, exposure_stagger_ms=stagger)

@@ -11,6 +11,7 @@ from drivewm.cli import main
 from drivewm.clips import ShardWriter
 from drivewm.clips.video import encode_mp4
 from drivewm.config import load_yaml, to_dict
+from drivewm.errors import DrivewmError
 from drivewm.eval.config import EVAL_RECIPES, EvalConfig
 from drivewm.eval.inputs import EvalItem
 from drivewm.eval.suite import aggregate, evaluate, evaluate_item
@@ -163,3 +164,28 @@ def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
     assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1 and summary["tse_counted"] is None
     metrics = json.loads((out / "metrics.json").read_text())
     assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
+
+
+def test_max_clips_spreads_the_subset_over_the_input():
+    from drivewm.eval.suite import spread
+
+    items = list(range(10))
+    assert spread(items, 3) == [0, 3, 6] and spread(items, 5) == [0, 2, 4, 6, 8]
+    assert spread(items, None) == items and spread(items, 12) == items
+    with pytest.raises(DrivewmError, match="max_clips"):
+        spread(items, 0)
+
+
+def test_a_folder_of_shard_folders_is_scored_with_folder_prefixed_keys(shard_dir, tmp_path):
+    """`drivewm eval RUN/generated` (one shard folder per prompt, equal sample keys in each): every
+    clip of every folder, none replacing another; a folder without shards is not an input."""
+    import shutil
+
+    from drivewm.eval.inputs import load_items
+
+    for name in ("snow_left", "fog_right"):
+        shutil.copytree(shard_dir, tmp_path / "generated" / name)
+    (tmp_path / "generated" / "notes").mkdir()
+    keys = [i.key for i in load_items(tmp_path / "generated")]
+    inner = sorted(i.key for i in load_items(shard_dir))
+    assert keys == [f"fog_right/{k}" for k in inner] + [f"snow_left/{k}" for k in inner]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from drivewm.eval.trajectory_errors import ate, rpe, tfe, umeyama
+from drivewm.eval.trajectory_errors import ate, heading_change_deg, rpe, tfe, umeyama, waypoint_heading_deg
 from drivewm.geometry import euler_to_R, make_T, rot_z
 
 
@@ -86,3 +86,23 @@ def test_tfe_scale_only_alignment():
     straight = np.stack([make_T(np.eye(3), [2.0 * i, 0, 0]) for i in range(11)])
     way_left = np.array([[2.0 * i, 1.0, 0.0] for i in range(1, 11)])
     assert tfe(straight, fps, way_left, 1 / fps) == pytest.approx(1.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("turn_deg", [-40.0, -5.0, 0.0, 12.0, 60.0])
+def test_heading_change_reads_a_turn_in_any_world_gauge(turn_deg):
+    """An arc turning by turn_deg (left positive): the recovered heading change is the turn, whatever
+    rotation, translation and scale the world frame has (structure from motion fixes none of them);
+    the conditioned waypoints of the same arc give the same heading."""
+    n = 17
+    yaw = np.radians(np.linspace(0.0, turn_deg, n))
+    step = 1.5
+    xy = np.cumsum(np.stack([np.cos(yaw), np.sin(yaw)], 1) * step, 0) - [step, 0.0]
+    T = np.stack([make_T(rot_z(a), np.array([x, y, 0.0])) for a, (x, y) in zip(yaw, xy, strict=True)])
+    gauge = make_T(euler_to_R(0.3, -0.2, 1.1), np.array([5.0, -3.0, 2.0]))
+    T_gauge = np.einsum("ij,njk->nik", gauge, T)
+    T_gauge[:, :3, 3] *= 0.37
+    assert heading_change_deg(T_gauge) == pytest.approx(turn_deg, abs=1e-6)
+    waypoints = np.concatenate([xy[1:], np.zeros((n - 1, 1))], 1)  # after the first frame, as ClipMeta stores them
+    expected_last_segment = np.degrees(np.arctan2(*(xy[-1] - xy[-2])[::-1]))
+    assert waypoint_heading_deg(waypoints) == pytest.approx(expected_last_segment, abs=1e-6)
+    assert np.sign(waypoint_heading_deg(waypoints)) == np.sign(turn_deg)

@@ -116,6 +116,7 @@ def test_generate_writes_clips_for_any_rig(trained_mv, rig, views):
 
     (item,) = load_items(out)  # what `drivewm eval GENDIR` scores: the rig and the conditioned trajectory
     assert item.rig.names == meta.cameras and item.trajectory_ego == meta.trajectory_ego and item.trajectory_dt_s == 0.1
+    assert meta.tags["weather"] == "snow" and item.tags["weather"] == "snow"  # adherence checks what was asked
 
 
 def test_rollout_continues_a_real_clip_and_keeps_its_frames(trained_mv, sim_clip_dir):

@@ -3,6 +3,8 @@ camera in rig order (first/middle/last frame), the caption above."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -10,7 +12,8 @@ import pytest
 from drivewm.clips import iter_clips
 from drivewm.curate.contact_sheet import THUMB_W
 from drivewm.geometry import load_rig
-from drivewm.multiview.writer import GeneratedSample, prompted_tags, write_samples
+from drivewm.multiview.writer import GeneratedSample, sample_clip, write_samples
+from drivewm.text.conditions import caption_conditions
 
 
 def _sample(rig, seed: int) -> GeneratedSample:
@@ -52,5 +55,7 @@ def test_contact_sheet_has_a_row_per_camera_like_the_curated_one(tmp_path):
         ("a drive on a road", {}),
     ],
 )
-def test_prompted_tags_name_the_conditions_a_prompt_asks_for(prompt, tags):
-    assert prompted_tags(prompt) == tags
+def test_sample_tags_are_the_conditions_its_prompt_asks_for(prompt, tags):
+    s = dataclasses.replace(_sample(load_rig("nuscenes6"), 0), caption=prompt)
+    clip = sample_clip("sample_000", s, fps=10.0)
+    assert clip.meta.tags == tags == caption_conditions(prompt)  # the one reader of prompts (drivewm.text)

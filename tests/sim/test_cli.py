@@ -101,7 +101,15 @@ def test_bad_input_is_one_clear_error(tmp_path, capsys, argv) -> None:
 
 
 def test_recipes_are_valid() -> None:
-    assert resources.names(RECIPES) == ["default", "quickstart", "smoke", "worldmodel", "worldmodel_heldout"]
+    assert resources.names(RECIPES) == [
+        "default",
+        "quickstart",
+        "smoke",
+        "transfer",
+        "transfer_heldout",
+        "worldmodel",
+        "worldmodel_heldout",
+    ]
     for name in resources.names(RECIPES):
         plan = load_recipe(name)
         assert plan and all(count >= 1 for _, count in plan)

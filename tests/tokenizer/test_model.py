@@ -131,6 +131,10 @@ def test_bad_input_is_a_clear_error(tmp_path):
     other = Tokenizer(preset("debug-8x8x8-fsq"))
     other.save_pretrained(tmp_path / "b")
     (tmp_path / "b" / "config.json").write_text((tmp_path / "a" / "config.json").read_text())
+    with pytest.raises(DrivewmError, match="config.json .* and model.safetensors .* come from different saves"):
+        Tokenizer.from_pretrained(tmp_path / "b")
+    hand_made = {k: v for k, v in json.loads((tmp_path / "a" / "config.json").read_text()).items() if k != "revision"}
+    (tmp_path / "b" / "config.json").write_text(json.dumps(hand_made))
     with pytest.raises(DrivewmError, match="does not match config.json"):
         Tokenizer.from_pretrained(tmp_path / "b")
     with pytest.raises(DrivewmError, match="not a drivewm model folder"):

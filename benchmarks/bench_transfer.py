@@ -1,0 +1,153 @@
+"""Weather / time-of-day transfer on held-out simulated drives, against SDEdit at the same network evaluations.
+
+Every held-out drive is rendered by the simulator in the source and in each target condition
+(drivewm/recipes/simulate/transfer_heldout.yaml), so each transferred clip is scored against the truth:
+
+    python benchmarks/bench_transfer.py --model runs/transfer --data data/transfer_heldout_clips \
+        [--source clear:day] [--targets snow:day,clear:night] [--steps 8] [--sdedit-sigmas 0.5,1,2,4,8]
+
+Prints, per target and over all, for the transfer model, SDEdit with the parent Text2World model at
+each sigma (same sampler, steps and guidance, so the same number of network evaluations), and the
+references ``identity`` (the source clip unchanged) and ``tokenizer`` (the true target coded and
+decoded: the ceiling of any latent method): PSNR / SSIM to the true target, the median SIFT
+displacement from the source frames, CSE over the source's CSE, and the adherence classifier's hit
+rate; then the must-holds of issue 18 against the best SDEdit sigma (by PSNR). CSE (seconds per
+clip) is computed for the transfer model and the references only. ``--out`` writes every per-clip
+row as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+MUST = {"psnr_gain_db": 3.0, "sift_shift_px": 2.0, "cse_ratio": 1.5, "adherence": 0.8}
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", required=True, type=Path, help="transfer model folder")
+    p.add_argument("--parent", type=Path, help="Text2World folder for SDEdit (default: the model's parent)")
+    p.add_argument("--data", required=True, type=Path, help="held-out paired clip folder (at the model's size)")
+    p.add_argument("--source", default="clear:day", help="source condition WEATHER:TIME")
+    p.add_argument("--targets", default="snow:day,clear:night", help="target conditions, comma-separated")
+    p.add_argument("--steps", type=int, default=8)
+    p.add_argument("--sampler", default="euler", choices=["euler", "heun"])
+    p.add_argument("--guidance", type=float, default=1.0)
+    p.add_argument("--start-sigma", type=float, default=None, help="transfer model: start from the noised source")
+    p.add_argument("--sdedit-sigmas", default="0.5,1,2,4,8")
+    p.add_argument("--max-pairs", type=int, default=None, help="pairs per target (default: all)")
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where the networks run")
+    p.add_argument("--out", type=Path, help="write the per-clip rows and the summary here (JSON)")
+    return p.parse_args(argv)
+
+
+def build_methods(args, targets):
+    from drivewm.diffusion.text2world import Text2World
+    from drivewm.transfer.model import Transfer
+    from drivewm.transfer.sdedit import sdedit_latents
+
+    model = Transfer.from_pretrained(args.model).to(args.device)
+    parent = Text2World.from_pretrained(args.parent or model.parent).to(args.device)
+    o = args
+
+    def transfer(latents, captions, target, seeds):
+        n = len(captions)
+        return model.transfer_latents(
+            latents, captions, [target] * n, seeds, o.steps, o.guidance, o.sampler, o.start_sigma
+        )
+
+    methods = {"transfer": transfer}
+    for s in [float(x) for x in args.sdedit_sigmas.split(",") if x]:
+        methods[f"sdedit@{s:g}"] = lambda z, c, t, seeds, s=s: sdedit_latents(
+            parent, z, c, seeds, s, o.steps, o.guidance, o.sampler
+        )
+    return model, parent, methods
+
+
+def print_table(summary: dict, nfe: int) -> None:
+    cols = ("clips", "psnr", "ssim", "sift_shift_px", "cse_ratio", "cse_calibrated_ratio", "adherence")
+    print(f"{'target':<13}{'method':<12}{'nfe':>4}" + "".join(f"{c[:20]:>21}" for c in cols))
+    for target, methods in summary.items():
+        for name, m in methods.items():
+            n = "-" if name in ("identity", "tokenizer") else str(nfe)
+            print(f"{target:<13}{name:<12}{n:>4}" + "".join(f"{m[c]:>21.3f}" for c in cols))
+
+
+def verdict(summary: dict) -> list[str]:
+    """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR."""
+    allm = summary["all"]
+    best = max((k for k in allm if k.startswith("sdedit@")), key=lambda k: allm[k]["psnr"])
+    t, b = allm["transfer"], allm[best]
+    checks = [
+        ("PSNR gain over best SDEdit", t["psnr"] - b["psnr"], ">=", MUST["psnr_gain_db"], f"dB vs {best}"),
+        ("SSIM gain over best SDEdit", t["ssim"] - b["ssim"], ">", 0.0, f"vs {best}"),
+        ("median SIFT shift (px)", t["sift_shift_px"], "<=", MUST["sift_shift_px"], ""),
+        ("CSE / source CSE", t["cse_ratio"], "<=", MUST["cse_ratio"], f"({t['cse_nan_clips']} clips without CSE)"),
+        (
+            "calibrated CSE / source's",
+            t["cse_calibrated_ratio"],
+            "<=",
+            MUST["cse_ratio"],
+            f"({t['cse_calibrated_nan_clips']} clips without)",
+        ),
+        ("adherence", t["adherence"], ">=", MUST["adherence"], ""),
+    ]
+    lines = []
+    for name, value, op, bound, note in checks:
+        ok = value >= bound if op == ">=" else value > bound if op == ">" else value <= bound
+        ok = ok and math.isfinite(value)
+        lines.append(f"{'PASS' if ok else 'FAIL'}  {name}: {value:.3f} (must be {op} {bound}) {note}")
+    return lines
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    import torch
+
+    from drivewm.atomic import write_text
+    from drivewm.diffusion.dit import count_parameters
+    from drivewm.sim.paired import parse_conditions
+    from drivewm.tokenizer import Tokenizer
+    from drivewm.transfer.benchmark import paired_cases, run_cases, summarize
+    from drivewm.transfer.retarget import TargetCondition
+    from drivewm.transfer.sampling import network_evaluations
+
+    torch.set_num_threads(args.threads)
+    source = TargetCondition(*parse_conditions(args.source)[0])
+    targets = [TargetCondition(w, t) for w, t in parse_conditions(args.targets)]
+    model, parent, methods = build_methods(args, targets)
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
+    cases = paired_cases(args.data, source, targets, args.max_pairs)
+    nfe = network_evaluations(args.steps, args.guidance, args.sampler)
+    params = f"{count_parameters(model.net) / 1e6:.2f}M parameters, parent {count_parameters(parent.dit) / 1e6:.2f}M"
+    print(
+        f"transfer model {params}; "
+        f"{len(cases)} held-out pairs from {source.name}; {nfe} network evaluations per sample ({args.sampler}, "
+        f"{args.steps} steps, guidance {args.guidance}) on {model.device}"
+    )
+    t0 = time.perf_counter()
+    cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
+
+    def progress(case, rows):
+        cells = " ".join(f"{r['method']} {r['psnr']:.1f}dB/{r['adherence']:.0f}" for r in rows)
+        print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
+
+    rows = run_cases(cases, methods, tokenizer, progress=progress, cse_for=cse_for, device=model.device)
+    summary = summarize(rows)
+    print(f"scored in {time.perf_counter() - t0:.0f} s")
+    print_table(summary, nfe)
+    for line in verdict(summary):
+        print(line)
+    if args.out:
+        record = {"args": {k: str(v) for k, v in vars(args).items()}, "summary": summary, "rows": rows}
+        write_text(args.out, json.dumps(record, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,126 @@
+"""MODEL_CARD.md of exported weights, written from the run itself (nothing typed by hand but notes).
+
+Sections: the models (type, preset, parameters), the data (curation reports of the training and
+held-out clips), the recipe (every stage's exact command from ``RUN/.stages/``, with its wall time),
+steps and compute per trained model (from MANIFEST.json's training records), the must-hold figures
+(``RUN/eval/figures.md`` of :mod:`drivewm.worldmodel_figures`), the sha256 of every file, and the
+author's notes (deviations from the recipe, what a figure predicts), given as a Markdown file.
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+from pathlib import Path
+
+from drivewm.atomic import write_text
+
+#: Config fields that say a network's size, in the card's models table.
+SHAPE_KEYS = (
+    "hidden_dim",
+    "depth",
+    "num_heads",
+    "base_channels",
+    "latent_channels",
+    "temporal_compression",
+    "spatial_compression",
+)
+
+
+def _json(path: Path) -> dict:
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def _models(out: Path) -> list[str]:
+    from safetensors import safe_open
+
+    rows = ["| folder | model type | shape | parameters |", "|---|---|---|---|"]
+    for folder in sorted(p for p in out.iterdir() if (p / "config.json").is_file()):
+        info = _json(folder / "config.json")
+        with safe_open(str(folder / "model.safetensors"), "pt") as f:
+            params = sum(_numel(f.get_slice(k).get_shape()) for k in f.keys())
+        cfg = info.get("config", {})
+        cfg = cfg.get("dit", cfg)  # a diffusion folder nests its network under dit
+        shape = ", ".join(f"{k} {cfg[k]}" for k in SHAPE_KEYS if k in cfg)
+        rows.append(f"| {folder.name}/ | {info.get('model_type', '?')} | {shape} | {params / 1e6:.2f}M |")
+    return rows
+
+
+def _numel(shape) -> int:
+    n = 1
+    for s in shape:
+        n *= int(s)
+    return n
+
+
+def _data(run: Path) -> list[str]:
+    rows = []
+    for split in ("train", "heldout"):
+        report = _json(run / "clips" / split / "report.json")
+        if report:
+            rows.append(
+                f"- {split}: {report.get('kept', 0)} clips from {report.get('logs_ok', 0)} simulated logs "
+                f"(dropped by the filters: {report.get('dropped', {})})"
+            )
+    return rows
+
+
+def _stages(run: Path) -> list[str]:
+    rows = ["| stage | seconds | command |", "|---|---|---|"]
+    for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
+        m = _json(marker)
+        seconds = "" if m.get("seconds") is None else f"{m['seconds']:.0f}"
+        rows.append(f"| {marker.stem} | {seconds} | `drivewm {shlex.join(m.get('argv', []))}` |")
+    return rows
+
+
+def write_model_card(run: Path, out: Path, manifest: dict, notes: str = "") -> Path:
+    """Write ``out/MODEL_CARD.md`` for the weights exported from ``run``; returns its path."""
+    run, out = Path(run), Path(out)
+    training = manifest.get("training", {})
+    compute = ["| model | steps | training wall seconds | wall hours |", "|---|---|---|---|"]
+    for name, rec in training.items():
+        if rec:
+            seconds = rec.get("train_seconds")
+            wall, hours = ("not recorded", "") if seconds is None else (f"{seconds:.0f}", f"{seconds / 3600:.2f}")
+            compute.append(f"| {name} | {rec['steps']} | {wall} | {hours} |")
+    files = ["| file | bytes | sha256 |", "|---|---|---|"]
+    files += [f"| {name} | {e['bytes']} | `{e['sha256']}` |" for name, e in manifest["files"].items()]
+    figures = (run / "eval" / "figures.md").read_text() if (run / "eval" / "figures.md").is_file() else "not measured\n"
+    text = "\n".join(
+        [
+            "# drivewm shipped models",
+            "",
+            "Written by `drivewm worldmodel export` from the training run; the figures are `drivewm eval`'s.",
+            "",
+            "## Models",
+            "",
+            *_models(out),
+            "",
+            "## Data",
+            "",
+            *_data(run),
+            "",
+            "## Recipe",
+            "",
+            "`drivewm worldmodel train --profile cpu --out RUN` (drivewm/recipes/worldmodel.yaml); the stages as run:",
+            "",
+            *_stages(run),
+            "",
+            "## Steps and compute",
+            "",
+            *compute,
+            "",
+            "## Figures",
+            "",
+            figures,
+            "## Files",
+            "",
+            *files,
+            "",
+            *(["## Notes", "", notes.strip(), ""] if notes.strip() else []),
+        ]
+    )
+    path = out / "MODEL_CARD.md"
+    write_text(path, text)
+    return path

@@ -1,0 +1,82 @@
+"""One validated path for every name that becomes part of a file path (DESIGN.md section 7).
+
+Clip keys, camera names, shard and log names, latent-cache names: each ends up in a file name
+(``KEY.CAMERA.mp4``, ``CLIPDIR/latents/NAME/KEY.safetensors``, ``OUT/NAME-000000.tar``), and each
+can come from a file someone else wrote or from the command line, so it may hold ``..``, a slash
+or an absolute path. Every writer and reader builds such paths with :func:`child_path`, which takes
+only *safe names* (letters, digits, ``_`` and ``-``; no dots, so ``KEY.CAMERA.mp4`` splits back
+unambiguously) and checks that the result stays inside its folder. Names derived from user files
+(a log's file stem) go through :func:`sanitize_name` first.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from pathlib import Path
+
+from drivewm.errors import DrivewmError
+
+#: A safe name: one path component without dots, at most 128 characters.
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_\-]{1,128}")
+_UNSAFE_CHARS = re.compile(r"[^A-Za-z0-9_\-]")
+
+
+def check_name(name: object, what: str = "name") -> str:
+    """``name`` when it is a safe name, else a DrivewmError saying which ``what`` it was."""
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+        raise DrivewmError(f"{what} {name!r}: use 1-128 letters, digits, '_' or '-' (no dots, slashes or spaces)")
+    return name
+
+
+def file_name(*names: str, ext: str = "", what: str = "name") -> str:
+    """``"a.b.ext"`` from safe names (``file_name(key, camera, ext="mp4")`` -> ``KEY.CAMERA.mp4``)."""
+    stem = ".".join(check_name(n, what) for n in names)
+    return f"{stem}.{check_name(ext, 'extension')}" if ext else stem
+
+
+def child_path(folder: str | Path, *names: str, ext: str = "", what: str = "name") -> Path:
+    """``folder / file_name(*names, ext)``, refusing any name that is not safe; the result is inside ``folder``."""
+    folder = Path(folder)
+    path = folder / file_name(*names, ext=ext, what=what)
+    if path.resolve().parent != folder.resolve():  # a symlink named like a safe name can still point away
+        raise DrivewmError(f"{path}: resolves outside {folder}")
+    return path
+
+
+def sanitize_name(text: str, fallback: str = "item") -> str:
+    """A safe name derived from free text (e.g. a file stem): unsafe characters become ``_``; a name
+    that had to be cut to 128 characters keeps a short hash of the original so distinct texts stay distinct."""
+    name = _UNSAFE_CHARS.sub("_", text) or fallback
+    if len(name) > 128:
+        name = f"{name[:119]}_{hashlib.sha1(text.encode()).hexdigest()[:8]}"
+    return name
+
+
+def distinct_paths(paths: list[str | Path]) -> tuple[list[Path], list[str]]:
+    """``paths`` with each file (by resolved path) once, in first-seen order, and a warning per repeat."""
+    seen: dict[Path, Path] = {}
+    warnings = []
+    for p in map(Path, paths):
+        if p.resolve() in seen:
+            warnings.append(f"{p}: given twice (as {seen[p.resolve()]}); used once")
+        else:
+            seen[p.resolve()] = p
+    return list(seen.values()), warnings
+
+
+def unique_names(texts: list[str], keys: list[str], fallback: str = "item") -> list[str]:
+    """Safe, pairwise distinct names for items described by ``texts`` (e.g. file stems) and identified
+    by ``keys`` (e.g. resolved paths, all distinct): the sanitized text, plus a short hash of the key
+    wherever two items would otherwise share a name (``drive a`` and ``drive_a`` both sanitize to
+    ``drive_a``). Deterministic: the same inputs always give the same names."""
+    if len(set(keys)) != len(keys):
+        raise DrivewmError(f"unique_names: duplicate keys {sorted({k for k in keys if keys.count(k) > 1})}")
+    base = [sanitize_name(t, fallback) for t in texts]
+    names = [
+        b if base.count(b) == 1 else f"{b[:119]}_{hashlib.sha1(k.encode()).hexdigest()[:8]}" for b, k in zip(base, keys)
+    ]
+    taken = [n for n in names if names.count(n) > 1]  # a hashed name equal to another item's plain name
+    if taken:
+        raise DrivewmError(f"cannot give distinct names to {texts}: {sorted(set(taken))} repeat")
+    return names

@@ -1,0 +1,209 @@
+"""``drivewm transfer``: clips in, the same clips in another weather / time of day out.
+
+Every clip is resized to the model's image size, coded by the tokenizer, transferred view by view
+(a transfer model folder, or SDEdit with a Text2World folder as the baseline), decoded, and
+written as a clip (``OUT/transferred-NNNNNN.tar`` + ``manifest.jsonl``) that keeps every label of
+the source: timestamps, rig (at the output size), ego poses, trajectory, pair id and the other
+tags; the weather / time-of-day tags and captions are the target's (drivewm.transfer.retarget).
+Beside them: ``sheets/KEY.png`` (source above, transferred below, six frames over time) and
+``contact_sheet.png``. A clip that cannot be transferred is reported and skipped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from drivewm.atomic import write_json
+from drivewm.clips.format import Clip, clip_from_arrays
+from drivewm.clips.shards import ShardWriter, iter_shard, list_shards, write_manifest
+from drivewm.curate.stage import manifest_row
+from drivewm.diffusion.generate import video_to_uint8, write_grid_png
+from drivewm.diffusion.text2world import LatentInfo
+from drivewm.errors import DrivewmError
+from drivewm.logs.types import TIMES_OF_DAY
+from drivewm.multiview.rollout import decode_views, encode_views, frames_to_video
+from drivewm.multiview.writer import grid_layout, tile_views
+from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
+
+SHEET_CLIPS = 3  # clips shown in contact_sheet.png
+
+
+@dataclasses.dataclass
+class TransferOptions:
+    """Settings of ``drivewm transfer``."""
+
+    weather: str
+    """Target weather (clear | overcast | rain | snow | fog)."""
+    time_of_day: str | None = None
+    """Target time of day (day | dusk | night); None keeps each clip's own (day when unknown)."""
+    steps: int = 8
+    """Sampler steps."""
+    guidance: float = 1.0
+    """Classifier-free guidance on the target condition (1 = none; 2x the network evaluations otherwise)."""
+    sampler: str = "euler"
+    """``euler`` or ``heun`` (drivewm.diffusion.samplers)."""
+    seed: int = 0
+    """View v of every clip draws its noise from seed + v."""
+    start_sigma: float | None = None
+    """Transfer model: start from the source noised to this sigma (None: from pure noise). SDEdit
+    (a Text2World model): the noise level the source is lifted to (required)."""
+    tokenizer: str | None = None
+    """Tokenizer folder; None = the one recorded in the model folder."""
+    device: str = "cpu"
+    """Where the networks run: ``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
+    max_clips: int | None = None
+    """Transfer only the first N clips of the inputs (a preview; None: all)."""
+
+    def validate(self) -> None:
+        if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
+            raise DrivewmError(f"transfer: --steps ({self.steps}) and --max-clips ({self.max_clips}) must be >= 1")
+
+    def is_done(self, written: int) -> bool:
+        """True once ``written`` clips reach ``max_clips``."""
+        return self.max_clips is not None and written >= self.max_clips
+
+    def target_for(self, clip: Clip) -> TargetCondition:
+        """The target of one clip: the weather asked for, the time asked for or the clip's own."""
+        own = clip.meta.tags.get("time_of_day")
+        target = TargetCondition(self.weather, self.time_of_day or (own if own in TIMES_OF_DAY else "day"))
+        target.validate()
+        return target
+
+
+@dataclasses.dataclass
+class Transferer:
+    """A loaded model as one call: ``fn(raw source latents (B, c, t, h, w), captions, targets, seeds)``."""
+
+    fn: object
+    latent: LatentInfo
+    record: dict  # what the output clips record in extra["transfer"]
+    device: torch.device = torch.device("cpu")  # where the model runs (the tokenizer joins it)
+
+
+def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transferer:
+    """A transfer model folder, or a Text2World folder run as SDEdit (needs ``options.start_sigma``)."""
+    model_dir = Path(model_dir)
+    cfg_path = model_dir / "config.json"
+    if not cfg_path.is_file():
+        raise DrivewmError(f"{model_dir}: not a drivewm model folder (no config.json)")
+    model_type = json.loads(cfg_path.read_text()).get("model_type")
+    o = options
+    record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
+    record |= {"seed": o.seed, "start_sigma": o.start_sigma}
+    if model_type == "transfer":
+        from drivewm.transfer.model import Transfer
+
+        model = Transfer.from_pretrained(model_dir).to(o.device)
+
+        def fn(src, captions, targets, seeds):
+            return model.transfer_latents(src, captions, targets, seeds, o.steps, o.guidance, o.sampler, o.start_sigma)
+
+        return Transferer(fn, model.latent, {**record, "method": "transfer"}, model.device)
+    if model_type == "text2world":
+        from drivewm.diffusion.text2world import Text2World
+        from drivewm.transfer.sdedit import sdedit_latents
+
+        if not o.start_sigma:
+            raise DrivewmError(f"{model_dir}: a Text2World model transfers by SDEdit and needs --start-sigma")
+        t2w = Text2World.from_pretrained(model_dir).to(o.device)
+
+        def fn(src, captions, targets, seeds):
+            return sdedit_latents(t2w, src, captions, seeds, o.start_sigma, o.steps, o.guidance, o.sampler)
+
+        return Transferer(fn, t2w.latent, {**record, "method": "sdedit"}, t2w.device)
+    raise DrivewmError(f"{model_dir}: cannot transfer with model_type {model_type!r} (transfer or text2world)")
+
+
+def load_tokenizer(path: str | None, model_dir: str | Path, device: torch.device | str = "cpu"):
+    from drivewm.tokenizer import Tokenizer
+
+    if not path:
+        raise DrivewmError(f"{model_dir}: no tokenizer recorded in the model folder; give --tokenizer")
+    return Tokenizer.from_pretrained(path).to(device)
+
+
+@torch.no_grad()
+def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: TransferOptions) -> tuple[Clip, np.ndarray]:
+    """(the transferred clip, the source frames at the model's size uint8 (V, T, H, W, 3))."""
+    c, t, h, w = transferer.latent.latent_shape
+    tc, sc = tokenizer.config.temporal_compression, tokenizer.config.spatial_compression
+    frames = 1 + (t - 1) * tc
+    if clip.meta.num_frames != frames:
+        raise DrivewmError(
+            f"clip {clip.key}: {clip.meta.num_frames} frames; this model transfers {frames}-frame clips "
+            f"(curate with clip_frames: {frames})"
+        )
+    target = options.target_for(clip)
+    small = video_to_uint8(frames_to_video(clip.videos(), (h * sc, w * sc)))  # (V, T, H, W, 3) at the model's size
+    source = encode_views(tokenizer, small, (h * sc, w * sc), transferer.device)  # (V, c, t, h, w) on the CPU
+    _, views = target_captions(clip.meta, target)
+    captions = [views[name] for name in clip.meta.cameras]
+    seeds = [options.seed + v for v in range(len(captions))]
+    out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
+    # frames_to_video resizes each image to the model's size (cv2.resize, no crop): the rig says so, so a
+    # 16:9 dashcam at 160x96 gets fx != fy rather than a silently wrong calibration
+    rig = clip.meta.get_rig().scaled(w * sc, h * sc, fit="stretch")
+    meta = dataclasses.replace(clip.meta, rig=rig.to_dict())
+    meta = retarget_meta(meta, target, f"{clip.key}-{target.weather}-{target.time_of_day}", transferer.record)
+    return clip_from_arrays(meta, dict(zip(rig.names, out)), clip.T_world_from_ego), small
+
+
+def transfer_clips(
+    model_dir: str | Path, inputs: list[str | Path], options: TransferOptions, out_dir: str | Path
+) -> dict:
+    """Transfer every clip of ``inputs`` (shards or clip folders; the first ``options.max_clips``) into
+    ``out_dir``; returns the report (also ``report.json``): clips written, and clips or shards skipped
+    with the reason."""
+    options.validate()
+    transferer = load_transferer(model_dir, options)
+    tokenizer = load_tokenizer(options.tokenizer or transferer.latent.tokenizer, model_dir, transferer.device)
+    out = Path(out_dir)
+    (out / "sheets").mkdir(parents=True, exist_ok=True)
+    rows, failed, sheet = [], [], []
+    with ShardWriter(out, "transferred") as writer:
+        for shard in tqdm(list_shards(inputs), desc="transfer", unit="shard"):
+            if options.is_done(len(rows)):
+                break
+            try:
+                for clip in iter_shard(shard):
+                    if options.is_done(len(rows)):
+                        break
+                    try:
+                        result, source = transfer_clip(clip, transferer, tokenizer, options)
+                    except DrivewmError as exc:
+                        failed.append({"clip": clip.key, "shard": str(shard), "error": str(exc)})
+                        continue
+                    writer.write(result)
+                    rows.append(manifest_row(result.meta))
+                    sheet += _write_sheet(out / "sheets" / f"{result.key}.png", source, result)
+            except DrivewmError as exc:  # a corrupt shard costs its clips, not the run
+                failed.append({"shard": str(shard), "error": str(exc)})
+    shard_of = {key: name for name, key in writer.written}
+    for row in rows:
+        row["shard"] = shard_of[row["key"]]
+    write_manifest(out, rows)
+    if sheet:
+        captions = [text for _, _, text in sheet[: 2 * SHEET_CLIPS]]
+        write_grid_png(np.stack([v for _, v, _ in sheet[: 2 * SHEET_CLIPS]]), out / "contact_sheet.png", captions)
+    report = {"written": [r["key"] for r in rows], "failed": failed, **transferer.record}
+    write_json(out / "report.json", report)
+    return report
+
+
+def _write_sheet(path: Path, source: np.ndarray, result: Clip) -> list[tuple[str, np.ndarray, str]]:
+    """Side-by-side sheet of one clip (rig mosaics over time: source row, transferred row); returns its rows."""
+    layout = grid_layout(result.meta.get_rig())
+    info = result.meta.extra["transfer"]
+    src = info["source"]
+    rows = [
+        (result.key, tile_views(source, layout), f"{src['key']}: {src['weather']}/{src['time_of_day']}"),
+        (result.key, tile_views(result.videos(), layout), f"{result.key}: {info['target']}"),
+    ]
+    write_grid_png(np.stack([r[1] for r in rows]), path, [r[2] for r in rows])
+    return rows

@@ -1,0 +1,134 @@
+"""The transfer benchmark: held-out paired drives, every method scored against the simulator's truth.
+
+For each pair id with a clip in the source condition and one in the target condition, the source
+clip is coded by the tokenizer and transferred by every method; each output is decoded and scored
+(drivewm.transfer.metrics): PSNR / SSIM against the target clip, SIFT displacement against the
+source frames, CSE against the source's, adherence to the target. Two references frame the
+numbers: ``identity`` (the source clip itself, what a method that changes nothing scores) and
+``tokenizer`` (the true target coded and decoded, the best any latent method can reach).
+Methods take the same number of network evaluations (``nfe``) when run with the same sampler,
+steps and guidance.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from drivewm.clips.format import Clip
+from drivewm.clips.shards import iter_clips
+from drivewm.multiview.rollout import decode_views, encode_views
+from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
+from drivewm.transfer.retarget import TargetCondition, target_captions
+
+#: A method: (raw source latents (V, c, t, h, w), view captions, target, seeds) -> raw latents.
+Method = Callable[[torch.Tensor, list[str], TargetCondition, list[int]], torch.Tensor]
+
+
+@dataclasses.dataclass
+class PairCase:
+    """One held-out pair: the source clip and the simulator's rendering of it in the target condition."""
+
+    pair_id: str
+    source: Clip
+    target: Clip
+    condition: TargetCondition
+
+
+def paired_cases(
+    location: str | Path, source: TargetCondition, targets: list[TargetCondition], max_per_target: int | None = None
+) -> list[PairCase]:
+    """Cases of the clips at ``location``: for each target, the pair ids that have a clip in ``source``
+    and one in that target (sorted by id, at most ``max_per_target``)."""
+    by_id: dict[str, dict[TargetCondition, Clip]] = defaultdict(dict)
+    for clip in iter_clips(location):
+        cond = TargetCondition.of(clip.meta)
+        if clip.meta.pair_id and cond is not None:
+            by_id[clip.meta.pair_id][cond] = clip
+    cases = []
+    for target in targets:
+        ids = sorted(i for i, group in by_id.items() if source in group and target in group)
+        cases += [PairCase(i, by_id[i][source], by_id[i][target], target) for i in ids[:max_per_target]]
+    return cases
+
+
+def score_output(case: PairCase, out: np.ndarray, cse: bool = True) -> dict:
+    """Every measure of one output uint8 (V, T, H, W, 3) of ``case``; ``cse`` False skips the costly CSE
+    (NaN: seconds per clip, where everything else is a fraction of a second)."""
+    no_cse = {"cse": math.nan, "cse_calibrated": math.nan}
+    row = {
+        **image_scores(out, case.target.videos()),
+        **(cross_view_error(out, case.source.meta.get_rig()) if cse else no_cse),
+    }
+    shift = sift_shift_px(case.source.videos(), out)
+    row |= {"sift_shift_px": shift["median_px"], "sift_matches": shift["matches"]}
+    adh = adherent(out, case.condition)
+    return row | {"adherence": adh["match"], "predicted": adh["predicted"]}
+
+
+@torch.no_grad()
+def run_cases(
+    cases: list[PairCase],
+    methods: dict[str, Method],
+    tokenizer,
+    seed: int = 0,
+    progress=None,
+    cse_for: set[str] | None = None,
+    device: torch.device | str = "cpu",
+) -> list[dict]:
+    """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
+    ``cse_for`` (None: all). The tokenizer codes on ``device`` (where it is); methods take and return
+    latents on the CPU."""
+    rows = []
+    for case in cases:
+        src = case.source.videos()
+        latents = encode_views(tokenizer, src, src.shape[2:4], device)
+        _, views = target_captions(case.source.meta, case.condition)
+        captions = [views[c] for c in case.source.meta.cameras]
+        seeds = [seed + v for v in range(len(captions))]
+        source_cse = cross_view_error(src, case.source.meta.get_rig())  # {cse, cse_calibrated} of the source
+        outputs = {"identity": src, "tokenizer": _reconstruction(tokenizer, case.target.videos(), device)}
+        for name, method in methods.items():
+            outputs[name] = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
+        for name, out in outputs.items():
+            row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
+            row |= {f"source_{k}": v for k, v in source_cse.items()}
+            rows.append(row | score_output(case, out, cse_for is None or name in cse_for))
+        if progress is not None:
+            progress(case, rows[-len(outputs) :])
+    return rows
+
+
+def _reconstruction(tokenizer, frames: np.ndarray, device: torch.device | str = "cpu") -> np.ndarray:
+    return decode_views(tokenizer, encode_views(tokenizer, frames, frames.shape[2:4], device), device)
+
+
+def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
+    """{target (and "all"): {method: means of psnr, ssim, adherence; medians of sift_shift_px; CSE ratios
+    (fitted and calibrated) as mean output CSE over mean source CSE on the clips where both are finite;
+    clip count}}."""
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in rows:
+        groups[(r["target"], r["method"])].append(r)
+        groups[("all", r["method"])].append(r)
+    out: dict = defaultdict(dict)
+    for (target, method), rs in sorted(groups.items()):
+        shifts = [r["sift_shift_px"] for r in rs if math.isfinite(r["sift_shift_px"])]
+        out[target][method] = {
+            "clips": len(rs),
+            "psnr": float(np.mean([r["psnr"] for r in rs])),
+            "ssim": float(np.mean([r["ssim"] for r in rs])),
+            "sift_shift_px": float(np.median(shifts)) if shifts else math.nan,
+            "adherence": float(np.mean([r["adherence"] for r in rs])),
+        }
+        for key in ("cse", "cse_calibrated"):
+            ok = [r for r in rs if math.isfinite(r[key]) and math.isfinite(r[f"source_{key}"])]
+            ratio = np.mean([r[key] for r in ok]) / np.mean([r[f"source_{key}"] for r in ok]) if ok else math.nan
+            out[target][method] |= {f"{key}_ratio": float(ratio), f"{key}_nan_clips": len(rs) - len(ok)}
+    return dict(out)

@@ -1,0 +1,94 @@
+"""``drivewm transfer`` and ``drivewm transfer-train`` (thin: parse, build config, print it, call the library)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from drivewm.choices import model_folder
+
+WEATHERS = ["clear", "overcast", "rain", "snow", "fog"]  # drivewm.logs.types.WEATHERS (not imported: --help stays fast)
+TIMES_OF_DAY = ["day", "dusk", "night"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("transfer", help="the same clips in another weather / time of day (labels kept)")
+    p.add_argument("clips", nargs="+", type=Path, help="clip shards (.tar) or clip folders")
+    p.add_argument(
+        "--model", required=True, type=model_folder, help="transfer model folder (or Text2World: SDEdit baseline)"
+    )
+    p.add_argument("--to", required=True, choices=WEATHERS, dest="weather", help="target weather")
+    p.add_argument("--time-of-day", choices=TIMES_OF_DAY, help="target time of day (default: each clip's own)")
+    p.add_argument("--out", required=True, type=Path, help="output folder: clip shards, sheets/, contact_sheet.png")
+    p.add_argument("--steps", type=int, default=8, help="sampler steps (default 8)")
+    p.add_argument("--guidance", type=float, default=1.0, help="guidance on the target condition (1 = none)")
+    p.add_argument("--sampler", default="euler", choices=["euler", "heun"])
+    p.add_argument("--seed", type=int, default=0, help="view v draws its noise from seed + v")
+    p.add_argument(
+        "--start-sigma",
+        type=float,
+        default=None,
+        help="start from the source noised to this sigma (transfer model: optional; Text2World/SDEdit: required)",
+    )
+    p.add_argument(
+        "--tokenizer", type=model_folder, help="tokenizer folder or shipped:tokenizer (default: the model's)"
+    )
+    p.add_argument(
+        "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
+    )
+    p.add_argument("--max-clips", type=int, default=None, help="transfer only the first N clips (a preview)")
+    p.set_defaults(func=transfer_command)
+
+    t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
+    t.add_argument(
+        "--init", required=True, type=model_folder, help="Text2World model folder (or shipped:text2world) to start from"
+    )
+    t.add_argument("--data", required=True, type=Path, help="paired clip folder holding latents/NAME (or the cache)")
+    t.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    # the flags of drivewm.recipe.RecipeBook.add_arguments, spelled out: importing the book's presets
+    # (drivewm.transfer.train) would pull in torch for `drivewm --help`
+    t.add_argument("--preset", help="debug | small | base (default: the recipe's, else debug)")
+    t.add_argument("--recipe", type=Path, help="recipe YAML (keys: preset, config, overrides)")
+    t.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a field")
+    t.add_argument("--dry-run", action="store_true", help="print the resolved config and exit")
+    t.add_argument(
+        "--device", choices=["auto", "cpu", "cuda"], help="where to train (sets train.device; default: the recipe's)"
+    )
+    t.set_defaults(func=transfer_train_command)
+
+
+def transfer_command(args: argparse.Namespace) -> int:
+    from drivewm.transfer.apply import TransferOptions, transfer_clips
+
+    options = TransferOptions(
+        args.weather,
+        args.time_of_day,
+        args.steps,
+        args.guidance,
+        args.sampler,
+        args.seed,
+        args.start_sigma,
+        args.tokenizer,
+        args.device,
+        args.max_clips,
+    )
+    report = transfer_clips(args.model, args.clips, options, args.out)
+    for item in report["failed"]:
+        print(f"skipped {item.get('clip', item['shard'])}: {item['error']}")
+    print(f"wrote {len(report['written'])} transferred clip(s) to {args.out} ({len(report['failed'])} skipped)")
+    return 0
+
+
+def transfer_train_command(args: argparse.Namespace) -> int:
+    from drivewm.config import to_dict
+    from drivewm.transfer.train import RECIPES, train_transfer
+
+    device = [f"train.device={args.device}"] if args.device else []
+    cfg = RECIPES.resolve(args.preset, args.recipe, [*args.overrides, *device])
+    print(json.dumps(to_dict(cfg), indent=2))
+    if args.dry_run:
+        return 0
+    last = train_transfer(cfg, args.init, args.data, args.out)
+    print(f"wrote {args.out} ({json.dumps(last)})")
+    return 0

@@ -1,0 +1,150 @@
+"""The shipped models' figures (issue 12's "what must hold") from a ``drivewm worldmodel train`` run.
+
+Read from the run's eval outputs, never re-measured here:
+
+- ``RUN/eval/generated/metrics.json``: ``drivewm eval`` of the benchmark clips (prompts and
+  trajectories never used verbatim in training, fixed seeds), clip keys ``BENCHMARK/...``;
+- ``RUN/eval/heldout/metrics.json``: the same eval of held-out simulated clips (same rig and
+  resolution), the reference every ratio divides by;
+- ``RUN/eval/tokenizer/metrics.json``: the tokenizer's held-out reconstruction.
+
+Each figure is ``{"value", "goal", "holds"}`` with the goal spelled as the issue states it:
+adherence at least 0.8 per condition (snow, fog, rain and clear by the weather classifier, night by
+the time-of-day one); the yaw recovered from left/right samples has the conditioned sign in at least
+90% of them and straight samples turn less than either; TFE at most 3x the held-out clips'; pose
+success at least 0.5; ``tse_calibrated`` and ``cse_calibrated`` at most 2x the held-out clips' with
+at least the protocol's minimum of verified matches per pair; tokenizer PSNR at least 32 dB.
+``drivewm worldmodel figures RUN`` writes ``RUN/eval/figures.json`` and ``figures.md``; the model
+card quotes them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from drivewm.atomic import write_json, write_text
+
+ADHERENCE_CONDITIONS = {
+    "snow": "weather",
+    "fog": "weather",
+    "rain": "weather",
+    "clear": "weather",
+    "night": "time_of_day",
+}
+#: A conditioned heading beyond this (degrees) is a turn; within it, straight.
+TURN_DEG = 5.0
+
+
+def _finite(values) -> list[float]:
+    return [float(v) for v in values if v is not None and math.isfinite(float(v))]
+
+
+def _mean(values) -> float:
+    v = _finite(values)
+    return sum(v) / len(v) if v else math.nan
+
+
+def _figure(value: float, goal: str, holds: bool) -> dict:
+    return {"value": None if value is None or not math.isfinite(value) else round(float(value), 4), "goal": goal,
+            "holds": bool(holds) and value is not None and math.isfinite(value)}  # fmt: skip
+
+
+def _turn(clip: dict) -> str | None:
+    cond = clip.get("conditioned_yaw_change_deg")
+    if cond is None or not math.isfinite(cond):
+        return None
+    return "left" if cond > TURN_DEG else "right" if cond < -TURN_DEG else "straight"
+
+
+def adherence_figures(clips: list[dict]) -> dict:
+    out = {}
+    for condition, field in ADHERENCE_CONDITIONS.items():
+        matches = [
+            c["adherence"].get(f"{field}_match")
+            for c in clips
+            if isinstance(c.get("adherence"), dict) and c["adherence"].get("prompted", {}).get(field) == condition
+        ]
+        value = _mean(matches)
+        out[f"adherence_{condition}"] = _figure(value, ">= 0.8", value >= 0.8)
+        out[f"adherence_{condition}"]["clips"] = len(_finite(matches))
+    return out
+
+
+def trajectory_figures(clips: list[dict], real: dict) -> dict:
+    by_turn: dict[str, list[float]] = {"left": [], "right": [], "straight": []}
+    for c in clips:
+        turn, yaw = _turn(c), c.get("yaw_change_deg")
+        if turn and yaw is not None and math.isfinite(yaw):
+            by_turn[turn].append(yaw)
+    signed = [y > 0 for y in by_turn["left"]] + [y < 0 for y in by_turn["right"]]
+    sign_rate = sum(signed) / len(signed) if signed else math.nan
+    straight = _mean([abs(y) for y in by_turn["straight"]])
+    turning = [_mean([abs(y) for y in by_turn[t]]) for t in ("left", "right")]
+    tfe_ratio = _mean([c.get("tfe") for c in clips]) / real.get("tfe", math.nan)
+    return {
+        "turn_sign_rate": {**_figure(sign_rate, ">= 0.9", sign_rate >= 0.9), "clips": len(signed)},
+        "straight_abs_yaw_deg": {
+            **_figure(straight, "< left and right", all(straight < t for t in turning)),
+            "left_abs_yaw_deg": turning[0],
+            "right_abs_yaw_deg": turning[1],
+        },
+        "tfe_ratio_to_real": _figure(tfe_ratio, "<= 3", tfe_ratio <= 3),
+    }
+
+
+def geometry_figures(gen: dict, real: dict, min_matches: float) -> dict:
+    out = {"pose_success": _figure(gen.get("pose_success", math.nan), ">= 0.5", gen.get("pose_success", 0) >= 0.5)}
+    for key in ("tse_calibrated", "cse_calibrated"):
+        ratio = gen.get(key, math.nan) / real.get(key, math.nan)
+        matches = gen.get(f"{key}_matches", math.nan)
+        out[f"{key}_ratio_to_real"] = {
+            **_figure(ratio, f"<= 2 with >= {min_matches:g} matches per pair", ratio <= 2 and matches >= min_matches),
+            "matches_per_pair": matches,
+        }
+    return out
+
+
+def figures(run: Path) -> dict:
+    """Every figure of the run (missing inputs give None values that do not hold)."""
+    ev = Path(run) / "eval"
+    gen, real, tok = (_load(ev / name / "metrics.json") for name in ("generated", "heldout", "tokenizer"))
+    clips = list(gen.get("clips", {}).values())
+    min_matches = gen.get("config", {}).get("epipolar", {}).get("min_matches", 16)
+    psnr = tok.get("psnr", math.nan)
+    out = {
+        "generated_clips": len(clips),
+        "heldout_clips": real.get("num_clips", 0),
+        **adherence_figures(clips),
+        **trajectory_figures(clips, real),
+        **geometry_figures(gen, real, min_matches),
+        "tokenizer_psnr_db": _figure(psnr, ">= 32", psnr >= 32),
+    }
+    return out
+
+
+def _load(path: Path) -> dict:
+    return json.loads(path.read_text()) if path.is_file() else {}
+
+
+def figures_markdown(figs: dict) -> str:
+    lines = [
+        f"{figs['generated_clips']} generated clips against {figs['heldout_clips']} held-out simulated clips.",
+        "",
+        "| figure | value | goal | holds |",
+        "|---|---|---|---|",
+    ]
+    for name, f in figs.items():
+        if isinstance(f, dict):
+            value = "n/a (no measurable clip)" if f["value"] is None else f"{f['value']:g}"
+            lines.append(f"| {name} | {value} | {f['goal']} | {'yes' if f['holds'] else 'no'} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_figures(run: Path) -> dict:
+    figs = figures(run)
+    write_json(Path(run) / "eval" / "figures.json", figs)
+    write_text(Path(run) / "eval" / "figures.md", figures_markdown(figs))
+    print(figures_markdown(figs))
+    return figs

@@ -1,0 +1,115 @@
+"""Issue 15 item 4: atomic, durable writes; JSON-lines appends that survive a torn last row; folders
+replaced without a moment of absence; model folders whose weights and config never mix."""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+
+import pytest
+import torch
+
+from drivewm.atomic import JsonlAppender, atomic_path, read_jsonl, write_bytes
+from drivewm.errors import DrivewmError
+from drivewm.train import checkpoint
+from drivewm.train.checkpoint import load_model_folder, save_model_folder
+
+
+def test_a_torn_last_row_is_dropped_and_cut_before_the_next_append(tmp_path):
+    path = tmp_path / "metrics.jsonl"
+    path.write_text('{"step": 1}\n{"step": 2}\n{"step": 3, "lo')  # killed in the middle of row 3
+    assert read_jsonl(path) == [{"step": 1}, {"step": 2}]
+    with JsonlAppender(path, keep=lambda r: r["step"] <= 1) as log:  # a run resuming from step 1
+        log.write({"step": 2, "loss": 0.5})
+    assert path.read_text() == '{"step": 1}\n{"step": 2, "loss": 0.5}\n'
+    path.write_bytes(path.read_bytes() + b"\x00\x00\x00\n")  # a crash can also leave zeros
+    assert read_jsonl(path) == [{"step": 1}, {"step": 2, "loss": 0.5}]
+
+
+def test_a_bad_row_before_the_end_is_an_error_naming_the_line(tmp_path):
+    path = tmp_path / "m.jsonl"
+    path.write_text('{"step": 1}\nnot json\n{"step": 3}\n')
+    with pytest.raises(DrivewmError, match=r"m\.jsonl: line 2 is not JSON"):
+        read_jsonl(path)
+
+
+def test_writes_are_fsynced(tmp_path, monkeypatch):
+    synced = []
+    real = os.fsync
+    monkeypatch.setattr(os, "fsync", lambda fd: (synced.append(os.readlink(f"/proc/self/fd/{fd}")), real(fd)))
+    write_bytes(tmp_path / "a.bin", b"data")
+    assert len(synced) == 2 and synced[0].endswith("/a.bin")  # the data, under its temporary name
+    assert synced[1] == str(tmp_path)  # then the folder entry of the rename
+
+
+def test_replacing_a_folder_never_leaves_a_moment_without_it(tmp_path):
+    target = tmp_path / "model"
+    with atomic_path(target) as tmp:
+        tmp.mkdir()
+        (tmp / "value").write_text("0")
+    misses, done = [], threading.Event()
+
+    def reader():
+        while not done.is_set():
+            try:
+                (target / "value").read_text()
+            except FileNotFoundError:
+                misses.append(1)
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    try:
+        for i in range(1, 80):
+            with atomic_path(target) as tmp:
+                tmp.mkdir()
+                (tmp / "value").write_text(str(i))
+    finally:
+        done.set()
+        thread.join()
+    assert (target / "value").read_text() == "79" and not misses, f"{len(misses)} reads found no folder"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model"]  # no temporaries left
+
+
+def _save(path, i: int) -> None:
+    save_model_folder(path, "toy", {"i": i}, {"w": torch.full((64,), float(i))})
+
+
+def test_a_save_interrupted_between_its_two_renames_is_never_read_as_a_mix(tmp_path, monkeypatch):
+    _save(tmp_path, 1)
+    monkeypatch.setattr(checkpoint, "READ_ATTEMPTS", 2)
+    with monkeypatch.context() as m:
+        m.setattr(checkpoint, "write_json", lambda *a: (_ for _ in ()).throw(KeyboardInterrupt()))  # killed here
+        with pytest.raises(KeyboardInterrupt):
+            _save(tmp_path, 2)
+    with pytest.raises(DrivewmError, match="come from different saves"):
+        load_model_folder(tmp_path, "toy")
+    _save(tmp_path, 2)
+    info, state = load_model_folder(tmp_path, "toy")
+    assert info["config"] == {"i": 2} and torch.equal(state["w"], torch.full((64,), 2.0))
+
+
+def test_concurrent_reader_sees_matching_weights_and_config(tmp_path):
+    _save(tmp_path, 0)
+    seen, done = [], threading.Event()
+
+    def writer():
+        for i in range(1, 40):
+            _save(tmp_path, i)
+        done.set()
+
+    thread = threading.Thread(target=writer)
+    thread.start()
+    while not done.is_set():
+        info, state = load_model_folder(tmp_path, "toy")
+        seen.append((info["config"]["i"], float(state["w"][0])))
+    thread.join()
+    assert len(seen) > 5 and all(i == w for i, w in seen), [s for s in seen if s[0] != s[1]][:5]
+
+
+def test_equal_saves_give_equal_bytes(tmp_path):
+    _save(tmp_path / "a", 3)
+    _save(tmp_path / "b", 3)
+    for name in ("model.safetensors", "config.json"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    assert len(json.loads((tmp_path / "a" / "config.json").read_text())["revision"]) == 32

@@ -1,0 +1,33 @@
+"""Generated clips' tags come from what the caption asks for (drivewm.text.conditions)."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from drivewm.curate.captions import ClipInfo, TemplateCaptioner
+from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
+from drivewm.text.conditions import caption_conditions
+
+
+@pytest.mark.parametrize("weather, time_of_day", itertools.product(WEATHERS, TIMES_OF_DAY))
+def test_template_captions_read_back_as_their_tags(weather, time_of_day):
+    tags = {"weather": weather, "time_of_day": time_of_day, "road_type": "highway", "traffic_density": "medium"}
+    caption, _ = TemplateCaptioner().caption(ClipInfo(tags, "", [], "left turn", 12.0))
+    assert caption_conditions(caption) == {"weather": weather, "time_of_day": time_of_day}, caption
+
+
+@pytest.mark.parametrize(
+    "caption, expected",
+    [
+        ("snowfall on a two-lane road, the car ahead brakes, we turn left", {"weather": "snow"}),
+        ("a dark night drive past lit houses, turning left", {"time_of_day": "night"}),
+        ("foggy morning on a city street", {"weather": "fog", "time_of_day": "day"}),
+        ("today the road is busy", {}),  # whole words only: 'today' is not 'day'
+        ("snow turning to rain at dusk", {"time_of_day": "dusk"}),  # two weathers: neither is claimed
+        ("", {}),
+    ],
+)
+def test_prompts_name_only_what_they_ask_for(caption, expected):
+    assert caption_conditions(caption) == expected
