@@ -1,7 +1,10 @@
 """Command-line choices read from the registries they name, when argparse first needs them.
 
 ``--sampler`` takes the keys of ``drivewm.diffusion.samplers.SAMPLERS``, ``--weather`` the entries
-of ``drivewm.logs.types.WEATHERS``, and so on: the CLI never repeats a registry by hand. The
+of ``drivewm.logs.types.WEATHERS``, and so on: the CLI never repeats a registry by hand. A model
+folder argument (``--model``, ``--init``, ``--tokenizer``) also takes ``shipped:KIND``, the weights
+this drivewm ships (:func:`model_folder`), so a command that names them works wherever drivewm is
+installed. The
 registry's module is imported only when a value is checked or a help page is printed, so building
 the parser (``drivewm --help``) imports no stage code and no PyTorch.
 """
@@ -12,6 +15,9 @@ import argparse
 import functools
 import importlib
 from collections.abc import Iterator
+from pathlib import Path
+
+from drivewm.errors import DrivewmError
 
 
 class RegistryChoices:
@@ -40,3 +46,20 @@ def add_registry_argument(parser: argparse.ArgumentParser, flag: str, registry: 
     """
     metavar = flag.lstrip("-").replace("-", "_").upper()
     parser.add_argument(flag, choices=RegistryChoices(registry), metavar=metavar, help=f"{help}: %(choices)s", **kwargs)
+
+
+#: Prefix of a model folder argument that names a shipped model: ``shipped:multiview``.
+SHIPPED_PREFIX = "shipped:"
+
+
+def model_folder(value: str) -> Path:
+    """argparse ``type`` of a model folder argument: ``shipped:KIND`` is the installed
+    ``drivewm/weights/KIND`` (drivewm.release.shipped_model), anything else a path as given."""
+    if not value.startswith(SHIPPED_PREFIX):
+        return Path(value)
+    from drivewm.release import shipped_model  # PyTorch: imported only when a shipped model is named
+
+    try:
+        return shipped_model(value[len(SHIPPED_PREFIX) :])
+    except DrivewmError as exc:  # argparse turns this into the CLI's one-line error, exit 2
+        raise argparse.ArgumentTypeError(str(exc)) from exc

@@ -28,6 +28,8 @@ MAX_TOTAL_BYTES = 40 * 1000 * 1000
 
 def shipped_model(kind: str) -> Path:
     """The installed model folder ``kind`` (tokenizer, text2world or multiview)."""
+    if kind not in RUN_FOLDERS:
+        raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
     path = WEIGHTS_DIR / kind
     if not (path / WEIGHTS_NAME).is_file():
         raise DrivewmError(f"this drivewm has no shipped {kind} weights at {path}; give --model")

@@ -120,3 +120,18 @@ def sim_log_dir() -> Path:
 def sim_clip_dir(sim_log_dir: Path) -> Path:
     """:func:`sim_clips`, built once per source version."""
     return sim_clips()
+
+
+@pytest.fixture
+def fake_shipped_weights(tmp_path, monkeypatch) -> Path:
+    """drivewm/weights/ replaced by folders that only look shipped (multiview, tokenizer): for
+    tests of how ``shipped:KIND`` is resolved, not of the weights."""
+    from drivewm import release
+    from drivewm.train.checkpoint import WEIGHTS_NAME
+
+    root = tmp_path / "fake_weights"
+    for kind in ("multiview", "tokenizer"):
+        (root / kind).mkdir(parents=True)
+        (root / kind / WEIGHTS_NAME).write_bytes(b"weights")
+    monkeypatch.setattr(release, "WEIGHTS_DIR", root)
+    return root

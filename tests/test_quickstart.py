@@ -1,22 +1,40 @@
-"""End to end: `drivewm quickstart --profile smoke` runs every stage through the public commands,
-writes a report whose figures load in a real headless Chromium, and a rerun reuses every stage."""
+"""`drivewm quickstart` fine-tunes the shipped models through the public commands.
+
+Fast: every stage of every profile parses, names the shipped models as ``shipped:KIND`` and chains
+its outputs; the report's command block is shell-quoted with paths relative to the output folder.
+Slow (end to end, ``--profile smoke`` from the shipped weights in drivewm/weights/): the fine-tuned
+weights differ from the shipped ones, which stay byte-identical; the report has a number or a
+footnoted reason in each of its real / shipped / fine-tuned columns; generated contact sheets have
+a row per camera; a transfer model post-trained from the shipped Text2World model turns the first
+curated clip to snow (shown in the report); the report's commands can be pasted in the output folder;
+figures load in a real headless Chromium; a rerun reuses every stage.
+"""
 
 from __future__ import annotations
 
 import json
 import re
+import shlex
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
+from safetensors.torch import load_file
 
+from drivewm import release
+from drivewm.cli import build_parser
 from drivewm.clips import iter_clips, read_manifest
-from drivewm.quickstart import load_profile
+from drivewm.curate.contact_sheet import THUMB_W
+from drivewm.quickstart import FINETUNED, FIRST_LOG, MODELS, load_profile, stage_commands
+from drivewm.report import command_lines
+from drivewm.train.checkpoint import WEIGHTS_NAME
 
-pytestmark = pytest.mark.slow  # runs every stage of the pipeline (minutes)
-
+#: Whichever slow test runs first runs the whole pipeline: minutes, far more on a loaded machine.
+pytestmark = pytest.mark.timeout(3600)
 CHROMIUM_FLAGS = [
     "--headless",
     "--no-sandbox",
@@ -27,6 +45,76 @@ CHROMIUM_FLAGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
+#: Flags whose value is a path (or ``shipped:KIND``); with the positional inputs of these commands.
+PATH_FLAGS = {"--out", "--data", "--model", "--init", "--tokenizer", "--reference"}
+POSITIONAL_INPUT = {"view", "curate", "eval", "transfer"}
+
+
+def named_paths(tokens: list[str]) -> list[str]:
+    """The paths a ``drivewm ...`` command line names: values of PATH_FLAGS and positional inputs."""
+    paths = [b for a, b in zip(tokens, tokens[1:]) if a in PATH_FLAGS]
+    return paths + ([tokens[2]] if tokens[1] in POSITIONAL_INPUT else [])
+
+
+def without(argv: list[str], *flags: str) -> list[str]:
+    """``argv`` less the given flags and their values."""
+    drop = {i + d for i, a in enumerate(argv) if a in flags for d in (0, 1)}
+    return [a for i, a in enumerate(argv) if i not in drop]
+
+
+def command_block(markdown: str) -> list[list[str]]:
+    """The report's "Commands run" block, each command line split as a POSIX shell would."""
+    block = markdown.split("## Commands run")[1].split("```sh\n")[1].split("```")[0]
+    return [shlex.split(line) for line in block.splitlines() if line.strip() and not line.startswith("#")]
+
+
+@pytest.mark.parametrize("profile", ["full", "smoke"])
+def test_every_stage_parses_and_starts_from_the_shipped_models(profile, fake_shipped_weights, tmp_path):
+    (fake_shipped_weights / "text2world").mkdir()  # the transfer model's parent
+    (fake_shipped_weights / "text2world" / WEIGHTS_NAME).write_bytes(b"weights")
+    stages = stage_commands(load_profile(profile), tmp_path / "qs")
+    parser = build_parser()
+    for name, argv in stages:
+        args = parser.parse_args(argv)  # a typo in a profile fails here, not minutes into a run
+        assert callable(args.func), name
+    argv = dict(stages)
+    names = list(argv)
+    assert not any("tokenizer-train" in n or n == "pretrain" for n in names)  # nothing trains from scratch
+    assert argv["tokenizer-encode"][argv["tokenizer-encode"].index("--model") + 1] == "shipped:tokenizer"
+    assert argv["posttrain"][argv["posttrain"].index("--init") + 1] == "shipped:multiview"
+    assert parser.parse_args(argv["posttrain"]).init == fake_shipped_weights / "multiview"
+    encode_paired, transfer_train = argv["tokenizer-encode-paired"], argv["transfer-train"]
+    assert encode_paired[encode_paired.index("--model") + 1] == "shipped:tokenizer"
+    assert transfer_train[transfer_train.index("--init") + 1] == "shipped:text2world"
+    assert parser.parse_args(transfer_train).init == fake_shipped_weights / "text2world"
+    assert names.index("tokenizer-encode-paired") < names.index("transfer-train") < names.index("transfer")
+    for g in load_profile(profile).generations:  # both models draw the same prompt with the same seed
+        shipped, tuned = argv[f"generate-shipped-{g.name}"], argv[f"generate-finetuned-{g.name}"]
+        assert shipped[shipped.index("--model") + 1] == "shipped:multiview"
+        assert tuned[tuned.index("--model") + 1] == str(tmp_path / "qs" / FINETUNED)
+        assert without(shipped, "--model", "--out") == without(tuned, "--model", "--out")
+    assert names.index("tokenizer-encode") < names.index("posttrain") < names.index("generate-finetuned-snow_left")
+    evals = [n for n in names if n.startswith("eval-")]
+    assert names[-len(evals) :] == evals and len(evals) == 1 + 2 * len(load_profile(profile).generations)
+
+
+def test_command_lines_quote_arguments_and_name_paths_relative_to_the_output_folder(tmp_path):
+    out = tmp_path / "my quickstart"  # a space, so that unquoted paths would split
+    stages = [
+        (n, [str(out / "logs" / "a.mcap") if a == FIRST_LOG else a for a in argv])
+        for n, argv in stage_commands(load_profile("full"), out)
+    ]
+    lines = command_lines(stages, out)
+    assert lines[0].startswith("#") and "output folder" in lines[0]
+    commands = [shlex.split(line) for line in lines[1:]]
+    assert [c[1:] for c in commands[:1]] == [
+        ["simulate", "--recipe", "quickstart", "--rig", "nuscenes6", "--out", "logs"]
+    ]
+    prompts = [c[c.index("--prompt") + 1] for c in commands if "--prompt" in c]
+    assert prompts[0] == "heavy snow on a highway, daytime, the ego car turns left"  # one argument, not eight
+    assert "resolution=[160,96]" in commands[2]
+    assert not [t for c in commands for t in c if t.startswith("/") or "{" in t or str(tmp_path) in t]
+    assert commands[1][2] == "logs/a.mcap"
 
 
 def run_quickstart(out: Path) -> str:
@@ -34,38 +122,61 @@ def run_quickstart(out: Path) -> str:
         [sys.executable, "-m", "drivewm.cli", "quickstart", "--profile", "smoke", "--out", str(out)],
         capture_output=True,
         text=True,
-        timeout=1500,
+        timeout=3000,
     )
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return proc.stdout
 
 
 @pytest.fixture(scope="module")
-def quickstart_dir(tmp_path_factory) -> tuple[Path, str]:
+def shipped_manifest() -> dict:
+    """The shipped weights' manifest, checked (sha256 of every file) before the quickstart runs."""
+    return release.check_manifest()
+
+
+@pytest.fixture(scope="module")
+def quickstart_dir(tmp_path_factory, shipped_manifest) -> tuple[Path, str]:
     out = tmp_path_factory.mktemp("quickstart")
     return out, run_quickstart(out)
 
 
-def test_every_stage_ran_and_generated_clips_are_scored(quickstart_dir):
+@pytest.mark.slow
+def test_every_stage_ran_and_both_models_are_scored(quickstart_dir):
     out, stdout = quickstart_dir
     profile = load_profile("smoke")
     assert "expected about" in stdout  # says up front how long it will take
     clips = list(iter_clips(out / "clips"))
     assert clips and all(c.meta.cameras == clips[0].meta.cameras for c in clips)
-    for g in profile.generations:
-        generated = list(iter_clips(out / "generated" / g.name))
-        assert generated, g.name
-        assert generated[0].meta.cameras == clips[0].meta.cameras  # all six views generated
-        assert generated[0].videos().shape[:2] == (len(clips[0].meta.cameras), clips[0].meta.num_frames)
-        metrics = json.loads((out / "eval" / g.name / "metrics.json").read_text())
-        assert "pose_success" in metrics and "tse" in metrics
+    for model in MODELS:
+        for g in profile.generations:
+            generated = list(iter_clips(out / "generated" / model / g.name))
+            assert generated, (model, g.name)
+            assert generated[0].meta.cameras == clips[0].meta.cameras  # all six views generated
+            assert generated[0].videos().shape[:2] == (len(clips[0].meta.cameras), clips[0].meta.num_frames)
+            metrics = json.loads((out / "eval" / model / g.name / "metrics.json").read_text())
+            assert metrics["num_clips"] == 1 and "pose_success" in metrics
     real = json.loads((out / "eval" / "real" / "metrics.json").read_text())
     assert real["tse"] is not None and 0 < real["tse"] < 2.0  # simulated clips are geometrically consistent
     tok = json.loads((out / "tokenizer_eval" / "metrics.json").read_text())
-    assert tok["psnr"] > 8.0  # even 20 steps beat a constant grey image (about 6 dB on these renders)
+    assert tok["psnr"] > 8.0  # the shipped tokenizer beats a constant grey image (about 6 dB on these renders)
 
 
-def test_one_curated_clip_is_transferred_to_snow_with_its_labels_and_shown_in_the_report(quickstart_dir):
+@pytest.mark.slow
+def test_fine_tuning_changes_a_copy_and_leaves_the_shipped_weights_alone(quickstart_dir, shipped_manifest):
+    out, _ = quickstart_dir
+    assert release.check_manifest() == shipped_manifest  # every shipped file still has its sha256
+    shipped = load_file(release.shipped_model("multiview") / WEIGHTS_NAME)
+    tuned = load_file(out / FINETUNED / WEIGHTS_NAME)
+    assert tuned.keys() == shipped.keys() and all(tuned[k].shape == shipped[k].shape for k in shipped)
+    changed = [k for k in shipped if not np.allclose(tuned[k].float().numpy(), shipped[k].float().numpy(), atol=1e-4)]
+    assert len(changed) > len(shipped) // 2, f"only {len(changed)} of {len(shipped)} tensors moved"
+    shipped_cfg = json.loads((release.shipped_model("multiview") / "config.json").read_text())["config"]
+    tuned_cfg = json.loads((out / FINETUNED / "config.json").read_text())["config"]
+    assert tuned_cfg["dit"] == shipped_cfg["dit"]  # the shipped architecture, whatever its preset
+
+
+@pytest.mark.slow
+def test_one_curated_clip_is_transferred_to_snow_by_a_model_from_the_shipped_text2world(quickstart_dir):
     out, _ = quickstart_dir
     source = next(iter_clips(out / "clips"))
     (done,) = list(iter_clips(out / "transfer"))  # --max-clips 1: the first curated clip
@@ -73,17 +184,64 @@ def test_one_curated_clip_is_transferred_to_snow_with_its_labels_and_shown_in_th
     assert done.meta.cameras == source.meta.cameras and done.videos().shape[:2] == source.videos().shape[:2]
     assert done.meta.tags["weather"] == "snow" and done.meta.timestamps_ns == source.meta.timestamps_ns
     assert {r["pair_id"] for r in read_manifest(out / "paired_clips")} != {""}  # the model trained on pairs
+    shipped_t2w = release.shipped_model("text2world")
+    transfer_model = json.loads((out / "transfer_model" / "config.json").read_text())
+    assert transfer_model["parent"] == str(shipped_t2w.resolve())  # post-trained from the shipped Text2World
+    assert transfer_model["config"]["dit"] == json.loads((shipped_t2w / "config.json").read_text())["config"]["dit"]
     assert f"Transferred: {done.key}" in (out / "report.md").read_text()
 
 
-def test_report_lists_real_and_generated_numbers(quickstart_dir):
+@pytest.mark.slow
+def test_report_has_real_shipped_and_fine_tuned_columns_with_numbers(quickstart_dir):
     out, _ = quickstart_dir
     md = (out / "report.md").read_text()
-    assert re.search(r"\| `tse` \| .* \| \d+\.\d+ \|", md)  # the real clips' TSE is a number
-    assert "generated: snow_left" in md
-    assert "drive.rrd" in md and (out / "drive.rrd").stat().st_size > 10_000
+    table = [line for line in md.split("## Consistency benchmark")[1].split("\n\n")[1].splitlines()]
+    header = [c.strip() for c in table[0].strip("|").split("|")]
+    assert [h.split(" (")[0] for h in header[2:]] == ["real clips", "shipped model", "fine-tuned model"]
+    rows = {r.split("|")[1].strip(" `"): [c.strip() for c in r.strip("|").split("|")[2:]] for r in table[2:]}
+    for key in ("pose_success", "tse"):
+        assert re.fullmatch(r"\d+\.\d{3}", rows[key][0]), rows[key]  # real clips: a number
+    assert all(re.fullmatch(r"\d+\.\d{3}", c) for c in rows["pose_success"])  # three numbers
+    notes = dict(re.findall(r"^\[(\d+)\] (.+?)\s*$", md, re.M))
+    for cells in rows.values():
+        for cell in cells:  # a number, or a dash whose footnote says why eval gave none
+            assert re.fullmatch(r"\d+\.\d{3}", cell) or re.fullmatch(r"— \[(\d+)\]", cell), cell
+            if cell.startswith("—"):
+                assert notes[cell[3:-1]].split(": ", 1)[1], cell
+    assert "n/a" not in md
 
 
+@pytest.mark.slow
+def test_generated_contact_sheets_have_a_row_per_camera_like_the_real_one(quickstart_dir):
+    out, _ = quickstart_dir
+    real = cv2.imread(str(out / "clips" / "contact_sheet.png"))
+    for model in MODELS:
+        folder = out / "generated" / model / "snow_left"
+        clips = list(iter_clips(folder))
+        sheet = cv2.imread(str(folder / "contact_sheet.png"))
+        v, _, h, w, _ = clips[0].videos().shape
+        assert all(len(f"{c.key}: {c.meta.caption}") < 3 * THUMB_W // 6 for c in clips)  # one caption line
+        view_h = round(h * THUMB_W / w)  # each camera a row of THUMB_W-wide thumbnails, as on the real sheet
+        assert sheet.shape[:2] == (len(clips) * (20 + v * view_h + 6), real.shape[1]), model
+
+
+@pytest.mark.slow
+def test_report_commands_paste_into_a_shell_in_the_output_folder(quickstart_dir):
+    out, _ = quickstart_dir
+    commands = command_block((out / "report.md").read_text())
+    assert len(commands) == len(list((out / ".stages").glob("*.json")))
+    parser = build_parser()
+    for tokens in commands:
+        assert tokens[0] == "drivewm" and callable(parser.parse_args(tokens[1:]).func), tokens
+        for path in named_paths(tokens):
+            assert not Path(path).is_absolute() and "{" not in path, tokens
+            if not path.startswith("shipped:"):
+                assert (out / path).exists(), f"{path} (from {shlex.join(tokens)}) is not in {out}"
+    prompts = [t[t.index("--prompt") + 1] for t in commands if "--prompt" in t]
+    assert prompts and all(" " in p for p in prompts)  # a whole prompt is one argument
+
+
+@pytest.mark.slow
 @pytest.mark.skipif(
     shutil.which("chromium") is None, reason="Debian's chromium is not installed (scripts/run-tests.sh installs it)"
 )
@@ -105,10 +263,11 @@ def test_report_figures_load_in_headless_chromium(quickstart_dir, tmp_path):
     body = re.search(r'<body data-figures="(\d+)" data-figures-loaded="(\d+)"', dom)
     assert body, dom[:500]
     expected, loaded = int(body.group(1)), int(body.group(2))
-    assert expected >= 4 and loaded == expected
+    assert expected >= 5 and loaded == expected  # real, shipped and fine-tuned sheets, tokenizer, curves
     assert '<table id="eval-table">' in dom
 
 
+@pytest.mark.slow
 def test_rerun_reuses_finished_stages(quickstart_dir):
     out, _ = quickstart_dir
     stdout = run_quickstart(out)

@@ -42,15 +42,18 @@ def write_contact_sheet(out_dir: Path, rows: list[dict], n_clips: int) -> Path |
     if not rows or n_clips <= 0:
         return None
     picks = [rows[i] for i in sorted(set(np.linspace(0, len(rows) - 1, min(n_clips, len(rows))).round().astype(int)))]
-    blocks = []
-    for row in picks:
-        clip = next(c for c in iter_shard(Path(out_dir) / row["shard"]) if c.key == row["key"])
-        blocks.append(clip_block(clip))
+    clips = [next(c for c in iter_shard(Path(out_dir) / row["shard"]) if c.key == row["key"]) for row in picks]
+    return write_clips_sheet(clips, Path(out_dir) / "contact_sheet.png")
+
+
+def write_clips_sheet(clips: list, path: Path) -> Path:
+    """Stack :func:`clip_block` of every clip top to bottom (6 px white between) into the PNG ``path``;
+    curated and generated clips share this layout, so their sheets compare row for row."""
+    blocks = [clip_block(clip) for clip in clips]
     width = max(b.shape[1] for b in blocks)
     sheet = np.concatenate(
         [np.pad(b, ((0, 6), (0, width - b.shape[1]), (0, 0)), constant_values=255) for b in blocks], axis=0
     )
     ok, png = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
-    path = Path(out_dir) / "contact_sheet.png"
     write_bytes(path, png.tobytes())
     return path

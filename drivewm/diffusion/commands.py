@@ -12,7 +12,7 @@ import importlib
 import json
 from pathlib import Path
 
-from drivewm.choices import add_registry_argument
+from drivewm.choices import add_registry_argument, model_folder
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -26,11 +26,15 @@ GENERATORS = {
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("pretrain", help="train a Text2World diffusion model on tokenizer latents")
     add_recipe_arguments(p, DIT_PRESETS, "debug")
-    p.add_argument("--init", type=Path, help="Text2World folder whose weights start the run (warm start, fine-tuning)")
+    p.add_argument(
+        "--init", type=model_folder, help="Text2World folder whose weights start the run (warm start, fine-tuning)"
+    )
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
     )
-    p.add_argument("--tokenizer", type=Path, help="tokenizer model folder that encoded the latents")
+    p.add_argument(
+        "--tokenizer", type=model_folder, help="tokenizer model folder that encoded the latents (or shipped:tokenizer)"
+    )
     p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
     p.add_argument(
         "--device",
@@ -42,8 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = sub.add_parser("generate", help="generate clips from a Text2World or multi-view model")
     g.add_argument(
         "--model",
-        type=Path,
-        help="model folder (config.json + model.safetensors); default: the shipped multi-view model",
+        type=model_folder,
+        help="model folder (config.json + model.safetensors) or shipped:KIND; default: shipped:multiview",
     )
     g.add_argument("--prompt", required=True, action="append", help="caption (repeat for several)")
     g.add_argument("--out", required=True, type=Path, help="output folder: clip shards, mp4s, contact_sheet.png")

@@ -131,10 +131,13 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
 
 
 def _close(a: list[float] | None, b: list[float] | None) -> bool:
+    """Equal up to half precision: shipped tokenizers store their statistics' buffers in fp16 (an 11-bit
+    significand, so rounding moves a value by up to 2^-11 = 4.9e-4 of it) while their config.json keeps
+    the fp32 values, and a cache records the statistics the loaded tokenizer encoded with."""
     return (
         a is None
         or b is None
-        or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-4, atol=1e-6))
+        or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-3, atol=1e-6))
     )
 
 

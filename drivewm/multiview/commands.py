@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument
+from drivewm.choices import add_registry_argument, model_folder
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -20,7 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_recipe_arguments(p, DIT_PRESETS, "debug", resources.names("recipes/posttrain"))
     p.add_argument(
-        "--init", required=True, type=Path, help="Text2World folder to start from, or a multi-view folder to fine-tune"
+        "--init",
+        required=True,
+        type=model_folder,
+        help="Text2World folder to start from, or a multi-view folder to fine-tune (e.g. shipped:multiview)",
     )
     p.add_argument(
         "--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache folder)"
@@ -38,7 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     r = sub.add_parser("rollout", help="continue a real clip autoregressively under a chosen ego trajectory")
     r.add_argument(
-        "--model", type=Path, help="multi-view model folder (with its tokenizer recorded); default: the shipped one"
+        "--model",
+        type=model_folder,
+        help="multi-view model folder (with its tokenizer recorded); default: shipped:multiview",
     )
     r.add_argument("--clip", required=True, type=Path, help="clip shard (.tar) or clip folder")
     r.add_argument("--key", help="clip key inside --clip (default: the first clip)")

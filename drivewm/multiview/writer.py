@@ -1,9 +1,12 @@
 """Writing multi-view samples: clips in the clip format (so ``drivewm eval`` scores them directly),
-a grid mp4 of all views per sample, and a contact sheet.
+a grid mp4 of all views per sample, and a contact sheet laid out as curation's (a row per camera in
+rig order, first/middle/last frame, the caption above), so generated and real sheets compare row for row.
 
 Each generated clip carries its rig (at the decoded image size), per-view captions, the
-conditioned trajectory (``trajectory_ego``, ``trajectory_dt_s``) and, as ego poses, that
-trajectory integrated at the video frame rate.
+conditioned trajectory (``trajectory_ego``, ``trajectory_dt_s``), as ego poses that trajectory
+integrated at the video frame rate, and as scene ``tags`` the weather and time of day its prompt
+names (``drivewm.text.conditions.caption_conditions``; so ``drivewm eval`` scores adherence to them,
+as it does for curated clips' tags).
 """
 
 from __future__ import annotations
@@ -18,7 +21,8 @@ from drivewm.atomic import write_bytes
 from drivewm.clips.format import clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
-from drivewm.diffusion.generate import clip_meta, write_grid_png
+from drivewm.curate.contact_sheet import write_clips_sheet
+from drivewm.diffusion.generate import clip_meta
 from drivewm.geometry import Rig
 from drivewm.multiview.cross_view import viewing_azimuth_rad
 from drivewm.multiview.trajectories import poses_from_waypoints
@@ -67,11 +71,12 @@ def write_samples(
     """Clip shards + manifest, ``sample_XXX.mp4`` grid videos and ``contact_sheet.png``; returns the files."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows, files = [], []
+    rows, files, clips = [], [], []
     with ShardWriter(out_dir, name) as writer:
         for i, s in enumerate(samples):
             clip = sample_clip(f"sample_{i:03d}", s, fps)
             writer.write(clip)
+            clips.append(clip)
             grid = tile_views(s.videos, grid_layout(s.rig))
             write_bytes(out_dir / f"sample_{i:03d}.mp4", encode_mp4(grid, fps))
             files.append(out_dir / f"sample_{i:03d}.mp4")
@@ -79,8 +84,7 @@ def write_samples(
     for (shard, _), row in zip(writer.written, rows):
         row["shard"] = shard
     files.append(write_manifest(out_dir, rows))
-    sheets = np.stack([tile_views(s.videos, grid_layout(s.rig)) for s in samples])  # (N, T, H', W', 3)
-    files.append(write_grid_png(sheets, out_dir / "contact_sheet.png", [s.caption for s in samples]))
+    files.append(write_clips_sheet(clips, out_dir / "contact_sheet.png"))
     return files
 
 

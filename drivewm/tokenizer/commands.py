@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from drivewm.choices import model_folder
 from drivewm.tokenizer.recipe import RECIPES
 
 
@@ -25,14 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     t.set_defaults(func=_train)
 
     e = tsub.add_parser("encode", help="write the latent cache CLIPDIR/latents/NAME/")
-    e.add_argument("--model", required=True, type=Path, help="tokenizer model folder")
+    e.add_argument("--model", required=True, type=model_folder, help="tokenizer model folder (or shipped:tokenizer)")
     e.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
     e.add_argument("--name", default=None, help="cache name (default: the model folder's name)")
     _tiling(e)
     e.set_defaults(func=_encode)
 
     d = tsub.add_parser("decode", help="latent cache or clips -> mp4 per clip and camera")
-    d.add_argument("--model", required=True, type=Path, help="tokenizer model folder")
+    d.add_argument("--model", required=True, type=model_folder, help="tokenizer model folder (or shipped:tokenizer)")
     d.add_argument("--latents", type=Path, help="latent cache folder (CLIPDIR/latents/NAME)")
     d.add_argument("--data", type=Path, help="clip folder or tar to reconstruct (encode + decode)")
     d.add_argument("--key", action="append", default=None, help="only these clip keys (repeatable)")
@@ -41,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.set_defaults(func=_decode)
 
     v = tsub.add_parser("eval", help="PSNR, SSIM, temporal stability + side-by-side PNG")
-    v.add_argument("--model", required=True, type=Path, help="tokenizer model folder")
+    v.add_argument("--model", required=True, type=model_folder, help="tokenizer model folder (or shipped:tokenizer)")
     v.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
     v.add_argument("--out", required=True, type=Path, help="folder for metrics.json and side_by_side.png")
     v.add_argument(

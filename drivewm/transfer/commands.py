@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from drivewm.choices import model_folder
+
 WEATHERS = ["clear", "overcast", "rain", "snow", "fog"]  # drivewm.logs.types.WEATHERS (not imported: --help stays fast)
 TIMES_OF_DAY = ["day", "dusk", "night"]
 
@@ -13,7 +15,9 @@ TIMES_OF_DAY = ["day", "dusk", "night"]
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("transfer", help="the same clips in another weather / time of day (labels kept)")
     p.add_argument("clips", nargs="+", type=Path, help="clip shards (.tar) or clip folders")
-    p.add_argument("--model", required=True, type=Path, help="transfer model folder (or Text2World: SDEdit baseline)")
+    p.add_argument(
+        "--model", required=True, type=model_folder, help="transfer model folder (or Text2World: SDEdit baseline)"
+    )
     p.add_argument("--to", required=True, choices=WEATHERS, dest="weather", help="target weather")
     p.add_argument("--time-of-day", choices=TIMES_OF_DAY, help="target time of day (default: each clip's own)")
     p.add_argument("--out", required=True, type=Path, help="output folder: clip shards, sheets/, contact_sheet.png")
@@ -27,7 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="start from the source noised to this sigma (transfer model: optional; Text2World/SDEdit: required)",
     )
-    p.add_argument("--tokenizer", help="tokenizer folder (default: the model's)")
+    p.add_argument(
+        "--tokenizer", type=model_folder, help="tokenizer folder or shipped:tokenizer (default: the model's)"
+    )
     p.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
@@ -35,7 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=transfer_command)
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
-    t.add_argument("--init", required=True, type=Path, help="Text2World model folder to start from")
+    t.add_argument(
+        "--init", required=True, type=model_folder, help="Text2World model folder (or shipped:text2world) to start from"
+    )
     t.add_argument("--data", required=True, type=Path, help="paired clip folder holding latents/NAME (or the cache)")
     t.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
     # the flags of drivewm.recipe.RecipeBook.add_arguments, spelled out: importing the book's presets
