@@ -2,7 +2,7 @@
 
 Every DiT parameter of the parent is copied; the new parts (the source projection and the last
 layer of the condition MLP) are zero-initialised, so the step-0 model's prediction is the
-parent's for any source and condition (tests/transfer/test_model.py).
+parent's for any source and condition (tests/transfer/test_transfer_model.py).
 """
 
 from __future__ import annotations
