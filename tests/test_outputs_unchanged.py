@@ -183,6 +183,9 @@ if __name__ == "__main__":
     import tempfile
 
     import conftest  # the shared fixtures' builders
+    import torch
+
+    torch.set_num_threads(1)  # as every test runs (conftest._one_torch_thread): reductions depend on it
 
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
