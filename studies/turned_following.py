@@ -71,7 +71,14 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "multiview"))  # the tests' helpers
-from yaw_augment import decode_bilinear, paired_agreement, recovered_yaw, trajectory_yaw, write_turned_cache  # noqa: E402
+from yaw_augment import (  # noqa: E402
+    decode_bilinear,
+    paired_agreement,
+    recovered_yaw,
+    trajectory_yaw,
+    turned_key,
+    write_turned_cache,
+)
 
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss  # noqa: E402
 from drivewm.diffusion.dit_config import DiTConfig  # noqa: E402
@@ -123,9 +130,9 @@ def turned_pairs(ds: MultiViewDataset, rate: float) -> list[tuple[int, int]]:
     """(index of the +rate copy, index of the -rate copy) of every clip."""
     by_key = {ds.cache.rows[i]["key"]: i for i in range(len(ds))}
     return [
-        (i, by_key[k.replace(f"@{rate:+.2f}", f"@{-rate:+.2f}")])
+        (i, by_key[k.replace(turned_key("", rate), turned_key("", -rate))])
         for k, i in sorted(by_key.items())
-        if k.endswith(f"@{rate:+.2f}")
+        if k.endswith(turned_key("", rate))
     ]
 
 

@@ -10,6 +10,7 @@ from yaw_augment import (
     paired_agreement,
     recovered_yaw,
     trajectory_yaw,
+    turned_key,
     turned_poses,
     write_turned_cache,
 )
@@ -46,8 +47,8 @@ def test_estimator_tells_left_from_right_turned_copies_after_tokenizer(turned_la
     by_key = {ds.cache.rows[i]["key"]: i for i in range(len(ds))}
     pairs = []
     for key, i in by_key.items():
-        if key.endswith("@+0.25"):
-            j = by_key[key.replace("@+0.25", "@-0.25")]
+        if key.endswith(turned_key("", 0.25)):
+            j = by_key[key.replace(turned_key("", 0.25), turned_key("", -0.25))]
             cam = ds[i].rig.cameras[0]
             pairs.append(
                 (

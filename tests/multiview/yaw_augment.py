@@ -29,6 +29,11 @@ from drivewm.geometry import Camera, invert_T, rot_z, yaw_of
 CAMERA = "CAM_FRONT"
 
 
+def turned_key(key: str, rate_rps: float) -> str:
+    """The clip key of a copy turned by ``rate_rps``: a safe name (drivewm.paths), e.g. KEY_yawm025 for -0.25."""
+    return f"{key}_yaw{'p' if rate_rps >= 0 else 'm'}{round(abs(rate_rps) * 100):03d}"
+
+
 def turned_poses(T_world_from_ego: np.ndarray, yaw_rate_rps: float, dt_s: float) -> np.ndarray:
     """(T, 4, 4) ego poses in the first frame's ego frame after adding ``yaw_rate_rps`` (+ = left)."""
     P = np.einsum("ij,njk->nik", invert_T(T_world_from_ego[0]), T_world_from_ego)
@@ -67,7 +72,7 @@ def write_turned_cache(clip_dir: Path, out: Path, yaw_rates_rps: tuple[float, ..
             z = tok.encode(rearrange(torch.from_numpy(video).float() / 127.5 - 1, "t h w c -> 1 c t h w"))
             meta = dataclasses.replace(
                 clip.meta,
-                key=f"{clip.key}@{rate:+.2f}",
+                key=turned_key(clip.key, rate),
                 trajectory_ego=P[1:, :3, 3].tolist(),
                 trajectory_dt_s=dt,
                 rig=clip.meta.get_rig().subset([CAMERA]).to_dict(),
