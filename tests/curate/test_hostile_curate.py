@@ -74,7 +74,8 @@ def test_same_log_twice_and_colliding_stems_keep_every_shard(tmp_path):
 
 @pytest.mark.slow  # two curate processes, about 20 s
 def test_a_second_run_on_the_same_folder_is_refused_and_the_first_completes(tmp_path):
-    logs = [write_synth_log(tmp_path / "logs" / f"d{i}.mcap", seed=10 + i, n_frames=36) for i in range(3)]
+    # enough input that the first run is still curating when the second starts, on a fast machine too
+    logs = [write_synth_log(tmp_path / "logs" / f"d{i}.mcap", seed=10 + i, n_frames=36) for i in range(12)]
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out), "--recipe", CONFIG]
     first = subprocess.Popen(cmd, cwd=CODE, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -91,7 +92,7 @@ def test_a_second_run_on_the_same_folder_is_refused_and_the_first_completes(tmp_
     assert first.returncode == 0, first_err[-2000:]
     assert second.returncode == 2 and "another curate run" in second.stderr, second.stderr[-2000:]
     assert f"pid {first.pid}" in second.stderr
-    assert len(assert_consistent(out)) == 6
+    assert len(assert_consistent(out)) == 24
     assert all(len(keys) == 2 for keys in shard_keys(out).values())  # the first run's clips_per_shard (8)
 
 

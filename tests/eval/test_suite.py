@@ -70,7 +70,8 @@ def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path
     metrics = json.loads((out / "metrics.json").read_text())
     # stdout's summary is strict JSON (no NaN) and equals metrics.json's top level.
     stdout = capsys.readouterr().out
-    summary = json.loads(stdout[: stdout.rindex("}") + 1], parse_constant=lambda c: pytest.fail(f"{c} in stdout"))
+    rest = stdout.partition("\n")[2]  # after the resolved config's line
+    summary = json.loads(rest[: rest.rindex("}") + 1], parse_constant=lambda c: pytest.fail(f"{c} in stdout"))
     assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
     assert metrics["num_clips"] == 2 and set(metrics["clips"]) == {"corridor", "corridor2"}
     assert 0 < metrics["tse"] < 0.3 and 0 < metrics["cse"] < 0.5

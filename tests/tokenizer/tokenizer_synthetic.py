@@ -44,7 +44,7 @@ def road_video(T: int, H: int, W: int, seed: int) -> np.ndarray:
 
 def write_synthetic_clips(out: Path, clips: int = 6, T: int = 17, H: int = 96, W: int = 160) -> Path:
     """``clips`` clips of the front3 rig at W x H into ``out`` (shards only)."""
-    rig = load_rig("front3").scaled(W, H)
+    rig = load_rig("front3").scaled(W, H, fit="stretch")  # any test size, e.g. a height no multiple of 8
     with ShardWriter(out, "synthetic", max_clips=4) as writer:
         for c in range(clips):
             meta = ClipMeta(
