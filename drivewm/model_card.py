@@ -1,19 +1,20 @@
 """MODEL_CARD.md of exported weights, written from the run itself (nothing typed by hand but notes).
 
-Sections: the models (type, preset, parameters), the data (curation reports of the training and
+Sections: the models (type, shape, parameters), the data (curation reports of the training and
 held-out clips), the recipe (every stage's exact command from ``RUN/.stages/``, with its wall time),
-steps and compute per trained model (from MANIFEST.json's training records), the must-hold figures
+steps and compute of every trained folder of the run (its training states), the must-hold figures
 (``RUN/eval/figures.md`` of :mod:`drivewm.worldmodel_figures`), the sha256 of every file, and the
 author's notes (deviations from the recipe, what a figure predicts), given as a Markdown file.
 """
 
 from __future__ import annotations
 
-import json
+import math
 import shlex
 from pathlib import Path
 
 from drivewm.atomic import write_text
+from drivewm.worldmodel_figures import read_json
 
 #: Config fields that say a network's size, in the card's models table.
 SHAPE_KEYS = (
@@ -27,18 +28,14 @@ SHAPE_KEYS = (
 )
 
 
-def _json(path: Path) -> dict:
-    return json.loads(path.read_text()) if path.is_file() else {}
-
-
 def _models(out: Path) -> list[str]:
     from safetensors import safe_open
 
     rows = ["| folder | model type | shape | parameters |", "|---|---|---|---|"]
     for folder in sorted(p for p in out.iterdir() if (p / "config.json").is_file()):
-        info = _json(folder / "config.json")
+        info = read_json(folder / "config.json")
         with safe_open(str(folder / "model.safetensors"), "pt") as f:
-            params = sum(_numel(f.get_slice(k).get_shape()) for k in f.keys())
+            params = sum(math.prod(f.get_slice(k).get_shape()) for k in f.keys())
         cfg = info.get("config", {})
         cfg = cfg.get("dit", cfg)  # a diffusion folder nests its network under dit
         shape = ", ".join(f"{k} {cfg[k]}" for k in SHAPE_KEYS if k in cfg)
@@ -46,17 +43,10 @@ def _models(out: Path) -> list[str]:
     return rows
 
 
-def _numel(shape) -> int:
-    n = 1
-    for s in shape:
-        n *= int(s)
-    return n
-
-
 def _data(run: Path) -> list[str]:
     rows = []
     for split in ("train", "heldout"):
-        report = _json(run / "clips" / split / "report.json")
+        report = read_json(run / "clips" / split / "report.json")
         if report:
             rows.append(
                 f"- {split}: {report.get('kept', 0)} clips from {report.get('logs_ok', 0)} simulated logs "
@@ -68,7 +58,7 @@ def _data(run: Path) -> list[str]:
 def _stages(run: Path) -> list[str]:
     rows = ["| stage | seconds | command |", "|---|---|---|"]
     for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
-        m = _json(marker)
+        m = read_json(marker)
         seconds = "" if m.get("seconds") is None else f"{m['seconds']:.0f}"
         command = shlex.join(m.get("argv", [])).replace(str(run), "RUN")  # paste-able for another run folder
         rows.append(f"| {marker.stem} | {seconds} | `drivewm {command}` |")
@@ -78,14 +68,14 @@ def _stages(run: Path) -> list[str]:
 def _compute(run: Path) -> list[str]:
     """Steps and wall seconds of every trained folder of the run (intermediate stages included:
     the image-pretrained Text2World model is compute the shipped one was built on)."""
-    import torch
+    from drivewm.release import training_record
 
     rows = []
     for state in sorted(run.glob("*/train_state.pt"), key=lambda p: p.stat().st_mtime):
-        saved = torch.load(state, map_location="cpu", weights_only=True)
-        seconds = saved.get("train_seconds")
+        rec = training_record(state.parent)
+        seconds = rec["train_seconds"]
         wall, hours = ("not recorded", "") if seconds is None else (f"{seconds:.0f}", f"{seconds / 3600:.2f}")
-        rows.append(f"| {state.parent.name}/ | {int(saved['step'])} | {wall} | {hours} |")
+        rows.append(f"| {state.parent.name}/ | {rec['steps']} | {wall} | {hours} |")
     return rows
 
 

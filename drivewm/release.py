@@ -52,7 +52,12 @@ def export_folder(src: Path, dst: Path) -> dict:
     if "latent" in extra and extra["latent"].get("tokenizer"):
         extra["latent"] = {**extra["latent"], "tokenizer": "../tokenizer"}
     save_model_folder(dst, info["model_type"], info["config"], half, extra)
-    saved = load_train_state(src)
+    return training_record(src)
+
+
+def training_record(run_dir: Path) -> dict:
+    """``{"steps", "train_seconds"}`` of a training run folder ({} without a training state)."""
+    saved = load_train_state(run_dir)
     if saved is None:
         return {}
     seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock

@@ -109,7 +109,7 @@ def geometry_figures(gen: dict, real: dict, min_matches: float) -> dict:
 def figures(run: Path) -> dict:
     """Every figure of the run (missing inputs give None values that do not hold)."""
     ev = Path(run) / "eval"
-    gen, real, tok = (_load(ev / name / "metrics.json") for name in ("generated", "heldout", "tokenizer"))
+    gen, real, tok = (read_json(ev / name / "metrics.json") for name in ("generated", "heldout", "tokenizer"))
     clips = list(gen.get("clips", {}).values())
     min_matches = gen.get("config", {}).get("epipolar", {}).get("min_matches", 16)
     psnr = tok.get("psnr", math.nan)
@@ -124,7 +124,8 @@ def figures(run: Path) -> dict:
     return out
 
 
-def _load(path: Path) -> dict:
+def read_json(path: Path) -> dict:
+    """A JSON file's object, {} when the file is absent (a stage that has not run)."""
     return json.loads(path.read_text()) if path.is_file() else {}
 
 

@@ -16,7 +16,6 @@ half size, into one picture.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import matplotlib
@@ -25,15 +24,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from drivewm.atomic import read_jsonl  # noqa: E402
+
 STAGES = (("tokenizer", "tokenizer"), ("text2world_image", "Text2World, images"),
           ("text2world", "Text2World, video"), ("multiview", "multi-view"))  # fmt: skip
 PSNR_GOAL_DB = 32.0
-
-
-def read_log(path: Path) -> list[dict]:
-    if not path.is_file():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
 def smooth(values: np.ndarray, window: int = 9) -> np.ndarray:
@@ -59,7 +54,7 @@ def main() -> None:
     print("| model | steps | wall hours | last loss (median of 9 logs) |")
     print("|---|---|---|---|")
     for ax, (folder, title) in zip(axes, STAGES, strict=True):
-        log = [r for r in read_log(args.run / folder / "metrics.jsonl") if "loss" in r]
+        log = [r for r in read_jsonl(args.run / folder / "metrics.jsonl") if "loss" in r]
         ax.set_title(title)
         if not log:
             ax.text(0.5, 0.5, "not trained", ha="center", transform=ax.transAxes)

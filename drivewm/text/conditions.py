@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import re
 
-from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
-
 #: field -> value -> words (lower case, matched as whole words) that ask for it.
 KEYWORDS: dict[str, dict[str, tuple[str, ...]]] = {
     "weather": {
@@ -27,7 +25,6 @@ KEYWORDS: dict[str, dict[str, tuple[str, ...]]] = {
         "day": ("day", "daytime", "daylight", "afternoon", "morning", "noon"),
     },
 }
-assert set(KEYWORDS["weather"]) == set(WEATHERS) and set(KEYWORDS["time_of_day"]) == set(TIMES_OF_DAY)
 
 
 def caption_conditions(caption: str) -> dict[str, str]:

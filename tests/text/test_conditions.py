@@ -8,7 +8,11 @@ import pytest
 
 from drivewm.curate.captions import ClipInfo, TemplateCaptioner
 from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
-from drivewm.text.conditions import caption_conditions
+from drivewm.text.conditions import KEYWORDS, caption_conditions
+
+
+def test_keywords_cover_exactly_the_registries():
+    assert set(KEYWORDS["weather"]) == set(WEATHERS) and set(KEYWORDS["time_of_day"]) == set(TIMES_OF_DAY)
 
 
 @pytest.mark.parametrize("weather, time_of_day", itertools.product(WEATHERS, TIMES_OF_DAY))
