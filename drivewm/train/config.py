@@ -22,6 +22,12 @@ class TrainConfig:
     """AdamW peak learning rate."""
     warmup_steps: int = 50
     """Linear learning-rate warm-up from 0."""
+    lr_schedule: Literal["constant", "cosine"] = "constant"
+    """After warm-up: hold ``lr`` (``constant``), or decay it along a half cosine to
+    ``lr * min_lr_ratio`` at the last step (``cosine``; a function of ``steps``, so raising
+    ``steps`` on resume stretches the rest of the curve)."""
+    min_lr_ratio: float = 0.1
+    """Where ``cosine`` ends, as a fraction of ``lr``."""
     weight_decay: float = 0.0
     """AdamW weight decay."""
     betas: list[float] = dataclasses.field(default_factory=lambda: [0.9, 0.99])
@@ -54,6 +60,8 @@ class TrainConfig:
         at_least(self, 0, "warmup_steps", "weight_decay", "grad_clip", "sample_every")
         above(self, 0, "lr")
         in_range(self, "ema_decay", 0, 1, high_open=True)
+        in_range(self, "min_lr_ratio", 0, 1)
+        require(self.lr_schedule in ("constant", "cosine"), "lr_schedule", self.lr_schedule, "constant or cosine")
         require(
             len(self.betas) == 2 and all(0 <= b < 1 for b in self.betas), "betas", self.betas, "two numbers in [0, 1)"
         )

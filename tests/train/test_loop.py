@@ -121,3 +121,17 @@ def test_torchrun_two_cpu_processes_match_one_process(latents, single_process_ru
     from drivewm.diffusion.text2world import Text2World
 
     assert Text2World.from_pretrained(tmp_path / "dist").dit.final.proj.weight.abs().max() > 0
+
+
+def test_cosine_schedule_warms_up_then_decays_to_the_floor():
+    from drivewm.train.config import TrainConfig
+    from drivewm.train.loop import learning_rate
+
+    cfg = TrainConfig(steps=101, lr=1.0, warmup_steps=11, lr_schedule="cosine", min_lr_ratio=0.1)
+    lrs = [learning_rate(cfg, s) for s in range(cfg.steps)]
+    assert lrs[0] == pytest.approx(1 / 11) and lrs[10] == pytest.approx(1.0)
+    assert all(a > b for a, b in zip(lrs[10:], lrs[11:]))  # strictly decreasing after warm-up
+    assert lrs[55] == pytest.approx(0.55)  # half-way: the mean of peak and floor
+    assert lrs[-1] == pytest.approx(0.1)
+    constant = TrainConfig(steps=101, lr=1.0, warmup_steps=11)
+    assert [learning_rate(constant, s) for s in range(11, 101)] == [1.0] * 90
