@@ -16,6 +16,7 @@ import torch
 from drivewm.clips.latents import find_latent_cache
 from drivewm.config import at_least, to_dict
 from drivewm.device import resolve_device
+from drivewm.diffusion.bundle_task import BundleTask
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
@@ -28,7 +29,7 @@ from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
 from drivewm.recipe import RecipeBook
 from drivewm.train.checkpoint import load_weights, read_model_type
-from drivewm.train.loop import TrainConfig, TrainTask, train
+from drivewm.train.loop import TrainConfig, train
 
 
 @dataclasses.dataclass
@@ -110,20 +111,12 @@ def posttrain_config(preset: str, overrides: list[str] | None = None) -> Posttra
     return RECIPES.resolve(preset, None, overrides or [])
 
 
-class MultiViewTask(TrainTask):
-    """drivewm.train.loop.TrainTask for multi-view post-training on a :class:`MultiViewDataset`."""
+class MultiViewTask(BundleTask):
+    """The training task of multi-view post-training: a :class:`MultiView` on a :class:`MultiViewDataset`."""
 
-    def __init__(self, cfg: PosttrainConfig, dataset: MultiViewDataset, model: MultiView):
-        self.cfg = cfg
-        self.dataset = dataset
-        self.bundle = model
-        self.model = model.net.train()
-
-    def blocks(self) -> list[torch.nn.Module]:
-        return list(self.bundle.net.dit.blocks)
-
-    def num_samples(self) -> int:
-        return len(self.dataset)
+    cfg: PosttrainConfig
+    dataset: MultiViewDataset
+    bundle: MultiView
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
@@ -156,19 +149,13 @@ class MultiViewTask(TrainTask):
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
-    def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> MultiView:
-        with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
-            bundle = MultiView(self.bundle.cfg, self.bundle.latent)
-        bundle.net.load_state_dict(ema_state)
-        return bundle
-
-    def save_model(self, ema_state: dict[str, torch.Tensor], out_dir: Path) -> None:
-        self._ema_bundle(ema_state).save_pretrained(out_dir, ema_state)
+    def new_bundle(self) -> MultiView:
+        return MultiView(self.bundle.cfg, self.bundle.latent)
 
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
-        bundle = self._ema_bundle(ema_state).to(next(self.model.parameters()).device)  # the training device
+        bundle = self.ema_bundle(ema_state).to(next(self.model.parameters()).device)  # the training device
         s = self.dataset[0]
         z = bundle.sample_latents(
             s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0

@@ -16,13 +16,14 @@ import torch
 from drivewm.clips.latents import find_latent_cache
 from drivewm.config import to_dict
 from drivewm.device import resolve_device
+from drivewm.diffusion.bundle_task import BundleTask
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig, check_tokenizer
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.recipe import RecipeBook
 from drivewm.sim.paired import parse_conditions
-from drivewm.train.loop import TrainConfig, TrainTask, train
+from drivewm.train.loop import TrainConfig, train
 from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.data import PairDataset
 from drivewm.transfer.init import from_text2world
@@ -93,20 +94,12 @@ RECIPES = RecipeBook(
 )
 
 
-class TransferTask(TrainTask):
-    """drivewm.train.loop.TrainTask for transfer post-training on a :class:`PairDataset`."""
+class TransferTask(BundleTask):
+    """The training task of transfer post-training: a :class:`Transfer` on a :class:`PairDataset`."""
 
-    def __init__(self, cfg: TransferTrainConfig, dataset: PairDataset, model: Transfer):
-        self.cfg = cfg
-        self.dataset = dataset
-        self.bundle = model
-        self.model = model.net.train()
-
-    def blocks(self) -> list[torch.nn.Module]:
-        return list(self.bundle.net.dit.blocks)
-
-    def num_samples(self) -> int:
-        return len(self.dataset)
+    cfg: TransferTrainConfig
+    dataset: PairDataset
+    bundle: Transfer
 
     def tokens_per_sample(self) -> int:
         c, t, h, w = self.dataset.latent_shape
@@ -127,14 +120,8 @@ class TransferTask(TrainTask):
         cond = self.bundle.conditioning(source, [s.caption for s in samples], [s.condition for s in samples])
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
-    def _ema_bundle(self, ema_state: dict[str, torch.Tensor]) -> Transfer:
-        with torch.random.fork_rng():  # building the networks draws weights: keep the run's RNG untouched
-            bundle = Transfer(self.bundle.cfg, self.bundle.latent, self.bundle.parent)
-        bundle.net.load_state_dict(ema_state)
-        return bundle
-
-    def save_model(self, ema_state: dict[str, torch.Tensor], out_dir: Path) -> None:
-        self._ema_bundle(ema_state).save_pretrained(out_dir, ema_state)
+    def new_bundle(self) -> Transfer:
+        return Transfer(self.bundle.cfg, self.bundle.latent, self.bundle.parent)
 
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
         """Rows: source, transferred, true target, for the first samples of the dataset."""
@@ -142,7 +129,7 @@ class TransferTask(TrainTask):
         from drivewm.diffusion.generate import decode_latents, write_grid_png
 
         device = next(self.model.parameters()).device  # the training device
-        bundle = self._ema_bundle(ema_state).to(device)
+        bundle = self.ema_bundle(ema_state).to(device)
         samples = [self.dataset[i] for i in range(0, len(self.dataset), max(1, len(self.dataset) // 2))][:2]
         stats = (
             torch.tensor(bundle.latent.latent_mean),
