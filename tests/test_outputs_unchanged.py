@@ -162,9 +162,9 @@ def test_fixture_logs_and_clips_unchanged(golden, sim_log_dir, sim_clip_dir):
 
 @pytest.mark.slow
 def test_cli_chain_outputs_unchanged(golden, tmp_path):
-    """In a fresh interpreter, as a user runs the commands: inside the full suite's process the
-    simulated logs came out different after other tests had run (some state one of them leaves
-    behind reaches the simulator; not yet found), which this test is not about."""
+    """In a fresh interpreter, as a user runs the commands (the chain's outputs must not depend on
+    what earlier tests left in the process; tests/sim/test_determinism.py checks that for the one
+    leak found, highway-env's intersection scenario rewriting IDMVehicle's class constants)."""
     import subprocess
 
     code = (

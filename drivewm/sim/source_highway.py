@@ -8,8 +8,10 @@ lane changes, Treiber 2000 / Kesting 2007), so drives are sensible without a tra
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
+from collections.abc import Iterator
 
 import highway_env.envs as envs
 import numpy as np
@@ -26,6 +28,12 @@ REAR_AXLE_BEHIND_CENTER_M = 1.5
 MAX_SUBSTEP_S = 1.0 / 15.0
 LINE_TYPES = {0: "none", 1: "dashed", 2: "solid", 3: "solid"}
 DENSITY = {"low": (15, 0.7), "medium": (30, 1.0), "high": (50, 1.6)}  # (vehicles_count, vehicles_density)
+#: IDMVehicle class constants that highway-env's IntersectionEnv overwrites on the shared class when
+#: it places its vehicles (DISTANCE_WANTED = 7, COMFORT_ACC_MAX = 6, COMFORT_ACC_MIN = -3): left so,
+#: every later drive in the same process would follow other traffic rules than in a fresh one.
+IDM_CLASS_CONSTANTS = {
+    name: vars(IDMVehicle)[name] for name in ("DISTANCE_WANTED", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN")
+}
 
 
 def make_env(scenario: str, traffic_density: str, seed: int):
@@ -51,11 +59,25 @@ def record_highway(cfg: SimConfig) -> SceneRecording:
     A drive whose ego crashes is rerun with the next simulator seed (up to 5 tries), since a
     crashed ego stands still for the rest of the drive.
     """
-    for attempt in range(5):
-        rec = _run_once(cfg, cfg.seed * 7919 + attempt)
-        if rec is not None:
-            return rec
-    return _run_once(cfg, cfg.seed * 7919 + 5, allow_crash=True)
+    with idm_class_constants():
+        for attempt in range(5):
+            rec = _run_once(cfg, cfg.seed * 7919 + attempt)
+            if rec is not None:
+                return rec
+        return _run_once(cfg, cfg.seed * 7919 + 5, allow_crash=True)
+
+
+@contextlib.contextmanager
+def idm_class_constants() -> Iterator[None]:
+    """Start from highway-env's own IDM constants and put them back afterwards, so a drive's traffic
+    does not depend on which scenarios ran before it in the process (see IDM_CLASS_CONSTANTS)."""
+    for name, value in IDM_CLASS_CONSTANTS.items():
+        setattr(IDMVehicle, name, value)
+    try:
+        yield
+    finally:
+        for name, value in IDM_CLASS_CONSTANTS.items():
+            setattr(IDMVehicle, name, value)
 
 
 def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> SceneRecording | None:

@@ -41,3 +41,19 @@ def test_sumo_traffic_is_seeded() -> None:
     assert np.array_equal(a.ego_xy(), b.ego_xy())
     assert [[x.track_id for x in t.agents] for t in a.ticks] == [[x.track_id for x in t.agents] for t in b.ticks]
     assert all(np.array_equal(x.center_xyz, y.center_xyz) for x, y in zip(a.ticks[-1].agents, b.ticks[-1].agents))
+
+
+def test_a_drive_does_not_depend_on_the_scenarios_simulated_before_it() -> None:
+    """highway-env's IntersectionEnv rewrites IDMVehicle's class constants (jam distance, comfort
+    accelerations); a merge drive after an intersection drive must still equal one in a fresh process."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    merge = SimConfig(source="highway", scenario="merge", duration_s=1.5, seed=11)
+    before = record(merge)
+    record(SimConfig(source="highway", scenario="intersection", duration_s=0.2, seed=5))
+    assert IDMVehicle.DISTANCE_WANTED == 5.0 + 5.0  # highway-env's default (LENGTH + 5 m) again
+    after = record(merge)
+    assert np.array_equal(before.ego_xy(), after.ego_xy())
+    assert [[x.center_xyz.tolist() for x in t.agents] for t in before.ticks] == [
+        [x.center_xyz.tolist() for x in t.agents] for t in after.ticks
+    ]
