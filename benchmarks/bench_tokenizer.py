@@ -186,7 +186,7 @@ def step_cpu_seconds(task: TokenizerTask, batch_size: int, repeats: int = 3) -> 
     return statistics.median(times[1:])
 
 
-def equal_compute(data: Path, budget_s: float, work: Path, holdout: int) -> None:
+def equal_compute(data: Path, budget_s: float, work: Path, holdout: int, max_heldout: int) -> None:
     overrides = ["train.batch_size=4", "data.frames=17", "data.crop=[64,96]", f"data.holdout_percent={holdout}"]
     overrides += ["train.lr=5e-4", "train.warmup_steps=50", "train.log_every=50", "train.ema_decay=0.99"]
     base = RECIPES.resolve("tiny-8x8x8", None, overrides)
@@ -195,6 +195,7 @@ def equal_compute(data: Path, budget_s: float, work: Path, holdout: int) -> None
     tasks = {"drivewm tiny-8x8x8": TokenizerTask(base, dataset), "Cosmos tiny": PeerTask(base, dataset, "tiny")}
     costs = {name: step_cpu_seconds(task, 4) for name, task in tasks.items()}
     heldout = torch.cat([clip_video(c) for c in load_clips(data, "holdout", holdout)])[:, :, :17]
+    heldout = heldout[torch.linspace(0, len(heldout) - 1, min(max_heldout, len(heldout))).long()]  # spread evenly
     dashcam = dashcam_video(17, 2, (96, 160))
     print(f"== quality at equal compute: {budget_s:.0f} CPU-s each, same loop, loss, data ({len(heldout)} held-out) ==")
     for name, task in tasks.items():
@@ -219,6 +220,7 @@ def main() -> None:
     parser.add_argument("--data", type=Path, help="simulated clip folder for the equal-compute comparison")
     parser.add_argument("--budget-s", type=float, default=600.0, help="CPU seconds of training per model")
     parser.add_argument("--holdout-percent", type=int, default=25)
+    parser.add_argument("--max-heldout", type=int, default=96, help="held-out camera videos scored, spread evenly")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--no-throughput", action="store_true")
@@ -229,7 +231,7 @@ def main() -> None:
         throughput(17, 128, 224, args.repeats, device)
     if args.data:
         with tempfile.TemporaryDirectory() as work:
-            equal_compute(args.data, args.budget_s, Path(work), args.holdout_percent)
+            equal_compute(args.data, args.budget_s, Path(work), args.holdout_percent, args.max_heldout)
 
 
 if __name__ == "__main__":
