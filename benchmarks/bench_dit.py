@@ -15,6 +15,7 @@ plus 12 x layers x tokens^2 x width (QK^T and PV, forward and backward) -- the P
 
     python benchmarks/bench_dit.py                 # small: D=192, depth 4, 2 x 288 tokens (a minute)
     python benchmarks/bench_dit.py --size full     # D=384, depth 12, 2,240 tokens (the issue-19 target)
+    python benchmarks/bench_dit.py --profile       # also each model's step time per op class (torch.profiler)
     python benchmarks/bench_dit.py --mfu-size base # also our DiT alone at the base preset, fp32 on a CPU (on CUDA:
                                                    # by default, bf16, batch 16 x 2,240 tokens)
 """
@@ -257,6 +258,49 @@ def report(results: dict, peak: float, size: dict) -> None:
         print(f"ratio drivewm / best peer ({best}) tokens/s: {rate['drivewm DiT'] / rate[best]:.2f}")
 
 
+#: Op classes of the --profile table: aten op names (attention is told apart by name, see :func:`op_class`).
+OP_CLASSES = {
+    "GEMM (linear fwd/bwd)": {"mm", "addmm", "bmm"},
+    "GELU fwd/bwd": {"gelu", "gelu_backward"},
+    "norms": {"native_layer_norm", "native_layer_norm_backward", "pow", "rsqrt", "mean"},
+    "layout copies": {"copy_", "cat", "clone", "stack"},
+    "reductions (bias/gate grads)": {"sum"},
+    "elementwise (modulation, RoPE, loss)": {"mul", "mul_", "add", "add_", "addcmul", "sub", "div", "div_", "neg"},
+    "optimizer": {"_fused_adamw_"},
+}
+
+
+def op_class(name: str) -> str:
+    """The op class of an aten op's profiler name: attention fwd/bwd, an :data:`OP_CLASSES` key, or other."""
+    if "scaled_dot_product" in name or "flash_attention" in name:
+        return "attention bwd" if "backward" in name else "attention fwd"
+    op = name.removeprefix("aten::")
+    return next((cls for cls, ops in OP_CLASSES.items() if op in ops), "other")
+
+
+def profile_step(names: list[str], size: dict, device: torch.device) -> None:
+    """Print, per model, the share of one training step's time in each op class (torch.profiler: self time
+    of the aten ops, on the CPU or the GPU, after one warm step). Shares, as the profiler's own overhead
+    and clock differ from :func:`timed_step`'s."""
+    from torch.profiler import ProfilerActivity, profile
+
+    cuda = device.type == "cuda"
+    for name in names:
+        torch.manual_seed(0)
+        model, loss_fn = MODELS[name](size, device)
+        opt = torch.optim.AdamW(model.parameters(), lr=1e-4, fused=True)
+        timed_step(model, loss_fn, opt, cuda, device)
+        with profile(activities=[ProfilerActivity.CUDA if cuda else ProfilerActivity.CPU]) as prof:
+            timed_step(model, loss_fn, opt, cuda, device)
+        by_class: dict[str, float] = {}
+        for event in prof.key_averages():
+            spent = event.self_device_time_total if cuda else event.self_cpu_time_total
+            by_class[op_class(event.key)] = by_class.get(op_class(event.key), 0.0) + spent
+        total = sum(by_class.values())
+        shares = ", ".join(f"{cls} {t / total:.1%}" for cls, t in sorted(by_class.items(), key=lambda kv: -kv[1]))
+        print(f"profile {name}: {shares}")
+
+
 def load_note(threads: int) -> str:
     """'under load' when other processes keep the CPUs busy (1-minute load average above our threads)."""
     load = os.getloadavg()[0]
@@ -276,6 +320,7 @@ def main() -> None:
     parser.add_argument(
         "--mfu-batch", type=int, help="samples per step of the MFU run (default: 16 on CUDA, the size's on the CPU)"
     )
+    parser.add_argument("--profile", action="store_true", help="also print each model's step time per op class")
     args = parser.parse_args()
     device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
     torch.set_num_threads(args.threads)
@@ -289,6 +334,8 @@ def main() -> None:
         f"D={size['hidden_dim']}, depth {size['depth']}, {size['num_heads']} heads"
     )
     report(*compare(args.models, size, args.rounds, device, bf16), size)
+    if args.profile:
+        profile_step(args.models, size, device)
     mfu_size = args.mfu_size or ("base" if device.type == "cuda" else None)
     if mfu_size:
         big = dict(SIZES[mfu_size], batch=args.mfu_batch or (16 if device.type == "cuda" else SIZES[mfu_size]["batch"]))
