@@ -61,7 +61,6 @@ class TrainConfig:
         above(self, 0, "lr")
         in_range(self, "ema_decay", 0, 1, high_open=True)
         in_range(self, "min_lr_ratio", 0, 1)
-        require(self.lr_schedule in ("constant", "cosine"), "lr_schedule", self.lr_schedule, "constant or cosine")
         require(
             len(self.betas) == 2 and all(0 <= b < 1 for b in self.betas), "betas", self.betas, "two numbers in [0, 1)"
         )

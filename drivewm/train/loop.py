@@ -103,10 +103,10 @@ def _epoch_permutation(seed: int, epoch: int, num_samples: int) -> torch.Tensor:
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
     """Linear warm-up to ``cfg.lr``, then constant or a half cosine down to ``lr * min_lr_ratio``."""
-    if step + 1 < cfg.warmup_steps or cfg.lr_schedule == "constant":
+    peak = max(0, cfg.warmup_steps - 1)  # the step that reaches cfg.lr
+    if step < peak or cfg.lr_schedule == "constant":
         return cfg.lr * min(1.0, (step + 1) / max(1, cfg.warmup_steps))
-    span = max(1, cfg.steps - 1 - max(0, cfg.warmup_steps - 1))
-    progress = min(1.0, (step - max(0, cfg.warmup_steps - 1)) / span)
+    progress = min(1.0, (step - peak) / max(1, cfg.steps - 1 - peak))
     return cfg.lr * (cfg.min_lr_ratio + (1 - cfg.min_lr_ratio) * 0.5 * (1 + math.cos(math.pi * progress)))
 
 
