@@ -1,12 +1,13 @@
 """The weights drivewm ships: export of a ``drivewm worldmodel train`` run, and where they are found.
 
-``export_run(RUN, DIR)`` writes ``DIR/tokenizer``, ``DIR/text2world`` and ``DIR/multiview`` as model
-folders with fp16 weights (loaders cast them to the network's dtype), the diffusion models pointing
-at the tokenizer by the relative path ``../tokenizer`` (resolved against the model folder, so the
-package works wherever it is installed), plus ``DIR/MANIFEST.json`` (sha256 and size of every file,
-training steps and seconds of every stage), which the model card (MODEL_CARD.md) quotes.
-``shipped_model(kind)`` is the installed copy that ``drivewm generate`` and ``drivewm rollout``
-use when no ``--model`` is given.
+``export_run(RUN, DIR)`` writes ``DIR/tokenizer``, ``DIR/text2world`` and ``DIR/multiview`` (and
+``DIR/transfer`` when the run has a ``transfer`` folder) as model folders with fp16 weights (loaders
+cast them to the network's dtype), the diffusion models pointing at the tokenizer by the relative
+path ``../tokenizer`` and the transfer model at its Text2World parent by ``../text2world``
+(resolved against the model folder, so the package works wherever it is installed), plus
+``DIR/MANIFEST.json`` (sha256 and size of every file, training steps and seconds of every stage),
+which the model card (MODEL_CARD.md) quotes. ``shipped_model(kind)`` is the installed copy that
+``drivewm generate``, ``drivewm rollout`` and ``drivewm transfer`` use when no ``--model`` is given.
 """
 
 from __future__ import annotations
@@ -21,13 +22,15 @@ from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folde
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 #: Model folders of a run, by the name they ship under.
-RUN_FOLDERS = {"tokenizer": "tokenizer", "text2world": "text2world", "multiview": "multiview"}
+RUN_FOLDERS = {"tokenizer": "tokenizer", "text2world": "text2world", "multiview": "multiview", "transfer": "transfer"}
+#: Run folders an export may lack (a run without paired drives trains no transfer model).
+OPTIONAL_FOLDERS = ("transfer",)
 MAX_FILE_BYTES = 16 * 1000 * 1000
 MAX_TOTAL_BYTES = 40 * 1000 * 1000
 
 
 def shipped_model(kind: str) -> Path:
-    """The installed model folder ``kind`` (tokenizer, text2world or multiview)."""
+    """The installed model folder ``kind`` (tokenizer, text2world, multiview or transfer)."""
     if kind not in RUN_FOLDERS:
         raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
     path = WEIGHTS_DIR / kind
@@ -46,11 +49,13 @@ def sha256(path: Path) -> str:
 
 def export_folder(src: Path, dst: Path) -> dict:
     """Copy a model folder with fp16 weights and a package-relative tokenizer path; returns its training record."""
-    info, state = load_model_folder(src, ("drivewm-tokenizer", "text2world", "multiview"))
+    info, state = load_model_folder(src, ("drivewm-tokenizer", "text2world", "multiview", "transfer"))
     half = {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
     extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
     if "latent" in extra and extra["latent"].get("tokenizer"):
         extra["latent"] = {**extra["latent"], "tokenizer": "../tokenizer"}
+    if extra.get("parent"):  # a transfer model's Text2World parent ships beside it
+        extra["parent"] = "../text2world"
     save_model_folder(dst, info["model_type"], info["config"], half, extra)
     return training_record(src)
 
@@ -65,13 +70,15 @@ def training_record(run_dir: Path) -> dict:
 
 
 def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
-    """Export the three model folders of ``run`` into ``out``, write the manifest and the model card
-    (drivewm.model_card, with ``notes`` as its last section); returns the files."""
+    """Export the model folders of ``run`` (three, or four with a transfer model) into ``out``, write
+    the manifest and the model card (drivewm.model_card, with ``notes`` as its last section); returns
+    the files."""
     from drivewm.model_card import write_model_card
 
     run, out = Path(run), Path(out)
-    records = {name: export_folder(run / folder, out / name) for name, folder in RUN_FOLDERS.items()}
-    files = sorted(p for name in RUN_FOLDERS for p in (out / name).iterdir() if p.is_file())
+    folders = {n: f for n, f in RUN_FOLDERS.items() if n not in OPTIONAL_FOLDERS or (run / f).is_dir()}
+    records = {name: export_folder(run / folder, out / name) for name, folder in folders.items()}
+    files = sorted(p for name in folders for p in (out / name).iterdir() if p.is_file())
     sizes = {str(p.relative_to(out)): p.stat().st_size for p in files}
     too_big = [k for k, v in sizes.items() if v > MAX_FILE_BYTES]
     if too_big or sum(sizes.values()) > MAX_TOTAL_BYTES:

@@ -15,12 +15,16 @@ each training stage by its own train state:
 6. generate the benchmark clips (prompts and trajectories the training captions never use
    verbatim, fixed seeds) and score them next to the held-out clips with ``drivewm eval``;
 7. the must-hold figures against their goals (``drivewm worldmodel figures``,
-   drivewm/worldmodel_figures.py): ``RUN/eval/figures.json`` and ``figures.md``.
+   drivewm/worldmodel_figures.py): ``RUN/eval/figures.json`` and ``figures.md``;
+8. (profile key ``transfer_train``) paired drives, every drive in six conditions, training and
+   held-out, and a weather / time-of-day transfer model post-trained from the video Text2World model
+   (docs/transfer.md), scored by ``benchmarks/bench_transfer.py``.
 
 Profiles (``drivewm/recipes/worldmodel.yaml``) change only sizes and steps: ``cpu`` is what the shipped
 weights were trained with on 2 cores; ``gpu`` is the same recipe sized for one GPU in about 25
 minutes (``scripts/gpu-recipe.sh``). ``drivewm worldmodel export RUN --out DIR`` writes the three
-model folders in fp16 safetensors with a model card (what ``drivewm/weights/`` ships).
+model folders (four with the transfer model of the paired-drive stages) in fp16 safetensors with a
+model card (what ``drivewm/weights/`` ships).
 """
 
 from __future__ import annotations
@@ -66,6 +70,10 @@ class WorldModelProfile:
     eval: list[str]
     eval_heldout: list[str] = dataclasses.field(default_factory=list)
     """Extra arguments of the held-out reference eval (e.g. ``--max-clips``)."""
+    transfer_train: list[str] | None = None
+    """Arguments of ``drivewm transfer-train`` from the video Text2World model on paired drives
+    (simulate recipes ``transfer`` / ``transfer_heldout``, curate recipe ``transfer``, docs/transfer.md);
+    None: the run trains no transfer model."""
     samples_per_benchmark: int = 2
     """Seeds per benchmark entry (24+ generated clips in all for the issue's figures)."""
     benchmarks: list[Benchmark] = dataclasses.field(default_factory=list)
@@ -176,6 +184,28 @@ def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]
         ("eval-generated", ["eval", str(gen), "--rig", p.rig, "--out", str(ev / "generated"), *reference, *p.eval])
     )
     stages.append(("figures", ["worldmodel", "figures", str(run)]))
+    if p.transfer_train is not None:
+        stages += transfer_stages(p, run)
+    return stages
+
+
+def transfer_stages(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]]]:
+    """Paired drives (training and held-out), their clips and latents, and the transfer model
+    post-trained from ``RUN/text2world``; ``benchmarks/bench_transfer.py --model RUN/transfer --data
+    RUN/clips/paired_heldout`` scores it (docs/transfer.md)."""
+    logs, clips, tok = run / "logs", run / "clips", run / "tokenizer"
+    stages = []
+    for split, recipe in (("paired", "transfer"), ("paired_heldout", "transfer_heldout")):
+        name = split.replace("_", "-")
+        stages.append(
+            (f"simulate-{name}", ["simulate", "--recipe", recipe, "--rig", p.rig, "--out", str(logs / split)])
+        )
+        stages.append(
+            (f"curate-{name}", ["curate", str(logs / split), "--out", str(clips / split), "--recipe", "transfer"])
+        )
+        stages.append((f"encode-{name}", ["tokenizer", "encode", "--model", str(tok), "--data", str(clips / split)]))
+    train = ["transfer-train", "--init", str(run / "text2world"), "--data", str(clips / "paired")]
+    stages.append(("transfer-train", [*train, "--out", str(run / "transfer"), *p.transfer_train]))
     return stages
 
 

@@ -23,6 +23,10 @@ def test_every_stage_parses_and_chains_its_outputs(profile, tmp_path):
     argv = dict(stages)
     assert argv["pretrain-video"][argv["pretrain-video"].index("--init") + 1] == str(tmp_path / "text2world_image")
     assert argv["posttrain"][argv["posttrain"].index("--init") + 1] == str(tmp_path / "text2world")
+    transfer = argv["transfer-train"]  # paired drives' latents from the run's tokenizer, init its video model
+    assert transfer[transfer.index("--init") + 1] == str(tmp_path / "text2world")
+    assert transfer[transfer.index("--data") + 1] == argv["encode-paired"][-1] == str(tmp_path / "clips" / "paired")
+    assert argv["encode-paired"][argv["encode-paired"].index("--model") + 1] == str(tmp_path / "tokenizer")
     generated = [n for n in names if n.startswith("generate-")]
     assert len(generated) * p.samples_per_benchmark >= 24  # the issue's 24 generated clips at least
     for _, argv in stages:  # packaged recipes, found by name for their stage

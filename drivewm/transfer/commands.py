@@ -16,7 +16,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("transfer", help="the same clips in another weather / time of day (labels kept)")
     p.add_argument("clips", nargs="+", type=Path, help="clip shards (.tar) or clip folders")
     p.add_argument(
-        "--model", required=True, type=model_folder, help="transfer model folder (or Text2World: SDEdit baseline)"
+        "--model",
+        type=model_folder,
+        help="transfer model folder, shipped:transfer (the default), or a Text2World folder (the SDEdit baseline)",
     )
     p.add_argument("--to", required=True, choices=WEATHERS, dest="weather", help="target weather")
     p.add_argument("--time-of-day", choices=TIMES_OF_DAY, help="target time of day (default: each clip's own)")
@@ -42,7 +44,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
     t.add_argument(
-        "--init", required=True, type=model_folder, help="Text2World model folder (or shipped:text2world) to start from"
+        "--init",
+        required=True,
+        type=model_folder,
+        help="Text2World model folder (or shipped:text2world) to start from, or a transfer folder to fine-tune",
     )
     t.add_argument("--data", required=True, type=Path, help="paired clip folder holding latents/NAME (or the cache)")
     t.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
@@ -73,6 +78,10 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.device,
         args.max_clips,
     )
+    if args.model is None:
+        from drivewm.release import shipped_model
+
+        args.model = shipped_model("transfer")
     report = transfer_clips(args.model, args.clips, options, args.out)
     for item in report["failed"]:
         print(f"skipped {item.get('clip', item['shard'])}: {item['error']}")

@@ -118,9 +118,10 @@ class Transfer:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
         config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
-        model = cls(
-            from_dict(TransferModelConfig, config, where), read_latent_info(info, path), str(info.get("parent", ""))
-        )
+        parent = str(info.get("parent", ""))
+        if parent and not Path(parent).is_absolute():  # shipped weights point at ../text2world
+            parent = str((Path(path) / parent).resolve())
+        model = cls(from_dict(TransferModelConfig, config, where), read_latent_info(info, path), parent)
         load_weights(model.net, state, path)
         return model
 

@@ -23,6 +23,7 @@ from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.recipe import RecipeBook
 from drivewm.sim.paired import parse_conditions
+from drivewm.train.checkpoint import read_model_config
 from drivewm.train.loop import TrainConfig, train
 from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.data import PairDataset
@@ -150,6 +151,19 @@ class TransferTask(BundleTask):
         write_grid_png(decode_latents(rows, bundle.latent.tokenizer, device), path, labels)
 
 
+def init_transfer(cfg: TransferTrainConfig, init_dir: str | Path) -> Transfer:
+    """The model a run starts from: a Text2World folder gives a new transfer model equal to it
+    (drivewm.transfer.init); a transfer folder (say ``shipped:transfer``) is fine-tuned as it is,
+    with its own ``transfer`` settings and noise distribution (``cfg.transfer`` and ``cfg.p_mean``
+    apply to new models only)."""
+    if read_model_config(init_dir, ("text2world", "transfer"))["model_type"] == "transfer":
+        return Transfer.from_pretrained(init_dir)
+    torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
+    return from_text2world(
+        Text2World.from_pretrained(init_dir), cfg.transfer, cfg.p_mean, str(Path(init_dir).resolve())
+    )
+
+
 def train_transfer(
     cfg: TransferTrainConfig,
     init_dir: str | Path,
@@ -157,22 +171,20 @@ def train_transfer(
     out_dir: str | Path,
     stop_after: int | None = None,
 ) -> dict:
-    """Post-train a transfer model folder into ``out_dir`` from the Text2World folder ``init_dir``
-    (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
+    """Post-train a transfer model folder into ``out_dir`` from the Text2World or transfer folder
+    ``init_dir`` (resuming when ``out_dir`` holds a train state). Returns the last metrics row."""
     resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
-    parent = Text2World.from_pretrained(init_dir)
-    tokenizer = Path(parent.latent.tokenizer) if parent.latent.tokenizer else None
+    model = init_transfer(cfg, init_dir)
+    tokenizer = Path(model.latent.tokenizer) if model.latent.tokenizer else None
     cache = find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents)
-    dataset = PairDataset(cache, parent.cfg.edm.sigma_data, cfg.target_conditions())
+    dataset = PairDataset(cache, model.cfg.edm.sigma_data, cfg.target_conditions())
     if tokenizer is not None:
         check_tokenizer(dataset.cache, tokenizer)
-    if dataset.latent_shape[0] != parent.cfg.dit.in_channels:
+    if dataset.latent_shape[0] != model.cfg.dit.in_channels:
         raise DrivewmError(
             f"{data_dir}: latents have {dataset.latent_shape[0]} channels, {init_dir} was trained on "
-            f"{parent.cfg.dit.in_channels}"
+            f"{model.cfg.dit.in_channels}"
         )
-    torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
-    model = from_text2world(parent, cfg.transfer, cfg.p_mean, str(Path(init_dir).resolve()))
     model.latent = dataclasses.replace(model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps)
     record = {**to_dict(cfg), "init": str(Path(init_dir).resolve())}
     return train(TransferTask(cfg, dataset, model), cfg.train, out_dir, config_record=record, stop_after=stop_after)

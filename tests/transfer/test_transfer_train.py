@@ -12,7 +12,9 @@ from safetensors.torch import load_file
 
 from drivewm.cli import main
 from drivewm.clips.latents import write_latent_clip, write_latent_index
-from drivewm.transfer.train import RECIPES, train_transfer
+from drivewm.release import export_folder
+from drivewm.transfer.model import Transfer
+from drivewm.transfer.train import RECIPES, init_transfer, train_transfer
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_data import METAS  # noqa: E402
@@ -44,6 +46,27 @@ def test_resumed_training_equals_an_uninterrupted_run(tmp_path) -> None:
     info = json.loads((tmp_path / "straight" / "config.json").read_text())
     assert info["model_type"] == "transfer" and info["parent"] == str(parent.resolve())
     assert info["config"]["edm"]["p_mean"] == 0.0 and info["latent"]["latent_shape"] == [4, 2, 4, 6]
+
+
+def test_a_transfer_folder_is_fine_tuned_as_it_is_and_ships_pointing_at_its_parent(tmp_path) -> None:
+    """--init with a transfer folder (say shipped:transfer) starts from its trained weights, not from a
+    zero-initialised source branch; the export writes its parent as ../text2world, found beside it."""
+    cache, parent = _cache_and_parent(tmp_path)
+    cfg = RECIPES.resolve("debug", overrides=["train.steps=2", "train.batch_size=4", "train.checkpoint_every=2"])
+    train_transfer(cfg, parent, cache, tmp_path / "first")
+    first = load_file(str(tmp_path / "first" / "model.safetensors"))
+    start = init_transfer(cfg, tmp_path / "first").net.state_dict()
+    assert first["source_encoder.proj.weight"].abs().sum() > 0
+    assert all(torch.equal(start[k], first[k]) for k in first)
+    train_transfer(cfg, tmp_path / "first", cache, tmp_path / "second")
+    second = load_file(str(tmp_path / "second" / "model.safetensors"))
+    assert any(not torch.equal(second[k], first[k]) for k in first)  # it trained on
+    assert json.loads((tmp_path / "second" / "config.json").read_text())["parent"] == str(parent.resolve())
+    export_folder(parent, tmp_path / "pkg" / "text2world")
+    export_folder(tmp_path / "second", tmp_path / "pkg" / "transfer")
+    assert json.loads((tmp_path / "pkg" / "transfer" / "config.json").read_text())["parent"] == "../text2world"
+    shipped = Transfer.from_pretrained(tmp_path / "pkg" / "transfer")
+    assert shipped.parent == str((tmp_path / "pkg" / "text2world").resolve())
 
 
 def test_transfer_train_dry_run_resolves_presets_recipes_and_overrides(tmp_path, capsys) -> None:
