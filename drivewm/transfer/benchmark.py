@@ -45,7 +45,8 @@ def paired_cases(
     location: str | Path, source: TargetCondition, targets: list[TargetCondition], max_per_target: int | None = None
 ) -> list[PairCase]:
     """Cases of the clips at ``location``: for each target, the pair ids that have a clip in ``source``
-    and one in that target (sorted by id, at most ``max_per_target``)."""
+    and one in that target (sorted by id; at most ``max_per_target``, evenly spaced over the sorted
+    ids, so a subset still spans every drive)."""
     by_id: dict[str, dict[TargetCondition, Clip]] = defaultdict(dict)
     for clip in iter_clips(location):
         cond = TargetCondition.of(clip.meta)
@@ -54,7 +55,9 @@ def paired_cases(
     cases = []
     for target in targets:
         ids = sorted(i for i, group in by_id.items() if source in group and target in group)
-        cases += [PairCase(i, by_id[i][source], by_id[i][target], target) for i in ids[:max_per_target]]
+        if max_per_target is not None and len(ids) > max_per_target:
+            ids = [ids[int(k * len(ids) / max_per_target)] for k in range(max_per_target)]
+        cases += [PairCase(i, by_id[i][source], by_id[i][target], target) for i in ids]
     return cases
 
 
