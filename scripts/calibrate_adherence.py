@@ -1,10 +1,13 @@
 """Fit the adherence classifier on simulator renders and write drivewm/tables/adherence_calibration.json.
 
-``python scripts/calibrate_adherence.py [--seeds 2] [--duration 1.0] [--out FILE]`` simulates short
-nuscenes6 drives (highway-env and SUMO) for every weather x time-of-day pair, computes
-:func:`drivewm.eval.adherence.condition_scores` per drive, fits the nearest-centroid tables
-(:func:`drivewm.eval.adherence.fit_calibration`) and writes them, with the training accuracy, as the
-JSON table the package ships (read by :func:`drivewm.eval.adherence.load_calibration`).
+``python scripts/calibrate_adherence.py [--seeds 2] [--duration 1.0] [--tokenizer shipped:tokenizer]
+[--coded-size 160x96] [--out FILE]`` simulates short nuscenes6 drives (highway-env and SUMO) for
+every weather x time-of-day pair, computes :func:`drivewm.eval.adherence.condition_scores` per drive,
+fits the nearest-centroid tables (:func:`drivewm.eval.adherence.fit_calibration`) and writes them,
+with the training accuracy per domain, as the JSON table the package ships (read by
+:func:`drivewm.eval.adherence.load_calibration`). With ``--tokenizer``, every pair is rendered once
+more as a clip is curated (17 frames at 10 fps), resized to ``--coded-size`` and coded by that
+tokenizer (encode, decode): the ``coded`` domain, what generated and transferred clips look like.
 """
 
 from __future__ import annotations
@@ -17,34 +20,44 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from drivewm import resources
 from drivewm.atomic import write_text
+from drivewm.choices import model_folder
 from drivewm.eval.adherence import classify_condition, condition_scores, fit_calibration
 from drivewm.logs.reader import read_log
 from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
+from drivewm.multiview.rollout import decode_views, encode_views
 from drivewm.sim import SimConfig, simulate
+from drivewm.tokenizer import Tokenizer
 
 SOURCES = (("highway", "highway"), ("sumo", "grid"))
+CODED_FRAMES, CODED_FPS = 17, 10.0  # a curated clip's length and rate (curate recipes worldmodel, transfer)
 
 
-def render_scores(weather: str, time_of_day: str, seed: int, source: tuple[str, str], duration_s: float) -> dict:
-    """Condition scores of one short simulated drive."""
+def render(weather: str, time_of_day: str, seed: int, source: tuple[str, str], duration_s: float, fps: float):
+    """uint8 frames (V, T, H, W, 3) of one short simulated drive."""
     cfg = SimConfig(
         source=source[0],
         scenario=source[1],
         weather=weather,
         time_of_day=time_of_day,
         duration_s=duration_s,
-        fps=5.0,
+        fps=fps,
         seed=seed,
     )
     with tempfile.TemporaryDirectory() as tmp:
         log = read_log(simulate(cfg, Path(tmp) / "drive.mcap", progress=False))
     n = min(len(v) for v in log.images.values())
-    frames = np.stack([[f.decode() for f in log.images[c][:n]] for c in log.rig.names])
-    return condition_scores(frames)
+    return np.stack([[f.decode() for f in log.images[c][:n]] for c in log.rig.names])
+
+
+def coded(frames: np.ndarray, tokenizer: Tokenizer, size_hw: tuple[int, int]) -> np.ndarray:
+    """``frames`` (V, T, H, W, 3) resized to ``size_hw`` and coded by ``tokenizer``, as the transfer
+    benchmark's ``tokenizer`` reference (drivewm.transfer.benchmark) codes the true target."""
+    return decode_views(tokenizer, encode_views(tokenizer, frames, size_hw))
 
 
 def table_json(table: dict) -> str:
@@ -57,23 +70,46 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--duration", type=float, default=1.0)
+    parser.add_argument(
+        "--tokenizer", type=model_folder, help="add the coded domain: tokenizer folder or shipped:tokenizer"
+    )
+    parser.add_argument("--coded-size", default="160x96", help="WIDTHxHEIGHT the coded renders are resized to")
     parser.add_argument("--out", default=str(resources.package_dir("tables") / "adherence_calibration.json"))
     args = parser.parse_args(argv)
+    torch.set_num_threads(1)
     jobs = list(itertools.product(WEATHERS, TIMES_OF_DAY, range(args.seeds), SOURCES))
-    samples = [(render_scores(w, t, 100 + s, src, args.duration), w, t) for w, t, s, src in tqdm(jobs, desc="renders")]
-    table = fit_calibration(samples)
-    preds = [classify_condition(s, table) for s, _, _ in samples]
-    acc_w = float(np.mean([p["weather"] == w for p, (_, w, _) in zip(preds, samples)]))
-    acc_t = float(np.mean([p["time_of_day"] == t for p, (_, _, t) in zip(preds, samples)]))
+    samples = [
+        (condition_scores(render(w, t, 100 + s, src, args.duration, 5.0)), w, t, "")
+        for w, t, s, src in tqdm(jobs, desc="renders")
+    ]
     sources = " and ".join(f"{a} {b}" for a, b in SOURCES)
+    what = f"{args.seeds} seeds x weathers x times of day x sources {sources}, {args.duration} s at 5 fps"
+    if args.tokenizer:
+        tok, (w, h) = Tokenizer.from_pretrained(args.tokenizer), (int(v) for v in args.coded_size.split("x"))
+        duration = CODED_FRAMES / CODED_FPS
+        for wx, t, s, src in tqdm(jobs, desc="coded renders"):
+            frames = coded(render(wx, t, 100 + s, src, duration, CODED_FPS), tok, (h, w))
+            samples.append((condition_scores(frames), wx, t, "coded"))
+        what += (
+            f"; the same pairs as {CODED_FRAMES}-frame {CODED_FPS:g} fps clips at {args.coded_size} coded by the "
+            f"tokenizer {Path(args.tokenizer).name} (domain coded)"
+        )
+    table = fit_calibration(samples)
+    accuracy = {}
+    for domain in sorted({d for *_, d in samples}):
+        part = [(classify_condition(x, table), w, t) for x, w, t, d in samples if d == domain]
+        accuracy[domain or "rendered"] = {
+            "weather": round(float(np.mean([p["weather"] == w for p, w, _ in part])), 3),
+            "time_of_day": round(float(np.mean([p["time_of_day"] == t for p, _, t in part])), 3),
+        }
     record = {
-        "source": f"scripts/calibrate_adherence.py: nearest-centroid tables fitted on {len(samples)} simulator renders "
-        f"({args.seeds} seeds x weathers x times of day x sources {sources}, {args.duration} s at 5 fps)",
-        "accuracy": {"weather": round(acc_w, 3), "time_of_day": round(acc_t, 3)},
+        "source": f"scripts/calibrate_adherence.py: nearest-centroid tables fitted on {len(samples)} simulator "
+        f"renders ({what})",
+        "accuracy": accuracy,
         **table,
     }
     write_text(Path(args.out), table_json(record))
-    print(f"wrote {args.out}: weather accuracy {acc_w:.3f}, time-of-day accuracy {acc_t:.3f}")
+    print(f"wrote {args.out}: training accuracy {accuracy}")
     return 0
 
 

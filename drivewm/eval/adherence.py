@@ -16,9 +16,13 @@
   from frame to frame while the scene barely changes).
 
 ``classify_condition(scores)`` is a nearest-centroid classifier in z-scored feature space, one
-centroid per weather x time-of-day pair, with centroids and scales fitted on simulator renders
-(``python scripts/calibrate_adherence.py``; the numbers are package data,
-``drivewm/tables/adherence_calibration.json``).
+centroid per weather x time-of-day pair and per image domain, with centroids and scales fitted on
+simulator renders (``python scripts/calibrate_adherence.py``; the numbers are package data,
+``drivewm/tables/adherence_calibration.json``). The domains are the renders as logged and the same
+renders coded by a video tokenizer at the size generators work at (``coded``): a tokenizer removes
+the snowflakes and rain streaks that the flicker and edge statistics see, so its ideal output of a
+snow render otherwise reads as fog, and every generated or transferred clip is such an output.
+A domain's centroids name their domain third (``snow/day/coded``); the label is the first two parts.
 Probabilities are a softmax over negative squared distances.
 """
 
@@ -139,12 +143,13 @@ def load_calibration() -> dict:
     return json.loads((resources.package_dir("tables") / "adherence_calibration.json").read_text())
 
 
-def fit_calibration(samples: list[tuple[dict[str, float], str, str]]) -> dict:
-    """Fit the classifier tables from (scores, weather, time_of_day) samples of labelled renders."""
-    X = np.array([[s[k] for k in FEATURES] for s, _, _ in samples])
+def fit_calibration(samples: list[tuple]) -> dict:
+    """Fit the classifier tables from (scores, weather, time_of_day[, domain]) samples of labelled
+    renders; a sample with a domain (say ``coded``) adds to that domain's centroid of its class."""
+    X = np.array([[s[0][k] for k in FEATURES] for s in samples])
     mean, std = X.mean(0), X.std(0) + 1e-6
     Z = (X - mean) / std
-    labels = np.array([f"{w}/{t}" for _, w, t in samples])
+    labels = np.array(["/".join(s[1:3]) + (f"/{s[3]}" if len(s) > 3 and s[3] else "") for s in samples])
     cents = {str(c): Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
     return {
         "features": list(FEATURES),

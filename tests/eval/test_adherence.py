@@ -34,3 +34,24 @@ def test_classifier_recognises_held_out_simulated_clips(sim_clip_dir):
     print("(tag weather, tag time, predicted weather, predicted time):", results)
     assert all(t == pt for _, t, _, pt in results)
     assert sum(w == pw for w, _, pw, _ in results) >= len(results) - 1
+
+
+def test_classifier_recognises_held_out_clips_coded_by_the_shipped_tokenizer(sim_clip_dir):
+    """Generated and transferred clips are tokenizer outputs: the fixture's clips resized to the
+    shipped models' 160x96 and coded by the shipped tokenizer keep their weather and time of day.
+    (Before the coded domain, a coded snow render read as fog: the flakes are what a tokenizer drops.)"""
+    from drivewm.clips import iter_clips
+    from drivewm.multiview.rollout import decode_views, encode_views
+    from drivewm.release import shipped_model
+    from drivewm.tokenizer import Tokenizer
+
+    tok = Tokenizer.from_pretrained(shipped_model("tokenizer"))
+    results = []
+    for clip in list(iter_clips(sim_clip_dir))[::3]:  # one clip per drive
+        frames = decode_views(tok, encode_views(tok, clip.videos(), (96, 160)))
+        pred = classify_condition(condition_scores(frames))
+        tags = clip.meta.tags
+        results.append((tags["weather"], tags["time_of_day"], pred["weather"], pred["time_of_day"]))
+    print("(tag weather, tag time, predicted weather, predicted time):", results)
+    assert {w for w, *_ in results} >= {"clear", "snow"} and "night" in {t for _, t, *_ in results}
+    assert all(w == pw and t == pt for w, t, pw, pt in results)
