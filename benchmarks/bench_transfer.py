@@ -40,6 +40,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--start-sigma", type=float, default=None, help="transfer model: start from the noised source")
     p.add_argument("--sdedit-sigmas", default="0.5,1,2,4,8")
     p.add_argument("--max-pairs", type=int, default=None, help="pairs per target (default: all)")
+    p.add_argument(
+        "--no-detail", action="store_true", help="score decoded outputs as they are (default: source detail restored)"
+    )
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where the networks run")
     p.add_argument("--out", type=Path, help="write the per-clip rows and the summary here (JSON)")
@@ -137,7 +140,9 @@ def main(argv=None) -> int:
         cells = " ".join(f"{r['method']} {r['psnr']:.1f}dB/{r['adherence']:.0f}" for r in rows)
         print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
 
-    rows = run_cases(cases, methods, tokenizer, progress=progress, cse_for=cse_for, device=model.device)
+    rows = run_cases(
+        cases, methods, tokenizer, progress=progress, cse_for=cse_for, device=model.device, detail=not args.no_detail
+    )
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
     print_table(summary, nfe)

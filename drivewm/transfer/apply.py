@@ -29,6 +29,7 @@ from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
 from drivewm.multiview.rollout import decode_views, encode_views, frames_to_video
 from drivewm.multiview.writer import grid_layout, tile_views
+from drivewm.transfer.detail import restore_detail
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
 
 SHEET_CLIPS = 3  # clips shown in contact_sheet.png
@@ -59,6 +60,9 @@ class TransferOptions:
     """Where the networks run: ``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
     max_clips: int | None = None
     """Transfer only the first N clips of the inputs (a preview; None: all)."""
+    detail: bool = True
+    """Add back the source detail the tokenizer drops, scaled by the contrast the target keeps
+    (drivewm.transfer.detail); False writes the decoded transfer as it is."""
 
     def validate(self) -> None:
         if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
@@ -95,7 +99,7 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
     model_type = json.loads(cfg_path.read_text()).get("model_type")
     o = options
     record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
-    record |= {"seed": o.seed, "start_sigma": o.start_sigma}
+    record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail}
     if model_type == "transfer":
         from drivewm.transfer.model import Transfer
 
@@ -146,6 +150,8 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
     captions = [views[name] for name in clip.meta.cameras]
     seeds = [options.seed + v for v in range(len(captions))]
     out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
+    if options.detail:
+        out = restore_detail(out, small, decode_views(tokenizer, source, transferer.device))
     # frames_to_video resizes each image to the model's size (cv2.resize, no crop): the rig says so, so a
     # 16:9 dashcam at 160x96 gets fx != fy rather than a silently wrong calibration
     rig = clip.meta.get_rig().scaled(w * sc, h * sc, fit="stretch")

@@ -5,7 +5,9 @@ clip is coded by the tokenizer and transferred by every method; each output is d
 (drivewm.transfer.metrics): PSNR / SSIM against the target clip, SIFT displacement against the
 source frames, CSE against the source's, adherence to the target. Two references frame the
 numbers: ``identity`` (the source clip itself, what a method that changes nothing scores) and
-``tokenizer`` (the true target coded and decoded, the best any latent method can reach).
+``tokenizer`` (the true target coded and decoded, the best any latent method can reach without
+the source's detail). With ``detail`` (the default of ``drivewm transfer``) every method's output
+gets the source detail the tokenizer dropped back (drivewm.transfer.detail), the same for all.
 Methods take the same number of network evaluations (``nfe``) when run with the same sampler,
 steps and guidance.
 """
@@ -24,6 +26,7 @@ import torch
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.multiview.rollout import decode_views, encode_views
+from drivewm.transfer.detail import restore_detail
 from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.retarget import TargetCondition, target_captions
 
@@ -84,10 +87,11 @@ def run_cases(
     progress=None,
     cse_for: set[str] | None = None,
     device: torch.device | str = "cpu",
+    detail: bool = False,
 ) -> list[dict]:
     """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
     ``cse_for`` (None: all). The tokenizer codes on ``device`` (where it is); methods take and return
-    latents on the CPU."""
+    latents on the CPU. ``detail``: every method's output gets the source's lost detail back."""
     rows = []
     for case in cases:
         src = case.source.videos()
@@ -97,8 +101,10 @@ def run_cases(
         seeds = [seed + v for v in range(len(captions))]
         source_cse = cross_view_error(src, case.source.meta.get_rig())  # {cse, cse_calibrated} of the source
         outputs = {"identity": src, "tokenizer": _reconstruction(tokenizer, case.target.videos(), device)}
+        coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
-            outputs[name] = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
+            out = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
+            outputs[name] = restore_detail(out, src, coded_src) if detail else out
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()}

@@ -40,6 +40,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
     p.add_argument("--max-clips", type=int, default=None, help="transfer only the first N clips (a preview)")
+    p.add_argument(
+        "--no-detail",
+        action="store_true",
+        help="write the decoded transfer as it is (default: add back the source detail the tokenizer drops)",
+    )
     p.set_defaults(func=transfer_command)
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
@@ -77,6 +82,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.tokenizer,
         args.device,
         args.max_clips,
+        detail=not args.no_detail,
     )
     if args.model is None:
         from drivewm.release import shipped_model

@@ -1,0 +1,59 @@
+"""Restoring the source detail the tokenizer drops (drivewm.transfer.detail)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from drivewm.transfer.detail import restore_detail
+from drivewm.transfer.metrics import sift_shift_px
+
+
+def _scene(seed: int = 0) -> np.ndarray:
+    """uint8 (1, 2, 96, 160, 3): textured frames with fine detail (what a tokenizer blurs away)."""
+    rng = np.random.default_rng(seed)
+    base = cv2.resize(rng.uniform(40, 215, (12, 20)).astype(np.float32), (160, 96), interpolation=cv2.INTER_CUBIC)
+    fine = rng.normal(0, 25, (96, 160)).astype(np.float32)
+    img = np.clip(base + cv2.GaussianBlur(fine, (0, 0), 0.8) * 2, 0, 255)
+    return np.broadcast_to(np.stack([img] * 3, -1), (1, 2, 96, 160, 3)).astype(np.uint8).copy()
+
+
+def _coded(frames: np.ndarray) -> np.ndarray:
+    """A tokenizer stand-in: detail gone (Gaussian blur, sigma 2 px)."""
+    return np.stack([[cv2.GaussianBlur(f, (0, 0), 2.0) for f in v] for v in frames])
+
+
+def test_a_transfer_that_changes_nothing_gets_the_source_back():
+    src = _scene()
+    coded = _coded(src)
+    out = restore_detail(coded, src, coded)
+    assert np.abs(out.astype(int) - src).max() <= 1  # gain 1 everywhere: coded + (src - coded) = src
+
+
+def test_detail_follows_the_contrast_the_target_keeps():
+    src = _scene()
+    coded = _coded(src)
+    darker = (coded * 0.5).astype(np.uint8)  # night: half the contrast, so half the detail
+    out = restore_detail(darker, src, coded).astype(np.float32)
+    detail_out = out - _coded(out.astype(np.uint8))
+    detail_src = src.astype(np.float32) - coded
+    ratio = detail_out.std() / detail_src.std()
+    assert 0.35 < ratio < 0.65, ratio
+    flat = np.full_like(coded, 200)  # dense fog: no contrast left, so (almost) no detail comes back
+    fogged = restore_detail(flat, src, coded).astype(np.float32)
+    assert np.abs(fogged - 200).mean() < 0.2 * np.abs(detail_src).mean()
+
+
+def test_restored_detail_puts_sift_matches_back_where_they_were():
+    src = _scene(1)
+    coded = _coded(src)
+    before = sift_shift_px(src, coded)["median_px"]
+    after = sift_shift_px(src, restore_detail(coded, src, coded))["median_px"]
+    assert after < 0.5 and after <= before
+
+
+def test_shapes_must_agree():
+    src = _scene()
+    with pytest.raises(ValueError, match="shapes differ"):
+        restore_detail(src[:, :1], src, src)
