@@ -28,7 +28,7 @@ from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
 from drivewm.config import to_dict
-from drivewm.curate import dedup, filters, split, sync, trajectory
+from drivewm.curate import dedup, filters, images, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.privacy import Anonymizer
@@ -239,6 +239,8 @@ def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> It
     for a, b in runs:
         needed[a:b] = True
     assembler = TickAssembler(ctx.table, ctx.sorted_ns, needed)
+    source = {c.name: (c.width, c.height) for c in ctx.log.rig.cameras}
+    scales = [images.jpeg_scale(source[c.name], (c.width, c.height)) for c in ctx.rig.cameras]
     blank = _small(np.zeros((cam.height, cam.width, 3), np.uint8))
     windows = WindowStream(
         runs, cfg.clip_frames, cfg.stride_frames, cfg.fps, cfg.shot_threshold, cfg.shot_min_frames, blank
@@ -251,7 +253,7 @@ def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> It
         if item is None:
             break
         for tick, frames in assembler.add(*item[1]):
-            buffer[tick] = TickImages(frames, ctx.rig.cameras, clock.step)
+            buffer[tick] = TickImages(frames, ctx.rig.cameras, clock.step, scales)
             with clock.step("shots"):
                 final = windows.push(tick, functools.partial(_reference_frame, buffer[tick]))
             for start, end in final:
@@ -312,9 +314,10 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
     t_ns = ctx.table.tick_ns[start : start + T]
     poses = ctx.smooth.poses_at(t_ns) if ctx.smooth is not None else np.tile(np.eye(4), (T, 1, 1))
     with clock.step("filters"):
-        scores = filters.score_clip(frames, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)
+        grey = np.stack([[tick.grey(v) for tick in ticks] for v in range(V)])  # (V, T, h, 160), once per frame
+        scores = filters.score_grey(grey, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)
         reason = filters.judge(scores, cfg.filters)
-        emb = dedup.clip_embedding(frames)
+        emb = dedup.grey_embedding(grey[:, dedup.key_frames(T)])
         if reason is None and cfg.filters.dedup_cosine < 1 and kept.count:
             if dedup.near_duplicates(emb[None], cfg.filters.dedup_cosine, kept.rows()):
                 reason = "near_duplicate"
