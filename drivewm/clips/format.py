@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 
-from drivewm.clips.video import decode_mp4, encode_mp4
+from drivewm.clips.video import H264Encoder, decode_mp4, encode_mp4
 from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
@@ -126,12 +126,17 @@ def clip_from_arrays(
     preset: str = "veryfast",
     threads: int = 0,
     yuv_converter: str = "swscale",
+    encoders: dict[str, H264Encoder] | None = None,
 ) -> Clip:
     """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta);
     ``crf``, ``preset``, ``threads``, ``yuv_converter``: the H.264 settings of
-    :func:`drivewm.clips.video.encode_mp4`."""
+    :func:`drivewm.clips.video.encode_mp4`. ``encoders``: per camera an open encoder to use instead
+    (its own settings apply), kept over the clips of a log (:class:`drivewm.clips.video.H264Encoder`)."""
     validate_meta(meta)
-    mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads, yuv_converter) for c in meta.cameras}
+    if encoders is not None:
+        mp4 = {c: encoders[c].encode(frames[c]) for c in meta.cameras}
+    else:
+        mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads, yuv_converter) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
     clip._decoded.update({c: frames[c] for c in meta.cameras})
     return clip

@@ -27,6 +27,7 @@ import numpy as np
 from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
+from drivewm.clips.video import H264Encoder
 from drivewm.config import to_dict
 from drivewm.curate import dedup, filters, images, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
@@ -125,16 +126,20 @@ def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, cl
     for f in _stale_shards(out, name):
         f.unlink()
     kept_rows, embeddings, dropped = [], _Embeddings(), {}
-    with ShardWriter(out, name, cfg.clips_per_shard) as writer:
-        for start, ticks in _stream_windows(reader, ctx, clock):
-            clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock)
-            if reason:
-                dropped[reason] = dropped.get(reason, 0) + 1
-                continue
-            with clock.step("write"):
-                writer.write(clip)
-            embeddings.add(emb)
-            kept_rows.append(manifest_row(clip.meta))
+    try:
+        with ShardWriter(out, name, cfg.clips_per_shard) as writer:
+            for start, ticks in _stream_windows(reader, ctx, clock):
+                clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock)
+                if reason:
+                    dropped[reason] = dropped.get(reason, 0) + 1
+                    continue
+                with clock.step("write"):
+                    writer.write(clip)
+                embeddings.add(emb)
+                kept_rows.append(manifest_row(clip.meta))
+    finally:
+        for encoder in ctx.encoders.values():
+            encoder.close()
     shard_of = dict((k, s) for s, k in writer.written)
     for row in kept_rows:
         row["shard"] = shard_of[row["key"]]
@@ -158,6 +163,7 @@ class _LogContext:
     captioner: Captioner
     anonymizer: Callable[[np.ndarray], np.ndarray] | None
     clocks: _ClockReport
+    encoders: dict[str, H264Encoder] = dataclasses.field(default_factory=dict)  # h264_keep_encoder: per camera
 
 
 def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
@@ -329,8 +335,21 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
     meta = _meta(ctx, name, start, t_ns, poses, scores, frames)
     with clock.step("encode"):
         videos = {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}
-        clip = clip_from_arrays(meta, videos, poses, cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
+        h264 = (cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
+        clip = clip_from_arrays(meta, videos, poses, *h264, encoders=_encoders(ctx))
     return clip, None, emb
+
+
+def _encoders(ctx: _LogContext) -> dict[str, H264Encoder] | None:
+    """Per camera the encoder kept over the log's clips (``h264_keep_encoder``; opened with the first
+    clip), or None: one encoder per clip video."""
+    cfg = ctx.cfg
+    if not cfg.h264_keep_encoder:
+        return None
+    if not ctx.encoders:
+        h264 = (cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
+        ctx.encoders.update({c.name: H264Encoder(c.width, c.height, cfg.fps, *h264) for c in ctx.rig.cameras})
+    return ctx.encoders
 
 
 def _meta(
