@@ -113,6 +113,17 @@ class Clip:
             self._decoded[camera] = decode_mp4(self.mp4[camera], self.meta.num_frames, f"clip {self.key} {camera}")
         return self._decoded[camera]
 
+    def frames(self, camera: str, indices: list[int]) -> np.ndarray:
+        """Some frames of one camera, uint8 RGB (len(indices), H, W, 3), converting only these from
+        the decoded video (unless it is decoded already)."""
+        if camera in self._decoded:
+            return self._decoded[camera][indices]
+        if camera not in self.mp4:
+            raise DrivewmError(f"clip {self.key}: no video for camera {camera!r}")
+        unique = sorted(set(indices))
+        got = decode_mp4(self.mp4[camera], self.meta.num_frames, f"clip {self.key} {camera}", keep=unique)
+        return got[[unique.index(i) for i in indices]]
+
     def videos(self) -> np.ndarray:
         """All cameras in rig order, uint8 (V, T, H, W, 3)."""
         return np.stack([self.video(c) for c in self.meta.cameras])
