@@ -305,6 +305,51 @@ def write_hour_log(source: Path, out: Path, seconds: float) -> Path:
     return out
 
 
+def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
+    """1 -> 2 workers on inputs long enough to amortise a pool worker's start-up: each log looped to
+    ``seconds`` (:func:`write_hour_log`, in-log dedup off as in :func:`hour`), the fleet recipe at the
+    logs' size and at 160x96 on one worker (in-process) and two, interleaved against raw decode."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    long_logs = []
+    for src in logs:
+        path = work / f"loop_{seconds:g}s" / f"{src.stem}.mcap"
+        if not path.is_file():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_hour_log(src, path, seconds)
+        long_logs.append(path)
+    off = ["filters.dedup_cosine=1.0"]
+    runs = {"raw decode": None}
+    for name, extra in (("fleet", []), ("fleet 160x96", SMALL)):
+        runs.update({f"{name}, 1 worker": ("fleet", 1, off + extra), f"{name}, 2 workers": ("fleet", 2, off + extra)})
+    wall, cpu, frames = {k: [] for k in runs}, {k: [] for k in runs}, 0
+    for r in range(rounds):
+        for name, spec in runs.items():
+            with Meter() as m:
+                if spec is None:
+                    frames = raw_decode(long_logs)
+                else:
+                    curate_run(long_logs, _out(work, f"loop {name}"), *spec)
+            wall[name].append(m.wall)
+            cpu[name].append(m.cpu)
+        print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
+    print(f"\nscaling: {len(long_logs)} logs looped to {seconds:g} s, {frames} camera-frames ({off})")
+    for k in runs:
+        print(
+            f"{k:24s} {frames / med[k]:12.1f} cam-frames/s, {med['raw decode'] / med[k]:.2f}x raw (wall), "
+            f"{1e3 * med_cpu[k] / frames:.3f} CPU ms per camera-frame, "
+            f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU)"
+        )
+    for name in ("fleet", "fleet 160x96"):
+        print(
+            f"1 -> 2 workers ({name}): {med[f'{name}, 1 worker'] / med[f'{name}, 2 workers']:.2f}x wall on "
+            f"{os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f})"
+        )
+
+
 HOUR_SCRIPT = """
 import json, resource, sys, time
 import cv2
@@ -360,6 +405,9 @@ def main() -> None:
     parser.add_argument("--hour-seconds", type=float, default=3600.0, help="length of that log (default 3600)")
     parser.add_argument("--hour-recipe", choices=sorted(RECIPES), default="fleet")
     parser.add_argument("--skip-throughput", action="store_true", help="only the hour-long log")
+    parser.add_argument(
+        "--scaling-seconds", type=float, help="also time 1 -> 2 workers on the logs looped to this length"
+    )
     parser.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "drivewm_bench_curate")
     args = parser.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
@@ -371,6 +419,8 @@ def main() -> None:
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
     if not args.skip_throughput:
         throughput(logs, args.work, args.rounds)
+    if args.scaling_seconds:
+        scaling(logs, args.work, args.scaling_seconds, args.rounds)
     if args.hour:
         hour(logs[0], args.work, args.hour_seconds, args.hour_recipe)
     print(f"load average {os.getloadavg()[0]:.1f} at the end")
