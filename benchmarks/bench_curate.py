@@ -5,12 +5,18 @@ Everything is measured in this run on the same input, in interleaved rounds (med
 
 - raw decode: drivewm's image stream of every log (MCAP + protobuf) and one JPEG decode per
   image (``ImageFrame.decode``): the least any curation must do;
+- raw decode straight to RGB (``cv2.IMREAD_COLOR_RGB``, no BGR -> RGB copy): the same pixels a
+  little cheaper, as curation decodes them, printed beside the baseline (which stays as it was);
 - ``drivewm curate`` with the packaged ``default`` and ``fleet`` recipes (drivewm/recipes/curate/) on
-  one local worker, and the fleet recipe on two;
+  one local worker and the fleet recipe on two, at the logs' size and at 160x96 (the team's clip
+  size: ``--set resolution=[160,96] crf=12 h264_yuv_converter=swscale``, JPEGs decoded at 1/2 scale in
+  the DCT domain);
 - per step CPU seconds per camera-frame (the stage's own StepClock: index, read, decode, resize,
-  shots, filters, encode, write);
-- PSNR of the encoded clips against the log's frames at each camera's exposure times, with the
-  H.264 settings that produced them.
+  shots, filters, encode, write, other) and "outside": the run's CPU outside the per-log stage
+  (contact sheet, manifest, report: a fixed cost per run);
+- PSNR of the encoded clips against the log's frames at each camera's exposure times (decoded in
+  full, INTER_AREA-resized to the clip's size), with the H.264 settings that produced them, and of
+  the 1/2-scale JPEG decode against full decode + INTER_AREA.
 
 On a machine shared with other jobs, wall-clock ratios move with the load; CPU seconds per
 camera-frame (this process and its workers) move much less, so both are printed.
@@ -38,6 +44,8 @@ import numpy as np
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 REPO = Path(__file__).resolve().parents[1]
 RECIPES = ("default", "fleet")  # packaged curate recipes (drivewm/recipes/curate/)
+#: the runs at the team's clip size: the fleet recipe at 160x96 (swscale: OpenCV's centred chroma costs ~3 dB there)
+SMALL = ["resolution=[160,96]", "crf=12", "h264_yuv_converter=swscale"]
 SCENARIOS = ["highway", "roundabout", "merge", "intersection"]
 
 
@@ -83,6 +91,50 @@ def raw_decode(logs: list[Path]) -> int:
     return frames
 
 
+def raw_decode_rgb(logs: list[Path]) -> int:
+    """As :func:`raw_decode`, decoding straight to RGB (the pixels of ``ImageFrame.decode``)."""
+    import cv2
+
+    from drivewm.logs.reader import LogStream
+
+    frames = 0
+    for path in logs:
+        for _, (_, frame) in LogStream(path).stream(("image",)):
+            cv2.imdecode(np.frombuffer(frame.data, np.uint8), cv2.IMREAD_COLOR_RGB)
+            frames += 1
+    return frames
+
+
+def reduced_decode(logs: list[Path], size: tuple[int, int], rounds: int) -> None:
+    """CPU ms per image and PSNR of JPEGs decoded at a reduced DCT scale to ``size`` against full decode +
+    INTER_AREA (drivewm.curate.images), interleaved rounds over the first log's images."""
+    import cv2
+
+    from drivewm.curate.images import decode_rgb, fit, jpeg_scale
+    from drivewm.logs.reader import read_log
+
+    log = read_log(logs[0])
+    frames = [f for fs in log.images.values() for f in fs]
+    cam = log.rig.cameras[0]
+    scale = jpeg_scale((cam.width, cam.height), size)
+    full = lambda f: cv2.resize(f.decode(), size, interpolation=cv2.INTER_AREA)  # noqa: E731
+    reduced = lambda f: fit(decode_rgb(f, size, scale), size)  # noqa: E731
+    ms = {"full": [], "reduced": []}
+    for _ in range(rounds):
+        for name, fn in (("full", full), ("reduced", reduced)):
+            c0 = time.process_time()
+            for f in frames:
+                fn(f)
+            ms[name].append(1e3 * (time.process_time() - c0) / len(frames))
+    mse = [np.mean((reduced(f).astype(np.float64) - full(f)) ** 2) for f in frames[::7]]
+    print(
+        f"\nJPEG {cam.width}x{cam.height} -> {size[0]}x{size[1]}: full decode + INTER_AREA "
+        f"{np.median(ms['full']):.3f} CPU ms per image, 1/{scale} DCT-scaled decode (+ INTER_AREA) "
+        f"{np.median(ms['reduced']):.3f} ms ({np.median(ms['full']) / np.median(ms['reduced']):.2f}x); "
+        f"PSNR of the reduced against the full {10 * np.log10(255.0**2 / np.mean(mse)):.2f} dB"
+    )
+
+
 def curate_run(logs: list[Path], out: Path, recipe: str, workers: int, overrides: list[str] = ()) -> dict:
     from drivewm.curate import curate, load_curate_config
 
@@ -104,7 +156,9 @@ def step_ms(report: dict, frames: int) -> dict[str, float]:
 
 def clip_psnr(out: Path, logs: list[Path], max_clips: int = 6) -> tuple[float, float, float]:
     """(mean PSNR dB, min PSNR dB, mean kB per camera video) of up to ``max_clips`` clips against
-    the log frames at each camera's exposure times."""
+    the log frames at each camera's exposure times (decoded in full, INTER_AREA-resized to the clip's size)."""
+    import cv2
+
     from drivewm.clips import iter_clips
     from drivewm.logs.reader import read_log
 
@@ -114,7 +168,13 @@ def clip_psnr(out: Path, logs: list[Path], max_clips: int = 6) -> tuple[float, f
         log = by_name[Path(clip.meta.source_log).name]
         for cam in clip.meta.cameras:
             frames = {f.timestamp_ns: f for f in log.images[cam]}
-            source = np.stack([frames[t].decode() for t in clip.meta.camera_times_ns(cam)])
+            size = tuple(clip.video(cam).shape[2:0:-1])  # (W, H)
+            source = np.stack(
+                [
+                    cv2.resize(frames[t].decode(), size, interpolation=cv2.INTER_AREA)
+                    for t in clip.meta.camera_times_ns(cam)
+                ]
+            )
             mse = np.mean((clip.video(cam).astype(np.float64) - source) ** 2, axis=(1, 2, 3))
             psnrs += list(10 * np.log10(255.0**2 / np.maximum(mse, 1e-12)))
             sizes.append(len(clip.mp4[cam]) / 1e3)
@@ -125,68 +185,83 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
     import cv2
 
     cv2.setNumThreads(1)  # one core per worker, as the pool's workers run
-    runs = {"raw decode": None, "default, 1 worker": ("default", 1), "fleet, 1 worker": ("fleet", 1)}
-    runs["fleet, 2 workers"] = ("fleet", 2)
+    runs = {
+        "raw decode": None,
+        "raw decode, RGB": None,
+        "default, 1 worker": ("default", 1, []),
+        "fleet, 1 worker": ("fleet", 1, []),
+        "fleet, 2 workers": ("fleet", 2, []),
+        "fleet 160x96, 1 worker": ("fleet", 1, SMALL),
+        "fleet 160x96, 2 workers": ("fleet", 2, SMALL),
+    }
     wall = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
-    steps: dict[str, list[dict]] = {"default": [], "fleet": []}
+    steps: dict[str, list[dict]] = {k: [] for k, spec in runs.items() if spec is not None and spec[1] == 1}
     stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
     frames, reports = 0, {}
     for r in range(rounds):
         for name, spec in runs.items():
             with Meter() as m:
                 if spec is None:
-                    frames = raw_decode(logs)
+                    frames = (raw_decode_rgb if name.endswith("RGB") else raw_decode)(logs)
                 else:
-                    reports[name] = curate_run(logs, work / name.replace(", ", "_").replace(" ", ""), *spec)
+                    reports[name] = curate_run(logs, _out(work, name), *spec)
             wall[name].append(m.wall)
             cpu[name].append(m.cpu)
-            if spec is not None and spec[1] == 1:
-                steps[spec[0]].append(step_ms(reports[name], frames))
             if spec is not None:
-                stage_cpu[name].append(sum(step_ms(reports[name], frames).values()))
+                stage = step_ms(reports[name], frames)
+                stage_cpu[name].append(sum(stage.values()))
+                if spec[1] == 1:  # in-process: the run's CPU outside the per-log stage is the rest
+                    steps[name].append({**stage, "outside": 1e3 * m.cpu / frames - sum(stage.values())})
         print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
     med = {k: float(np.median(v)) for k, v in wall.items()}
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
     kept = {k: reports[k]["kept"] for k in reports}
     print(f"\ninput: {len(logs)} logs, {frames} camera-frames; clips kept {kept}")
-    print(f"{'':22s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s}")
+    print(f"{'':24s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s}")
     for k in runs:
         print(
-            f"{k:22s} {frames / med[k]:12.1f} {med['raw decode'] / med[k]:12.2f} "
+            f"{k:24s} {frames / med[k]:12.1f} {med['raw decode'] / med[k]:12.2f} "
             f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f}"
         )
-    speedup = med["fleet, 1 worker"] / med["fleet, 2 workers"]
     steady = {k: float(np.median(v)) for k, v in stage_cpu.items()}
-    print(
-        f"1 -> 2 workers (fleet): {speedup:.2f}x wall on {os.cpu_count()} CPUs (load average now "
-        f"{os.getloadavg()[0]:.1f}); stage CPU ms per camera-frame per worker (StepClock, no process start-up): "
-        f"{steady['fleet, 1 worker']:.3f} with 1 worker, {steady['fleet, 2 workers']:.3f} with 2"
-    )
+    for one, two in (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers")):
+        print(
+            f"1 -> 2 workers ({one.split(',')[0]}): {med[one] / med[two]:.2f}x wall, "
+            f"{med_cpu[one] / med_cpu[two]:.2f}x CPU per frame, on {os.cpu_count()} CPUs (load average now "
+            f"{os.getloadavg()[0]:.1f}); stage CPU ms per camera-frame per worker (StepClock, no process start-up): "
+            f"{steady[one]:.3f} with 1 worker, {steady[two]:.3f} with 2"
+        )
     startup = worker_startup_cpu_s()
     print(
         f"a pool worker's start-up (spawn + importing the stage) costs {startup:.2f} CPU s, i.e. "
         f"{1e3 * 2 * startup / frames:.3f} ms per camera-frame of this input for 2 workers (1 worker runs in-process)"
     )
-    print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock):")
+    print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock; outside: rest of the run):")
     names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
-    print(f"{'recipe':10s} " + " ".join(f"{k:>8s}" for k in names) + f" {'total':>8s}")
-    for recipe, rows in steps.items():
+    print(f"{'run':24s} " + " ".join(f"{k:>8s}" for k in names) + f" {'total':>8s}")
+    for run, rows in steps.items():
         vals = [float(np.median([row.get(k, 0.0) for row in rows])) for k in names]
-        print(f"{recipe:10s} " + " ".join(f"{v:8.3f}" for v in vals) + f" {sum(vals):8.3f}")
+        print(f"{run:24s} " + " ".join(f"{v:8.3f}" for v in vals) + f" {sum(vals):8.3f}")
     print(f"raw decode total {1e3 * med_cpu['raw decode'] / frames:.3f} ms per camera-frame (read + decode)")
     print("\nH.264 output (yuv420p, no B-frames, tune zerolatency) against the source frames:")
     from drivewm.curate import load_curate_config
 
-    for recipe, run in (("default", "default, 1 worker"), ("fleet", "fleet, 1 worker")):
-        cfg = load_curate_config(recipe)
-        mean, low, kb = clip_psnr(work / run.replace(", ", "_").replace(" ", ""), logs)
+    for run, (recipe, _, overrides) in ((k, v) for k, v in runs.items() if v is not None and v[1] == 1):
+        cfg = load_curate_config(recipe, overrides)
+        mean, low, kb = clip_psnr(_out(work, run), logs)
         threads = cfg.h264_threads or "x264 auto"
+        size = "x".join(map(str, cfg.resolution)) if cfg.resolution else "log size"
         print(
-            f"  {recipe:8s} preset {cfg.h264_preset}, crf {cfg.crf}, threads {threads}, RGB->YUV "
-            f"{cfg.h264_yuv_converter}: "
-            f"PSNR mean {mean:.2f} dB, min {low:.2f} dB, {kb:.0f} kB per camera per {cfg.clip_frames}-frame clip"
+            f"  {run:24s} {size}, preset {cfg.h264_preset}, crf {cfg.crf}, threads {threads}, RGB->YUV "
+            f"{cfg.h264_yuv_converter}, encoder kept {cfg.h264_keep_encoder}: PSNR mean {mean:.2f} dB, "
+            f"min {low:.2f} dB, {kb:.0f} kB per camera per {cfg.clip_frames}-frame clip"
         )
+    reduced_decode(logs, (160, 96), rounds)
+
+
+def _out(work: Path, run: str) -> Path:
+    return work / run.replace(", ", "_").replace(" ", "")
 
 
 def worker_startup_cpu_s() -> float:
@@ -199,7 +274,8 @@ def worker_startup_cpu_s() -> float:
 def _step_order(name: str) -> int:
     from drivewm.curate.timing import STEPS
 
-    return STEPS.index(name) if name in STEPS else len(STEPS)
+    order = (*STEPS, "outside")
+    return order.index(name) if name in order else len(order)
 
 
 def write_hour_log(source: Path, out: Path, seconds: float) -> Path:
@@ -227,6 +303,51 @@ def write_hour_log(source: Path, out: Path, seconds: float) -> Path:
                         writer.write_encoded_image(cam, t, f.data, f.format)
             D = step @ D
     return out
+
+
+def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
+    """1 -> 2 workers on inputs long enough to amortise a pool worker's start-up: each log looped to
+    ``seconds`` (:func:`write_hour_log`, in-log dedup off as in :func:`hour`), the fleet recipe at the
+    logs' size and at 160x96 on one worker (in-process) and two, interleaved against raw decode."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    long_logs = []
+    for src in logs:
+        path = work / f"loop_{seconds:g}s" / f"{src.stem}.mcap"
+        if not path.is_file():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_hour_log(src, path, seconds)
+        long_logs.append(path)
+    off = ["filters.dedup_cosine=1.0"]
+    runs = {"raw decode": None}
+    for name, extra in (("fleet", []), ("fleet 160x96", SMALL)):
+        runs.update({f"{name}, 1 worker": ("fleet", 1, off + extra), f"{name}, 2 workers": ("fleet", 2, off + extra)})
+    wall, cpu, frames = {k: [] for k in runs}, {k: [] for k in runs}, 0
+    for r in range(rounds):
+        for name, spec in runs.items():
+            with Meter() as m:
+                if spec is None:
+                    frames = raw_decode(long_logs)
+                else:
+                    curate_run(long_logs, _out(work, f"loop {name}"), *spec)
+            wall[name].append(m.wall)
+            cpu[name].append(m.cpu)
+        print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
+    print(f"\nscaling: {len(long_logs)} logs looped to {seconds:g} s, {frames} camera-frames ({off})")
+    for k in runs:
+        print(
+            f"{k:24s} {frames / med[k]:12.1f} cam-frames/s, {med['raw decode'] / med[k]:.2f}x raw (wall), "
+            f"{1e3 * med_cpu[k] / frames:.3f} CPU ms per camera-frame, "
+            f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU)"
+        )
+    for name in ("fleet", "fleet 160x96"):
+        print(
+            f"1 -> 2 workers ({name}): {med[f'{name}, 1 worker'] / med[f'{name}, 2 workers']:.2f}x wall on "
+            f"{os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f})"
+        )
 
 
 HOUR_SCRIPT = """
@@ -284,6 +405,9 @@ def main() -> None:
     parser.add_argument("--hour-seconds", type=float, default=3600.0, help="length of that log (default 3600)")
     parser.add_argument("--hour-recipe", choices=sorted(RECIPES), default="fleet")
     parser.add_argument("--skip-throughput", action="store_true", help="only the hour-long log")
+    parser.add_argument(
+        "--scaling-seconds", type=float, help="also time 1 -> 2 workers on the logs looped to this length"
+    )
     parser.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "drivewm_bench_curate")
     args = parser.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
@@ -295,6 +419,8 @@ def main() -> None:
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
     if not args.skip_throughput:
         throughput(logs, args.work, args.rounds)
+    if args.scaling_seconds:
+        scaling(logs, args.work, args.scaling_seconds, args.rounds)
     if args.hour:
         hour(logs[0], args.work, args.hour_seconds, args.hour_recipe)
     print(f"load average {os.getloadavg()[0]:.1f} at the end")

@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 
-from drivewm.clips.video import decode_mp4, encode_mp4
+from drivewm.clips.video import H264Encoder, decode_mp4, encode_mp4
 from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
@@ -113,6 +113,17 @@ class Clip:
             self._decoded[camera] = decode_mp4(self.mp4[camera], self.meta.num_frames, f"clip {self.key} {camera}")
         return self._decoded[camera]
 
+    def frames(self, camera: str, indices: list[int]) -> np.ndarray:
+        """Some frames of one camera, uint8 RGB (len(indices), H, W, 3), converting only these from
+        the decoded video (unless it is decoded already)."""
+        if camera in self._decoded:
+            return self._decoded[camera][indices]
+        if camera not in self.mp4:
+            raise DrivewmError(f"clip {self.key}: no video for camera {camera!r}")
+        unique = sorted(set(indices))
+        got = decode_mp4(self.mp4[camera], self.meta.num_frames, f"clip {self.key} {camera}", keep=unique)
+        return got[[unique.index(i) for i in indices]]
+
     def videos(self) -> np.ndarray:
         """All cameras in rig order, uint8 (V, T, H, W, 3)."""
         return np.stack([self.video(c) for c in self.meta.cameras])
@@ -126,12 +137,17 @@ def clip_from_arrays(
     preset: str = "veryfast",
     threads: int = 0,
     yuv_converter: str = "swscale",
+    encoders: dict[str, H264Encoder] | None = None,
 ) -> Clip:
     """Encode per-camera uint8 (T, H, W, 3) arrays into a :class:`Clip` (validating the meta);
     ``crf``, ``preset``, ``threads``, ``yuv_converter``: the H.264 settings of
-    :func:`drivewm.clips.video.encode_mp4`."""
+    :func:`drivewm.clips.video.encode_mp4`. ``encoders``: per camera an open encoder to use instead
+    (its own settings apply), kept over the clips of a log (:class:`drivewm.clips.video.H264Encoder`)."""
     validate_meta(meta)
-    mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads, yuv_converter) for c in meta.cameras}
+    if encoders is not None:
+        mp4 = {c: encoders[c].encode(frames[c]) for c in meta.cameras}
+    else:
+        mp4 = {c: encode_mp4(frames[c], meta.fps, crf, preset, threads, yuv_converter) for c in meta.cameras}
     clip = Clip(meta, mp4, np.asarray(T_world_from_ego, dtype=np.float64))
     clip._decoded.update({c: frames[c] for c in meta.cameras})
     return clip

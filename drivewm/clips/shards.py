@@ -134,10 +134,11 @@ class BadClip:
     reason: str
 
 
-def read_shard(shard: Path) -> Iterator[Clip | BadClip]:
+def read_shard(shard: Path, keys: set[str] | None = None) -> Iterator[Clip | BadClip]:
     """Clips of one tar in order, a :class:`BadClip` in place of each one that cannot be read. A
     truncated or corrupt tar yields the clips before the damage, then one BadClip (named after the
-    shard's stem) for the rest; an unsafe member path refuses the whole shard."""
+    shard's stem) for the rest; an unsafe member path refuses the whole shard. ``keys``: only these
+    clips are parsed and yielded (checking a clip's metadata and rig costs more than reading its bytes)."""
     groups: dict[str, dict[str, bytes]] = {}
     damage = None
     try:
@@ -154,6 +155,8 @@ def read_shard(shard: Path) -> Iterator[Clip | BadClip]:
         yield BadClip(shard.stem, str(exc))
         return
     for key, members in groups.items():
+        if keys is not None and key not in keys:
+            continue
         try:
             yield _clip_from_members(key, members, shard)
         except DrivewmError as exc:
@@ -162,9 +165,10 @@ def read_shard(shard: Path) -> Iterator[Clip | BadClip]:
         yield damage
 
 
-def iter_shard(shard: Path) -> Iterator[Clip]:
-    """Clips of one tar in order. A corrupt tar or clip raises DrivewmError naming the shard."""
-    for item in read_shard(shard):
+def iter_shard(shard: Path, keys: set[str] | None = None) -> Iterator[Clip]:
+    """Clips of one tar in order (only ``keys``, if given). A corrupt tar or clip raises DrivewmError
+    naming the shard."""
+    for item in read_shard(shard, keys):
         if isinstance(item, BadClip):
             raise DrivewmError(item.reason)
         yield item

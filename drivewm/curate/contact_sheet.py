@@ -20,11 +20,11 @@ def _thumb(img: np.ndarray) -> np.ndarray:
 
 def clip_block(clip) -> np.ndarray:
     """One clip: rows = cameras in rig order, columns = first/middle/last frame, caption lines on top."""
-    videos = clip.videos()  # (V, T, H, W, 3)
-    T = videos.shape[1]
+    T = clip.meta.num_frames
+    shown = [0, T // 2, T - 1]
     rows = []
-    for name, v in zip(clip.meta.cameras, videos):
-        row = np.concatenate([_thumb(v[t]) for t in (0, T // 2, T - 1)], axis=1)
+    for name in clip.meta.cameras:
+        row = np.concatenate([_thumb(f) for f in clip.frames(name, shown)], axis=1)
         cv2.putText(row, name, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1, cv2.LINE_AA)
         rows.append(row)
     grid = np.concatenate(rows, axis=0)
@@ -42,7 +42,10 @@ def write_contact_sheet(out_dir: Path, rows: list[dict], n_clips: int) -> Path |
     if not rows or n_clips <= 0:
         return None
     picks = [rows[i] for i in sorted(set(np.linspace(0, len(rows) - 1, min(n_clips, len(rows))).round().astype(int)))]
-    clips = [next(c for c in iter_shard(Path(out_dir) / row["shard"]) if c.key == row["key"]) for row in picks]
+    found = {}
+    for shard in sorted({row["shard"] for row in picks}):  # each shard read once, only the picked clips parsed
+        found.update({c.key: c for c in iter_shard(Path(out_dir) / shard, {row["key"] for row in picks})})
+    clips = [found[row["key"]] for row in picks]
     return write_clips_sheet(clips, Path(out_dir) / "contact_sheet.png")
 
 

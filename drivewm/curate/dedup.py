@@ -1,8 +1,9 @@
 """Near-duplicate clips across the dataset, by cosine similarity of a tiny clip embedding.
 
 The embedding: for every camera, the first, middle and last frame as 16x9 grey thumbnails
-(INTER_AREA), each centred to zero mean (so a global brightness change does not hide a duplicate),
-concatenated over cameras and frames and L2-normalised: 432 numbers per camera. Two clips of the
+(INTER_AREA, from the filters' 160 px wide grey thumbnails), each centred to zero mean (so a
+global brightness change does not hide a duplicate), concatenated over cameras and frames and
+L2-normalised: 432 numbers per camera. Two clips of the
 same place at the same moment (a log curated twice, overlapping clips, a re-recorded drive)
 come out above 0.98; different moments of a drive differ in layout and fall well below.
 """
@@ -12,20 +13,31 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from drivewm.curate.images import analysis_grey
+
 THUMB_WH = (16, 9)
 
 
+def key_frames(T: int) -> list[int]:
+    """The frames of a T-frame clip that the embedding looks at: first, middle, last."""
+    return [0, T // 2, T - 1]
+
+
 def clip_embedding(frames: np.ndarray) -> np.ndarray:
-    """(V, T, H, W, 3) uint8 RGB -> (V * 3 * 144,) float32 unit vector."""
-    T = frames.shape[1]
-    parts = []
-    for cam in frames:
-        for t in (0, T // 2, T - 1):
-            thumb = cv2.resize(cv2.cvtColor(cam[t], cv2.COLOR_RGB2GRAY), THUMB_WH, interpolation=cv2.INTER_AREA).astype(
-                np.float32
-            )
-            parts.append((thumb - thumb.mean()).ravel())
-    vec = np.concatenate(parts)
+    """(V, T, H, W, 3) uint8 RGB -> (V * 3 * 144,) float32 unit vector (see :func:`grey_embedding`)."""
+    keep = key_frames(frames.shape[1])
+    return grey_embedding(np.stack([[analysis_grey(cam[t]) for t in keep] for cam in frames]))
+
+
+def grey_embedding(grey: np.ndarray) -> np.ndarray:
+    """(V, 3, h, 160) uint8 grey analysis thumbnails of each camera's :func:`key_frames`
+    (drivewm.curate.images.analysis_grey, made once per frame while streaming) -> (V * 3 * 144,)
+    float32 unit vector."""
+    thumbs = [
+        cv2.resize(g, THUMB_WH, interpolation=cv2.INTER_AREA).astype(np.float32)
+        for g in grey.reshape(-1, *grey.shape[2:])
+    ]
+    vec = np.concatenate([(t - t.mean()).ravel() for t in thumbs])
     return (vec / max(float(np.linalg.norm(vec)), 1e-6)).astype(np.float32)
 
 

@@ -27,8 +27,9 @@ import numpy as np
 from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
+from drivewm.clips.video import H264Encoder
 from drivewm.config import to_dict
-from drivewm.curate import dedup, filters, split, sync, trajectory
+from drivewm.curate import dedup, filters, images, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.privacy import Anonymizer
@@ -125,16 +126,20 @@ def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, cl
     for f in _stale_shards(out, name):
         f.unlink()
     kept_rows, embeddings, dropped = [], _Embeddings(), {}
-    with ShardWriter(out, name, cfg.clips_per_shard) as writer:
-        for start, ticks in _stream_windows(reader, ctx, clock):
-            clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock)
-            if reason:
-                dropped[reason] = dropped.get(reason, 0) + 1
-                continue
-            with clock.step("write"):
-                writer.write(clip)
-            embeddings.add(emb)
-            kept_rows.append(manifest_row(clip.meta))
+    try:
+        with ShardWriter(out, name, cfg.clips_per_shard) as writer:
+            for start, ticks in _stream_windows(reader, ctx, clock):
+                clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock)
+                if reason:
+                    dropped[reason] = dropped.get(reason, 0) + 1
+                    continue
+                with clock.step("write"):
+                    writer.write(clip)
+                embeddings.add(emb)
+                kept_rows.append(manifest_row(clip.meta))
+    finally:
+        for encoder in ctx.encoders.values():
+            encoder.close()
     shard_of = dict((k, s) for s, k in writer.written)
     for row in kept_rows:
         row["shard"] = shard_of[row["key"]]
@@ -158,6 +163,7 @@ class _LogContext:
     captioner: Captioner
     anonymizer: Callable[[np.ndarray], np.ndarray] | None
     clocks: _ClockReport
+    encoders: dict[str, H264Encoder] = dataclasses.field(default_factory=dict)  # h264_keep_encoder: per camera
 
 
 def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
@@ -239,6 +245,8 @@ def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> It
     for a, b in runs:
         needed[a:b] = True
     assembler = TickAssembler(ctx.table, ctx.sorted_ns, needed)
+    source = {c.name: (c.width, c.height) for c in ctx.log.rig.cameras}
+    scales = [images.jpeg_scale(source[c.name], (c.width, c.height)) for c in ctx.rig.cameras]
     blank = _small(np.zeros((cam.height, cam.width, 3), np.uint8))
     windows = WindowStream(
         runs, cfg.clip_frames, cfg.stride_frames, cfg.fps, cfg.shot_threshold, cfg.shot_min_frames, blank
@@ -251,7 +259,7 @@ def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> It
         if item is None:
             break
         for tick, frames in assembler.add(*item[1]):
-            buffer[tick] = TickImages(frames, ctx.rig.cameras, clock.step)
+            buffer[tick] = TickImages(frames, ctx.rig.cameras, clock.step, scales)
             with clock.step("shots"):
                 final = windows.push(tick, functools.partial(_reference_frame, buffer[tick]))
             for start, end in final:
@@ -312,9 +320,10 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
     t_ns = ctx.table.tick_ns[start : start + T]
     poses = ctx.smooth.poses_at(t_ns) if ctx.smooth is not None else np.tile(np.eye(4), (T, 1, 1))
     with clock.step("filters"):
-        scores = filters.score_clip(frames, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)
+        grey = np.stack([[tick.grey(v) for tick in ticks] for v in range(V)])  # (V, T, h, 160), once per frame
+        scores = filters.score_grey(grey, poses[:, :3, 3] if ctx.smooth is not None else None, cfg.filters)
         reason = filters.judge(scores, cfg.filters)
-        emb = dedup.clip_embedding(frames)
+        emb = dedup.grey_embedding(grey[:, dedup.key_frames(T)])
         if reason is None and cfg.filters.dedup_cosine < 1 and kept.count:
             if dedup.near_duplicates(emb[None], cfg.filters.dedup_cosine, kept.rows()):
                 reason = "near_duplicate"
@@ -326,8 +335,21 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
     meta = _meta(ctx, name, start, t_ns, poses, scores, frames)
     with clock.step("encode"):
         videos = {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}
-        clip = clip_from_arrays(meta, videos, poses, cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
+        h264 = (cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
+        clip = clip_from_arrays(meta, videos, poses, *h264, encoders=_encoders(ctx))
     return clip, None, emb
+
+
+def _encoders(ctx: _LogContext) -> dict[str, H264Encoder] | None:
+    """Per camera the encoder kept over the log's clips (``h264_keep_encoder``; opened with the first
+    clip), or None: one encoder per clip video."""
+    cfg = ctx.cfg
+    if not cfg.h264_keep_encoder:
+        return None
+    if not ctx.encoders:
+        h264 = (cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
+        ctx.encoders.update({c.name: H264Encoder(c.width, c.height, cfg.fps, *h264) for c in ctx.rig.cameras})
+    return ctx.encoders
 
 
 def _meta(

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import cv2
 import numpy as np
 
+from drivewm.curate.images import analysis_grey, decode_rgb, fit
 from drivewm.curate.sync import SyncResult
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Camera
@@ -82,12 +82,17 @@ class TickAssembler:
 
 
 class TickImages:
-    """One tick's frames, decoded on first use (uint8 RGB at the output camera size) and kept while
-    the tick is buffered, so a frame shared by shot detection and a clip is decoded once."""
+    """One tick's frames, decoded on first use (uint8 RGB at the output camera size, JPEGs at a reduced
+    DCT scale when ``scales`` allow: :mod:`drivewm.curate.images`) and kept while the tick is buffered,
+    so a frame shared by shot detection, filters and clips is decoded once; likewise its grey analysis
+    thumbnail. ``timed(step)`` charges the CPU to a step (drivewm.curate.timing)."""
 
-    def __init__(self, frames: list[ImageFrame], cameras: list[Camera], timed: Callable[[str], object]):
-        self.frames, self.cameras, self.timed = frames, cameras, timed
+    def __init__(
+        self, frames: list[ImageFrame], cameras: list[Camera], timed: Callable[[str], object], scales: list[int]
+    ):
+        self.frames, self.cameras, self.timed, self.scales = frames, cameras, timed, scales
         self._decoded: list[np.ndarray | DrivewmError | None] = [None] * len(frames)
+        self._grey: list[np.ndarray | None] = [None] * len(frames)
 
     def image(self, v: int) -> np.ndarray:
         """Camera ``v``'s image (H, W, 3) uint8 RGB; raises DrivewmError for undecodable bytes (every time)."""
@@ -98,14 +103,20 @@ class TickImages:
             raise got
         return got
 
+    def grey(self, v: int) -> np.ndarray:
+        """Camera ``v``'s grey analysis thumbnail (h, 160) uint8 (images.analysis_grey); raises as :meth:`image`."""
+        if self._grey[v] is None:
+            self._grey[v] = analysis_grey(self.image(v))
+        return self._grey[v]
+
     def _decode(self, v: int) -> np.ndarray | DrivewmError:
-        cam = self.cameras[v]
+        size = (self.cameras[v].width, self.cameras[v].height)
         try:
             with self.timed("decode"):
-                img = self.frames[v].decode()
+                img = decode_rgb(self.frames[v], size, self.scales[v])
         except DrivewmError as exc:
             return exc
-        if img.shape[:2] != (cam.height, cam.width):
+        if img.shape[:2] != (size[1], size[0]):
             with self.timed("resize"):
-                img = cv2.resize(img, (cam.width, cam.height), interpolation=cv2.INTER_AREA)
+                img = fit(img, size)
         return img

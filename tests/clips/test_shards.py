@@ -6,7 +6,7 @@ import pytest
 
 from drivewm.clips import ClipMeta, ShardWriter, iter_clips, read_manifest
 from drivewm.clips.format import clip_from_arrays
-from drivewm.clips.shards import write_manifest
+from drivewm.clips.shards import iter_shard, write_manifest
 from drivewm.clips.video import decode_mp4, encode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
@@ -75,6 +75,21 @@ def test_shard_round_trip_and_manifest(tmp_path):
         assert np.array_equal(got.T_world_from_ego, orig.T_world_from_ego)
         for cam in orig.meta.cameras:
             assert psnr(got.video(cam), frames[cam]) > 32.0
+
+
+def test_reading_some_clips_and_some_frames(tmp_path):
+    """iter_shard(keys=...) parses only those clips; Clip.frames gives those frames of the full video."""
+    with ShardWriter(tmp_path, "drive", max_clips=8) as writer:
+        for i in range(3):
+            writer.write(make_clip(f"clip{i}")[0])
+    shard = tmp_path / "drive-000000.tar"
+    assert [c.key for c in iter_shard(shard, {"clip2", "clip0", "absent"})] == ["clip0", "clip2"]
+    clip, again = (next(iter_shard(shard, {"clip1"})) for _ in range(2))
+    cam = clip.meta.cameras[1]
+    assert np.array_equal(clip.frames(cam, [8, 0, 4, 8]), again.video(cam)[[8, 0, 4, 8]])
+    assert np.array_equal(again.frames(cam, [3]), again.video(cam)[[3]])  # from the decoded video
+    with pytest.raises(DrivewmError, match="no video for camera 'nope'"):
+        clip.frames("nope", [0])
 
 
 def test_unsafe_member_is_refused(tmp_path):
