@@ -90,13 +90,20 @@ def verdict(summary: dict) -> list[str]:
         ("PSNR gain over best SDEdit", t["psnr"] - b["psnr"], ">=", MUST["psnr_gain_db"], f"dB vs {best}"),
         ("SSIM gain over best SDEdit", t["ssim"] - b["ssim"], ">", 0.0, f"vs {best}"),
         ("median SIFT shift (px)", t["sift_shift_px"], "<=", MUST["sift_shift_px"], ""),
-        ("CSE / source CSE", t["cse_ratio"], "<=", MUST["cse_ratio"], f"({t['cse_nan_clips']} clips without CSE)"),
+        (
+            "CSE / source CSE",
+            t["cse_ratio"],
+            "<=",
+            MUST["cse_ratio"],
+            f"({t['cse_nan_clips']} clips without CSE; the true target render's own: {t['truth_cse_ratio']:.3f})",
+        ),
         (
             "calibrated CSE / source's",
             t["cse_calibrated_ratio"],
             "<=",
             MUST["cse_ratio"],
-            f"({t['cse_calibrated_nan_clips']} clips without)",
+            f"({t['cse_calibrated_nan_clips']} clips without; the true target's: "
+            f"{t['truth_cse_calibrated_ratio']:.3f})",
         ),
         ("adherence", t["adherence"], ">=", MUST["adherence"], ""),
     ]

@@ -99,7 +99,9 @@ def run_cases(
         _, views = target_captions(case.source.meta, case.condition)
         captions = [views[c] for c in case.source.meta.cameras]
         seeds = [seed + v for v in range(len(captions))]
-        source_cse = cross_view_error(src, case.source.meta.get_rig())  # {cse, cse_calibrated} of the source
+        rig = case.source.meta.get_rig()
+        source_cse = cross_view_error(src, rig)  # {cse, cse_calibrated} of the source
+        truth_cse = cross_view_error(case.target.videos(), rig)  # and of the simulator's own target render
         outputs = {"identity": src, "tokenizer": _reconstruction(tokenizer, case.target.videos(), device)}
         coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
@@ -107,7 +109,7 @@ def run_cases(
             outputs[name] = restore_detail(out, src, coded_src) if detail else out
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
-            row |= {f"source_{k}": v for k, v in source_cse.items()}
+            row |= {f"source_{k}": v for k, v in source_cse.items()} | {f"truth_{k}": v for k, v in truth_cse.items()}
             rows.append(row | score_output(case, out, cse_for is None or name in cse_for))
         if progress is not None:
             progress(case, rows[-len(outputs) :])
@@ -120,8 +122,9 @@ def _reconstruction(tokenizer, frames: np.ndarray, device: torch.device | str = 
 
 def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
     """{target (and "all"): {method: means of psnr, ssim, adherence; medians of sift_shift_px; CSE ratios
-    (fitted and calibrated) as mean output CSE over mean source CSE on the clips where both are finite;
-    clip count}}."""
+    (fitted and calibrated) as mean output CSE over mean source CSE on the clips where both are finite,
+    and ``truth_`` the same ratio of the simulator's own target render (what the condition itself
+    does to CSE: snow, fog and night lose cross-view matches); clip count}}."""
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in rows:
         groups[(r["target"], r["method"])].append(r)
@@ -138,6 +141,13 @@ def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
         }
         for key in ("cse", "cse_calibrated"):
             ok = [r for r in rs if math.isfinite(r[key]) and math.isfinite(r[f"source_{key}"])]
-            ratio = np.mean([r[key] for r in ok]) / np.mean([r[f"source_{key}"] for r in ok]) if ok else math.nan
-            out[target][method] |= {f"{key}_ratio": float(ratio), f"{key}_nan_clips": len(rs) - len(ok)}
+            source = np.mean([r[f"source_{key}"] for r in ok]) if ok else math.nan
+            ratio = np.mean([r[key] for r in ok]) / source if ok else math.nan
+            truth = [r.get(f"truth_{key}", math.nan) for r in ok]
+            truth_ratio = np.mean(truth) / source if ok and all(map(math.isfinite, truth)) else math.nan
+            out[target][method] |= {
+                f"{key}_ratio": float(ratio),
+                f"truth_{key}_ratio": float(truth_ratio),
+                f"{key}_nan_clips": len(rs) - len(ok),
+            }
     return dict(out)
