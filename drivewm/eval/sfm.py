@@ -26,6 +26,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from drivewm.errors import DrivewmError
 from drivewm.eval.config import EpipolarConfig, PoseConfig
@@ -92,7 +93,7 @@ def run_sfm(
     pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 2)  # COLMAP's INFO lines drown the progress bar
     matcher = matcher or FrameMatcher(_default_match_cfg())
     shared = cfg.features == "shared" and matcher.shares_features
-    with tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
+    with threadpool_limits(limits=1), tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"
         images.mkdir()
