@@ -2,12 +2,13 @@
 and 60 s for the 221-frame real dashcam clip, on 2 cores (issue 14).
 
 Simulates one short nuscenes6 drive (highway-env, 320x192, 10 fps), curates it into 17-frame
-clips with the packaged curate recipe ``test``, and scores each clip with the full protocol (TSE, CSE, pose,
-trajectory) twice, interleaved: with the features TSE and CSE computed shared with structure from
-motion (``pose.features=shared``, the protocol) and with COLMAP's own extraction and matching
-(``colmap``, the protocol before issue 14), one process each. Prints per-metric seconds per clip,
-the medians, their ratio and the ratio to the 10 s goal; pose success and ATE of both. ``--dashcam`` also
-times ../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE) against 60 s.
+clips with the packaged curate recipe ``test`` (or takes the clips of ``--clip-dir``, e.g. the
+reference set), and scores each clip with the full protocol (TSE, CSE, pose, trajectory) twice,
+interleaved: with the features TSE and CSE computed shared with structure from motion
+(``pose.features=shared``, the protocol) and with COLMAP's own extraction and matching (``colmap``,
+the protocol before issue 14), one process each. Prints per-metric seconds per clip, the medians,
+their ratio and the ratio to the 10 s goal; pose success and ATE of both. ``--dashcam`` also times
+../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE) against 60 s.
 The machine is shared: the load average is printed; compare ratios taken in the same run.
 
     python benchmarks/bench_eval.py              # 2 clips
