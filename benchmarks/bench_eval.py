@@ -2,16 +2,18 @@
 and 60 s for the 221-frame real dashcam clip, on 2 cores (issue 14).
 
 Simulates one short nuscenes6 drive (highway-env, 320x192, 10 fps), curates it into 17-frame
-clips with the packaged curate recipe ``test``, and scores each clip with the full protocol (TSE, CSE, pose,
-trajectory) twice, interleaved: with the features TSE and CSE computed shared with structure from
-motion (``pose.features=shared``, the protocol) and with COLMAP's own extraction and matching
-(``colmap``, the protocol before issue 14), one process each. Prints per-metric seconds per clip,
-the medians, their ratio and the ratio to the 10 s goal; pose success of both. ``--dashcam`` also
-times ../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE) against 60 s.
+clips with the packaged curate recipe ``test`` (or takes the clips of ``--clip-dir``, e.g. the
+reference set), and scores each clip with the full protocol (TSE, CSE, pose, trajectory) twice,
+interleaved: with the features TSE and CSE computed shared with structure from motion
+(``pose.features=shared``, the protocol) and with COLMAP's own extraction and matching (``colmap``,
+the protocol before issue 14), one process each. Prints per-metric seconds per clip, the medians,
+their ratio and the ratio to the 10 s goal; pose success and ATE of both. ``--dashcam`` also times
+../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE) against 60 s.
 The machine is shared: the load average is printed; compare ratios taken in the same run.
 
     python benchmarks/bench_eval.py              # 2 clips
     python benchmarks/bench_eval.py --clips 6 --dashcam
+    python benchmarks/bench_eval.py --clip-dir CLIPDIR   # e.g. the reference set: tests/conftest.py::sim_clips()
     taskset -c 0,1 python benchmarks/bench_eval.py   # pin to 2 cores
 """
 
@@ -56,12 +58,13 @@ def timed(item, cfg) -> tuple[float, float, dict]:
     return time.perf_counter() - t0, time.process_time() - c0, metrics
 
 
-def bench_clips(n: int) -> None:
+def bench_clips(n: int, clip_dir: Path | None = None) -> None:
+    """Score ``n`` new simulated clips, or every clip of ``clip_dir``, with both feature paths, interleaved."""
     from drivewm.eval.config import EvalConfig, PoseConfig
     from drivewm.eval.inputs import load_items
 
     with tempfile.TemporaryDirectory() as tmp:
-        items = load_items(make_clips(Path(tmp), n))
+        items = load_items(clip_dir or make_clips(Path(tmp), n))
         for item in items:
             item.videos()  # decode once, outside the timing
         configs = {
@@ -71,12 +74,14 @@ def bench_clips(n: int) -> None:
         walls: dict[str, list[float]] = {k: [] for k in configs}
         cpus: dict[str, list[float]] = {k: [] for k in configs}
         success: dict[str, list[float]] = {k: [] for k in configs}
+        ates: dict[str, list[float]] = {k: [] for k in configs}
         for item in items:
             for name, cfg in configs.items():  # interleaved: both see the same load
                 wall, cpu, m = timed(item, cfg)
                 walls[name].append(wall)
                 cpus[name].append(cpu)
                 success[name].append(m["pose_success"])
+                ates[name].append(m["ate"])
                 parts = ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())
                 print(f"  {item.key:24s} {name:6s} wall {wall:6.1f} s, cpu {cpu:6.1f} s  ({parts})")
     print(f"clips: {len(items)} (6 cameras x 17 frames, 320x192), load average {os.getloadavg()[0]:.1f}")
@@ -85,7 +90,8 @@ def bench_clips(n: int) -> None:
         print(
             f"  {name:6s} median wall {wall:6.1f} s/clip = {wall / CLIP_GOAL_S:.2f}x the {CLIP_GOAL_S:.0f} s goal; "
             f"cpu {cpu:6.1f} s/clip = {cpu / CLIP_GOAL_S:.2f}x (one core), {cpu / 2 / CLIP_GOAL_S:.2f}x with 2 workers "
-            f"on 2 cores; pose success {np.mean(success[name]):.2f}"
+            f"on 2 cores; pose success {np.mean(success[name]):.2f}, ATE mean {np.nanmean(ates[name]):.4f} "
+            f"max {np.nanmax(ates[name]):.4f} m"
         )
     ratio = float(np.median(cpus["colmap"])) / float(np.median(cpus["shared"]))
     print(f"  speed-up shared / colmap features (cpu medians): {ratio:.2f}x")
@@ -110,11 +116,12 @@ def bench_dashcam() -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--clips", type=int, default=2, help="simulated 17-frame clips to time")
+    parser.add_argument("--clip-dir", type=Path, help="score these clips instead (e.g. the reference set's)")
     parser.add_argument("--dashcam", action="store_true", help="also time the 221-frame real dashcam clip")
     args = parser.parse_args()
     cores = len(os.sched_getaffinity(0))
     print(f"{cores} cores available to this process ({os.cpu_count()} on the machine)")
-    bench_clips(args.clips)
+    bench_clips(args.clips, args.clip_dir)
     if args.dashcam:
         bench_dashcam()
 

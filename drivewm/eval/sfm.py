@@ -4,15 +4,15 @@ The rig's intrinsics and extrinsics are known, so registration only has to find 
 every camera keeps its calibration fixed (a COLMAP camera model that carries its distortion:
 PINHOLE, OPENCV or FULL_OPENCV), and a COLMAP rig config (``apply_rig_config``: each camera's
 ``cam_from_rig`` from the extrinsics, held fixed in bundle adjustment) ties the views of one
-timestamp into one frame. Features come either from COLMAP's own SIFT extraction and sequential
-matching (``features='colmap'``, the default: it registers every reference clip), or from the
-benchmark's own matcher (``features='shared'``, about 2x faster, not yet as robust on snow): the
-SIFT keypoints and matches that TSE and CSE already computed
-(drivewm.eval.matching.FrameMatcher caches both), geometrically verified by the same robust F
-fit, are written into the COLMAP database, so COLMAP neither extracts nor matches: pairs are each
-camera's frame t with t + each of ``temporal_gaps``, and the overlapping camera pairs at each t.
-``features='colmap'`` (also what a learned matcher, which has no per-image keypoints, needs) writes
-PNGs and runs COLMAP's SIFT extraction and sequential matching, rig images expanded.
+timestamp into one frame. Features come from the benchmark's own matcher (``features='shared'``, the
+protocol): the SIFT keypoints and matches that TSE and CSE already computed
+(drivewm.eval.matching.FrameMatcher caches both), geometrically verified by the same robust F fit
+(``verify='drivewm'``), are written into the COLMAP database, so COLMAP neither extracts nor
+matches: pairs are each camera's frame t with t + each of ``temporal_gaps``, the overlapping camera
+pairs at each t and, for the metric scale, across one frame (``cross_gaps``). ``features='colmap'``
+(the protocol before issue 14's speed goal, 2.2x the pose CPU; also what a learned matcher, which has no
+per-image keypoints, needs) writes PNGs and runs COLMAP's SIFT extraction and sequential matching,
+rig images expanded.
 
 COLMAP puts pixel centres at half-integers (the top-left pixel's centre is (0.5, 0.5)); drivewm at
 integers (OpenCV), so principal points and keypoints get +0.5 on the way in.
@@ -26,6 +26,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from drivewm.errors import DrivewmError
 from drivewm.eval.config import EpipolarConfig, PoseConfig
@@ -92,7 +93,7 @@ def run_sfm(
     pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 2)  # COLMAP's INFO lines drown the progress bar
     matcher = matcher or FrameMatcher(_default_match_cfg())
     shared = cfg.features == "shared" and matcher.shares_features
-    with tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
+    with threadpool_limits(limits=1), tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"
         images.mkdir()

@@ -1,5 +1,7 @@
 """Matcher options and grid splitting (cheap plumbing checks with real OpenCV / TorchScript)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -55,3 +57,29 @@ def test_grid_split_skips_dash_cells():
     assert list(views) == ["A", "B", "C", "D", "E"] and views["B"].shape == (2, 2, 2, 3) and views["B"].max() == 7
     with pytest.raises(DrivewmError, match="does not split"):
         split_grid(np.zeros((1, 5, 6, 3), np.uint8), GridLayout.parse("2x3", list("ABCDEF")), "grid.mp4")
+
+
+def test_match_indices_equal_opencv_brute_force_ratio_and_mutual_checks():
+    """The one-matrix matcher keeps exactly the pairs that cv2.BFMatcher's 2-NN ratio test (Lowe
+    2004, sec. 7.1) and its mutual nearest-neighbour check keep: SIFT of a texture and of a noisy,
+    shifted crop of it that overlaps by two thirds (so that some ratio-test pairs are not mutual)."""
+    import cv2
+
+    from drivewm.eval.matching import detect_sift, match_indices
+
+    rng = np.random.default_rng(1)
+    blurred = cv2.GaussianBlur(rng.normal(0, 1, (240, 400)).astype(np.float32), (0, 0), 1.5)
+    tex = cv2.cvtColor(cv2.normalize(blurred, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8), cv2.COLOR_GRAY2RGB)
+    noisy = np.clip(tex[16:206, 104:384] + rng.normal(0, 12, (190, 280, 3)), 0, 255).astype(np.uint8)
+    cfg = MatchConfig()
+    fa, fb = detect_sift(tex[10:200, 10:290], cfg), detect_sift(noisy, cfg)
+    bf = cv2.BFMatcher(cv2.NORM_L2)
+    ratio = {
+        (m.queryIdx, m.trainIdx) for m, n in bf.knnMatch(fa.desc, fb.desc, k=2) if m.distance < cfg.ratio * n.distance
+    }
+    back = {m.queryIdx: m.trainIdx for m in bf.match(fb.desc, fa.desc)}
+    expected = sorted((i, j) for i, j in ratio if back[j] == i)
+    assert len(expected) > 500 and len(ratio) > len(expected)
+    assert [tuple(p) for p in match_indices(fa, fb, cfg).tolist()] == expected
+    unchecked = match_indices(fa, fb, dataclasses.replace(cfg, mutual=False))
+    assert sorted(map(tuple, unchecked.tolist())) == sorted(ratio)
