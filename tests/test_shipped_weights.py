@@ -27,7 +27,7 @@ GENERATE = [
     "generate", "--prompt", "a snowy highway at dusk, the car ahead brakes", "--rig", "nuscenes6",
     "--trajectory", "left", "--steps", "3", "--guidance", "3", "--seed", "7", "--num-samples", "1", "--device", "cpu",
 ]  # fmt: skip
-KINDS = ("tokenizer", "text2world", "multiview")
+KINDS = ("tokenizer", "text2world", "multiview", "transfer")
 
 
 def test_every_shipped_file_is_in_the_manifest_with_its_sha256_and_within_the_limits():
@@ -94,6 +94,29 @@ def test_fixed_seed_generation_matches_the_stored_statistics(tmp_path):
     assert sorted(got) == sorted(want) and len(got) == 6  # one mp4 per nuScenes camera
     for cam, values in want.items():
         np.testing.assert_allclose(got[cam], values, atol=2.0, err_msg=cam)  # 8-bit levels
+
+
+@pytest.mark.slow
+def test_the_shipped_transfer_model_turns_an_unseen_clear_clip_to_snow_and_keeps_its_geometry(tmp_path, sim_clip_dir):
+    """No --model: ``drivewm transfer`` uses the shipped transfer model. A clear-day clip of the test
+    fixture (a drive it never saw) comes out as snow by the eval's classifier, with every SIFT match
+    within 2 px of its source position (issue 18's must-hold), labels kept."""
+    from drivewm.diffusion.generate import video_to_uint8
+    from drivewm.multiview.rollout import frames_to_video
+    from drivewm.transfer.metrics import adherent, sift_shift_px
+    from drivewm.transfer.retarget import TargetCondition
+
+    clear = next(c for c in iter_clips(sim_clip_dir) if c.meta.tags.get("weather") == "clear")
+    assert main(["transfer", str(sim_clip_dir), "--to", "snow", "--max-clips", "1", "--out", str(tmp_path)]) == 0
+    (out,) = list(iter_clips(tmp_path))
+    assert out.meta.extra["transfer"]["source"]["key"] == clear.key and out.meta.tags["weather"] == "snow"
+    videos = out.videos()
+    source = video_to_uint8(frames_to_video(clear.videos(), videos.shape[2:4]))
+    assert (
+        adherent(videos, TargetCondition("snow", clear.meta.tags.get("time_of_day", "day")))["predicted"]["weather"]
+        == "snow"
+    )
+    assert sift_shift_px(source, videos)["median_px"] <= 2.0
 
 
 if __name__ == "__main__":
