@@ -29,7 +29,7 @@ from drivewm.choices import model_folder
 from drivewm.eval.adherence import classify_condition, condition_scores, fit_calibration
 from drivewm.logs.reader import read_log
 from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
-from drivewm.multiview.rollout import decode_views, encode_views
+from drivewm.multiview.rollout import code_views
 from drivewm.sim import SimConfig, simulate
 from drivewm.tokenizer import Tokenizer
 
@@ -52,12 +52,6 @@ def render(weather: str, time_of_day: str, seed: int, source: tuple[str, str], d
         log = read_log(simulate(cfg, Path(tmp) / "drive.mcap", progress=False))
     n = min(len(v) for v in log.images.values())
     return np.stack([[f.decode() for f in log.images[c][:n]] for c in log.rig.names])
-
-
-def coded(frames: np.ndarray, tokenizer: Tokenizer, size_hw: tuple[int, int]) -> np.ndarray:
-    """``frames`` (V, T, H, W, 3) resized to ``size_hw`` and coded by ``tokenizer``, as the transfer
-    benchmark's ``tokenizer`` reference (drivewm.transfer.benchmark) codes the true target."""
-    return decode_views(tokenizer, encode_views(tokenizer, frames, size_hw))
 
 
 def table_json(table: dict) -> str:
@@ -88,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         tok, (w, h) = Tokenizer.from_pretrained(args.tokenizer), (int(v) for v in args.coded_size.split("x"))
         duration = CODED_FRAMES / CODED_FPS
         for wx, t, s, src in tqdm(jobs, desc="coded renders"):
-            frames = coded(render(wx, t, 100 + s, src, duration, CODED_FPS), tok, (h, w))
+            frames = code_views(tok, render(wx, t, 100 + s, src, duration, CODED_FPS), (h, w))
             samples.append((condition_scores(frames), wx, t, "coded"))
         what += (
             f"; the same pairs as {CODED_FRAMES}-frame {CODED_FPS:g} fps clips at {args.coded_size} coded by the "

@@ -98,6 +98,13 @@ def decode_views(tokenizer, latents: torch.Tensor, device: torch.device | str = 
     return np.concatenate([video_to_uint8(tokenizer.decode(z[None].to(device))) for z in latents])
 
 
+def code_views(
+    tokenizer, frames: np.ndarray, size_hw: tuple[int, int], device: torch.device | str = "cpu"
+) -> np.ndarray:
+    """uint8 (V, T, H, W, 3) resized to ``size_hw``, encoded and decoded: what the tokenizer keeps of them."""
+    return decode_views(tokenizer, encode_views(tokenizer, frames, size_hw, device), device)
+
+
 def initial_speed_mps(clip: Clip) -> float:
     """Ego speed between the clip's first two frames (NaN when the poses are missing)."""
     T = clip.T_world_from_ego

@@ -25,7 +25,7 @@ import torch
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
-from drivewm.multiview.rollout import decode_views, encode_views
+from drivewm.multiview.rollout import code_views, decode_views, encode_views
 from drivewm.transfer.detail import restore_detail
 from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.retarget import TargetCondition, target_captions
@@ -102,7 +102,8 @@ def run_cases(
         rig = case.source.meta.get_rig()
         source_cse = cross_view_error(src, rig)  # {cse, cse_calibrated} of the source
         truth_cse = cross_view_error(case.target.videos(), rig)  # and of the simulator's own target render
-        outputs = {"identity": src, "tokenizer": _reconstruction(tokenizer, case.target.videos(), device)}
+        target = case.target.videos()
+        outputs = {"identity": src, "tokenizer": code_views(tokenizer, target, target.shape[2:4], device)}
         coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
             out = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
@@ -114,10 +115,6 @@ def run_cases(
         if progress is not None:
             progress(case, rows[-len(outputs) :])
     return rows
-
-
-def _reconstruction(tokenizer, frames: np.ndarray, device: torch.device | str = "cpu") -> np.ndarray:
-    return decode_views(tokenizer, encode_views(tokenizer, frames, frames.shape[2:4], device), device)
 
 
 def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:

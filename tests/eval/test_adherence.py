@@ -41,14 +41,14 @@ def test_classifier_recognises_held_out_clips_coded_by_the_shipped_tokenizer(sim
     shipped models' 160x96 and coded by the shipped tokenizer keep their weather and time of day.
     (Before the coded domain, a coded snow render read as fog: the flakes are what a tokenizer drops.)"""
     from drivewm.clips import iter_clips
-    from drivewm.multiview.rollout import decode_views, encode_views
+    from drivewm.multiview.rollout import code_views
     from drivewm.release import shipped_model
     from drivewm.tokenizer import Tokenizer
 
     tok = Tokenizer.from_pretrained(shipped_model("tokenizer"))
     results = []
     for clip in list(iter_clips(sim_clip_dir))[::3]:  # one clip per drive
-        frames = decode_views(tok, encode_views(tok, clip.videos(), (96, 160)))
+        frames = code_views(tok, clip.videos(), (96, 160))
         pred = classify_condition(condition_scores(frames))
         tags = clip.meta.tags
         results.append((tags["weather"], tags["time_of_day"], pred["weather"], pred["time_of_day"]))
