@@ -93,9 +93,11 @@ def test_concurrent_reader_sees_matching_weights_and_config(tmp_path):
     _save(tmp_path, 0)
     seen, done = [], threading.Event()
 
-    def writer():
-        for i in range(1, 40):
+    def writer():  # at least 39 saves, and on until the reader has loaded 20 times (a busy machine's
+        i = 1  # scheduler can let the saves finish before the reader's fifth load: a flaky count, not a bug)
+        while i < 40 or len(seen) < 20:
             _save(tmp_path, i)
+            i += 1
         done.set()
 
     thread = threading.Thread(target=writer)
