@@ -11,7 +11,11 @@ best peer, and model-FLOPs utilisation against the device's peak measured in the
 matmul (bf16 autocast on CUDA, fp32 on the CPU).
 
 FLOPs of a training step are counted as 6 x params x tokens (forward + backward of every weight)
-plus 12 x layers x tokens^2 x width (QK^T and PV, forward and backward) -- the PaLM appendix B count.
+plus 12 x layers x tokens^2 x width (QK^T and PV, forward and backward) -- the PaLM appendix B count;
+a frame-local block of ours (``full_attn_every`` > 1: attention within each of t latent frames)
+counts 1/t of a layer. Ours runs twice: every block full (the layout of the shipped models) and
+full every FRAME_LOCAL_EVERY blocks, frame-local between (the same parameters; its quality against
+full attention at equal compute: studies/attention_layout.py).
 
     python benchmarks/bench_dit.py                 # small: D=192, depth 4, 2 x 288 tokens (a minute)
     python benchmarks/bench_dit.py --size full     # D=384, depth 12, 2,240 tokens (the issue-19 target)
@@ -23,6 +27,7 @@ plus 12 x layers x tokens^2 x width (QK^T and PV, forward and backward) -- the P
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import statistics
 import time
@@ -48,13 +53,15 @@ TEXT_DIM, TEXT_LEN = 256, 32
 Build = Callable[[dict, torch.device], tuple[torch.nn.Module, Callable[[], torch.Tensor]]]
 
 
-def ours(size: dict, device: torch.device):
+def ours(size: dict, device: torch.device, full_attn_every: int = 1):
+    """drivewm's DiT; ``full_attn_every`` > 1: the blocks between every k-th attend within latent frames."""
     cfg = DiTConfig(
         in_channels=16,
         hidden_dim=size["hidden_dim"],
         depth=size["depth"],
         num_heads=size["num_heads"],
         text_dim=TEXT_DIM,
+        full_attn_every=full_attn_every,
     )
     model = EDMDenoiser(DiT(cfg), EDMConfig()).to(device)
     b, (c, t, h, w) = size["batch"], size["latent"]
@@ -162,8 +169,13 @@ def wan(size: dict, device: torch.device):
     return model, loss
 
 
+#: full_attn_every of the frame-local layout timed beside full attention (studies/attention_layout.py
+#: compares their quality at equal compute).
+FRAME_LOCAL_EVERY = 3
+
 MODELS: dict[str, Build] = {
     "drivewm DiT": ours,
+    f"drivewm DiT, full every {FRAME_LOCAL_EVERY}": functools.partial(ours, full_attn_every=FRAME_LOCAL_EVERY),
     "CogVideoX": cogvideox,
     "LTX-Video": ltx,
     "Wan 2.1": wan,
@@ -188,10 +200,20 @@ def timed_step(model, loss_fn, opt, bf16: bool, device: torch.device) -> float:
     return clock() - tic
 
 
-def train_flops(params: int, tokens: int, depth: int, dim: int, batch: int) -> float:
-    """6 x params x tokens + 12 x layers x (tokens per sample)^2 x width per sample (PaLM, app. B)."""
+def train_flops(params: int, tokens: int, depth: float, dim: int, batch: int) -> float:
+    """6 x params x tokens + 12 x layers x (tokens per sample)^2 x width per sample (PaLM, app. B);
+    ``depth``: blocks of full attention (a frame-local block at t latent frames counts 1/t)."""
     per_sample = tokens // batch
     return 6 * params * tokens + 12 * depth * per_sample**2 * dim * batch
+
+
+def full_attention_depth(model: torch.nn.Module, size: dict) -> float:
+    """Blocks of full attention the model's attention FLOPs equal: a frame-local block of drivewm's
+    DiT attends over 1/t of the sequence; the peers' every block over all of it."""
+    if not isinstance(model, EDMDenoiser):
+        return size["depth"]
+    cfg, t = model.backbone.cfg, size["latent"][1]
+    return sum(1 / t if cfg.frame_local(i) else 1.0 for i in range(cfg.depth))
 
 
 def peak_flops(device: torch.device, bf16: bool) -> float:
@@ -234,28 +256,30 @@ def compare(
                 times[name].append(dt)
         peaks.append(peak_flops(device, bf16))
     params = {name: count_parameters(m) for name, (m, _) in runs.items()}
-    return {name: (params[name], times[name]) for name in runs}, statistics.median(peaks)
+    depths = {name: full_attention_depth(m, size) for name, (m, _) in runs.items()}
+    return {name: (params[name], depths[name], times[name]) for name in runs}, statistics.median(peaks)
 
 
 def report(results: dict, peak: float, size: dict) -> None:
     print(f"peak by matmul {peak / 1e12:.3f} TFLOP/s (median over the rounds)")
     tokens = tokens_of(size)
     rate = {}
-    for name, (params, times) in results.items():
+    for name, (params, depth, times) in results.items():
         step_s = statistics.median(times)
         rate[name] = tokens / step_s
-        mfu = train_flops(params, tokens, size["depth"], size["hidden_dim"], size["batch"]) / step_s / peak
+        mfu = train_flops(params, tokens, depth, size["hidden_dim"], size["batch"]) / step_s / peak
         print(
-            f"{name:12s} {params / 1e6:6.1f}M params  {step_s * 1e3:9.1f} ms/step (median of {len(times)}, "
+            f"{name:26s} {params / 1e6:6.1f}M params  {step_s * 1e3:9.1f} ms/step (median of {len(times)}, "
             f"{min(times) * 1e3:.0f}-{max(times) * 1e3:.0f})  "
             f"{rate[name]:9.0f} tokens/s  MFU {mfu:6.1%}"
         )
-    peers = [n for n in rate if n != "drivewm DiT"]
-    for name in peers:
-        print(f"ratio drivewm / {name} tokens/s: {rate['drivewm DiT'] / rate[name]:.2f}")
-    if peers:
-        best = max(peers, key=rate.get)
-        print(f"ratio drivewm / best peer ({best}) tokens/s: {rate['drivewm DiT'] / rate[best]:.2f}")
+    peers = [n for n in rate if not n.startswith("drivewm")]
+    for ours_name in (n for n in rate if n.startswith("drivewm")):
+        for name in peers:
+            print(f"ratio {ours_name} / {name} tokens/s: {rate[ours_name] / rate[name]:.2f}")
+        if peers:
+            best = max(peers, key=rate.get)
+            print(f"ratio {ours_name} / best peer ({best}) tokens/s: {rate[ours_name] / rate[best]:.2f}")
 
 
 #: Op classes of the --profile table: aten op names (attention is told apart by name, see :func:`op_class`).

@@ -17,6 +17,10 @@ layout of model folders written before joint attention). Joint attention spares 
 query and output projections (2 D^2 of 14 D^2 multiply-adds per token and block) and one modulated
 sub-layer; see benchmarks/bench_dit.py.
 
+Attention over time: a block of a DiT whose ``full_attn_every`` is above 1 may be frame-local: its
+``self_attn`` or ``joint_attn`` attends within each latent frame (the frames folded into the batch,
+no mask over a full-length sequence), with the same parameters as a full block.
+
 Layouts: attention works on (B, N, heads, head_dim) views of the fused projections, so neither the
 heads split nor their merge copies memory (SDPA returns (B, N, heads, head_dim) storage for inputs
 laid out so).
@@ -57,7 +61,15 @@ class BlockContext:
     @functools.cached_property
     def joint_mask(self) -> torch.Tensor:
         """(B, 1, 1, N + L) bool: every video token, then the caption tokens ``text_mask`` allows."""
-        b, n = self.text_mask.shape[0], self.grid_thw[0] * self.grid_thw[1] * self.grid_thw[2]
+        return self._joint_mask(self.grid_thw[0] * self.grid_thw[1] * self.grid_thw[2])
+
+    @functools.cached_property
+    def frame_joint_mask(self) -> torch.Tensor:
+        """(B t, 1, 1, h w + L) bool: :attr:`joint_mask` of frame-local attention (frames folded into B)."""
+        return self._joint_mask(self.grid_thw[1] * self.grid_thw[2]).repeat_interleave(self.grid_thw[0], dim=0)
+
+    def _joint_mask(self, n: int) -> torch.Tensor:
+        b = self.text_mask.shape[0]
         video = torch.ones(b, n, dtype=torch.bool, device=self.text_mask.device)
         return torch.cat([video, self.text_mask.bool()], dim=1)[:, None, None]
 
@@ -80,6 +92,16 @@ def attend(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, mask: torch.Tensor
     return out.transpose(1, 2).flatten(2)  # (B, N, heads * hd); no copy for (B, N, heads, hd) inputs
 
 
+def frames_as_batch(x: torch.Tensor, t: int) -> torch.Tensor:
+    """(B, t*hw, ...) tokens -> (B t, hw, ...): each latent frame a sample of its own (a view)."""
+    return x.unflatten(1, (t, -1)).flatten(0, 1)
+
+
+def batch_as_frames(x: torch.Tensor, t: int) -> torch.Tensor:
+    """(B t, hw, ...) -> (B, t*hw, ...): the inverse of :func:`frames_as_batch`."""
+    return x.unflatten(0, (-1, t)).flatten(1, 2)
+
+
 def rms_norm_pair(x: torch.Tensor, first: nn.RMSNorm, second: nn.RMSNorm) -> torch.Tensor:
     """QK-norm of queries and keys in one pass: ``x`` (..., 2, heads, hd) -> RMSNorm with ``first``'s
     weight on index 0 and ``second``'s on index 1 of the pair axis."""
@@ -88,11 +110,13 @@ def rms_norm_pair(x: torch.Tensor, first: nn.RMSNorm, second: nn.RMSNorm) -> tor
 
 
 class SelfAttention(nn.Module):
-    """Full attention over the tokens of a sample with QK-norm (RMSNorm) and 3D RoPE."""
+    """Attention over the tokens of a sample with QK-norm (RMSNorm) and 3D RoPE: all of them, or with
+    ``frame_local`` those of the query's own latent frame."""
 
-    def __init__(self, cfg: DiTConfig):
+    def __init__(self, cfg: DiTConfig, frame_local: bool = False):
         super().__init__()
         self.num_heads = cfg.num_heads
+        self.frame_local = frame_local
         self.qkv = nn.Linear(cfg.hidden_dim, 3 * cfg.hidden_dim)
         self.q_norm = nn.RMSNorm(cfg.head_dim, eps=1e-6)
         self.k_norm = nn.RMSNorm(cfg.head_dim, eps=1e-6)
@@ -107,25 +131,36 @@ class SelfAttention(nn.Module):
         q, k = qk.unbind(2)  # (B, N, heads, hd) each
         return q, k, v.unflatten(-1, (self.num_heads, -1))
 
+    def frames(self, ctx: BlockContext) -> int:
+        """Latent frames folded into the batch by this layer's attention: 1 when it is full."""
+        return ctx.grid_thw[0] if self.frame_local else 1
+
     def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
-        return self.out(attend(*self.heads(x, ctx)))  # (B, N, D)
+        t = self.frames(ctx)
+        q, k, v = (frames_as_batch(a, t) for a in self.heads(x, ctx))  # (B t, N / t, heads, hd) each
+        return self.out(batch_as_frames(attend(q, k, v), t))  # (B, N, D)
 
 
 class JointAttention(SelfAttention):
     """Self-attention whose keys and values are the video tokens' and the caption tokens' together
     (one softmax; caption keys QK-normed, no RoPE, masked by ``ctx.text_mask``)."""
 
-    def __init__(self, cfg: DiTConfig):
-        super().__init__(cfg)
+    def __init__(self, cfg: DiTConfig, frame_local: bool = False):
+        super().__init__(cfg, frame_local)
         self.text_kv = nn.Linear(cfg.hidden_dim, 2 * cfg.hidden_dim)
         self.text_k_norm = nn.RMSNorm(cfg.head_dim, eps=1e-6)
 
     def forward(self, x: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
-        q, k, v = self.heads(x, ctx)  # (B, N, heads, hd) each
+        t = self.frames(ctx)
+        q, k, v = (frames_as_batch(a, t) for a in self.heads(x, ctx))  # (B t, n = N / t, heads, hd) each
         text_k, text_v = split_heads(self.text_kv(ctx.text), 2, self.num_heads).unbind(2)  # (B, L, heads, hd)
-        k = torch.cat([k, self.text_k_norm(text_k)], dim=1)  # (B, N + L, heads, hd)
+        text_k = self.text_k_norm(text_k)
+        if t > 1:  # every frame reads the caption
+            text_k, text_v = text_k.repeat_interleave(t, dim=0), text_v.repeat_interleave(t, dim=0)
+        k = torch.cat([k, text_k], dim=1)  # (B t, n + L, heads, hd)
         v = torch.cat([v, text_v], dim=1)
-        return self.out(attend(q, k, v, ctx.joint_mask))  # (B, N, D)
+        mask = ctx.frame_joint_mask if t > 1 else ctx.joint_mask
+        return self.out(batch_as_frames(attend(q, k, v, mask), t))  # (B, N, D)
 
 
 class CrossAttention(nn.Module):
@@ -175,15 +210,20 @@ def register_sublayer(name: str, builder: Callable[[DiTConfig], nn.Module]) -> N
     SUBLAYERS[name] = builder
 
 
+#: The sub-layers a frame-local block restricts to latent frames (their builders take ``frame_local``).
+FRAME_LOCAL_SUBLAYERS = ("joint_attn", "self_attn")
+
+
 class ModulatedSublayer(nn.Module):
     """``x + gate * layer(norm(x) * (1 + scale) + shift)`` with AdaLN-LoRA (shift, scale, gate)."""
 
-    def __init__(self, name: str, cfg: DiTConfig):
+    def __init__(self, name: str, cfg: DiTConfig, frame_local: bool = False):
         super().__init__()
         if name not in SUBLAYERS:
             raise DrivewmError(f"dit: unknown block layer {name!r} in block_layers; registered: {sorted(SUBLAYERS)}")
         self.norm = nn.LayerNorm(cfg.hidden_dim, elementwise_affine=False, eps=1e-6)
-        self.layer = SUBLAYERS[name](cfg)
+        local = frame_local and name in FRAME_LOCAL_SUBLAYERS
+        self.layer = SUBLAYERS[name](cfg, frame_local=True) if local else SUBLAYERS[name](cfg)
         self.adaln = nn.Sequential(
             nn.SiLU(),
             nn.Linear(cfg.hidden_dim, cfg.adaln_lora_dim, bias=False),
@@ -197,11 +237,12 @@ class ModulatedSublayer(nn.Module):
 
 
 class DiTBlock(nn.Module):
-    """The sub-layers named by ``cfg.block_layers``, applied in order."""
+    """The sub-layers named by ``cfg.block_layers``, applied in order; ``frame_local``: the block's
+    self- or joint attention stays within latent frames."""
 
-    def __init__(self, cfg: DiTConfig):
+    def __init__(self, cfg: DiTConfig, frame_local: bool = False):
         super().__init__()
-        self.layers = nn.ModuleDict({name: ModulatedSublayer(name, cfg) for name in cfg.block_layers})
+        self.layers = nn.ModuleDict({name: ModulatedSublayer(name, cfg, frame_local) for name in cfg.block_layers})
 
     def forward(self, x: torch.Tensor, emb: torch.Tensor, adaln_lora: torch.Tensor, ctx: BlockContext) -> torch.Tensor:
         for layer in self.layers.values():

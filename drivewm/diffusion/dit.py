@@ -91,7 +91,7 @@ class DiT(nn.Module):
         )
         # A learned always-visible "null" text token: dropped captions (CFG) attend to it alone.
         self.null_text = nn.Parameter(torch.zeros(1, 1, cfg.hidden_dim))
-        self.blocks = nn.ModuleList(DiTBlock(cfg) for _ in range(cfg.depth))
+        self.blocks = nn.ModuleList(DiTBlock(cfg, cfg.frame_local(i)) for i in range(cfg.depth))
         self.final = FinalLayer(cfg)
         self._rope_cache: dict[tuple, torch.Tensor] = {}
 

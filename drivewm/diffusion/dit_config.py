@@ -49,14 +49,26 @@ class DiTConfig:
     """Video frame rate at which the temporal RoPE position of latent frame i is exactly i."""
     cond_mask_channel: bool = False
     """Video2World: one extra input channel marks clean conditioning latent frames."""
+    full_attn_every: int = 1
+    """Attention layout over time: every k-th block (counted back from the last, which is always one)
+    attends across the whole clip; the blocks between attend within their own latent frame, to that
+    frame's tokens and the caption (factorised space-time attention as GAIA-2's, arXiv 2503.20523,
+    with full blocks instead of temporal-only ones). A frame-local block at t latent frames spends 1/t
+    of a full block's attention FLOPs with the same parameters, so a model trained either way loads
+    the other way. 1 = every block full (Cosmos, CogVideoX; the layout of folders written before this
+    field). One latent frame (images): every layout is the same network."""
 
     @property
     def head_dim(self) -> int:
         return self.hidden_dim // self.num_heads
 
+    def frame_local(self, block: int) -> bool:
+        """Whether block ``block`` (0-based) attends within latent frames (see :attr:`full_attn_every`)."""
+        return (self.depth - 1 - block) % self.full_attn_every != 0
+
     def validate(self) -> None:
         at_least(self, 1, "in_channels", "patch_size", "patch_t", "hidden_dim", "depth", "num_heads", "text_dim")
-        at_least(self, 1, "adaln_lora_dim")
+        at_least(self, 1, "adaln_lora_dim", "full_attn_every")
         above(self, 0, "mlp_ratio", "rope_theta", "rope_base_fps")
         if self.hidden_dim % self.num_heads or self.head_dim % 2:
             raise DrivewmError(

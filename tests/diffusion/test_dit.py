@@ -9,7 +9,7 @@ import torch
 from torch import nn
 
 from drivewm.cli import main
-from drivewm.diffusion.blocks import SUBLAYERS, register_sublayer
+from drivewm.diffusion.blocks import SUBLAYERS, BlockContext, DiTBlock, register_sublayer
 from drivewm.diffusion.dit import DiT, count_parameters, patchify, unpatchify
 from drivewm.diffusion.dit_config import DIT_PRESETS, DiTConfig, dit_preset
 from drivewm.diffusion.rope import apply_rope, grid_positions, rope_angles
@@ -186,3 +186,44 @@ def test_a_folder_saved_before_a_config_field_loads_as_it_was_trained(tmp_path):
     (tmp_path / "config.json").write_text(json.dumps(info))
     assert Text2World.from_pretrained(tmp_path).cfg.dit.mlp_activation == "gelu_tanh"
     assert DiTConfig().mlp_activation == "gelu"  # new models: exact GELU (faster on the CPU)
+
+
+def test_full_attn_every_picks_the_full_blocks_counting_back_from_the_last():
+    pick = [DiTConfig(depth=12, full_attn_every=k).frame_local(i) for k in (1, 3) for i in range(12)]
+    assert pick[:12] == [False] * 12
+    assert [i for i in range(12) if not pick[12 + i]] == [2, 5, 8, 11]
+    assert [i for i in range(6) if not DiTConfig(depth=6, full_attn_every=4).frame_local(i)] == [1, 5]
+    with pytest.raises(DrivewmError, match="full_attn_every"):
+        DiT(DiTConfig(full_attn_every=0))
+
+
+@pytest.mark.parametrize("layers", LAYOUTS, ids=["joint", "self+cross"])
+def test_a_frame_local_block_keeps_latent_frames_apart_and_a_full_block_does_not(layers):
+    """Tokens of frame 2 changed: a frame-local block's output for frames 0 and 1 is bit-identical
+    (the caption still reaches every frame), a full block's is not."""
+    cfg = dataclasses.replace(CFG, block_layers=layers)
+    x, noise, text, mask, fps = _inputs()
+    model = _randomize(DiT(cfg))
+    ctx = BlockContext(model.rope((3, 2, 3), fps), *model.embed_text(text, mask), (3, 2, 3))
+    emb, lora = model.time_embed(noise, None)
+    tokens = torch.randn(2, 18, 64)
+    changed = tokens.clone()
+    changed[:, 12:] += 1.0  # frame 2 of (t, h, w) = (3, 2, 3)
+    for frame_local in (True, False):
+        block = _randomize(DiTBlock(cfg, frame_local)).eval()
+        a, b = block(tokens, emb, lora, ctx), block(changed, emb, lora, ctx)
+        assert torch.equal(a[:, :12], b[:, :12]) == frame_local
+        assert not torch.allclose(a[:, 12:], b[:, 12:])
+    local = _randomize(DiTBlock(cfg, True)).eval()
+    other_text = BlockContext(ctx.rope, ctx.text + 1.0, ctx.text_mask, ctx.grid_thw)
+    assert not torch.allclose(local(tokens, emb, lora, ctx)[:, :6], local(tokens, emb, lora, other_text)[:, :6])
+
+
+def test_attention_layouts_share_parameters_and_agree_on_images():
+    """Weights of a full-attention DiT load into a frame-local layout unchanged; on one latent frame
+    (images) the two are the same function, on video they differ."""
+    full = _randomize(DiT(dataclasses.replace(CFG, depth=3))).eval()
+    hybrid = DiT(dataclasses.replace(CFG, depth=3, full_attn_every=2)).eval()
+    hybrid.load_state_dict(full.state_dict())
+    assert torch.equal(full(*_inputs(t=1)), hybrid(*_inputs(t=1)))
+    assert not torch.allclose(full(*_inputs(t=3)), hybrid(*_inputs(t=3)), atol=1e-4)
