@@ -4,9 +4,9 @@ It simulates drive logs, curates them into clips at the shipped models' resoluti
 the SHIPPED tokenizer (and scores it on them), fine-tunes the SHIPPED multi-view model on them
 (``drivewm posttrain --init shipped:multiview``), generates the same prompts with the shipped and the
 fine-tuned model (same seeds), and scores real, shipped and fine-tuned clips with ``drivewm eval``.
-It also post-trains a weather / time-of-day transfer model from the SHIPPED Text2World model
-(``drivewm transfer-train --init shipped:text2world``) on paired simulated drives and transfers the
-first curated clip to snow (docs/transfer.md).
+It also fine-tunes the SHIPPED weather / time-of-day transfer model (``drivewm transfer-train --init
+shipped:transfer``) on paired simulated drives and transfers the first curated clip to snow
+(docs/transfer.md).
 Shipped models are named ``shipped:KIND`` (resolved by the CLI, docs/DESIGN.md section 8), so every
 command works wherever drivewm is installed; nothing the package ships is written to.
 
@@ -75,7 +75,7 @@ class Profile:
     paired: list[str]
     """``drivewm simulate`` arguments of the paired drives (with ``--conditions``) the transfer model trains on."""
     transfer_train: list[str]
-    """``drivewm transfer-train`` arguments (post-trained from the shipped Text2World model)."""
+    """``drivewm transfer-train`` arguments (fine-tuning the shipped transfer model)."""
     transfer: list[str]
     """``drivewm transfer`` arguments: the target condition and how many of the curated clips (the report shows one)."""
 
@@ -152,8 +152,7 @@ def stage_commands(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
 
 def transfer_stages(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
     """Weather / time-of-day transfer (docs/transfer.md): paired drives, their latents (shipped
-    tokenizer), a transfer model post-trained from the SHIPPED Text2World model, and the first curated
-    clips transferred."""
+    tokenizer), the SHIPPED transfer model fine-tuned on them, and the first curated clips transferred."""
     logs, clips, model = out / "paired_logs", out / "paired_clips", out / "transfer_model"
     return [
         ("simulate-paired", ["simulate", *p.paired, "--rig", p.rig, "--out", str(logs)]),
@@ -167,7 +166,7 @@ def transfer_stages(p: Profile, out: Path) -> list[tuple[str, list[str]]]:
             [
                 "transfer-train",
                 "--init",
-                SHIPPED_PREFIX + "text2world",
+                SHIPPED_PREFIX + "transfer",
                 "--data",
                 str(clips),
                 "--out",

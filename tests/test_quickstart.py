@@ -23,6 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import torch
 from safetensors.torch import load_file
 
 from drivewm import release
@@ -70,8 +71,8 @@ def command_block(markdown: str) -> list[list[str]]:
 
 @pytest.mark.parametrize("profile", ["full", "smoke"])
 def test_every_stage_parses_and_starts_from_the_shipped_models(profile, fake_shipped_weights, tmp_path):
-    (fake_shipped_weights / "text2world").mkdir()  # the transfer model's parent
-    (fake_shipped_weights / "text2world" / WEIGHTS_NAME).write_bytes(b"weights")
+    (fake_shipped_weights / "transfer").mkdir()  # the transfer model the quickstart fine-tunes
+    (fake_shipped_weights / "transfer" / WEIGHTS_NAME).write_bytes(b"weights")
     stages = stage_commands(load_profile(profile), tmp_path / "qs")
     parser = build_parser()
     for name, argv in stages:
@@ -85,8 +86,8 @@ def test_every_stage_parses_and_starts_from_the_shipped_models(profile, fake_shi
     assert parser.parse_args(argv["posttrain"]).init == fake_shipped_weights / "multiview"
     encode_paired, transfer_train = argv["tokenizer-encode-paired"], argv["transfer-train"]
     assert encode_paired[encode_paired.index("--model") + 1] == "shipped:tokenizer"
-    assert transfer_train[transfer_train.index("--init") + 1] == "shipped:text2world"
-    assert parser.parse_args(transfer_train).init == fake_shipped_weights / "text2world"
+    assert transfer_train[transfer_train.index("--init") + 1] == "shipped:transfer"
+    assert parser.parse_args(transfer_train).init == fake_shipped_weights / "transfer"
     assert names.index("tokenizer-encode-paired") < names.index("transfer-train") < names.index("transfer")
     for g in load_profile(profile).generations:  # both models draw the same prompt with the same seed
         shipped, tuned = argv[f"generate-shipped-{g.name}"], argv[f"generate-finetuned-{g.name}"]
@@ -176,7 +177,7 @@ def test_fine_tuning_changes_a_copy_and_leaves_the_shipped_weights_alone(quickst
 
 
 @pytest.mark.slow
-def test_one_curated_clip_is_transferred_to_snow_by_a_model_from_the_shipped_text2world(quickstart_dir):
+def test_one_curated_clip_is_transferred_to_snow_by_the_fine_tuned_shipped_transfer_model(quickstart_dir):
     out, _ = quickstart_dir
     source = next(iter_clips(out / "clips"))
     (done,) = list(iter_clips(out / "transfer"))  # --max-clips 1: the first curated clip
@@ -184,10 +185,17 @@ def test_one_curated_clip_is_transferred_to_snow_by_a_model_from_the_shipped_tex
     assert done.meta.cameras == source.meta.cameras and done.videos().shape[:2] == source.videos().shape[:2]
     assert done.meta.tags["weather"] == "snow" and done.meta.timestamps_ns == source.meta.timestamps_ns
     assert {r["pair_id"] for r in read_manifest(out / "paired_clips")} != {""}  # the model trained on pairs
-    shipped_t2w = release.shipped_model("text2world")
+    shipped_t2w, shipped_transfer = release.shipped_model("text2world"), release.shipped_model("transfer")
     transfer_model = json.loads((out / "transfer_model" / "config.json").read_text())
-    assert transfer_model["parent"] == str(shipped_t2w.resolve())  # post-trained from the shipped Text2World
-    assert transfer_model["config"]["dit"] == json.loads((shipped_t2w / "config.json").read_text())["config"]["dit"]
+    assert transfer_model["parent"] == str(shipped_t2w.resolve())  # the shipped transfer model's lineage
+    shipped_cfg, tuned_cfg = (
+        json.loads((shipped_transfer / "config.json").read_text())["config"],
+        transfer_model["config"],
+    )
+    assert tuned_cfg["transfer"] == shipped_cfg["transfer"]  # the shipped transfer model, fine-tuned as it is
+    assert {k: tuned_cfg["dit"][k] for k in shipped_cfg["dit"]} == shipped_cfg["dit"]  # (+ fields added since)
+    train_state = torch.load(out / "transfer_model" / "train_state.pt", weights_only=False)
+    assert train_state["config"]["init"] == str(shipped_transfer.resolve())
     assert f"Transferred: {done.key}" in (out / "report.md").read_text()
 
 
