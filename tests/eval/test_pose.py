@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from drivewm.errors import DrivewmError
 from drivewm.eval.config import PoseConfig
-from drivewm.eval.sfm import run_sfm
+from drivewm.eval.sfm import mapper_options, run_sfm
 from drivewm.eval.trajectory import ego_from_sfm, estimate_ego_trajectory
 from drivewm.eval.trajectory_errors import ate, rpe, tfe
 
@@ -104,3 +105,19 @@ def test_real_dashcam_start_registers_every_frame(shared_data):
     sfm = run_sfm(videos, item.rig, PoseConfig())
     print(f"dashcam, first 48 frames: registered {sfm.registered_fraction:.3f}")
     assert sfm.all_registered
+
+
+def test_mapper_options_carry_the_protocol_settings():
+    """The protocol's mapper settings reach COLMAP's bundle-adjustment and registration options (pycolmap
+    4.2 drops some in-place edits of nested options), and bad values are refused."""
+    cfg = PoseConfig(
+        ba_global_max_iterations=7, ba_local_max_refinements=3, ba_global_max_refinements=4, abs_pose_min_num_inliers=21
+    )
+    options = mapper_options(cfg)
+    assert options.get_global_bundle_adjustment().ceres.solver_options.max_num_iterations == 7
+    assert (options.ba_local_max_refinements, options.ba_global_max_refinements) == (3, 4)
+    assert options.get_mapper().abs_pose_min_num_inliers == 21
+    assert not (options.ba_refine_focal_length or options.ba_refine_extra_params or options.ba_refine_sensor_from_rig)
+    for bad in ({"ba_global_max_iterations": 0}, {"ba_global_max_refinements": 0}):
+        with pytest.raises(DrivewmError, match=next(iter(bad))):
+            PoseConfig(**bad).validate()
