@@ -150,8 +150,11 @@ class PoseConfig:
     """features='shared': image pairs with fewer verified matches are not written to COLMAP."""
     ba_global_frames_ratio: float = 1.1
     """COLMAP mapper: a global bundle adjustment runs when the registered frames (and points) grew by this factor."""
-    ba_global_max_iterations: int = 50
-    """COLMAP mapper: Ceres iterations per global bundle adjustment (COLMAP 50)."""
+    ba_global_max_iterations: int = 5
+    """COLMAP mapper: Ceres iterations per global bundle adjustment (COLMAP 50). A global adjustment
+    starts from poses that local adjustments already refined, and the next one, after 10% more
+    frames, goes on from where it stopped: on the 221-frame dashcam clip 5 cut mapping from 53 to 30
+    CPU s, poses within 0.09% of the path length; the reference clips' pose success and ATE hold."""
     ba_local_max_refinements: int = 2
     """COLMAP mapper: rounds of bundle adjustment, re-triangulation and outlier filtering per local
     adjustment (COLMAP 2)."""
