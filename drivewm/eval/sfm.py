@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import tempfile
+import time
 from pathlib import Path
 
 import cv2
@@ -39,10 +40,14 @@ COLMAP_MODELS = {4: "OPENCV", 8: "FULL_OPENCV"}
 @dataclasses.dataclass
 class SfmResult:
     """Reconstruction of one clip: ``T_world_from_cam`` per camera (T, 4, 4) in the SfM's own world
-    frame and scale (NaN where a frame did not register), and ``registered`` per camera (T,) bool."""
+    frame and scale (NaN where a frame did not register), ``registered`` per camera (T,) bool, and
+    wall ``seconds`` of its two stages: ``database`` (features, matches and their verification into
+    COLMAP's database; with shared features, the part TSE and CSE did not already compute) and
+    ``mapping`` (COLMAP's incremental mapper)."""
 
     T_world_from_cam: dict[str, np.ndarray]
     registered: dict[str, np.ndarray]
+    seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def registered_fraction(self) -> float:
@@ -93,6 +98,7 @@ def run_sfm(
     pycolmap.logging.minloglevel = max(pycolmap.logging.minloglevel, 2)  # COLMAP's INFO lines drown the progress bar
     matcher = matcher or FrameMatcher(_default_match_cfg())
     shared = cfg.features == "shared" and matcher.shares_features
+    t0 = time.perf_counter()
     with threadpool_limits(limits=1), tempfile.TemporaryDirectory(prefix="drivewm-sfm-") as tmp:
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"
@@ -109,9 +115,13 @@ def run_sfm(
             _match(pycolmap, db_path, cfg, rig_aware)
         elif cfg.verify == "colmap":
             _verify(pycolmap, db_path, names, cfg)
+        t1 = time.perf_counter()
         models = _map(pycolmap, db_path, images, tmp / "sparse", cfg)
+        t2 = time.perf_counter()
     num_frames = len(next(iter(videos.values())))
-    return _poses_from_models(models, rig, num_frames)
+    result = _poses_from_models(models, rig, num_frames)
+    result.seconds = {"database": t1 - t0, "mapping": t2 - t1}
+    return result
 
 
 def _default_match_cfg():
@@ -245,6 +255,15 @@ def _match(pycolmap, db_path: Path, cfg: PoseConfig, rig_aware: bool) -> None:
 
 def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> list:
     out.mkdir()
+    return list(pycolmap.incremental_mapping(db_path, images, out, mapper_options(cfg)).values())
+
+
+def mapper_options(cfg: PoseConfig):
+    """pycolmap.IncrementalPipelineOptions of the protocol: the rig's calibration held fixed, one
+    thread, and the global bundle adjustments capped (``ba_global_max_iterations``,
+    ``ba_global_max_refinements``): they are most of a long clip's mapping time."""
+    import pycolmap
+
     options = pycolmap.IncrementalPipelineOptions(
         min_model_size=cfg.min_model_size,
         random_seed=cfg.seed,
@@ -255,6 +274,9 @@ def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> l
         ba_refine_sensor_from_rig=False,
         ba_global_frames_ratio=cfg.ba_global_frames_ratio,
         ba_global_points_ratio=cfg.ba_global_frames_ratio,
+        ba_global_max_num_iterations=cfg.ba_global_max_iterations,
+        ba_global_max_refinements=cfg.ba_global_max_refinements,
+        ba_local_max_refinements=cfg.ba_local_max_refinements,
     )
     # Assign a whole new mapper-options object: mutating options.mapper in place is not reliable in pycolmap 4.2.
     options.mapper = pycolmap.IncrementalMapperOptions(
@@ -262,7 +284,7 @@ def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> l
         abs_pose_min_inlier_ratio=cfg.abs_pose_min_inlier_ratio,
         init_min_tri_angle=cfg.init_min_tri_angle_deg,
     )
-    return list(pycolmap.incremental_mapping(db_path, images, out, options).values())
+    return options
 
 
 def _poses_from_models(models: list, rig: Rig, num_frames: int) -> SfmResult:

@@ -169,6 +169,7 @@ def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
     sfm = run_sfm(videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs)
     metrics["pose_success"] = float(sfm.all_registered)
     metrics["registered_fraction"] = sfm.registered_fraction
+    metrics["seconds"].update({f"pose_{stage}": s for stage, s in sfm.seconds.items()})  # parts of "pose"
     artifacts["sfm"] = sfm
 
 

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from drivewm.errors import DrivewmError
 from drivewm.eval.config import PoseConfig
-from drivewm.eval.sfm import run_sfm
+from drivewm.eval.sfm import mapper_options, run_sfm
 from drivewm.eval.trajectory import ego_from_sfm, estimate_ego_trajectory
 from drivewm.eval.trajectory_errors import ate, rpe, tfe
 
@@ -104,3 +105,49 @@ def test_real_dashcam_start_registers_every_frame(shared_data):
     sfm = run_sfm(videos, item.rig, PoseConfig())
     print(f"dashcam, first 48 frames: registered {sfm.registered_fraction:.3f}")
     assert sfm.all_registered
+
+
+def test_mapper_options_carry_the_protocol_settings():
+    """The protocol's mapper settings reach COLMAP's bundle-adjustment and registration options (pycolmap
+    4.2 drops some in-place edits of nested options), and bad values are refused."""
+    cfg = PoseConfig(
+        ba_global_max_iterations=7, ba_local_max_refinements=3, ba_global_max_refinements=4, abs_pose_min_num_inliers=21
+    )
+    options = mapper_options(cfg)
+    assert options.get_global_bundle_adjustment().ceres.solver_options.max_num_iterations == 7
+    assert (options.ba_local_max_refinements, options.ba_global_max_refinements) == (3, 4)
+    assert options.get_mapper().abs_pose_min_num_inliers == 21
+    assert not (options.ba_refine_focal_length or options.ba_refine_extra_params or options.ba_refine_sensor_from_rig)
+    for bad in ({"ba_global_max_iterations": 0}, {"ba_global_max_refinements": 0}):
+        with pytest.raises(DrivewmError, match=next(iter(bad))):
+            PoseConfig(**bad).validate()
+
+
+@pytest.mark.slow
+def test_capped_global_bundle_adjustment_keeps_the_real_dashcam_poses(shared_data):
+    """The first 96 frames of the real dashcam video: the protocol's capped global bundle adjustments
+    (``ba_global_max_iterations``) register every frame, and the camera path after a similarity alignment
+    lies within 0.5% of its length of the path with COLMAP's 50 iterations (same features and matches)."""
+    from test_degenerate import dashcam_camera
+
+    from drivewm.eval.config import MatchConfig
+    from drivewm.eval.inputs import load_items
+    from drivewm.eval.matching import FrameMatcher
+    from drivewm.geometry import Rig
+
+    path = shared_data / "video" / "dashcam_highway" / "solidWhiteRight.mp4"
+    item = load_items(path, Rig("dashcam", [dashcam_camera()]))[0]
+    videos = {c: v[:96] for c, v in item.videos().items()}
+    matcher = FrameMatcher(MatchConfig())
+    capped = run_sfm(videos, item.rig, PoseConfig(), matcher=matcher)
+    full = run_sfm(videos, item.rig, PoseConfig(ba_global_max_iterations=50), matcher=matcher)
+    assert capped.all_registered and full.all_registered
+    est, ref = capped.T_world_from_cam["CAM_FRONT"], full.T_world_from_cam["CAM_FRONT"]
+    err, _ = ate(est, ref)
+    length = np.sum(np.linalg.norm(np.diff(ref[:, :3, 3], axis=0), axis=1))
+    print(
+        f"dashcam, 96 frames: capped vs full BA {err / length:.5f} of the path; "
+        f"seconds {capped.seconds} vs {full.seconds}"
+    )
+    assert err / length < 0.005
+    assert set(capped.seconds) == {"database", "mapping"} and capped.seconds["database"] > full.seconds["database"]
