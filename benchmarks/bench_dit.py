@@ -13,9 +13,10 @@ matmul (bf16 autocast on CUDA, fp32 on the CPU).
 FLOPs of a training step are counted as 6 x params x tokens (forward + backward of every weight)
 plus 12 x layers x tokens^2 x width (QK^T and PV, forward and backward) -- the PaLM appendix B count;
 a frame-local block of ours (``full_attn_every`` > 1: attention within each of t latent frames)
-counts 1/t of a layer. Ours runs twice: every block full (the layout of the shipped models) and
-full every FRAME_LOCAL_EVERY blocks, frame-local between (the same parameters; its quality against
-full attention at equal compute: studies/attention_layout.py).
+counts 1/t of a layer. Ours runs twice: every block full (the layout of the shipped models and of
+the debug and tiny presets) and full every FRAME_LOCAL_EVERY blocks, frame-local between (the layout
+of the small to xl presets, the same parameters; its quality against full attention at equal
+compute: studies/attention_layout.py).
 
     python benchmarks/bench_dit.py                 # small: D=192, depth 4, 2 x 288 tokens (a minute)
     python benchmarks/bench_dit.py --size full     # D=384, depth 12, 2,240 tokens (the issue-19 target)
@@ -169,9 +170,9 @@ def wan(size: dict, device: torch.device):
     return model, loss
 
 
-#: full_attn_every of the frame-local layout timed beside full attention (studies/attention_layout.py
-#: compares their quality at equal compute).
-FRAME_LOCAL_EVERY = 3
+#: full_attn_every of the frame-local layout timed beside full attention: the small preset's
+#: (studies/attention_layout.py compares their quality at equal compute).
+FRAME_LOCAL_EVERY = dit_preset("small")["full_attn_every"]
 
 MODELS: dict[str, Build] = {
     "drivewm DiT": ours,

@@ -15,7 +15,8 @@ blocks. This study trains the same Text2World network with each layout through t
     python studies/attention_layout.py --data CLIPDIR/latents/tokenizer --out /tmp/attn --steps 240 \\
         --layouts 1 3 --set model.depth=6 --set train.batch_size=4
 
-Results are printed and written to OUT/results.json.
+Results are printed and written to OUT/results.json, with a plot of the x0 error against sigma at
+OUT/x0_error.png (``--plot-only`` redraws it from an existing results.json).
 """
 
 from __future__ import annotations
@@ -28,7 +29,11 @@ import sys
 import time
 from pathlib import Path
 
+import matplotlib
 import torch
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "diffusion"))  # the flow study's helpers
 from study_flow_vs_edm import SIGMAS, split_cache, x0_errors  # noqa: E402
@@ -80,6 +85,8 @@ def step_cpu_seconds(cfgs: dict[int, PretrainConfig], shape: tuple[int, ...], ro
 
 def run(args: argparse.Namespace) -> dict:
     out = Path(args.out)
+    if not args.data:
+        raise SystemExit("--data is required to train (only --plot-only works without it)")
     train_dir, held_dir = split_cache(Path(args.data), out / "split", args.held_every)
     base = layout_config(args, 1)
     shape = tuple(LatentDataset(train_dir, base.edm.sigma_data)[0].latents.shape)
@@ -113,9 +120,25 @@ def report(results: dict, layouts: list[int]) -> None:
         print(f"{key:>14s} " + " ".join(f"{results[n][key]:10.4f}" for n in names))
 
 
+def plot(results: dict, layouts: list[int], path: Path) -> None:
+    """x0 error against sigma (log-log), one line per layout, steps and CPU seconds in the legend."""
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
+    for k in layouts:
+        r = results[f"every{k}"]
+        name = "full attention" if k == 1 else f"full every {k}, frame-local between"
+        label = f"{name}: {r['steps']} steps, {r['train_cpu_s']:.0f} CPU s, mean {r['x0_error_mean']:.4f}"
+        ax.loglog(results["sigmas"], r["x0_error_by_sigma"], marker="o", label=label)
+    c, t, h, w = results["latent_shape"]
+    ax.set(xlabel="sigma", ylabel="held-out x0 error (per latent element)")
+    ax.set_title(f"equal compute, {t} x {h // 2} x {w // 2} tokens per clip", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", required=True, help="latent cache folder (CLIPDIR/latents/TOKENIZER)")
+    parser.add_argument("--data", help="latent cache folder (CLIPDIR/latents/TOKENIZER); needed unless --plot-only")
     parser.add_argument("--out", default="/tmp/attention_layout", help="run folder (models, split caches, results)")
     parser.add_argument("--preset", default="debug")
     parser.add_argument("--layouts", type=int, nargs="+", default=[1, 3], help="full_attn_every values; 1 first")
@@ -123,11 +146,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--held-every", type=int, default=6, help="every n-th clip is held out")
     parser.add_argument("--cost-rounds", type=int, default=3, help="timed steps per layout for the cost ratio")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--plot-only", action="store_true", help="redraw OUT/x0_error.png from OUT/results.json")
     args = parser.parse_args(argv)
     if args.layouts[0] != 1:
         parser.error("--layouts must start with 1 (full attention: the reference of equal compute)")
     torch.set_num_threads(1)
-    report(run(args), args.layouts)
+    out = Path(args.out)
+    results = json.loads((out / "results.json").read_text()) if args.plot_only else run(args)
+    report(results, args.layouts)
+    plot(results, args.layouts, out / "x0_error.png")
 
 
 if __name__ == "__main__":
