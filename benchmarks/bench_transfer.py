@@ -11,7 +11,11 @@ each sigma (same sampler, steps and guidance, so the same number of network eval
 references ``identity`` (the source clip unchanged) and ``tokenizer`` (the true target coded and
 decoded: the ceiling of any latent method): PSNR / SSIM to the true target, the median SIFT
 displacement from the source frames, CSE over the source's CSE, and the adherence classifier's hit
-rate; then the must-holds of issue 18 against the best SDEdit sigma (by PSNR). CSE (seconds per
+rate; then the must-holds of issue 18 against the best SDEdit sigma (by PSNR). Clips larger than the
+model's size (the simulator's 320x192) are scored at their own size, as `drivewm transfer` writes them:
+every method works at the model's size, is upsampled (bicubic) and gets the source detail back at full
+resolution (drivewm.transfer.resolution); ``--model-resolution`` scores at the model's size instead
+(the clips resized to it: the 160x96 figures). CSE (seconds per
 clip) is computed for the transfer model and the references only. ``--out`` writes every per-clip
 row as JSON.
 """
@@ -31,7 +35,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", required=True, type=Path, help="transfer model folder")
     p.add_argument("--parent", type=Path, help="Text2World folder for SDEdit (default: the model's parent)")
-    p.add_argument("--data", required=True, type=Path, help="held-out paired clip folder (at the model's size)")
+    p.add_argument(
+        "--data", required=True, type=Path, help="held-out paired clip folder (any size; see --model-resolution)"
+    )
     p.add_argument("--source", default="clear:day", help="source condition WEATHER:TIME")
     p.add_argument("--targets", default="snow:day,clear:night", help="target conditions, comma-separated")
     p.add_argument("--steps", type=int, default=8)
@@ -42,6 +48,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--max-pairs", type=int, default=None, help="pairs per target (default: all)")
     p.add_argument(
         "--no-detail", action="store_true", help="score decoded outputs as they are (default: source detail restored)"
+    )
+    p.add_argument(
+        "--model-resolution",
+        action="store_true",
+        help="score at the model's image size (the clips resized to it) as `drivewm transfer --model-resolution` "
+        "writes; default: at the clips' own size when larger (the outputs upsampled, detail from the source)",
     )
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where the networks run")
@@ -140,6 +152,11 @@ def main(argv=None) -> int:
         f"{len(cases)} held-out pairs from {source.name}; {nfe} network evaluations per sample ({args.sampler}, "
         f"{args.steps} steps, guidance {args.guidance}) on {model.device}"
     )
+    _, _, h, w = model.latent.latent_shape
+    model_hw = (h * tokenizer.config.spatial_compression, w * tokenizer.config.spatial_compression)
+    clip_hw = cases[0].source.videos().shape[2:4] if cases else model_hw
+    at = model_hw if args.model_resolution else clip_hw
+    print(f"model works at {model_hw[1]}x{model_hw[0]}; clips {clip_hw[1]}x{clip_hw[0]}, scored at {at[1]}x{at[0]}")
     t0 = time.perf_counter()
     cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
 
@@ -148,7 +165,15 @@ def main(argv=None) -> int:
         print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
 
     rows = run_cases(
-        cases, methods, tokenizer, progress=progress, cse_for=cse_for, device=model.device, detail=not args.no_detail
+        cases,
+        methods,
+        tokenizer,
+        progress=progress,
+        cse_for=cse_for,
+        device=model.device,
+        detail=not args.no_detail,
+        model_hw=model_hw,
+        model_resolution=args.model_resolution,
     )
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
