@@ -93,6 +93,18 @@ def print_table(summary: dict, nfe: int) -> None:
             print(f"{target:<13}{name:<12}{n:>4}" + "".join(f"{m[c]:>21.3f}" for c in cols))
 
 
+def print_cse_parts(summary: dict) -> None:
+    """What makes up each CSE: the share of camera pairs counted (enough verified matches; the others
+    count at 4 px) and the mean over the counted pairs, beside the source's and the true target's."""
+    print("CSE parts (share of camera pairs counted / their mean px): output, source, true target")
+    for target, methods in summary.items():
+        for name, m in methods.items():
+            if not math.isfinite(m["cse_counted"]):
+                continue
+            parts = [f"{m[w + 'cse_counted']:.2f} / {m[w + 'cse_counted_px']:.3f}" for w in ("", "source_", "truth_")]
+            print(f"  {target:<13}{name:<12}" + "   ".join(parts))
+
+
 def verdict(summary: dict) -> list[str]:
     """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR."""
     allm = summary["all"]
@@ -178,6 +190,7 @@ def main(argv=None) -> int:
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
     print_table(summary, nfe)
+    print_cse_parts(summary)
     for line in verdict(summary):
         print(line)
     if args.out:

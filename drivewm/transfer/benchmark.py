@@ -30,7 +30,7 @@ from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.geometry import Rig
 from drivewm.multiview.rollout import code_views, decode_views, encode_views
-from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
+from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.resolution import output_size_hw, resize_views, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
 
@@ -88,7 +88,7 @@ class ScoredPair:
 def score_output(case: PairCase, out: np.ndarray, scored: ScoredPair, cse: bool = True) -> dict:
     """Every measure of one output uint8 (V, T, H, W, 3) of ``case`` at ``scored``'s size; ``cse`` False
     skips the costly CSE (NaN: seconds per clip, where everything else is a fraction of a second)."""
-    no_cse = {"cse": math.nan, "cse_calibrated": math.nan}
+    no_cse = dict.fromkeys(CSE_KEYS, math.nan)
     row = {**image_scores(out, scored.target), **(cross_view_error(out, scored.rig) if cse else no_cse)}
     shift = sift_shift_px(scored.source, out)
     row |= {"sift_shift_px": shift["median_px"], "sift_matches": shift["matches"]}
@@ -160,6 +160,11 @@ def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
             "sift_shift_px": float(np.median(shifts)) if shifts else math.nan,
             "adherence": float(np.mean([r["adherence"] for r in rs])),
         }
+        for key in ("cse_counted", "cse_counted_px"):  # what makes up CSE: pairs counted, their own mean
+            for who in ("", "source_", "truth_"):
+                values = [r.get(who + key, math.nan) for r in rs]
+                finite = [v for v in values if math.isfinite(v)]
+                out[target][method][who + key] = float(np.mean(finite)) if finite else math.nan
         for key in ("cse", "cse_calibrated"):
             ok = [r for r in rs if math.isfinite(r[key]) and math.isfinite(r[f"source_{key}"])]
             source = np.mean([r[f"source_{key}"] for r in ok]) if ok else math.nan
