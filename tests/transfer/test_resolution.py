@@ -79,3 +79,25 @@ def test_restored_detail_keeps_sift_positions_at_full_resolution(clip) -> None:
     after = sift_shift_px(src, to_output_size(dusk, src, coded))
     print(f"median SIFT shift at 320x192: {before['median_px']:.2f} px upsampled, {after['median_px']:.2f} with detail")
     assert after["matches"] > 500 and after["median_px"] <= 2.0 < before["median_px"]
+
+
+@pytest.mark.slow
+def test_shipped_model_transfers_a_sim_clip_at_its_resolution(clip, tmp_path) -> None:
+    """``drivewm transfer`` with the shipped model (160x96) on a real 320x192 clip, clear to snow: the
+    clip comes back at 320x192 with its rig, SIFT matches within 2 px of the source's (issue 18), and
+    the adherence classifier calls it snow."""
+    from drivewm.cli import main
+    from drivewm.clips.shards import ShardWriter
+    from drivewm.transfer.metrics import adherent
+    from drivewm.transfer.retarget import TargetCondition
+
+    with ShardWriter(tmp_path / "in", "in") as writer:
+        writer.write(clip)
+    assert main(["transfer", str(tmp_path / "in"), "--to", "snow", "--out", str(tmp_path / "out")]) == 0
+    (out,) = iter_clips(tmp_path / "out")
+    videos, src = out.videos(), clip.videos()
+    assert videos.shape == src.shape == (6, 17, 192, 320, 3) and out.meta.rig == clip.meta.rig
+    shift = sift_shift_px(src, videos)
+    print(f"median SIFT shift {shift['median_px']:.2f} px over {shift['matches']} matches")
+    assert shift["median_px"] <= 2.0 and shift["matches"] > 1000
+    assert adherent(videos, TargetCondition("snow", "day"))["match"] == 1.0
