@@ -84,6 +84,16 @@ def build_methods(args, targets):
     return model, parent, methods
 
 
+def interleaved(cases: list) -> list:
+    """Cases round-robin over their targets (first pair of each target, then the second, ...), so a run
+    cut short has scored every target alike."""
+    by_target: dict = {}
+    for case in cases:
+        by_target.setdefault(case.condition, []).append(case)
+    rounds = max((len(v) for v in by_target.values()), default=0)
+    return [group[i] for i in range(rounds) for group in by_target.values() if i < len(group)]
+
+
 def print_table(summary: dict, nfe: int) -> None:
     cols = ("clips", "psnr", "ssim", "sift_shift_px", "cse_ratio", "cse_calibrated_ratio", "adherence")
     print(f"{'target':<13}{'method':<12}{'nfe':>4}" + "".join(f"{c[:20]:>21}" for c in cols))
@@ -156,7 +166,7 @@ def main(argv=None) -> int:
     targets = [TargetCondition(w, t) for w, t in parse_conditions(args.targets)]
     model, parent, methods = build_methods(args, targets)
     tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
-    cases = paired_cases(args.data, source, targets, args.max_pairs)
+    cases = interleaved(paired_cases(args.data, source, targets, args.max_pairs))
     nfe = network_evaluations(args.steps, args.guidance, args.sampler)
     params = f"{count_parameters(model.net) / 1e6:.2f}M parameters, parent {count_parameters(parent.dit) / 1e6:.2f}M"
     print(
@@ -172,9 +182,15 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
 
+    partial = args.out.with_suffix(".partial.jsonl") if args.out else None
+    done: list[str] = []
+
     def progress(case, rows):
         cells = " ".join(f"{r['method']} {r['psnr']:.1f}dB/{r['adherence']:.0f}" for r in rows)
         print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
+        if partial:  # every case's rows as they come, so a run cut short still has them
+            done.extend(json.dumps(r, default=str) for r in rows)
+            write_text(partial, "\n".join(done) + "\n")
 
     rows = run_cases(
         cases,

@@ -135,7 +135,11 @@ def run_cases(
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()} | {f"truth_{k}": v for k, v in truth_cse.items()}
-            rows.append(row | score_output(case, out, scored, cse_for is None or name in cse_for))
+            wants_cse = cse_for is None or name in cse_for
+            row |= score_output(case, out, scored, wants_cse and name != "identity")
+            if wants_cse and name == "identity":  # the source itself: its CSE is the source's, already measured
+                row |= source_cse
+            rows.append(row)
         if progress is not None:
             progress(case, rows[-len(outputs) :])
     return rows
