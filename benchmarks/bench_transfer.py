@@ -16,8 +16,9 @@ model's size (the simulator's 320x192) are scored at their own size, as `drivewm
 every method works at the model's size, is upsampled (bicubic) and gets the source detail back at full
 resolution (drivewm.transfer.resolution); ``--model-resolution`` scores at the model's size instead
 (the clips resized to it: the 160x96 figures). CSE (seconds per
-clip) is computed for the transfer model and the references only. ``--out`` writes every per-clip
-row as JSON.
+clip) is computed for the transfer model and the references only, with its parts (the share of
+camera pairs counted, the counted pairs' mean) beside the source's and the true target's. ``--out``
+writes every per-clip row as JSON (and OUT.partial.jsonl as cases finish; targets are interleaved).
 """
 
 from __future__ import annotations
