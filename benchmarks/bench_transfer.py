@@ -11,9 +11,14 @@ each sigma (same sampler, steps and guidance, so the same number of network eval
 references ``identity`` (the source clip unchanged) and ``tokenizer`` (the true target coded and
 decoded: the ceiling of any latent method): PSNR / SSIM to the true target, the median SIFT
 displacement from the source frames, CSE over the source's CSE, and the adherence classifier's hit
-rate; then the must-holds of issue 18 against the best SDEdit sigma (by PSNR). CSE (seconds per
-clip) is computed for the transfer model and the references only. ``--out`` writes every per-clip
-row as JSON.
+rate; then the must-holds of issue 18 against the best SDEdit sigma (by PSNR). Clips larger than the
+model's size (the simulator's 320x192) are scored at their own size, as `drivewm transfer` writes them:
+every method works at the model's size, is upsampled (bicubic) and gets the source detail back at full
+resolution (drivewm.transfer.resolution); ``--model-resolution`` scores at the model's size instead
+(the clips resized to it: the 160x96 figures). CSE (seconds per
+clip) is computed for the transfer model and the references only, with its parts (the share of
+camera pairs counted, the counted pairs' mean) beside the source's and the true target's. ``--out``
+writes every per-clip row as JSON (and OUT.partial.jsonl as cases finish; targets are interleaved).
 """
 
 from __future__ import annotations
@@ -31,7 +36,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", required=True, type=Path, help="transfer model folder")
     p.add_argument("--parent", type=Path, help="Text2World folder for SDEdit (default: the model's parent)")
-    p.add_argument("--data", required=True, type=Path, help="held-out paired clip folder (at the model's size)")
+    p.add_argument(
+        "--data", required=True, type=Path, help="held-out paired clip folder (any size; see --model-resolution)"
+    )
     p.add_argument("--source", default="clear:day", help="source condition WEATHER:TIME")
     p.add_argument("--targets", default="snow:day,clear:night", help="target conditions, comma-separated")
     p.add_argument("--steps", type=int, default=8)
@@ -42,6 +49,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--max-pairs", type=int, default=None, help="pairs per target (default: all)")
     p.add_argument(
         "--no-detail", action="store_true", help="score decoded outputs as they are (default: source detail restored)"
+    )
+    p.add_argument(
+        "--model-resolution",
+        action="store_true",
+        help="score at the model's image size (the clips resized to it) as `drivewm transfer --model-resolution` "
+        "writes; default: at the clips' own size when larger (the outputs upsampled, detail from the source)",
     )
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--device", default="auto", choices=["auto", "cpu", "cuda"], help="where the networks run")
@@ -72,6 +85,16 @@ def build_methods(args, targets):
     return model, parent, methods
 
 
+def interleaved(cases: list) -> list:
+    """Cases round-robin over their targets (first pair of each target, then the second, ...), so a run
+    cut short has scored every target alike."""
+    by_target: dict = {}
+    for case in cases:
+        by_target.setdefault(case.condition, []).append(case)
+    rounds = max((len(v) for v in by_target.values()), default=0)
+    return [group[i] for i in range(rounds) for group in by_target.values() if i < len(group)]
+
+
 def print_table(summary: dict, nfe: int) -> None:
     cols = ("clips", "psnr", "ssim", "sift_shift_px", "cse_ratio", "cse_calibrated_ratio", "adherence")
     print(f"{'target':<13}{'method':<12}{'nfe':>4}" + "".join(f"{c[:20]:>21}" for c in cols))
@@ -79,6 +102,18 @@ def print_table(summary: dict, nfe: int) -> None:
         for name, m in methods.items():
             n = "-" if name in ("identity", "tokenizer") else str(nfe)
             print(f"{target:<13}{name:<12}{n:>4}" + "".join(f"{m[c]:>21.3f}" for c in cols))
+
+
+def print_cse_parts(summary: dict) -> None:
+    """What makes up each CSE: the share of camera pairs counted (enough verified matches; the others
+    count at 4 px) and the mean over the counted pairs, beside the source's and the true target's."""
+    print("CSE parts (share of camera pairs counted / their mean px): output, source, true target")
+    for target, methods in summary.items():
+        for name, m in methods.items():
+            if not math.isfinite(m["cse_counted"]):
+                continue
+            parts = [f"{m[w + 'cse_counted']:.2f} / {m[w + 'cse_counted_px']:.3f}" for w in ("", "source_", "truth_")]
+            print(f"  {target:<13}{name:<12}" + "   ".join(parts))
 
 
 def verdict(summary: dict) -> list[str]:
@@ -132,7 +167,7 @@ def main(argv=None) -> int:
     targets = [TargetCondition(w, t) for w, t in parse_conditions(args.targets)]
     model, parent, methods = build_methods(args, targets)
     tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
-    cases = paired_cases(args.data, source, targets, args.max_pairs)
+    cases = interleaved(paired_cases(args.data, source, targets, args.max_pairs))
     nfe = network_evaluations(args.steps, args.guidance, args.sampler)
     params = f"{count_parameters(model.net) / 1e6:.2f}M parameters, parent {count_parameters(parent.dit) / 1e6:.2f}M"
     print(
@@ -140,19 +175,39 @@ def main(argv=None) -> int:
         f"{len(cases)} held-out pairs from {source.name}; {nfe} network evaluations per sample ({args.sampler}, "
         f"{args.steps} steps, guidance {args.guidance}) on {model.device}"
     )
+    _, _, h, w = model.latent.latent_shape
+    model_hw = (h * tokenizer.config.spatial_compression, w * tokenizer.config.spatial_compression)
+    clip_hw = cases[0].source.videos().shape[2:4] if cases else model_hw
+    at = model_hw if args.model_resolution else clip_hw
+    print(f"model works at {model_hw[1]}x{model_hw[0]}; clips {clip_hw[1]}x{clip_hw[0]}, scored at {at[1]}x{at[0]}")
     t0 = time.perf_counter()
     cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
+
+    partial = args.out.with_suffix(".partial.jsonl") if args.out else None
+    done: list[str] = []
 
     def progress(case, rows):
         cells = " ".join(f"{r['method']} {r['psnr']:.1f}dB/{r['adherence']:.0f}" for r in rows)
         print(f"  {case.pair_id} -> {case.condition.name}: {cells}", flush=True)
+        if partial:  # every case's rows as they come, so a run cut short still has them
+            done.extend(json.dumps(r, default=str) for r in rows)
+            write_text(partial, "\n".join(done) + "\n")
 
     rows = run_cases(
-        cases, methods, tokenizer, progress=progress, cse_for=cse_for, device=model.device, detail=not args.no_detail
+        cases,
+        methods,
+        tokenizer,
+        progress=progress,
+        cse_for=cse_for,
+        device=model.device,
+        detail=not args.no_detail,
+        model_hw=model_hw,
+        model_resolution=args.model_resolution,
     )
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
     print_table(summary, nfe)
+    print_cse_parts(summary)
     for line in verdict(summary):
         print(line)
     if args.out:

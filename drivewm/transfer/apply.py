@@ -1,10 +1,12 @@
 """``drivewm transfer``: clips in, the same clips in another weather / time of day out.
 
 Every clip is resized to the model's image size, coded by the tokenizer, transferred view by view
-(a transfer model folder, or SDEdit with a Text2World folder as the baseline), decoded, and
-written as a clip (``OUT/transferred-NNNNNN.tar`` + ``manifest.jsonl``) that keeps every label of
-the source: timestamps, rig (at the output size), ego poses, trajectory, pair id and the other
-tags; the weather / time-of-day tags and captions are the target's (drivewm.transfer.retarget).
+(a transfer model folder, or SDEdit with a Text2World folder as the baseline), decoded, brought back
+to the source's size with its detail (drivewm.transfer.resolution; ``model_resolution`` writes the
+model's size instead, as before) and written as a clip (``OUT/transferred-NNNNNN.tar`` +
+``manifest.jsonl``) that keeps every label of the source: timestamps, rig (the source's, or scaled to
+the model's size), ego poses, trajectory, pair id and the other tags; the weather / time-of-day tags
+and captions are the target's (drivewm.transfer.retarget).
 Beside them: ``sheets/KEY.png`` (source above, transferred below, six frames over time) and
 ``contact_sheet.png``. A clip that cannot be transferred is reported and skipped.
 """
@@ -23,13 +25,13 @@ from drivewm.atomic import write_json
 from drivewm.clips.format import Clip, clip_from_arrays
 from drivewm.clips.shards import ShardWriter, iter_shard, list_shards, write_manifest
 from drivewm.curate.stage import manifest_row
-from drivewm.diffusion.generate import video_to_uint8, write_grid_png
+from drivewm.diffusion.generate import write_grid_png
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
-from drivewm.multiview.rollout import decode_views, encode_views, frames_to_video
+from drivewm.multiview.rollout import decode_views, encode_views
 from drivewm.multiview.writer import grid_layout, tile_views
-from drivewm.transfer.detail import restore_detail
+from drivewm.transfer.resolution import output_size_hw, resize_views, to_output_size
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
 
 SHEET_CLIPS = 3  # clips shown in contact_sheet.png
@@ -62,7 +64,10 @@ class TransferOptions:
     """Transfer only the first N clips of the inputs (a preview; None: all)."""
     detail: bool = True
     """Add back the source detail the tokenizer drops, scaled by the contrast the target keeps
-    (drivewm.transfer.detail); False writes the decoded transfer as it is."""
+    (drivewm.transfer.detail); False writes the decoded transfer as it is (upsampled)."""
+    model_resolution: bool = False
+    """Write clips at the model's image size, the rig scaled to it; False (default) keeps the source's
+    size and rig when the source is larger (drivewm.transfer.resolution)."""
 
     def validate(self) -> None:
         if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
@@ -100,6 +105,7 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
     o = options
     record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
     record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail}
+    record |= {"model_resolution": o.model_resolution}
     if model_type == "transfer":
         from drivewm.transfer.model import Transfer
 
@@ -134,7 +140,7 @@ def load_tokenizer(path: str | None, model_dir: str | Path, device: torch.device
 
 @torch.no_grad()
 def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: TransferOptions) -> tuple[Clip, np.ndarray]:
-    """(the transferred clip, the source frames at the model's size uint8 (V, T, H, W, 3))."""
+    """(the transferred clip, the source frames at its size uint8 (V, T, H, W, 3))."""
     c, t, h, w = transferer.latent.latent_shape
     tc, sc = tokenizer.config.temporal_compression, tokenizer.config.spatial_compression
     frames = 1 + (t - 1) * tc
@@ -144,20 +150,26 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
             f"(curate with clip_frames: {frames})"
         )
     target = options.target_for(clip)
-    small = video_to_uint8(frames_to_video(clip.videos(), (h * sc, w * sc)))  # (V, T, H, W, 3) at the model's size
-    source = encode_views(tokenizer, small, (h * sc, w * sc), transferer.device)  # (V, c, t, h, w) on the CPU
+    model_hw = (h * sc, w * sc)
+    full = clip.videos()
+    out_hw = output_size_hw(full.shape[2:4], model_hw, options.model_resolution)
+    small = resize_views(full, model_hw)  # (V, T, H, W, 3) at the model's size, as the curator resizes
+    source = encode_views(tokenizer, small, model_hw, transferer.device)  # (V, c, t, h, w) on the CPU
     _, views = target_captions(clip.meta, target)
     captions = [views[name] for name in clip.meta.cameras]
     seeds = [options.seed + v for v in range(len(captions))]
     out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
-    if options.detail:
-        out = restore_detail(out, small, decode_views(tokenizer, source, transferer.device))
-    # frames_to_video resizes each image to the model's size (cv2.resize, no crop): the rig says so, so a
-    # 16:9 dashcam at 160x96 gets fx != fy rather than a silently wrong calibration
-    rig = clip.meta.get_rig().scaled(w * sc, h * sc, fit="stretch")
-    meta = dataclasses.replace(clip.meta, rig=rig.to_dict())
+    shown = resize_views(full, out_hw)  # the source at the output size: the detail's reference and the sheet's
+    coded = decode_views(tokenizer, source, transferer.device) if options.detail else None
+    out = to_output_size(out, shown, coded)
+    # frames resized to the model's size are stretched (cv2.resize, no crop): the rig says so, so a 16:9
+    # dashcam at 160x96 gets fx != fy rather than a silently wrong calibration; at the source's size it is kept
+    rig, meta = clip.meta.get_rig(), clip.meta
+    if out_hw != full.shape[2:4]:
+        rig = rig.scaled(out_hw[1], out_hw[0], fit="stretch")
+        meta = dataclasses.replace(meta, rig=rig.to_dict())
     meta = retarget_meta(meta, target, f"{clip.key}-{target.weather}-{target.time_of_day}", transferer.record)
-    return clip_from_arrays(meta, dict(zip(rig.names, out)), clip.T_world_from_ego), small
+    return clip_from_arrays(meta, dict(zip(rig.names, out)), clip.T_world_from_ego), shown
 
 
 def transfer_clips(

@@ -8,6 +8,9 @@ numbers: ``identity`` (the source clip itself, what a method that changes nothin
 ``tokenizer`` (the true target coded and decoded, the best any latent method can reach without
 the source's detail). With ``detail`` (the default of ``drivewm transfer``) every method's output
 gets the source detail the tokenizer dropped back (drivewm.transfer.detail), the same for all.
+Clips larger than the model's size are scored at their own size, as ``drivewm transfer`` writes
+them: methods and the tokenizer reference work at the model's size and are upsampled
+(drivewm.transfer.resolution); ``model_resolution`` scores everything at the model's size instead.
 Methods take the same number of network evaluations (``nfe``) when run with the same sampler,
 steps and guidance.
 """
@@ -25,9 +28,10 @@ import torch
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
+from drivewm.geometry import Rig
 from drivewm.multiview.rollout import code_views, decode_views, encode_views
-from drivewm.transfer.detail import restore_detail
-from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
+from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
+from drivewm.transfer.resolution import output_size_hw, resize_views, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
 
 #: A method: (raw source latents (V, c, t, h, w), view captions, target, seeds) -> raw latents.
@@ -64,15 +68,29 @@ def paired_cases(
     return cases
 
 
-def score_output(case: PairCase, out: np.ndarray, cse: bool = True) -> dict:
-    """Every measure of one output uint8 (V, T, H, W, 3) of ``case``; ``cse`` False skips the costly CSE
-    (NaN: seconds per clip, where everything else is a fraction of a second)."""
-    no_cse = {"cse": math.nan, "cse_calibrated": math.nan}
-    row = {
-        **image_scores(out, case.target.videos()),
-        **(cross_view_error(out, case.source.meta.get_rig()) if cse else no_cse),
-    }
-    shift = sift_shift_px(case.source.videos(), out)
+@dataclasses.dataclass
+class ScoredPair:
+    """A case's source and true target at the size outputs are scored at, uint8 (V, T, H, W, 3), and the
+    rig at that size."""
+
+    source: np.ndarray
+    target: np.ndarray
+    rig: Rig
+
+    @classmethod
+    def of(cls, case: PairCase, size_hw: tuple[int, int]) -> ScoredPair:
+        source, rig = case.source.videos(), case.source.meta.get_rig()
+        if source.shape[2:4] != tuple(size_hw):  # stretched like the frames (drivewm.transfer.apply)
+            rig = rig.scaled(size_hw[1], size_hw[0], fit="stretch")
+        return cls(resize_views(source, size_hw), resize_views(case.target.videos(), size_hw), rig)
+
+
+def score_output(case: PairCase, out: np.ndarray, scored: ScoredPair, cse: bool = True) -> dict:
+    """Every measure of one output uint8 (V, T, H, W, 3) of ``case`` at ``scored``'s size; ``cse`` False
+    skips the costly CSE (NaN: seconds per clip, where everything else is a fraction of a second)."""
+    no_cse = dict.fromkeys(CSE_KEYS, math.nan)
+    row = {**image_scores(out, scored.target), **(cross_view_error(out, scored.rig) if cse else no_cse)}
+    shift = sift_shift_px(scored.source, out)
     row |= {"sift_shift_px": shift["median_px"], "sift_matches": shift["matches"]}
     adh = adherent(out, case.condition)
     return row | {"adherence": adh["match"], "predicted": adh["predicted"]}
@@ -88,30 +106,40 @@ def run_cases(
     cse_for: set[str] | None = None,
     device: torch.device | str = "cpu",
     detail: bool = False,
+    model_hw: tuple[int, int] | None = None,
+    model_resolution: bool = False,
 ) -> list[dict]:
     """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
     ``cse_for`` (None: all). The tokenizer codes on ``device`` (where it is); methods take and return
-    latents on the CPU. ``detail``: every method's output gets the source's lost detail back."""
+    latents on the CPU. Methods work at ``model_hw`` (None: the clips' own size); outputs are scored at
+    the size ``drivewm transfer`` writes (the source's when larger, unless ``model_resolution``),
+    upsampled as it does (drivewm.transfer.resolution); ``detail``: every method's output gets the
+    source's lost detail back."""
     rows = []
     for case in cases:
-        src = case.source.videos()
-        latents = encode_views(tokenizer, src, src.shape[2:4], device)
+        full = case.source.videos()
+        size_hw = model_hw or full.shape[2:4]
+        scored = ScoredPair.of(case, output_size_hw(full.shape[2:4], size_hw, model_resolution))
+        latents = encode_views(tokenizer, resize_views(full, size_hw), size_hw, device)
         _, views = target_captions(case.source.meta, case.condition)
         captions = [views[c] for c in case.source.meta.cameras]
         seeds = [seed + v for v in range(len(captions))]
-        rig = case.source.meta.get_rig()
-        source_cse = cross_view_error(src, rig)  # {cse, cse_calibrated} of the source
-        truth_cse = cross_view_error(case.target.videos(), rig)  # and of the simulator's own target render
-        target = case.target.videos()
-        outputs = {"identity": src, "tokenizer": code_views(tokenizer, target, target.shape[2:4], device)}
+        source_cse = cross_view_error(scored.source, scored.rig)  # {cse, cse_calibrated} of the source
+        truth_cse = cross_view_error(scored.target, scored.rig)  # and of the simulator's own target render
+        coded_truth = code_views(tokenizer, case.target.videos(), size_hw, device)
+        outputs = {"identity": scored.source, "tokenizer": to_output_size(coded_truth, scored.source, None)}
         coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
             out = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
-            outputs[name] = restore_detail(out, src, coded_src) if detail else out
+            outputs[name] = to_output_size(out, scored.source, coded_src)
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()} | {f"truth_{k}": v for k, v in truth_cse.items()}
-            rows.append(row | score_output(case, out, cse_for is None or name in cse_for))
+            wants_cse = cse_for is None or name in cse_for
+            row |= score_output(case, out, scored, wants_cse and name != "identity")
+            if wants_cse and name == "identity":  # the source itself: its CSE is the source's, already measured
+                row |= source_cse
+            rows.append(row)
         if progress is not None:
             progress(case, rows[-len(outputs) :])
     return rows
@@ -136,6 +164,11 @@ def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
             "sift_shift_px": float(np.median(shifts)) if shifts else math.nan,
             "adherence": float(np.mean([r["adherence"] for r in rs])),
         }
+        for key in ("cse_counted", "cse_counted_px"):  # what makes up CSE: pairs counted, their own mean
+            for who in ("", "source_", "truth_"):
+                values = [r.get(who + key, math.nan) for r in rs]
+                finite = [v for v in values if math.isfinite(v)]
+                out[target][method][who + key] = float(np.mean(finite)) if finite else math.nan
         for key in ("cse", "cse_calibrated"):
             ok = [r for r in rs if math.isfinite(r[key]) and math.isfinite(r[f"source_{key}"])]
             source = np.mean([r[f"source_{key}"] for r in ok]) if ok else math.nan

@@ -45,6 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="write the decoded transfer as it is (default: add back the source detail the tokenizer drops)",
     )
+    p.add_argument(
+        "--model-resolution",
+        action="store_true",
+        help="write clips at the model's image size, the rig scaled to it (default: the source's size and rig "
+        "when larger; the model still works at its size and the detail above it comes from the source)",
+    )
     p.set_defaults(func=transfer_command)
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
@@ -83,6 +89,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.device,
         args.max_clips,
         detail=not args.no_detail,
+        model_resolution=args.model_resolution,
     )
     if args.model is None:
         from drivewm.release import shipped_model

@@ -29,16 +29,21 @@ def local_std(gray: np.ndarray, window: int = WINDOW_PX) -> np.ndarray:
 
 
 def restore_detail(
-    transferred: np.ndarray, source: np.ndarray, source_coded: np.ndarray, max_gain: float = 1.5
+    transferred: np.ndarray,
+    source: np.ndarray,
+    source_coded: np.ndarray,
+    max_gain: float = 1.5,
+    window: int = WINDOW_PX,
 ) -> np.ndarray:
     """``transferred`` plus the detail the tokenizer dropped from ``source``, scaled by the contrast
-    ratio; all uint8 (V, T, H, W, 3) of one size, ``source_coded`` the source decoded from its latents."""
+    ratio over a ``window`` px box; all uint8 (V, T, H, W, 3) of one size, ``source_coded`` the source
+    decoded from its latents (at a larger size than the model's: upsampled, drivewm.transfer.resolution)."""
     if not transferred.shape == source.shape == source_coded.shape:
         raise ValueError(f"shapes differ: {transferred.shape}, {source.shape}, {source_coded.shape}")
     out = np.empty_like(transferred)
     for v, t in np.ndindex(*transferred.shape[:2]):
         x, s, r = (a[v, t].astype(np.float32) for a in (transferred, source, source_coded))
-        gain = (local_std(x.mean(-1)) + FLOOR) / (local_std(r.mean(-1)) + FLOOR)
+        gain = (local_std(x.mean(-1), window) + FLOOR) / (local_std(r.mean(-1), window) + FLOOR)
         y = x + np.clip(gain, 0.0, max_gain)[..., None] * (s - r)
         out[v, t] = np.clip(np.rint(y), 0, 255).astype(np.uint8)
     return out

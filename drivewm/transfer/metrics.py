@@ -22,6 +22,8 @@ from drivewm.geometry import Rig
 from drivewm.tokenizer.metrics import psnr, ssim
 from drivewm.transfer.retarget import TargetCondition
 
+CSE_KEYS = ("cse", "cse_calibrated", "cse_counted", "cse_counted_px")  # what cross_view_error returns
+
 
 def _signed(videos: np.ndarray) -> torch.Tensor:
     """uint8 (V, T, H, W, 3) -> float (V, 3, T, H, W) in [-1, 1]."""
@@ -50,14 +52,22 @@ def sift_shift_px(source: np.ndarray, transferred: np.ndarray, cfg: EvalConfig |
 def cross_view_error(videos: np.ndarray, rig: Rig, cfg: EvalConfig | None = None) -> dict[str, float]:
     """CSE of a clip as ``drivewm eval`` scores it (px; NaN without enough matches): ``cse`` under the
     F fitted to the matches (the benchmark's headline) and ``cse_calibrated`` under the F of the
-    rig's calibration (which also catches views that moved against each other)."""
+    rig's calibration (which also catches views that moved against each other); and what makes up
+    ``cse``: ``cse_counted`` the share of camera pairs with enough verified matches (the others count
+    at the failed-pair penalty, 4 px) and ``cse_counted_px`` the mean over those pairs only."""
     cfg = cfg or EvalConfig()
     pairs = overlapping_pairs(rig, cfg.consistency)
     if not pairs:
-        return {"cse": float("nan"), "cse_calibrated": float("nan")}
+        return dict.fromkeys(CSE_KEYS, float("nan"))
     named = {name: videos[i] for i, name in enumerate(rig.names)}
     result = cross_sampson(named, rig, pairs, cfg.epipolar, FrameMatcher(cfg.match))
-    return {"cse": float(result["fitted"]["value_px"]), "cse_calibrated": float(result["calibrated"]["value_px"])}
+    fitted = result["fitted"]
+    return {
+        "cse": float(fitted["value_px"]),
+        "cse_calibrated": float(result["calibrated"]["value_px"]),
+        "cse_counted": float(fitted["counted_fraction"]),
+        "cse_counted_px": float(fitted["counted_mean_px"]),
+    }
 
 
 def adherent(videos: np.ndarray, target: TargetCondition) -> dict:

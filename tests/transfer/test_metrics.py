@@ -47,6 +47,8 @@ def test_cross_view_error_rises_when_views_are_swapped(snow_clip) -> None:
     rig, videos = clip.meta.get_rig(), clip.videos()[:, ::2]  # 9 frames: enough matches for every pair
     true = cross_view_error(videos, rig)
     assert true["cse"] < 1.0 and true["cse_calibrated"] < 1.0  # measured 0.42 and 0.57 px
+    # every pair has its verified matches, so the clip value is the counted pairs' own mean (no 4 px penalty)
+    assert true["cse_counted"] == 1.0 and true["cse_counted_px"] == pytest.approx(true["cse"])
     swapped = videos[[1, 0, 2, 3, 4, 5]]  # two cameras' videos exchanged: the calibration no longer fits
     assert not cross_view_error(swapped, rig)["cse_calibrated"] < 5 * true["cse_calibrated"]  # measured 8.0 px
 

@@ -77,17 +77,28 @@ def test_transfer_keeps_every_label(models, inputs, tmp_path) -> None:
         assert "snow night" in clip.meta.caption and "clear" not in clip.meta.caption
         assert set(clip.meta.view_captions) == set(src.meta.cameras)
         assert all("snow night" in c for c in clip.meta.view_captions.values())
-        rig, src_rig = clip.meta.get_rig(), src.meta.get_rig()
-        assert rig.names == src_rig.names
-        for cam, src_cam in zip(rig.cameras, src_rig.cameras):
-            # 320x192 -> the model's 160x96, pixel centres at integers: f' = f / 2, c' = (c + 0.5) / 2 - 0.5
-            np.testing.assert_allclose(cam.K[:2, :2], src_cam.K[:2, :2] / 2)
-            np.testing.assert_allclose(cam.K[:2, 2], (src_cam.K[:2, 2] + 0.5) / 2 - 0.5)
-            np.testing.assert_array_equal(cam.T_ego_from_cam, src_cam.T_ego_from_cam)
-        assert clip.videos().shape == (6, 17, 96, 160, 3)
+        assert clip.meta.rig == src.meta.rig  # at the source's size: its rig, intrinsics and all, exactly
+        assert clip.videos().shape == src.videos().shape == (6, 17, 192, 320, 3)  # the model works at 160x96
         assert clip.meta.extra["transfer"]["method"] == "transfer" and clip.meta.extra["speed_mps"] > 0
+        assert clip.meta.extra["transfer"]["model_resolution"] is False
         assert (out / "sheets" / f"{clip.key}.png").is_file()
     assert (out / "contact_sheet.png").is_file()
+
+
+def test_model_resolution_writes_the_models_size_with_the_rig_scaled(models, inputs, tmp_path) -> None:
+    argv = ["transfer", str(inputs / "one"), "--model", str(models["transfer"]), "--to", "snow", "--steps", "1"]
+    assert main([*argv, "--model-resolution", "--out", str(tmp_path)]) == 0
+    (clip,) = iter_clips(tmp_path)
+    (src,) = iter_clips(inputs / "one")
+    assert clip.videos().shape == (6, 17, 96, 160, 3) and clip.meta.extra["transfer"]["model_resolution"] is True
+    assert clip.meta.timestamps_ns == src.meta.timestamps_ns
+    rig, src_rig = clip.meta.get_rig(), src.meta.get_rig()
+    assert rig.names == src_rig.names
+    for cam, src_cam in zip(rig.cameras, src_rig.cameras):
+        # 320x192 -> the model's 160x96, pixel centres at integers: f' = f / 2, c' = (c + 0.5) / 2 - 0.5
+        np.testing.assert_allclose(cam.K[:2, :2], src_cam.K[:2, :2] / 2)
+        np.testing.assert_allclose(cam.K[:2, 2], (src_cam.K[:2, 2] + 0.5) / 2 - 0.5)
+        np.testing.assert_array_equal(cam.T_ego_from_cam, src_cam.T_ego_from_cam)
 
 
 def test_transfer_keeps_each_clips_time_of_day_unless_told(models, inputs, tmp_path) -> None:
@@ -159,7 +170,6 @@ def test_transfer_of_a_real_dashcam_video(models, shared_data, tmp_path) -> None
         assert clip.meta.timestamps_ns == src.meta.timestamps_ns and clip.meta.pair_id == ""
         assert clip.meta.tags["ego_motion"] == "unknown"
         np.testing.assert_array_equal(clip.T_world_from_ego, src.T_world_from_ego)
-        assert clip.videos().shape == (1, 17, 96, 160, 3)
-        K, src_K = clip.meta.get_rig().camera("CAM_FRONT").K, src.meta.get_rig().camera("CAM_FRONT").K
-        # 320x180 stretched to 160x96 (the frames are resized, not cropped): each axis by its own ratio
-        assert K[0, 0] == pytest.approx(src_K[0, 0] / 2) and K[1, 1] == pytest.approx(src_K[1, 1] * 96 / 180)
+        # the model works at 160x96 (320x180 stretched, not cropped); the clip comes back at 320x180, rig kept
+        assert clip.videos().shape == src.videos().shape == (1, 17, 180, 320, 3)
+        assert clip.meta.rig == src.meta.rig

@@ -1,0 +1,59 @@
+"""Transfer at the source's resolution: the model works at its own small size, the clip keeps its own.
+
+The transfer model (and the tokenizer under it) works at one image size (160x96 for the shipped
+model); a user's clips are larger (the team's 320x192 sim clips, 1600x900 fleet cameras). Writing
+the clip back at the model's size loses the user's resolution and ties the labels to another
+image size. Here the source is resized down to the model's size (cv2.INTER_AREA, as the curator
+does), coded and transferred there; the decoded frames are upsampled back to the source's size
+(bicubic) and the detail the round trip lost is restored at full resolution:
+
+    detail = source_full - upsample(decode(encode(source_small)))
+
+which holds both what the tokenizer drops at the model's size and everything above the model's
+resolution, scaled by the local contrast the transfer keeps (drivewm.transfer.detail, its window
+scaled to one tokenizer cell at the source's size). Cost: two bicubic resizes and one tokenizer
+decode per clip, no network evaluations. Videos are uint8 (V, T, H, W, 3) in rig order throughout.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from drivewm.transfer.detail import WINDOW_PX, restore_detail
+
+UPSAMPLE = cv2.INTER_CUBIC  # Keys' bicubic: sharper than bilinear, no LANCZOS ringing on dark night skies
+
+
+def output_size_hw(source_hw: tuple[int, int], model_hw: tuple[int, int], model_resolution: bool) -> tuple[int, int]:
+    """(H, W) a transferred clip is written at: the source's when it is larger than the model's size in
+    either axis (unless ``model_resolution``), else the model's (a smaller source is upsampled to it)."""
+    larger = source_hw[0] > model_hw[0] or source_hw[1] > model_hw[1]
+    return tuple(source_hw) if larger and not model_resolution else tuple(model_hw)
+
+
+def resize_views(frames: np.ndarray, size_hw: tuple[int, int], interpolation: int = cv2.INTER_AREA) -> np.ndarray:
+    """uint8 (V, T, H, W, 3) -> uint8 (V, T, h, w, 3) at ``size_hw`` (a copy-free no-op at that size)."""
+    h, w = size_hw
+    if frames.shape[2:4] == (h, w):
+        return frames
+    return np.stack([[cv2.resize(f, (w, h), interpolation=interpolation) for f in view] for view in frames])
+
+
+def detail_window_px(size_hw: tuple[int, int], model_hw: tuple[int, int]) -> int:
+    """The contrast window at ``size_hw``: WINDOW_PX (about one tokenizer cell at the model's size) times
+    the upsampling factor (mean of both axes), odd so it centres on the pixel."""
+    scale = 0.5 * (size_hw[0] / model_hw[0] + size_hw[1] / model_hw[1])
+    return int(WINDOW_PX * max(scale, 1.0)) // 2 * 2 + 1
+
+
+def to_output_size(transferred: np.ndarray, source: np.ndarray, source_coded: np.ndarray | None) -> np.ndarray:
+    """The decoded transfer (at the model's size) upsampled to ``source``'s size, plus the source detail
+    the round trip lost, its gain computed at that size; ``source_coded`` is the source decoded from its
+    latents (model's size), None for no detail (upsampled only)."""
+    size_hw, model_hw = source.shape[2:4], transferred.shape[2:4]
+    out = resize_views(transferred, size_hw, UPSAMPLE)
+    if source_coded is None:
+        return out
+    coded = resize_views(source_coded, size_hw, UPSAMPLE)
+    return restore_detail(out, source, coded, window=detail_window_px(size_hw, model_hw))
