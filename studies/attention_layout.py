@@ -35,7 +35,9 @@ import torch
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "diffusion"))  # the flow study's helpers
+REPO = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(REPO / "tests" / "diffusion"), str(REPO / "benchmarks")]  # the flow study's and bench_dit's helpers
+from bench_dit import timed_step  # noqa: E402
 from study_flow_vs_edm import SIGMAS, split_cache, x0_errors  # noqa: E402
 
 from drivewm.atomic import write_text  # noqa: E402
@@ -64,7 +66,7 @@ def step_cpu_seconds(cfgs: dict[int, PretrainConfig], shape: tuple[int, ...], ro
             torch.randn(b, 32, cfg.model.text_dim), torch.ones(b, 32, dtype=torch.bool), torch.full((b,), 10.0)
         )
         sigma, keep = torch.ones(b), torch.ones(b, dtype=torch.bool)
-        opt = torch.optim.AdamW(model.parameters(), lr=1e-4, fused=True)
+        opt = torch.optim.AdamW(model.parameters(), lr=1e-4, fused=True)  # as bench_dit times every model
         runs[k] = (
             model,
             opt,
@@ -72,13 +74,10 @@ def step_cpu_seconds(cfgs: dict[int, PretrainConfig], shape: tuple[int, ...], ro
         )
     times = {k: [] for k in runs}
     for r in range(rounds + 1):  # round 0 warms up
-        for k, (_, opt, loss_fn) in runs.items():
-            tic = time.process_time()
-            loss_fn().backward()
-            opt.step()
-            opt.zero_grad(set_to_none=True)
+        for k, (model, opt, loss_fn) in runs.items():
+            dt = timed_step(model, loss_fn, opt, False, torch.device("cpu"))  # CPU seconds of the process
             if r:
-                times[k].append(time.process_time() - tic)
+                times[k].append(dt)
     print("parameters:", {k: count_parameters(m) for k, (m, _, _) in runs.items()})
     return {k: statistics.median(t) for k, t in times.items()}
 

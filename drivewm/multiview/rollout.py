@@ -74,11 +74,17 @@ def load_clip(path: str | Path, key: str | None = None) -> Clip:
     raise DrivewmError(f"{path}: no clip with key {key!r}")
 
 
+def resize_views(frames: np.ndarray, size_hw: tuple[int, int], interpolation: int = cv2.INTER_AREA) -> np.ndarray:
+    """uint8 (V, T, H, W, 3) -> uint8 (V, T, h, w, 3) at ``size_hw`` (the input itself when already that size)."""
+    h, w = size_hw
+    if frames.shape[2:4] == (h, w):
+        return frames
+    return np.stack([[cv2.resize(f, (w, h), interpolation=interpolation) for f in view] for view in frames])
+
+
 def frames_to_video(frames: np.ndarray, size_hw: tuple[int, int]) -> torch.Tensor:
     """uint8 (V, T, H, W, 3) -> float (V, 3, T, h, w) in [-1, 1] at the tokenizer's input size."""
-    h, w = size_hw
-    if frames.shape[2:4] != (h, w):
-        frames = np.stack([[cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in view] for view in frames])
+    frames = resize_views(frames, size_hw)
     return rearrange(torch.from_numpy(frames).float() / 127.5 - 1, "v t h w c -> v c t h w")
 
 

@@ -29,9 +29,9 @@ from drivewm.diffusion.generate import write_grid_png
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
-from drivewm.multiview.rollout import decode_views, encode_views
+from drivewm.multiview.rollout import decode_views, encode_views, resize_views
 from drivewm.multiview.writer import grid_layout, tile_views
-from drivewm.transfer.resolution import output_size_hw, resize_views, to_output_size
+from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
 
 SHEET_CLIPS = 3  # clips shown in contact_sheet.png
@@ -162,11 +162,8 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
     shown = resize_views(full, out_hw)  # the source at the output size: the detail's reference and the sheet's
     coded = decode_views(tokenizer, source, transferer.device) if options.detail else None
     out = to_output_size(out, shown, coded)
-    # frames resized to the model's size are stretched (cv2.resize, no crop): the rig says so, so a 16:9
-    # dashcam at 160x96 gets fx != fy rather than a silently wrong calibration; at the source's size it is kept
-    rig, meta = clip.meta.get_rig(), clip.meta
+    rig, meta = rig_at_size(clip.meta.get_rig(), full.shape[2:4], out_hw), clip.meta
     if out_hw != full.shape[2:4]:
-        rig = rig.scaled(out_hw[1], out_hw[0], fit="stretch")
         meta = dataclasses.replace(meta, rig=rig.to_dict())
     meta = retarget_meta(meta, target, f"{clip.key}-{target.weather}-{target.time_of_day}", transferer.record)
     return clip_from_arrays(meta, dict(zip(rig.names, out)), clip.T_world_from_ego), shown

@@ -29,9 +29,9 @@ import torch
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.geometry import Rig
-from drivewm.multiview.rollout import code_views, decode_views, encode_views
+from drivewm.multiview.rollout import code_views, decode_views, encode_views, resize_views
 from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
-from drivewm.transfer.resolution import output_size_hw, resize_views, to_output_size
+from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
 
 #: A method: (raw source latents (V, c, t, h, w), view captions, target, seeds) -> raw latents.
@@ -79,9 +79,8 @@ class ScoredPair:
 
     @classmethod
     def of(cls, case: PairCase, size_hw: tuple[int, int]) -> ScoredPair:
-        source, rig = case.source.videos(), case.source.meta.get_rig()
-        if source.shape[2:4] != tuple(size_hw):  # stretched like the frames (drivewm.transfer.apply)
-            rig = rig.scaled(size_hw[1], size_hw[0], fit="stretch")
+        source = case.source.videos()
+        rig = rig_at_size(case.source.meta.get_rig(), source.shape[2:4], size_hw)
         return cls(resize_views(source, size_hw), resize_views(case.target.videos(), size_hw), rig)
 
 

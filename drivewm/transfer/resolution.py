@@ -20,6 +20,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from drivewm.geometry import Rig
+from drivewm.multiview.rollout import resize_views
 from drivewm.transfer.detail import WINDOW_PX, restore_detail
 
 UPSAMPLE = cv2.INTER_CUBIC  # Keys' bicubic: sharper than bilinear, no LANCZOS ringing on dark night skies
@@ -32,12 +34,11 @@ def output_size_hw(source_hw: tuple[int, int], model_hw: tuple[int, int], model_
     return tuple(source_hw) if larger and not model_resolution else tuple(model_hw)
 
 
-def resize_views(frames: np.ndarray, size_hw: tuple[int, int], interpolation: int = cv2.INTER_AREA) -> np.ndarray:
-    """uint8 (V, T, H, W, 3) -> uint8 (V, T, h, w, 3) at ``size_hw`` (a copy-free no-op at that size)."""
-    h, w = size_hw
-    if frames.shape[2:4] == (h, w):
-        return frames
-    return np.stack([[cv2.resize(f, (w, h), interpolation=interpolation) for f in view] for view in frames])
+def rig_at_size(rig: Rig, source_hw: tuple[int, int], size_hw: tuple[int, int]) -> Rig:
+    """The rig of frames resized from ``source_hw`` to ``size_hw`` (H, W): stretched like the frames
+    (cv2.resize, no crop), so a 16:9 dashcam at 160x96 gets fx != fy rather than a silently wrong
+    calibration; ``rig`` itself at the source's size."""
+    return rig if tuple(size_hw) == tuple(source_hw) else rig.scaled(size_hw[1], size_hw[0], fit="stretch")
 
 
 def detail_window_px(size_hw: tuple[int, int], model_hw: tuple[int, int]) -> int:
