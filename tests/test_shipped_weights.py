@@ -131,3 +131,16 @@ if __name__ == "__main__":
         assert main([*GENERATE, "--out", tmp]) == 0
         STATS.write_text(json.dumps(generation_stats(Path(tmp)), indent=1) + "\n")
     print(f"wrote {STATS}")
+
+
+def test_a_config_field_naming_a_shipped_model_loads_it():
+    """``--set init=shipped:tokenizer`` (a tokenizer run's decoder fine-tuning, docs/quality-vs-compute.md)
+    reads the installed folder, tensor for tensor; an unknown kind is a one-line error."""
+    from drivewm.train.checkpoint import load_model_folder
+
+    info, state = load_model_folder("shipped:tokenizer", "drivewm-tokenizer")
+    _, direct = load_model_folder(shipped_model("tokenizer"), "drivewm-tokenizer")
+    assert info["model_type"] == "drivewm-tokenizer" and state.keys() == direct.keys()
+    assert all(np.array_equal(state[k].numpy(), direct[k].numpy()) for k in state)
+    with pytest.raises(DrivewmError, match="no shipped model 'tokeniser'"):
+        load_model_folder("shipped:tokeniser", "drivewm-tokenizer")

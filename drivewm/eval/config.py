@@ -212,8 +212,17 @@ class TrajectoryConfig:
     """False: consecutive pairs (0-d, d-2d, ...; evo's default); True: every frame starts a pair (evo --all_pairs)."""
     rpe_pairs_from: str = "reference"
     """Trajectory whose frames / path choose the pairs: 'reference' (evo --pairs_from_reference) or 'estimate'."""
+    pose_auc_m: float = 0.25
+    """``pose_auc`` integrates per-image accuracy up to this position error (m) ..."""
+    pose_auc_deg: float = 2.0
+    """... and this rotation error (degrees): the finest threshold of Sattler et al. 2018's
+    localization benchmark, (0.25 m, 2 deg)."""
 
     def validate(self) -> None:
+        if not (self.pose_auc_m > 0 and self.pose_auc_deg > 0):
+            raise DrivewmError(
+                f"eval config: trajectory.pose_auc_m {self.pose_auc_m} and pose_auc_deg {self.pose_auc_deg} must be > 0"
+            )
         if self.alignment not in ("none", "se3", "sim3"):
             raise DrivewmError(f"eval config: trajectory.alignment {self.alignment!r} is not none, se3 or sim3")
         if self.rpe_delta_unit not in ("frames", "m") or self.rpe_delta <= 0:

@@ -31,7 +31,14 @@ from drivewm.eval.matching import FrameMatcher
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
 from drivewm.eval.trajectory import ego_from_sfm
-from drivewm.eval.trajectory_errors import ate, heading_change_deg, relative_pose_errors, tfe, waypoint_heading_deg
+from drivewm.eval.trajectory_errors import (
+    ate,
+    heading_change_deg,
+    image_pose_errors,
+    relative_pose_errors,
+    tfe,
+    waypoint_heading_deg,
+)
 from drivewm.workers import process_pool
 
 #: Figures reported beside each Sampson metric (drivewm.eval.suite._put_sampson).
@@ -45,6 +52,9 @@ AGGREGATE_KEYS = (
     *(f"{m}{suffix}" for m in ("tse", "tse_calibrated", "cse", "cse_calibrated") for suffix in SAMPSON_SUFFIXES),
     "pose_success",
     "registered_fraction",
+    "pose_auc",
+    "pose_error_m",
+    "pose_error_deg",
     "ate",
     "rpe_trans",
     "rpe_rot",
@@ -177,6 +187,8 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     tc = cfg.trajectory
     for k in ("ate", "rpe_trans", "rpe_rot", "rpe_trans_mean", "rpe_rot_rmse", "tfe"):
         metrics[k] = math.nan
+    if item.T_world_from_ego is not None:
+        _image_poses(item, cfg, metrics, artifacts["sfm"])
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
     reg = ego.registered
     if reg.sum() < 3:
@@ -204,6 +216,21 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
             ego.T_world_from_ego, item.fps, np.asarray(item.trajectory_ego), item.trajectory_dt_s or 1 / item.fps
         )
     metrics["status"]["traj"] = "ok" if item.T_world_from_ego is not None else "no_reference"
+
+
+def _image_poses(item, cfg, metrics, sfm) -> None:
+    """Every image's pose against the reference (the ego pose at its exposure, through the camera's
+    extrinsics): ``pose_auc`` and the median errors of the registered images."""
+    tc = cfg.trajectory
+    ego = _ego_at_cameras(item, cfg) or {c: item.T_world_from_ego for c in item.rig.names}
+    ref = {c.name: ego[c.name] @ c.T_ego_from_cam for c in item.rig.cameras}
+    if sum(int(r.sum()) for r in sfm.registered.values()) < 3:
+        metrics["pose_auc"], metrics["pose_error_m"], metrics["pose_error_deg"] = 0.0, math.nan, math.nan
+        return
+    errors = image_pose_errors(sfm.T_world_from_cam, sfm.registered, ref, tc.alignment)
+    metrics["pose_auc"] = errors.auc(tc.pose_auc_m, tc.pose_auc_deg)
+    metrics["pose_error_m"] = float(np.median(errors.position_m))
+    metrics["pose_error_deg"] = float(np.median(errors.rotation_deg))
 
 
 def _adherence(item, videos, cfg, matcher, metrics, artifacts) -> None:

@@ -168,6 +168,54 @@ def rpe(est: np.ndarray, ref: np.ndarray, delta: int = 1, scale: float = 1.0) ->
     return r.trans_rmse, r.rot_mean
 
 
+@dataclasses.dataclass
+class ImagePoseErrors:
+    """Per-image pose errors of a reconstruction against reference camera poses: ``position_m`` and
+    ``rotation_deg`` (R, ) of the R registered images after ``sim``, out of ``images`` in all."""
+
+    position_m: np.ndarray
+    rotation_deg: np.ndarray
+    images: int
+    sim: Sim3
+
+    def auc(self, max_m: float, max_deg: float) -> float:
+        """Area under the accuracy curve up to (``max_m``, ``max_deg``): the mean over all images of
+        ``max(0, 1 - max(position / max_m, rotation / max_deg))``, an unregistered image counting 0.
+        1 only for exact poses; it falls continuously as errors grow, where a success rate at one
+        threshold stays flat (the pose AUC of relative-pose benchmarks, Sarlin et al. 2020, with
+        absolute errors in place of angular ones)."""
+        if self.images == 0:
+            return float("nan")
+        err = np.maximum(self.position_m / max_m, self.rotation_deg / max_deg)
+        return float(np.sum(np.clip(1.0 - err, 0.0, 1.0)) / self.images)
+
+
+def image_pose_errors(
+    est: dict[str, np.ndarray], registered: dict[str, np.ndarray], ref: dict[str, np.ndarray], alignment: str = "sim3"
+) -> ImagePoseErrors:
+    """Errors of every registered image's ``T_world_from_cam`` in ``est`` (per camera, (T, 4, 4) in
+    the reconstruction's frame) against ``ref`` (per camera, (T, 4, 4) in metres), after one
+    ``alignment`` fitted to all registered camera centres at once.
+
+    Fitting to the centres of every camera of a rig, not to the ego path, keeps the alignment
+    well posed when the vehicle drives straight or stands still: the positions of a straight path
+    are collinear, leave the roll about that line free, and on simulated reference clips left the
+    aligned cameras 19-124 degrees off while the path's ATE was 1-5 cm."""
+    names = [c for c in est if registered[c].any()]
+    images = sum(len(registered[c]) for c in est)
+    if not names:
+        return ImagePoseErrors(np.zeros(0), np.zeros(0), images, Sim3(1.0, np.eye(3), np.zeros(3)))
+    e = np.concatenate([est[c][registered[c]] for c in names])
+    r = np.concatenate([ref[c][registered[c]] for c in names])
+    if len(e) < 3:
+        raise DrivewmError(f"image pose errors: {len(e)} registered images are too few to align")
+    sim = align(e[:, :3, 3], r[:, :3, 3], alignment)
+    aligned = sim.apply_poses(e)
+    position = np.linalg.norm(aligned[:, :3, 3] - r[:, :3, 3], axis=1)
+    rotation = np.array([rotation_angle_deg(a[:3, :3].T @ b[:3, :3]) for a, b in zip(aligned, r)])
+    return ImagePoseErrors(position, rotation, images, sim)
+
+
 def tfe(est_T_world_from_ego: np.ndarray, fps: float, waypoints_ego: np.ndarray, dt_s: float) -> float:
     """Trajectory-following error (m): mean distance between the conditioned waypoints and the
     recovered ego positions at the same times, both in the first frame's ego frame.

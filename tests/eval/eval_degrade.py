@@ -8,7 +8,12 @@ import numpy as np
 
 #: Headline metrics and which way is better; a missing value (NaN: could not be computed) ranks worst.
 LOWER_IS_BETTER = ("tse", "tse_calibrated", "cse", "cse_calibrated", "ate", "rpe_trans", "rpe_rot", "tfe")
-HIGHER_IS_BETTER = ("pose_success", "registered_fraction")
+#: Scored as their headline metric is, where an input lacks that one (the dashcam's own pixels).
+ALSO_LOWER_IS_BETTER = ("tse_native",)
+HIGHER_IS_BETTER = ("pose_auc",)
+#: Pass rates (docs/eval-protocol.md): every image registers, or the share that does. A degraded copy
+#: whose poses still come out may tie with the real clip here, never beat it; ``pose_auc`` ranks.
+GATES = ("pose_success", "registered_fraction")
 
 
 def blurred(videos: dict[str, np.ndarray], sigma_px: float = 2.5) -> dict[str, np.ndarray]:
@@ -36,10 +41,15 @@ DEGRADATIONS = {"blurred": blurred, "noised": noised, "frozen": frozen, "shuffle
 
 
 def worse(key: str, degraded: float | None, real: float | None) -> bool:
-    """True when ``degraded`` scores worse than ``real`` on ``key`` (a missing value is the worst)."""
+    """True when ``degraded`` scores worse than ``real`` on ``key`` (a missing value is the worst),
+    or, for a gate, no better."""
     missing = lambda v: v is None or not np.isfinite(v)  # noqa: E731
+    if key not in LOWER_IS_BETTER + ALSO_LOWER_IS_BETTER + HIGHER_IS_BETTER + GATES:
+        raise AssertionError(f"{key}: not a metric this comparison knows the direction of")
     if missing(real):
         raise AssertionError(f"{key}: the real clip has no value to compare with")
     if missing(degraded):
         return True
-    return degraded > real if key in LOWER_IS_BETTER else degraded < real
+    if key in GATES:
+        return degraded <= real
+    return degraded < real if key in HIGHER_IS_BETTER else degraded > real

@@ -41,6 +41,7 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
     assert m["tse"] == 4.0 and m["status"]["tse"] == {"too_few_matches": 8 * 3} and m["tse_counted_fraction"] == 0
     assert m["cse"] == 4.0 and set(m["status"]["cse"]) == {"too_few_matches"} and math.isnan(m["cse_counted"])
     assert m["pose_success"] == 0.0 and m["registered_fraction"] == 0.0
+    assert m["pose_auc"] == 0.0 and math.isnan(m["pose_error_m"])  # nothing registered: every image counts 0
     assert math.isnan(m["ate"]) and m["status"]["traj"] == "not_registered"
     from drivewm.eval.suite import ClipResult
 

@@ -106,3 +106,48 @@ def test_heading_change_reads_a_turn_in_any_world_gauge(turn_deg):
     expected_last_segment = np.degrees(np.arctan2(*(xy[-1] - xy[-2])[::-1]))
     assert waypoint_heading_deg(waypoints) == pytest.approx(expected_last_segment, abs=1e-6)
     assert np.sign(waypoint_heading_deg(waypoints)) == np.sign(turn_deg)
+
+
+def rig_images(ego: np.ndarray, rig_name: str = "nuscenes6") -> dict[str, np.ndarray]:
+    """T_world_from_cam (T, 4, 4) per camera of a rig driven along ``ego``."""
+    from drivewm.geometry import load_rig
+
+    return {c.name: ego @ c.T_ego_from_cam for c in load_rig(rig_name).cameras}
+
+
+def straight_path(n=17, speed_m=1.5):
+    return np.stack([make_T(np.eye(3), [speed_m * i, 0.0, 0.0]) for i in range(n)])
+
+
+def test_image_pose_errors_align_on_a_straight_path_where_the_ego_path_cannot():
+    """A straight drive: the ego positions are collinear, so an alignment fitted to them alone leaves
+    the roll about the path free (on simulated clips 19-124 deg); fitted to every camera centre of the
+    rig it recovers the exact similarity, and every image's error is 0."""
+    from drivewm.eval.trajectory_errors import image_pose_errors
+
+    ref = rig_images(straight_path())
+    R0 = euler_to_R(0.4, 0.1, -0.7)
+    est = {c: similarity(T, 0.5, R0, np.array([1.0, 2.0, 3.0])) for c, T in ref.items()}
+    registered = {c: np.ones(len(T), bool) for c, T in ref.items()}
+    errors = image_pose_errors(est, registered, ref)
+    assert errors.position_m.max() < 1e-9 and errors.rotation_deg.max() < 1e-5  # arccos near 0: ~1e-6 deg
+    assert errors.auc(0.25, 2.0) == pytest.approx(1.0)
+    assert errors.sim.scale == pytest.approx(2.0)
+
+
+def test_image_pose_auc_counts_errors_and_unregistered_images():
+    """AUC = mean over images of max(0, 1 - max(dp / 0.25 m, dr / 2 deg)): a 1 deg rotation error on
+    one image (its centre unchanged, so the alignment is too) costs that image half, and an
+    unregistered image counts 0."""
+    from drivewm.eval.trajectory_errors import image_pose_errors
+
+    ref = rig_images(straight_path())
+    est = {c: T.copy() for c, T in ref.items()}
+    est["CAM_FRONT"][3, :3, :3] = est["CAM_FRONT"][3, :3, :3] @ rot_z(np.radians(1.0))
+    registered = {c: np.ones(len(T), bool) for c, T in ref.items()}
+    registered["CAM_BACK"][5] = False
+    n = sum(len(T) for T in ref.values())
+    errors = image_pose_errors(est, registered, ref)
+    assert errors.images == n and len(errors.position_m) == n - 1
+    assert errors.rotation_deg.max() == pytest.approx(1.0)
+    assert errors.auc(0.25, 2.0) == pytest.approx((n - 2 + 0.5) / n)
