@@ -217,6 +217,11 @@ class TrajectoryConfig:
     pose_auc_deg: float = 2.0
     """... and this rotation error (degrees): the finest threshold of Sattler et al. 2018's
     localization benchmark, (0.25 m, 2 deg)."""
+    yaw_from_flow: bool = True
+    """When structure from motion registers fewer than 3 frames of the trajectory camera, read the
+    turn the clip shows (``yaw_change_deg``) from dense optical flow of that camera instead
+    (drivewm.eval.flow_motion; ``yaw_source`` says which), so the turn of blurry low-resolution
+    generated clips is still measured. ATE, RPE and TFE stay SfM's alone."""
 
     def validate(self) -> None:
         if not (self.pose_auc_m > 0 and self.pose_auc_deg > 0):

@@ -30,7 +30,7 @@ from drivewm.eval.inputs import EvalItem, load_items
 from drivewm.eval.matching import FrameMatcher
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
-from drivewm.eval.trajectory import ego_from_sfm
+from drivewm.eval.trajectory import ego_from_sfm, flow_fallback
 from drivewm.eval.trajectory_errors import (
     ate,
     heading_change_deg,
@@ -191,13 +191,16 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         _image_poses(item, cfg, metrics, artifacts["sfm"])
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
     reg = ego.registered
+    if item.trajectory_ego:
+        metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
     if reg.sum() < 3:
         metrics["status"]["traj"] = "not_registered"
+        if tc.yaw_from_flow:
+            _yaw_from_flow(item, videos, tc.camera, metrics)
         return
     est = ego.T_world_from_ego[reg]
     metrics["yaw_change_deg"] = heading_change_deg(est)  # the turn the video shows (first to last registered)
-    if item.trajectory_ego:
-        metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
+    metrics["yaw_source"] = "sfm"
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
         metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
@@ -216,6 +219,19 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
             ego.T_world_from_ego, item.fps, np.asarray(item.trajectory_ego), item.trajectory_dt_s or 1 / item.fps
         )
     metrics["status"]["traj"] = "ok" if item.T_world_from_ego is not None else "no_reference"
+
+
+def _yaw_from_flow(item, videos, camera: str, metrics) -> None:
+    """The turn a clip shows, from dense optical flow of the trajectory camera, where structure from
+    motion registered too few frames (trajectory.yaw_from_flow); frames flow cannot read are left out."""
+    try:
+        ego = flow_fallback(videos, item.rig, camera)
+    except DrivewmError as exc:  # e.g. frames too small or flat for flow
+        metrics["status"]["yaw"] = str(exc)
+        return
+    if ego.registered.sum() >= 2:
+        metrics["yaw_change_deg"] = heading_change_deg(ego.T_world_from_ego[ego.registered])
+        metrics["yaw_source"] = "flow"
 
 
 def _image_poses(item, cfg, metrics, sfm) -> None:
