@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from drivewm.curate.config import TrajectoryConfig
 from drivewm.geometry import euler_to_R, invert_T, make_T, transform_points
@@ -78,6 +77,11 @@ def smooth_poses(t_ns: np.ndarray, T_world_from_ego: np.ndarray, cfg: Trajectory
     z, valid, roll, pitch = _measurements(T_world_from_ego)
     if not valid.any():
         return None
+    # lazy: filterpy's package __init__ imports every submodule, scipy.stats among them (~1 CPU s idle,
+    # ~2 under load), and even filterpy.kalman.kalman_filter runs it; a process that only imports the
+    # stage (the driver of a pool, `drivewm curate --help`) never pays it (docs/DESIGN.md section 9)
+    from filterpy.kalman import KalmanFilter
+
     kf = KalmanFilter(dim_x=8, dim_z=4)
     kf.H = np.hstack([np.eye(4), np.zeros((4, 4))])
     kf.R = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2])

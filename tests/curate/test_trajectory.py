@@ -64,3 +64,23 @@ def test_real_gnss_log_gives_smooth_trajectory(shared_data):
     assert smooth < 5.0 and smooth < 0.01 * raw
     assert np.abs(s.xyz - raw_xyz).max() < 0.5  # smoothing stays within GNSS accuracy of the fixes
     assert np.linalg.norm(s.xyz[-1] - s.xyz[0]) > 50  # the car drives about 60 m
+
+
+def test_importing_the_stage_loads_no_scipy_until_the_smoother_runs():
+    """A fresh interpreter (as a spawned pool worker or the driver of a pool) that imports the curate
+    stage and its executors holds neither filterpy nor scipy; the first smoothing loads filterpy."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np\n"
+        "import drivewm.curate.executors, drivewm.curate.stage\n"
+        "print(sorted(m for m in ('scipy', 'scipy.stats', 'filterpy') if m in sys.modules))\n"
+        "from drivewm.curate.config import TrajectoryConfig\n"
+        "from drivewm.curate.trajectory import smooth_poses\n"
+        "smooth_poses(np.arange(3) * 10**8, np.tile(np.eye(4), (3, 1, 1)), TrajectoryConfig())\n"
+        "print(sorted(m for m in ('scipy', 'scipy.stats', 'filterpy') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]"
+    assert out[1] == "['filterpy', 'scipy', 'scipy.stats']"
