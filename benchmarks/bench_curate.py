@@ -181,7 +181,7 @@ def clip_psnr(out: Path, logs: list[Path], max_clips: int = 6) -> tuple[float, f
     return float(np.mean(psnrs)), float(np.min(psnrs)), float(np.mean(sizes))
 
 
-def throughput(logs: list[Path], work: Path, rounds: int) -> None:
+def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) -> None:
     import cv2
 
     cv2.setNumThreads(1)  # one core per worker, as the pool's workers run
@@ -194,6 +194,7 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
         "fleet 160x96, 1 worker": ("fleet", 1, SMALL),
         "fleet 160x96, 2 workers": ("fleet", 2, SMALL),
     }
+    runs = {k: spec for k, spec in runs.items() if spec is None or spec[1] <= max_workers}
     wall = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
     steps: dict[str, list[dict]] = {k: [] for k, spec in runs.items() if spec is not None and spec[1] == 1}
@@ -225,17 +226,19 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
             f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f}"
         )
     steady = {k: float(np.median(v)) for k, v in stage_cpu.items()}
-    for one, two in (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers")):
+    pairs = (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers"))
+    for one, two in (pair for pair in pairs if pair[1] in runs):
         print(
             f"1 -> 2 workers ({one.split(',')[0]}): {med[one] / med[two]:.2f}x wall, "
             f"{med_cpu[one] / med_cpu[two]:.2f}x CPU per frame, on {os.cpu_count()} CPUs (load average now "
             f"{os.getloadavg()[0]:.1f}); stage CPU ms per camera-frame per worker (StepClock, no process start-up): "
             f"{steady[one]:.3f} with 1 worker, {steady[two]:.3f} with 2"
         )
-    startup = worker_startup_cpu_s()
+    stage, smoother = worker_startup_cpu_s()
     print(
-        f"a pool worker's start-up (spawn + importing the stage) costs {startup:.2f} CPU s, i.e. "
-        f"{1e3 * 2 * startup / frames:.3f} ms per camera-frame of this input for 2 workers (1 worker runs in-process)"
+        f"a pool worker's start-up costs {stage:.2f} CPU s (spawn + importing the stage) + {smoother:.2f} s (filterpy, "
+        f"at its first log), i.e. {1e3 * 2 * (stage + smoother) / frames:.3f} ms per camera-frame of this input for 2 "
+        "workers (1 worker runs in-process)"
     )
     print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock; outside: rest of the run):")
     names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
@@ -264,11 +267,16 @@ def _out(work: Path, run: str) -> Path:
     return work / run.replace(", ", "_").replace(" ", "")
 
 
-def worker_startup_cpu_s() -> float:
-    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does."""
-    code = "import time; import drivewm.curate.executors; print(time.process_time())"
+def worker_startup_cpu_s() -> tuple[float, float]:
+    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does,
+    and then filterpy (scipy.stats), which the stage imports when it first smooths a log's poses."""
+    code = (
+        "import time; import drivewm.curate.executors; a = time.process_time(); import filterpy.kalman; "
+        "print(a, time.process_time() - a)"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return float(proc.stdout.split()[-1])
+    stage, smoother = proc.stdout.split()[-2:]
+    return float(stage), float(smoother)
 
 
 def _step_order(name: str) -> int:
@@ -406,6 +414,9 @@ def main() -> None:
     parser.add_argument("--hour-recipe", choices=sorted(RECIPES), default="fleet")
     parser.add_argument("--skip-throughput", action="store_true", help="only the hour-long log")
     parser.add_argument(
+        "--max-workers", type=int, choices=(1, 2), default=2, help="1: leave out the 2-worker runs (default 2)"
+    )
+    parser.add_argument(
         "--scaling-seconds", type=float, help="also time 1 -> 2 workers on the logs looped to this length"
     )
     parser.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "drivewm_bench_curate")
@@ -418,7 +429,7 @@ def main() -> None:
         logs = simulate_logs(args.work, args.drives, args.duration)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
     if not args.skip_throughput:
-        throughput(logs, args.work, args.rounds)
+        throughput(logs, args.work, args.rounds, args.max_workers)
     if args.scaling_seconds:
         scaling(logs, args.work, args.scaling_seconds, args.rounds)
     if args.hour:
