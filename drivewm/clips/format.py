@@ -171,8 +171,8 @@ def validate_meta(meta: ClipMeta, where: str = "") -> None:
 
 
 #: Rigs (canonical JSON) that loaded: a log's clips, or a shard's, share one rig, and checking its cameras
-#: (intrinsics, rigid poses) costs ~1 ms per 6-camera clip against ~0.09 ms for the JSON (curation wrote each
-#: clip's rig twice per clip: clip_from_arrays and ShardWriter.write both validate).
+#: (intrinsics, rigid poses) costs ~1 ms for 6 cameras against ~0.09 ms for the JSON (curation checked every
+#: clip's rig twice: clip_from_arrays and ShardWriter.write both validate).
 _LOADED_RIGS: set[str] = set()
 
 
