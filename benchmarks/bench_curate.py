@@ -181,7 +181,7 @@ def clip_psnr(out: Path, logs: list[Path], max_clips: int = 6) -> tuple[float, f
     return float(np.mean(psnrs)), float(np.min(psnrs)), float(np.mean(sizes))
 
 
-def throughput(logs: list[Path], work: Path, rounds: int) -> None:
+def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) -> None:
     import cv2
 
     cv2.setNumThreads(1)  # one core per worker, as the pool's workers run
@@ -194,6 +194,7 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
         "fleet 160x96, 1 worker": ("fleet", 1, SMALL),
         "fleet 160x96, 2 workers": ("fleet", 2, SMALL),
     }
+    runs = {k: spec for k, spec in runs.items() if spec is None or spec[1] <= max_workers}
     wall = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
     steps: dict[str, list[dict]] = {k: [] for k, spec in runs.items() if spec is not None and spec[1] == 1}
@@ -225,7 +226,8 @@ def throughput(logs: list[Path], work: Path, rounds: int) -> None:
             f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f}"
         )
     steady = {k: float(np.median(v)) for k, v in stage_cpu.items()}
-    for one, two in (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers")):
+    pairs = (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers"))
+    for one, two in (pair for pair in pairs if pair[1] in runs):
         print(
             f"1 -> 2 workers ({one.split(',')[0]}): {med[one] / med[two]:.2f}x wall, "
             f"{med_cpu[one] / med_cpu[two]:.2f}x CPU per frame, on {os.cpu_count()} CPUs (load average now "
@@ -406,6 +408,9 @@ def main() -> None:
     parser.add_argument("--hour-recipe", choices=sorted(RECIPES), default="fleet")
     parser.add_argument("--skip-throughput", action="store_true", help="only the hour-long log")
     parser.add_argument(
+        "--max-workers", type=int, choices=(1, 2), default=2, help="1: leave out the 2-worker runs (default 2)"
+    )
+    parser.add_argument(
         "--scaling-seconds", type=float, help="also time 1 -> 2 workers on the logs looped to this length"
     )
     parser.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "drivewm_bench_curate")
@@ -418,7 +423,7 @@ def main() -> None:
         logs = simulate_logs(args.work, args.drives, args.duration)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
     if not args.skip_throughput:
-        throughput(logs, args.work, args.rounds)
+        throughput(logs, args.work, args.rounds, args.max_workers)
     if args.scaling_seconds:
         scaling(logs, args.work, args.scaling_seconds, args.rounds)
     if args.hour:

@@ -8,6 +8,7 @@ Generated samples use the same format, so the benchmark scores real and generate
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 
@@ -160,10 +161,29 @@ def validate_meta(meta: ClipMeta, where: str = "") -> None:
     check_name(meta.key, f"{prefix}clip key")
     if not meta.fps > 0 or not np.isfinite(meta.fps) or meta.num_frames == 0:
         raise DrivewmError(f"{prefix}clip {meta.key}: needs a finite fps > 0 and at least one timestamp")
-    meta.get_rig()
+    _check_rig(meta)
     for camera, times in meta.camera_timestamps_ns.items():
         if camera not in meta.cameras or len(times) != meta.num_frames:
             raise DrivewmError(
                 f"clip {meta.key}: camera_timestamps_ns[{camera!r}] must name a rig camera and have "
                 f"{meta.num_frames} times, got {len(times)}"
             )
+
+
+#: Rigs (canonical JSON) that loaded: a log's clips, or a shard's, share one rig, and checking its cameras
+#: (intrinsics, rigid poses) costs ~1 ms for 6 cameras against ~0.09 ms for the JSON (curation checked every
+#: clip's rig twice: clip_from_arrays and ShardWriter.write both validate).
+_LOADED_RIGS: set[str] = set()
+
+
+def _check_rig(meta: ClipMeta) -> None:
+    """``meta.get_rig()`` (raises for a rig that does not load), skipped for a rig equal to one that loaded."""
+    try:
+        key = json.dumps(meta.rig, sort_keys=True, allow_nan=True)
+    except (TypeError, ValueError):  # not plain JSON (numpy values): check it every time
+        key = None
+    if key is not None and key in _LOADED_RIGS:
+        return
+    meta.get_rig()
+    if key is not None and len(_LOADED_RIGS) < 256:
+        _LOADED_RIGS.add(key)

@@ -7,9 +7,7 @@ the one around it, so every CPU second is charged to exactly one step.
 
 from __future__ import annotations
 
-import contextlib
 import time
-from collections.abc import Iterator
 
 #: The steps of the per-log stage, in pipeline order (the report and benchmark print them so).
 STEPS = ("index", "read", "decode", "resize", "shots", "filters", "encode", "write", "other")
@@ -23,15 +21,10 @@ class StepClock:
         self._stack: list[str] = []
         self._since = time.process_time()
 
-    @contextlib.contextmanager
-    def step(self, name: str) -> Iterator[None]:
-        self._charge()
-        self._stack.append(name)
-        try:
-            yield
-        finally:
-            self._charge()
-            self._stack.pop()
+    def step(self, name: str) -> _Step:
+        """``with clock.step(name):`` charges the block's CPU to ``name`` (a plain class, not a
+        contextlib generator: ~4 steps per camera-frame, 3.3 instead of 5.2 us each)."""
+        return _Step(self, name)
 
     def _charge(self) -> None:
         """Give the CPU time since the last change to the innermost open step (or to "other")."""
@@ -44,3 +37,20 @@ class StepClock:
         """Seconds per step so far (rounded to the millisecond), in :data:`STEPS` order."""
         self._charge()
         return {k: round(self.seconds[k], 3) for k in STEPS if k in self.seconds}
+
+
+class _Step:
+    """The context manager of :meth:`StepClock.step`."""
+
+    __slots__ = ("clock", "name")
+
+    def __init__(self, clock: StepClock, name: str) -> None:
+        self.clock, self.name = clock, name
+
+    def __enter__(self) -> None:
+        self.clock._charge()
+        self.clock._stack.append(self.name)
+
+    def __exit__(self, *exc) -> None:
+        self.clock._charge()
+        self.clock._stack.pop()

@@ -54,3 +54,36 @@ def test_decode_keep_gives_those_frames_of_a_full_decode(rendered):
     assert np.array_equal(decode_mp4(mp4, 17, keep=[0, 8, 16]), full[[0, 8, 16]])
     with pytest.raises(DrivewmError, match="asked for frames"):
         decode_mp4(mp4, 17, keep=[0, 17])
+
+
+def _encode_copying(frames: np.ndarray, crf: int, preset: str) -> bytes:
+    """The swscale path as it was before frames wrapped the array's memory: PyAV's copying
+    ``VideoFrame.from_ndarray``, one fresh libx264 per video, the same options as H264Encoder."""
+    buf = io.BytesIO()
+    with av.open(buf, mode="w", format="mp4") as container:
+        stream = container.add_stream("libx264", rate=10)
+        stream.width, stream.height, stream.pix_fmt = frames.shape[2], frames.shape[1], "yuv420p"
+        stream.options = {"crf": str(crf), "preset": preset, "bf": "0", "tune": "zerolatency", "forced-idr": "1"}
+        stream.options = {**stream.options, "threads": "1"}
+        for i, rgb in enumerate(frames):
+            frame = av.VideoFrame.from_ndarray(rgb, format="rgb24")
+            frame.pts, frame.pict_type = i, av.video.frame.PictureType.I if i == 0 else av.video.frame.PictureType.NONE
+            for packet in stream.encode(frame):
+                container.mux(packet)
+    return buf.getvalue()
+
+
+@pytest.mark.parametrize("size_wh", [(320, 192), (170, 96)])  # 170 x 3 bytes: rows not 32-byte aligned
+def test_swscale_path_wrapping_the_array_writes_the_copying_paths_video(rendered, size_wh):
+    """Frames wrap the array's memory (no copy): the H.264 frames are those of PyAV's copying path, and a
+    view whose rows are not contiguous (a BGR flip) encodes as its contiguous copy does."""
+    import cv2
+
+    frames = np.stack([cv2.resize(f, size_wh, interpolation=cv2.INTER_AREA) for f in rendered[:17]])
+    want = decode_mp4(_encode_copying(frames, 18, "ultrafast"))
+    with H264Encoder(*size_wh, 10.0, 18, "ultrafast", 1, "swscale") as encoder:
+        got = decode_mp4(encoder.encode(frames))
+    assert np.array_equal(got, want)  # the same decoded pixels, bit for bit
+    flipped = frames[..., ::-1]  # strides (.., .., -1): not C-contiguous rows
+    bgr = encode_mp4(flipped, 10.0, 18, "ultrafast", 1, "swscale")
+    assert bgr == encode_mp4(np.ascontiguousarray(flipped), 10.0, 18, "ultrafast", 1, "swscale")

@@ -1,4 +1,6 @@
+import dataclasses
 import io
+import json
 import tarfile
 
 import numpy as np
@@ -110,3 +112,21 @@ def test_corrupt_shard_is_a_clear_error(tmp_path):
     shard.write_bytes(shard.read_bytes()[:3000])
     with pytest.raises(DrivewmError, match="d-000000.tar"):
         list(iter_clips(tmp_path))
+
+
+def test_a_rig_that_loaded_once_is_not_rechecked_but_a_changed_one_is():
+    """validate_meta remembers rigs that loaded (a log's clips share one): the same rig again passes
+    without rebuilding its cameras, and any changed value is checked afresh (a non-rigid pose, a NaN K)."""
+    from drivewm.clips import format as clip_format
+
+    meta = make_clip("k0")[0].meta
+    clip_format.validate_meta(meta)
+    assert json.dumps(meta.rig, sort_keys=True) in clip_format._LOADED_RIGS
+    bad_pose = json.loads(json.dumps(meta.rig))
+    bad_pose["cameras"][0]["T_ego_from_cam"][0][0] = 2.0  # scales an axis: not a rigid transform
+    bad_K = json.loads(json.dumps(meta.rig))
+    bad_K["cameras"][-1]["K"][0][0] = float("nan")
+    for rig in (bad_pose, bad_K):
+        for _ in range(2):  # a refused rig is not remembered either
+            with pytest.raises(DrivewmError, match="clip k0"):
+                clip_format.validate_meta(dataclasses.replace(meta, rig=rig))
