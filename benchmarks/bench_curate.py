@@ -234,10 +234,11 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
             f"{os.getloadavg()[0]:.1f}); stage CPU ms per camera-frame per worker (StepClock, no process start-up): "
             f"{steady[one]:.3f} with 1 worker, {steady[two]:.3f} with 2"
         )
-    startup = worker_startup_cpu_s()
+    stage, smoother = worker_startup_cpu_s()
     print(
-        f"a pool worker's start-up (spawn + importing the stage) costs {startup:.2f} CPU s, i.e. "
-        f"{1e3 * 2 * startup / frames:.3f} ms per camera-frame of this input for 2 workers (1 worker runs in-process)"
+        f"a pool worker's start-up costs {stage:.2f} CPU s (spawn + importing the stage) + {smoother:.2f} s (filterpy, "
+        f"at its first log), i.e. {1e3 * 2 * (stage + smoother) / frames:.3f} ms per camera-frame of this input for 2 "
+        "workers (1 worker runs in-process)"
     )
     print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock; outside: rest of the run):")
     names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
@@ -266,11 +267,16 @@ def _out(work: Path, run: str) -> Path:
     return work / run.replace(", ", "_").replace(" ", "")
 
 
-def worker_startup_cpu_s() -> float:
-    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does."""
-    code = "import time; import drivewm.curate.executors; print(time.process_time())"
+def worker_startup_cpu_s() -> tuple[float, float]:
+    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does,
+    and then filterpy (scipy.stats), which the stage imports when it first smooths a log's poses."""
+    code = (
+        "import time; import drivewm.curate.executors; a = time.process_time(); import filterpy.kalman; "
+        "print(a, time.process_time() - a)"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return float(proc.stdout.split()[-1])
+    stage, smoother = proc.stdout.split()[-2:]
+    return float(stage), float(smoother)
 
 
 def _step_order(name: str) -> int:

@@ -5,7 +5,7 @@ the per-log stage (:mod:`drivewm.curate.stage`) on an executor and writes shards
 report.json and contact_sheet.png (see ``drivewm/recipes/curate/README.md``).
 
 The public names are imported on first use (:mod:`drivewm.lazy`): ``drivewm --help`` imports this
-package for its commands and must not pay for OpenCV, PyAV and scenedetect.
+package for its commands and must not pay for filterpy, scipy and OpenCV.
 """
 
 from drivewm.lazy import lazy_exports

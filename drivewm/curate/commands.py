@@ -1,6 +1,6 @@
 """``drivewm curate`` and ``drivewm import-video``.
 
-Thin: parse, build the config, print it, call the library; the curation stage (OpenCV, PyAV,
+Thin: parse, build the config, print it, call the library; the curation stage (OpenCV, filterpy,
 scenedetect) is imported inside the handlers so that ``drivewm --help`` stays fast.
 """
 

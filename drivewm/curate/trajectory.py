@@ -1,10 +1,4 @@
-"""Ego trajectory: logged poses smoothed by a Kalman filter + RTS smoother.
-
-Both passes are filterpy's ``KalmanFilter`` (``predict``, ``update``, ``rts_smoother``) step for step,
-the same products in the same order, so the same numbers (tests/curate/test_trajectory.py checks them
-bit for bit against filterpy). They are written out here because filterpy's package ``__init__``
-imports every submodule, scipy.stats among them: ~1 CPU s idle (~2 under load) in every spawned curate
-worker, for a dozen lines of linear algebra (docs/DESIGN.md section 9).
+"""Ego trajectory: logged poses smoothed by a Kalman filter + RTS smoother (filterpy).
 
 Model: constant velocity on (x, y, z, yaw) with yaw unwrapped, white-acceleration process noise
 (Bar-Shalom, "Estimation with Applications to Tracking", sec. 6.3.2, the discretized continuous
@@ -89,48 +83,35 @@ def smooth_poses(t_ns: np.ndarray, T_world_from_ego: np.ndarray, cfg: Trajectory
     z, valid, roll, pitch = _measurements(T_world_from_ego)
     if not valid.any():
         return None
-    H = np.hstack([np.eye(4), np.zeros((4, 4))])
-    R = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2])
+    # lazy: filterpy's package __init__ imports every submodule, scipy.stats among them (~1 CPU s idle,
+    # ~2 under load), and even filterpy.kalman.kalman_filter runs it; a process that only imports the
+    # stage (the driver of a pool, `drivewm curate --help`) never pays it (docs/DESIGN.md section 9)
+    from filterpy.kalman import KalmanFilter
+
+    kf = KalmanFilter(dim_x=8, dim_z=4)
+    kf.H = np.hstack([np.eye(4), np.zeros((4, 4))])
+    kf.R = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2])
     first = int(np.flatnonzero(valid)[0])
-    x = np.concatenate([z[first], np.zeros(4)])
-    P = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2] + [100.0] * 3 + [1.0])
+    kf.x = np.concatenate([z[first], np.zeros(4)])
+    kf.P = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2] + [100.0] * 3 + [1.0])
     n, rejected = len(t_ns), 0
     dts = np.concatenate([[0.0], np.diff(t_ns) * 1e-9])
     xs, Ps = np.empty((n, 8)), np.empty((n, 8, 8))  # filtered states, smoothed in place below
     for k in range(n):
         F, Q = _transition(float(dts[k]), cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
-        x, P = kf_predict(x, P, F, Q)
+        kf.predict(F=F, Q=Q)
         if valid[k]:
-            y = z[k] - H @ x
-            S = H @ P @ H.T + R
+            y = z[k] - kf.H @ kf.x
+            S = kf.H @ kf.P @ kf.H.T + kf.R
             if float(y @ np.linalg.solve(S, y)) <= cfg.gate_chi2:
-                x, P = kf_update(x, P, z[k], H, R)
+                kf.update(z[k])
             else:
                 rejected += 1
-        xs[k], Ps[k] = x, P
+        xs[k], Ps[k] = kf.x, kf.P
     xs_s = rts_smooth(xs, Ps, dts, cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
     idx = np.arange(len(t_ns))
     fill = lambda a: np.interp(idx, idx[valid], a[valid])  # noqa: E731 - roll/pitch across NaN samples
     return SmoothedTrajectory(t_ns, xs_s[:, :3], xs_s[:, 3], fill(roll), fill(pitch), rejected, int((~valid).sum()))
-
-
-def kf_predict(x: np.ndarray, P: np.ndarray, F: np.ndarray, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman prediction (Kalman 1960) of state ``x`` (n,) and covariance ``P`` (n, n): x = F x,
-    P = F P F' + Q (filterpy ``KalmanFilter.predict`` without control input, fading memory 1)."""
-    return np.dot(F, x), np.dot(np.dot(F, P), F.T) + Q
-
-
-def kf_update(
-    x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman update with measurement ``z`` (m,) of ``H`` (m, n) and noise ``R`` (m, m); the covariance
-    in Joseph form P = (I - KH) P (I - KH)' + K R K' (Bucy & Joseph 1968), stable for a non-optimal K (filterpy
-    ``KalmanFilter.update``: the same products in the same order)."""
-    y = z - np.dot(H, x)
-    PHT = np.dot(P, H.T)
-    K = np.dot(PHT, np.linalg.inv(np.dot(H, PHT) + R))
-    I_KH = np.eye(len(x)) - np.dot(K, H)
-    return x + np.dot(K, y), np.dot(np.dot(I_KH, P), I_KH.T) + np.dot(np.dot(K, R), K.T)
 
 
 def rts_smooth(xs: np.ndarray, Ps: np.ndarray, dts: np.ndarray, q_pos: float, q_yaw: float) -> np.ndarray:

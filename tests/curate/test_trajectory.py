@@ -1,7 +1,7 @@
 import numpy as np
 
 from drivewm.curate.config import TrajectoryConfig
-from drivewm.curate.trajectory import _measurements, _transition, future_waypoints, rts_smooth, smooth_poses
+from drivewm.curate.trajectory import future_waypoints, smooth_poses
 from drivewm.geometry import T_from_xyz_yaw
 
 
@@ -66,60 +66,21 @@ def test_real_gnss_log_gives_smooth_trajectory(shared_data):
     assert np.linalg.norm(s.xyz[-1] - s.xyz[0]) > 50  # the car drives about 60 m
 
 
-def _filterpy_forward(t_ns, T_world_from_ego, cfg):
-    """The forward pass as the stage ran it with filterpy's KalmanFilter (the oracle): filtered states and
-    covariances at every pose, the same gate."""
-    from filterpy.kalman import KalmanFilter
-
-    z, valid, _, _ = _measurements(T_world_from_ego)
-    kf = KalmanFilter(dim_x=8, dim_z=4)
-    kf.H = np.hstack([np.eye(4), np.zeros((4, 4))])
-    kf.R = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2])
-    kf.x = np.concatenate([z[int(np.flatnonzero(valid)[0])], np.zeros(4)])
-    kf.P = np.diag([cfg.position_sigma_m**2] * 3 + [cfg.yaw_sigma_rad**2] + [100.0] * 3 + [1.0])
-    dts = np.concatenate([[0.0], np.diff(t_ns) * 1e-9])
-    xs, Ps = np.empty((len(t_ns), 8)), np.empty((len(t_ns), 8, 8))
-    for k in range(len(t_ns)):
-        F, Q = _transition(float(dts[k]), cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
-        kf.predict(F=F, Q=Q)
-        if valid[k]:
-            y = z[k] - kf.H @ kf.x
-            if float(y @ np.linalg.solve(kf.H @ kf.P @ kf.H.T + kf.R, y)) <= cfg.gate_chi2:
-                kf.update(z[k])
-        xs[k], Ps[k] = kf.x, kf.P
-    return xs, Ps, dts
-
-
-def test_kalman_passes_give_filterpys_numbers_bit_for_bit():
-    """The written-out predict/update (imported without scipy) against filterpy's KalmanFilter on a drive
-    with GNSS jitter, two multipath jumps (gated out) and an outage; then the RTS pass on both."""
-    t, truth = circle_drive(n=120)
-    rng = np.random.default_rng(1)
-    noisy = truth.copy()
-    noisy[:, :2, 3] += rng.normal(0, 0.3, (len(t), 2))
-    noisy[[30, 70], 1, 3] -= 6.0
-    noisy[50:55] = np.nan
-    cfg = TrajectoryConfig(position_sigma_m=0.3)
-    xs, Ps, dts = _filterpy_forward(t, noisy, cfg)
-    want = rts_smooth(xs, Ps, dts, cfg.accel_sigma_mps2, cfg.yaw_accel_sigma_radps2)
-    got = smooth_poses(t, noisy, cfg)
-    assert got.rejected == 2 and got.missing == 5
-    assert np.array_equal(got.xyz, want[:, :3]) and np.array_equal(got.yaw, want[:, 3])
-
-
-def test_the_stage_and_its_smoother_never_import_scipy():
-    """A fresh interpreter (as a spawned pool worker) that imports the curate stage and its executors and
-    smooths a log's poses holds neither filterpy nor scipy: ~1 CPU s of imports saved per worker."""
+def test_importing_the_stage_loads_no_scipy_until_the_smoother_runs():
+    """A fresh interpreter (as a spawned pool worker or the driver of a pool) that imports the curate
+    stage and its executors holds neither filterpy nor scipy; the first smoothing loads filterpy."""
     import subprocess
     import sys
 
     code = (
         "import sys, numpy as np\n"
         "import drivewm.curate.executors, drivewm.curate.stage\n"
+        "print(sorted(m for m in ('scipy', 'scipy.stats', 'filterpy') if m in sys.modules))\n"
         "from drivewm.curate.config import TrajectoryConfig\n"
         "from drivewm.curate.trajectory import smooth_poses\n"
-        "s = smooth_poses(np.arange(3) * 10**8, np.tile(np.eye(4), (3, 1, 1)), TrajectoryConfig())\n"
-        "print(s.xyz.shape, sorted(m for m in ('scipy', 'filterpy') if m in sys.modules))\n"
+        "smooth_poses(np.arange(3) * 10**8, np.tile(np.eye(4), (3, 1, 1)), TrajectoryConfig())\n"
+        "print(sorted(m for m in ('scipy', 'scipy.stats', 'filterpy') if m in sys.modules))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
-    assert out.strip() == "(3, 3) []"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[0] == "[]"
+    assert out[1] == "['filterpy', 'scipy', 'scipy.stats']"
