@@ -15,4 +15,4 @@ fi
 ruff check .
 ruff format --check .
 export RAY_AUTH_MODE=disabled RAY_USAGE_STATS_ENABLED=0 SDL_VIDEODRIVER=offscreen
-python -m pytest -q "$@"
+python -m pytest -q --durations=15 "$@"
