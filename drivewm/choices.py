@@ -52,14 +52,19 @@ def add_registry_argument(parser: argparse.ArgumentParser, flag: str, registry: 
 SHIPPED_PREFIX = "shipped:"
 
 
-def model_folder(value: str) -> Path:
-    """argparse ``type`` of a model folder argument: ``shipped:KIND`` is the installed
-    ``drivewm/weights/KIND`` (drivewm.release.shipped_model), anything else a path as given."""
-    if not value.startswith(SHIPPED_PREFIX):
+def resolve_model_folder(value: str | Path) -> Path:
+    """``shipped:KIND`` is the installed ``drivewm/weights/KIND`` (drivewm.release.shipped_model; an
+    unknown or missing kind raises DrivewmError), anything else a path as given."""
+    if not (isinstance(value, str) and value.startswith(SHIPPED_PREFIX)):
         return Path(value)
     from drivewm.release import shipped_model  # PyTorch: imported only when a shipped model is named
 
+    return shipped_model(value[len(SHIPPED_PREFIX) :])
+
+
+def model_folder(value: str) -> Path:
+    """argparse ``type`` of a model folder argument (:func:`resolve_model_folder`)."""
     try:
-        return shipped_model(value[len(SHIPPED_PREFIX) :])
+        return resolve_model_folder(value)
     except DrivewmError as exc:  # argparse turns this into the CLI's one-line error, exit 2
         raise argparse.ArgumentTypeError(str(exc)) from exc

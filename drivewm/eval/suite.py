@@ -240,13 +240,11 @@ def _image_poses(item, cfg, metrics, sfm) -> None:
     tc = cfg.trajectory
     ego = _ego_at_cameras(item, cfg) or {c: item.T_world_from_ego for c in item.rig.names}
     ref = {c.name: ego[c.name] @ c.T_ego_from_cam for c in item.rig.cameras}
-    if sum(int(r.sum()) for r in sfm.registered.values()) < 3:
-        metrics["pose_auc"], metrics["pose_error_m"], metrics["pose_error_deg"] = 0.0, math.nan, math.nan
-        return
     errors = image_pose_errors(sfm.T_world_from_cam, sfm.registered, ref, tc.alignment)
     metrics["pose_auc"] = errors.auc(tc.pose_auc_m, tc.pose_auc_deg)
-    metrics["pose_error_m"] = float(np.median(errors.position_m))
-    metrics["pose_error_deg"] = float(np.median(errors.rotation_deg))
+    scored = len(errors.position_m) > 0
+    metrics["pose_error_m"] = float(np.median(errors.position_m)) if scored else math.nan
+    metrics["pose_error_deg"] = float(np.median(errors.rotation_deg)) if scored else math.nan
 
 
 def _adherence(item, videos, cfg, matcher, metrics, artifacts) -> None:

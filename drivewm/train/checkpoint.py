@@ -37,7 +37,7 @@ from safetensors.torch import save_file
 
 from drivewm import __version__
 from drivewm.atomic import atomic_path, write_json
-from drivewm.choices import SHIPPED_PREFIX
+from drivewm.choices import resolve_model_folder
 from drivewm.errors import DrivewmError
 
 CONFIG_NAME = "config.json"
@@ -140,11 +140,7 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
     a tokenizer run's ``init`` do. A missing folder/file or another ``model_type`` raises
     DrivewmError naming the folder.
     """
-    if isinstance(path, str) and path.startswith(SHIPPED_PREFIX):
-        from drivewm.release import shipped_model  # imports this module
-
-        path = shipped_model(path[len(SHIPPED_PREFIX) :])
-    path = Path(path)
+    path = resolve_model_folder(path)
     if not (path / WEIGHTS_NAME).is_file():
         raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
     for _ in range(READ_ATTEMPTS):

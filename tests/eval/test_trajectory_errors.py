@@ -151,3 +151,14 @@ def test_image_pose_auc_counts_errors_and_unregistered_images():
     assert errors.images == n and len(errors.position_m) == n - 1
     assert errors.rotation_deg.max() == pytest.approx(1.0)
     assert errors.auc(0.25, 2.0) == pytest.approx((n - 2 + 0.5) / n)
+
+
+def test_image_pose_errors_with_fewer_than_three_registered_images_score_every_image_zero():
+    from drivewm.eval.trajectory_errors import image_pose_errors
+
+    ref = rig_images(straight_path())
+    registered = {c: np.zeros(len(T), bool) for c, T in ref.items()}
+    registered["CAM_FRONT"][:2] = True  # two images: no similarity can be fitted
+    errors = image_pose_errors(ref, registered, ref)
+    assert len(errors.position_m) == 0 and errors.images == sum(len(T) for T in ref.values())
+    assert errors.auc(0.25, 2.0) == 0.0
