@@ -3,15 +3,18 @@ and 60 s for the 221-frame real dashcam clip, on 2 cores (issue 14).
 
 Simulates one short nuscenes6 drive (highway-env, 320x192, 10 fps), curates it into 17-frame
 clips with the packaged curate recipe ``test`` (or takes the clips of ``--clip-dir``, e.g. the
-reference set), and scores each clip with the full protocol (TSE, CSE, pose, trajectory) twice,
-interleaved: with the features TSE and CSE computed shared with structure from motion
-(``pose.features=shared``, the protocol) and with COLMAP's own extraction and matching (``colmap``,
-the protocol before issue 14), one process each. Prints per-metric seconds per clip, the medians,
-their ratio and the ratio to the 10 s goal; pose success and ATE of both. ``--dashcam`` also times
-../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE, one core) against 60 s, wall
-and CPU, with the protocol and with COLMAP's 50 iterations per global bundle adjustment, interleaved,
-and prints how far apart their camera paths are (seconds by part: TSE, pose's database and mapping).
-The machine is shared: the load average is printed; compare ratios taken in the same run.
+reference set), and scores each clip with the full protocol (TSE, CSE, pose, trajectory) three
+times, interleaved: the protocol (``pose.features=shared``: TSE, CSE and structure from motion share
+one clip's SIFT features and matches) on one thread and on two (``evaluate_item(threads=2)``: one
+clip's features, matches and F fits spread over both cores; COLMAP's mapping stays on one), and with
+COLMAP's own extraction and matching (``colmap``, the protocol before issue 14) on one. Prints
+per-metric seconds per clip, the medians, their ratios and the ratio to the 10 s goal, pose success
+and ATE, and whether the one- and two-thread figures are identical (they must be). ``--dashcam``
+also times ../shared/data's 221-frame 960x540 dashcam clip (front camera, pose + TSE) against 60 s,
+wall and CPU: the protocol on two threads and on one, and COLMAP's 50 iterations per global bundle
+adjustment, interleaved, and prints how far apart the camera paths are (seconds by part: TSE,
+pose's database and mapping). The machine is shared: the load average is printed; compare ratios
+taken in the same run.
 
     python benchmarks/bench_eval.py              # 2 clips
     python benchmarks/bench_eval.py --clips 6 --dashcam
@@ -22,6 +25,7 @@ The machine is shared: the load average is printed; compare ratios taken in the 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import tempfile
 import time
@@ -49,15 +53,19 @@ def make_clips(out: Path, clips: int) -> Path:
     return out / "clips"
 
 
-def timed(item, cfg):
-    """Wall seconds, CPU seconds of this process (one thread: pycolmap and OpenCV run single-threaded),
-    and the ClipResult (metrics, artifacts) of one clip. On a shared machine the CPU seconds are the
-    better estimate of an idle core's wall time."""
+def timed(item, cfg, threads: int):
+    """Wall seconds, CPU seconds of this process (all its threads), and the ClipResult (metrics,
+    artifacts) of one clip scored on ``threads`` threads."""
     from drivewm.eval.suite import evaluate_item
 
     t0, c0 = time.perf_counter(), time.process_time()
-    result = evaluate_item(item, cfg)
+    result = evaluate_item(item, cfg, threads)
     return time.perf_counter() - t0, time.process_time() - c0, result
+
+
+def figures(metrics: dict) -> dict:
+    """The metrics without their timings: what must not depend on the thread count."""
+    return {k: v for k, v in metrics.items() if k != "seconds"}
 
 
 def bench_clips(n: int, clip_dir: Path | None = None) -> None:
@@ -69,35 +77,47 @@ def bench_clips(n: int, clip_dir: Path | None = None) -> None:
         items = load_items(clip_dir or make_clips(Path(tmp), n))
         for item in items:
             item.videos()  # decode once, outside the timing
-        configs = {
-            "shared": EvalConfig(metrics=["tse", "cse", "pose", "traj"]),
-            "colmap": EvalConfig(metrics=["tse", "cse", "pose", "traj"], pose=PoseConfig(features="colmap")),
+        protocol = EvalConfig(metrics=["tse", "cse", "pose", "traj"])
+        runs = {
+            "2 threads": (protocol, 2),
+            "1 thread": (protocol, 1),
+            "colmap": (EvalConfig(metrics=["tse", "cse", "pose", "traj"], pose=PoseConfig(features="colmap")), 1),
         }
-        walls: dict[str, list[float]] = {k: [] for k in configs}
-        cpus: dict[str, list[float]] = {k: [] for k in configs}
-        success: dict[str, list[float]] = {k: [] for k in configs}
-        ates: dict[str, list[float]] = {k: [] for k in configs}
+        walls: dict[str, list[float]] = {k: [] for k in runs}
+        cpus: dict[str, list[float]] = {k: [] for k in runs}
+        success: dict[str, list[float]] = {k: [] for k in runs}
+        ates: dict[str, list[float]] = {k: [] for k in runs}
+        same = []
         for item in items:
-            for name, cfg in configs.items():  # interleaved: both see the same load
-                wall, cpu, result = timed(item, cfg)
-                m = result.metrics
+            got = {}
+            for name, (cfg, threads) in runs.items():  # interleaved: all see the same load
+                wall, cpu, result = timed(item, cfg, threads)
+                m = got[name] = result.metrics
                 walls[name].append(wall)
                 cpus[name].append(cpu)
                 success[name].append(m["pose_success"])
                 ates[name].append(m["ate"])
                 parts = ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())
-                print(f"  {item.key:24s} {name:6s} wall {wall:6.1f} s, cpu {cpu:6.1f} s  ({parts})")
+                print(f"  {item.key:24s} {name:9s} wall {wall:6.1f} s, cpu {cpu:6.1f} s  ({parts})")
+            same.append(
+                json.dumps(figures(got["1 thread"]), default=str) == json.dumps(figures(got["2 threads"]), default=str)
+            )
     print(f"clips: {len(items)} (6 cameras x 17 frames, 320x192), load average {os.getloadavg()[0]:.1f}")
-    for name in configs:
+    for name in runs:
         wall, cpu = float(np.median(walls[name])), float(np.median(cpus[name]))
         print(
-            f"  {name:6s} median wall {wall:6.1f} s/clip = {wall / CLIP_GOAL_S:.2f}x the {CLIP_GOAL_S:.0f} s goal; "
-            f"cpu {cpu:6.1f} s/clip = {cpu / CLIP_GOAL_S:.2f}x (one core), {cpu / 2 / CLIP_GOAL_S:.2f}x with 2 workers "
-            f"on 2 cores; pose success {np.mean(success[name]):.2f}, ATE mean {np.nanmean(ates[name]):.4f} "
+            f"  {name:9s} median wall {wall:6.1f} s/clip = {wall / CLIP_GOAL_S:.2f}x the {CLIP_GOAL_S:.0f} s goal, "
+            f"cpu {cpu:6.1f} s; pose success {np.mean(success[name]):.2f}, ATE mean {np.nanmean(ates[name]):.4f} "
             f"max {np.nanmax(ates[name]):.4f} m"
         )
-    ratio = float(np.median(cpus["colmap"])) / float(np.median(cpus["shared"]))
-    print(f"  speed-up shared / colmap features (cpu medians): {ratio:.2f}x")
+    one, two = float(np.median(walls["1 thread"])), float(np.median(walls["2 threads"]))
+    print(
+        f"  one clip on 2 cores: 2 threads {one / two:.2f}x faster than 1 (wall medians); 2 clips in parallel on one "
+        f"thread each: {float(np.median(cpus['1 thread'])) / 2 / CLIP_GOAL_S:.2f}x the goal per clip (cpu / 2); "
+        f"figures identical on 1 and 2 threads: {all(same)}"
+    )
+    ratio = float(np.median(cpus["colmap"])) / float(np.median(cpus["1 thread"]))
+    print(f"  speed-up shared / colmap features (cpu medians, 1 thread): {ratio:.2f}x")
 
 
 def bench_dashcam() -> None:
@@ -111,21 +131,28 @@ def bench_dashcam() -> None:
     item = load_items(DASHCAM, "front1", fit="stretch")[0]
     item.videos()
     frames = len(next(iter(item.videos().values())))
-    configs = {
-        "protocol": EvalConfig(metrics=["tse", "pose"]),
-        "ba_50_iterations": EvalConfig(metrics=["tse", "pose"], pose=PoseConfig(ba_global_max_iterations=50)),
+    protocol = EvalConfig(metrics=["tse", "pose"])
+    runs = {
+        "protocol, 2 threads": (protocol, 2),
+        "protocol, 1 thread": (protocol, 1),
+        "ba_50_iterations, 2 threads": (
+            EvalConfig(metrics=["tse", "pose"], pose=PoseConfig(ba_global_max_iterations=50)),
+            2,
+        ),
     }
     paths = {}
-    for name, cfg in configs.items():
-        wall, cpu, result = timed(item, cfg)
+    for name, (cfg, threads) in runs.items():
+        wall, cpu, result = timed(item, cfg, threads)
         m, paths[name] = result.metrics, result.artifacts["sfm"].T_world_from_cam["CAM_FRONT"]
         parts = ", ".join(f"{k} {v:.1f}" for k, v in m["seconds"].items())
         print(
-            f"dashcam {name:16s}: {frames} frames 960x540, wall {wall:.1f} s ({parts}) = {wall / DASHCAM_GOAL_S:.2f}x "
-            f"the {DASHCAM_GOAL_S:.0f} s goal, cpu {cpu:.1f} s = {cpu / DASHCAM_GOAL_S:.2f}x; "
+            f"dashcam {name:27s}: {frames} frames 960x540, wall {wall:.1f} s ({parts}) = {wall / DASHCAM_GOAL_S:.2f}x "
+            f"the {DASHCAM_GOAL_S:.0f} s goal, cpu {cpu:.1f} s; "
             f"registered {m['registered_fraction']:.2f}, TSE {m['tse']:.4f}, load {os.getloadavg()[0]:.1f}"
         )
-    est, ref = paths["protocol"], paths["ba_50_iterations"]
+    same = np.array_equal(paths["protocol, 1 thread"], paths["protocol, 2 threads"], equal_nan=True)
+    print(f"  camera paths on 1 and 2 threads identical: {same}")
+    est, ref = paths["protocol, 2 threads"], paths["ba_50_iterations, 2 threads"]
     if np.isfinite(est).all() and np.isfinite(ref).all():
         err, _ = ate(est, ref)
         length = float(np.sum(np.linalg.norm(np.diff(ref[:, :3, 3], axis=0), axis=1)))

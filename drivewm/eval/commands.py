@@ -30,6 +30,13 @@ def register(subparsers) -> None:
         "--out", required=True, help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd"
     )
     p.add_argument("--workers", type=int, default=1, help="clips scored in parallel (processes)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="threads per clip for its features and matches (default: the cores over the clips scored at once; "
+        "the figures do not depend on it)",
+    )
     p.add_argument("--metrics", default=None, help=f"comma list of {','.join(ALL_METRICS)} (default: the recipe's)")
     p.add_argument(
         "--reference",
@@ -76,6 +83,7 @@ def run_eval(args: argparse.Namespace) -> int:
         pictures=not args.no_pictures,
         rig_fit=args.rig_fit,
         max_clips=args.max_clips,
+        threads=args.threads,
     )
     # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
     summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})

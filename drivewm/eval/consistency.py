@@ -140,20 +140,22 @@ def temporal_sampson(
     (T, 4, 4) or None; ``ego_at_camera`` (optional): per camera, the ego poses (T, 4, 4) at that
     camera's exposure times (drivewm.eval.exposure.ego_at_cameras), used instead of ``T_world_from_ego``."""
     K_c = canonical_K(epi_cfg)
-    per_camera = {}
-    for cam in rig.cameras:
-        frames = videos[cam.name]
-        ego = None if T_world_from_ego is None else (ego_at_camera or {}).get(cam.name, T_world_from_ego)
-        pairs = []
-        for t in range(len(frames) - cfg.frame_gap):
-            u = t + cfg.frame_gap
-            m = rectify_matches(matcher.match((cam.name, t), frames[t], (cam.name, u), frames[u]), cam, cam, K_c)
-            T_rel = None
-            if ego is not None:
-                T_wc = ego @ cam.T_ego_from_cam
-                T_rel = [invert_T(T_wc[u]) @ T_wc[t]]
-            pairs.append(_score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, True))
-        per_camera[cam.name] = pairs
+    matcher.prefetch(((c, t), frame) for c, frames in videos.items() for t, frame in enumerate(frames))
+
+    def score(task: tuple[Camera, int]) -> dict:
+        cam, t = task
+        frames, u = videos[cam.name], t + cfg.frame_gap
+        m = rectify_matches(matcher.match((cam.name, t), frames[t], (cam.name, u), frames[u]), cam, cam, K_c)
+        T_rel = None
+        if T_world_from_ego is not None:
+            ego = (ego_at_camera or {}).get(cam.name, T_world_from_ego)
+            T_wc = ego @ cam.T_ego_from_cam
+            T_rel = [invert_T(T_wc[u]) @ T_wc[t]]
+        return _score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, True)
+
+    tasks = [(cam, t) for cam in rig.cameras for t in range(len(videos[cam.name]) - cfg.frame_gap)]
+    scores = matcher.map(score, tasks)
+    per_camera = {cam.name: [r for (c, _), r in zip(tasks, scores) if c is cam] for cam in rig.cameras}
     scale = {cam.name: native_px_per_canonical_px(cam, K_c) for cam in rig.cameras}
     return summarize(per_camera, {g: scale[g] for g in per_camera}, epi_cfg.failed_pair_px)
 
@@ -192,7 +194,9 @@ def cross_sampson(
     per_pair = {}
     num_frames = len(next(iter(videos.values())))
     min_verified = max(epi_cfg.min_matches, int(np.ceil(cfg.cse_min_matches_per_frame * num_frames)))
-    for name_a, name_b in pairs:
+
+    def score(pair: tuple[str, str]) -> tuple[dict, Matches]:
+        name_a, name_b = pair
         cam_a, cam_b = rig.camera(name_a), rig.camera(name_b)
         pooled, frame_of = _pooled_matches(videos, cam_a, cam_b, matcher, K_c)
         T_b_from_a = invert_T(cam_b.T_ego_from_cam) @ cam_a.T_ego_from_cam
@@ -202,7 +206,11 @@ def cross_sampson(
             T_rel = list(invert_T(T_wb) @ T_wa)
         else:
             T_rel = [T_b_from_a] * num_frames
-        per_pair[f"{name_a}~{name_b}"] = [_score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, False)]
+        return _score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, False), pooled
+
+    matcher.prefetch(((c, t), frame) for c in {c for p in pairs for c in p} for t, frame in enumerate(videos[c]))
+    for (name_a, name_b), (scored, pooled) in zip(pairs, matcher.map(score, pairs)):
+        per_pair[f"{name_a}~{name_b}"] = [scored]
         if matches_out is not None:
             matches_out[(name_a, name_b)] = pooled
     scale = {

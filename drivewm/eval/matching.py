@@ -11,7 +11,9 @@ input image (OpenCV convention: pixel centres at integers).
 from __future__ import annotations
 
 import dataclasses
-from functools import lru_cache
+import threading
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -46,9 +48,17 @@ class Matches:
         return Matches(np.concatenate([self.uv_a, other.uv_a]), np.concatenate([self.uv_b, other.uv_b]))
 
 
-@lru_cache(maxsize=4)
+_THREAD = threading.local()
+
+
 def _sift(max_features: int, contrast_threshold: float) -> cv2.SIFT:
-    return cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
+    """This thread's SIFT detector for the settings: one per thread, as OpenCV does not promise that
+    one Feature2D object may detect on several threads at once."""
+    detectors = _THREAD.__dict__.setdefault("sift", {})
+    key = (max_features, contrast_threshold)
+    if key not in detectors:
+        detectors[key] = cv2.SIFT_create(nfeatures=max_features, contrastThreshold=contrast_threshold)
+    return detectors[key]
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -106,10 +116,18 @@ def squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 class FrameMatcher:
     """Matches pairs of frames with the configured matcher, caching features per frame id and
-    matches per pair of ids: TSE, CSE and structure from motion share both (drivewm.eval.sfm)."""
+    matches per pair of ids: TSE, CSE and structure from motion share both (drivewm.eval.sfm).
 
-    def __init__(self, cfg: MatchConfig):
+    ``threads`` > 1 spreads one clip's work (SIFT, matching, F fits: OpenCV and NumPy release the
+    GIL) over that many threads through :meth:`map`, which keeps input order, so every figure is
+    the same as with one thread; the feature cache is filled by :meth:`prefetch` before the
+    threads read it."""
+
+    def __init__(self, cfg: MatchConfig, threads: int = 1):
+        if threads < 1:
+            raise DrivewmError(f"eval threads must be >= 1, got {threads}")
         self.cfg = cfg
+        self.threads = threads
         self._cache: dict[object, Features] = {}
         self._pairs: dict[tuple, np.ndarray] = {}
         self._learned = load_learned_matcher(cfg.learned_weights) if cfg.matcher == "learned" else None
@@ -120,6 +138,19 @@ class FrameMatcher:
         if frame_id not in self._cache:
             self._cache[frame_id] = detect_sift(image, self.cfg)
         return self._cache[frame_id]
+
+    def prefetch(self, frames: Iterable[tuple[object, np.ndarray]]) -> None:
+        """Detect the features of every (id, image) not cached yet, over ``threads`` threads."""
+        todo = {i: image for i, image in frames if i not in self._cache}
+        if self._learned is None:
+            self._cache.update(zip(todo, self.map(lambda image: detect_sift(image, self.cfg), todo.values())))
+
+    def map(self, fn: Callable, items: Iterable) -> list:
+        """``[fn(x) for x in items]`` over ``threads`` threads, in input order."""
+        if self.threads == 1:
+            return [fn(x) for x in items]
+        with ThreadPoolExecutor(self.threads) as pool:
+            return list(pool.map(fn, items))
 
     @property
     def shares_features(self) -> bool:

@@ -153,6 +153,19 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
     num_frames = len(next(iter(videos.values())))
     pairs = overlapping_pairs(rig, _consistency_cfg()) if pairs is None else pairs
     K_c = canonical_K(epi_cfg)
+
+    def verified_pair(pair: tuple) -> np.ndarray:
+        """Keypoint index pairs (N, 2) of a's and b's shared features, the drivewm-verified ones."""
+        a, b = pair
+        idx = matcher.match_indices(a, videos[a[0]][a[1]], b, videos[b[0]][b[1]])
+        if cfg.verify == "drivewm":
+            fa, fb = matcher.features(a, None), matcher.features(b, None)
+            m = rectify_matches(Matches(fa.uv[idx[:, 0]], fb.uv[idx[:, 1]]), rig.camera(a[0]), rig.camera(b[0]), K_c)
+            F, _ = fit_fundamental(m, epi_cfg)
+            idx = idx[verified_mask(F, m, epi_cfg)]
+        return idx
+
+    matcher.prefetch(((c, t), frame) for c, frames in videos.items() for t, frame in enumerate(frames))
     db = pycolmap.Database.open(db_path)
     try:
         ids = {}
@@ -163,16 +176,9 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
                 ids[(cam.name, t)] = image_id
                 uv = matcher.features((cam.name, t), videos[cam.name][t]).uv
                 db.write_keypoints(image_id, (uv + 0.5).astype(np.float32))
+        image_pairs = sfm_image_pairs(rig, num_frames, cfg, pairs)
         names = []
-        for a, b in sfm_image_pairs(rig, num_frames, cfg, pairs):
-            idx = matcher.match_indices(a, videos[a[0]][a[1]], b, videos[b[0]][b[1]])
-            if cfg.verify == "drivewm":
-                fa, fb = matcher.features(a, None), matcher.features(b, None)
-                m = rectify_matches(
-                    Matches(fa.uv[idx[:, 0]], fb.uv[idx[:, 1]]), rig.camera(a[0]), rig.camera(b[0]), K_c
-                )
-                F, _ = fit_fundamental(m, epi_cfg)
-                idx = idx[verified_mask(F, m, epi_cfg)]
+        for (a, b), idx in zip(image_pairs, matcher.map(verified_pair, image_pairs)):
             if len(idx) < cfg.min_pair_inliers:
                 continue
             db.write_matches(ids[a], ids[b], idx.astype(np.uint32))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import time
 import traceback
 from concurrent.futures import as_completed
@@ -75,11 +76,12 @@ class ClipResult:
     artifacts: dict
 
 
-def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
+def evaluate_item(item: EvalItem, cfg: EvalConfig, threads: int = 1) -> ClipResult:
     """All configured metrics of one clip. Bad input is recorded as the clip's error, never raised;
-    so is an unexpected exception (a bug or an input no check foresaw): the batch goes on."""
+    so is an unexpected exception (a bug or an input no check foresaw): the batch goes on.
+    ``threads``: the clip's feature work runs on that many threads (the figures do not change)."""
     try:
-        return _evaluate_item(item, cfg)
+        return _evaluate_item(item, cfg, threads)
     except DrivewmError as exc:
         return ClipResult(item.key, {"error": str(exc)}, {})
     except Exception as exc:  # noqa: BLE001 - one clip's failure must not end the batch
@@ -87,21 +89,22 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
         return ClipResult(item.key, {"error": f"{item.key}: unexpected error: {detail}"}, {})
 
 
-def _evaluate_item(item: EvalItem, cfg: EvalConfig) -> ClipResult:
-    # One thread each for OpenCV and BLAS: clips run in parallel over processes. OpenBLAS's own
+def _evaluate_item(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResult:
+    # One thread each inside OpenCV and BLAS calls: clips run in parallel over processes, and one
+    # clip over the matcher's own threads (whole frames and pairs per thread). OpenBLAS's own
     # threads made each 550 x 550 descriptor product 10x dearer in CPU on 2 busy cores (15.7 ms
     # against 1.5 ms), a third of a clip's matching time.
     cv2.setNumThreads(1)
     with threadpool_limits(limits=1):
-        return _evaluate_metrics(item, cfg)
+        return _evaluate_metrics(item, cfg, threads)
 
 
-def _evaluate_metrics(item: EvalItem, cfg: EvalConfig) -> ClipResult:
+def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResult:
     metrics: dict = {"status": {}, "seconds": {}}
     artifacts: dict = {}
     videos = item.videos()
 
-    matcher = FrameMatcher(cfg.match)
+    matcher = FrameMatcher(cfg.match, threads)
     for name, fn in (("tse", _tse), ("cse", _cse), ("pose", _pose), ("traj", _traj), ("adherence", _adherence)):
         if name in cfg.metrics or (name == "pose" and "traj" in cfg.metrics):
             t0 = time.perf_counter()
@@ -279,17 +282,30 @@ def _mean_seconds(results: list[ClipResult]) -> dict[str, float]:
     }
 
 
-def run_items(items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress: bool = True) -> list[ClipResult]:
-    """Evaluate items, in a process pool when ``workers`` > 1; results in input order."""
+def clip_threads(workers: int, clips: int, cores: int | None = None) -> int:
+    """Threads per clip that fill the cores: the cores over the clips scored at once (``workers``,
+    at most ``clips``), at least 1. One clip on 2 cores gets 2 threads; 2 workers get 1 each."""
+    cores = cores or len(os.sched_getaffinity(0))
+    return max(1, cores // max(1, min(workers, clips)))
+
+
+def run_items(
+    items: list[EvalItem], cfg: EvalConfig, workers: int = 1, progress: bool = True, threads: int | None = None
+) -> list[ClipResult]:
+    """Evaluate items, in a process pool when ``workers`` > 1; results in input order. ``threads``
+    per clip: :func:`clip_threads` when None."""
+    threads = clip_threads(workers, len(items)) if threads is None else threads
+    if threads < 1:
+        raise DrivewmError(f"eval threads must be >= 1, got {threads}")
     bar = tqdm(total=len(items), desc="eval clips", unit="clip", disable=not progress)
     results: dict[int, ClipResult] = {}
     if workers <= 1:
         for i, item in enumerate(items):
-            results[i] = evaluate_item(item, cfg)
+            results[i] = evaluate_item(item, cfg, threads)
             bar.update()
     else:
         with process_pool(workers) as pool:  # spawned workers that exit if this process is killed
-            futures = {pool.submit(evaluate_item, item, cfg): i for i, item in enumerate(items)}
+            futures = {pool.submit(evaluate_item, item, cfg, threads): i for i, item in enumerate(items)}
             for fut in as_completed(futures):
                 results[futures[fut]] = fut.result()
                 bar.update()
@@ -319,6 +335,7 @@ def evaluate(
     pictures: bool = True,
     rig_fit: str = "same",
     max_clips: int | None = None,
+    threads: int | None = None,
 ) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
@@ -327,13 +344,14 @@ def evaluate(
     and a Rerun recording (eval.rrd). ``rig_fit``: how videos of another aspect ratio than the rig
     were resized from it ('same' refuses them, 'stretch', 'crop'; drivewm.geometry.Camera.scaled).
     ``max_clips``: score that many clips spread evenly over the (sorted) input, e.g. a reference
-    subset of a large held-out set.
+    subset of a large held-out set. ``threads``: per clip (:func:`clip_threads` when None); the
+    figures are the same for any number.
     """
     cfg = cfg or EvalConfig()
     items = spread(load_items(location, rig, grid, cameras, rig_fit), max_clips)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
-    results = run_items(items, cfg, workers, progress)
+    results = run_items(items, cfg, workers, progress, threads)
     metrics = aggregate(results)
     metrics["clips"] = {r.key: r.metrics for r in results}
     metrics["config"] = to_dict(cfg)

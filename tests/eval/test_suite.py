@@ -14,7 +14,7 @@ from drivewm.config import load_yaml, to_dict
 from drivewm.errors import DrivewmError
 from drivewm.eval.config import EVAL_RECIPES, EvalConfig
 from drivewm.eval.inputs import EvalItem
-from drivewm.eval.suite import aggregate, evaluate, evaluate_item
+from drivewm.eval.suite import aggregate, evaluate, evaluate_item, run_items
 from drivewm.geometry import load_rig
 
 
@@ -191,3 +191,43 @@ def test_a_folder_of_shard_folders_is_scored_with_folder_prefixed_keys(shard_dir
     keys = [i.key for i in load_items(tmp_path / "generated")]
     inner = sorted(i.key for i in load_items(shard_dir))
     assert keys == [f"fog_right/{k}" for k in inner] + [f"snow_left/{k}" for k in inner]
+
+
+@pytest.mark.slow
+def test_one_clip_on_two_threads_gives_the_same_figures(synth_item):
+    """Threads spread one clip's features, matches and F fits (issue 14's speed goal on 2 cores);
+    every figure must be exactly what one thread gives."""
+    cfg = EvalConfig(metrics=["tse", "cse", "pose", "traj"])
+    one, two = (evaluate_item(synth_item, cfg, threads).metrics for threads in (1, 2))
+    for m in (one, two):
+        m.pop("seconds")
+    assert one["registered_fraction"] == 1.0 and one["tse_counted_fraction"] > 0.5  # a clip worth comparing
+    assert json.dumps(one, sort_keys=True, default=str) == json.dumps(two, sort_keys=True, default=str)
+
+
+def test_clip_threads_fill_the_cores_without_oversubscribing():
+    from drivewm.eval.suite import clip_threads
+
+    assert clip_threads(workers=1, clips=6, cores=2) == 2  # one clip at a time: both cores
+    assert clip_threads(workers=2, clips=6, cores=2) == 1  # two clips at a time: one core each
+    assert clip_threads(workers=4, clips=1, cores=8) == 8  # more workers than clips: the clip gets all
+    assert clip_threads(workers=3, clips=9, cores=2) == 1
+    with pytest.raises(DrivewmError, match="threads must be >= 1"):
+        run_items([], EvalConfig(), threads=0)
+
+
+def test_matcher_threads_run_in_parallel_and_keep_order():
+    import threading
+    import time
+
+    from drivewm.eval.config import MatchConfig
+    from drivewm.eval.matching import FrameMatcher
+
+    def work(x):
+        time.sleep(0.01)  # long enough that one thread cannot take every item
+        return x, threading.get_ident()
+
+    out = FrameMatcher(MatchConfig(), threads=2).map(work, range(20))
+    assert [x for x, _ in out] == list(range(20)) and len({t for _, t in out}) == 2
+    with pytest.raises(DrivewmError, match="threads"):
+        FrameMatcher(MatchConfig(), threads=0)
