@@ -138,7 +138,7 @@ def test_capped_global_bundle_adjustment_keeps_the_real_dashcam_poses(shared_dat
     path = shared_data / "video" / "dashcam_highway" / "solidWhiteRight.mp4"
     item = load_items(path, Rig("dashcam", [dashcam_camera()]))[0]
     videos = {c: v[:96] for c, v in item.videos().items()}
-    matcher = FrameMatcher(MatchConfig())
+    matcher = FrameMatcher(MatchConfig(), threads=2)
     capped = run_sfm(videos, item.rig, PoseConfig(), matcher=matcher)
     full = run_sfm(videos, item.rig, PoseConfig(ba_global_max_iterations=50), matcher=matcher)
     assert capped.all_registered and full.all_registered
