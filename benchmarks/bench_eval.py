@@ -167,9 +167,31 @@ def main() -> None:
     args = parser.parse_args()
     cores = len(os.sched_getaffinity(0))
     print(f"{cores} cores available to this process ({os.cpu_count()} on the machine)")
+    before = cpu_ticks()
     bench_clips(args.clips, args.clip_dir)
     if args.dashcam:
         bench_dashcam()
+    print(machine_share(before, cpu_ticks()))
+
+
+def cpu_ticks() -> list[int] | None:
+    """The machine's CPU ticks by kind (/proc/stat: user nice system idle iowait irq softirq steal), None off Linux."""
+    try:
+        return [int(x) for x in Path("/proc/stat").read_text().split("\n")[0].split()[1:9]]
+    except OSError:
+        return None
+
+
+def machine_share(before: list[int] | None, after: list[int] | None) -> str:
+    """How busy the whole machine was during the run and how much the hypervisor took (steal): a
+    load average does not show another tenant, and steal stretches every wall time."""
+    if before is None or after is None:
+        return "machine CPU shares: not available"
+    d = [b - a for a, b in zip(before, after)]
+    total = sum(d) or 1
+    return (
+        f"machine CPU during the run: busy {100 * (total - d[3] - d[4]) / total:.0f}%, steal {100 * d[7] / total:.1f}%"
+    )
 
 
 if __name__ == "__main__":
