@@ -140,7 +140,19 @@ def curate_run(logs: list[Path], out: Path, recipe: str, workers: int, overrides
 
     shutil.rmtree(out, ignore_errors=True)
     cfg = load_curate_config(recipe, list(overrides))
-    return curate(logs, out, cfg, executor="local", workers=workers, progress=False)
+    report = curate(logs, out, cfg, executor="local", workers=workers, progress=False)
+    if workers > 1:
+        stop_fork_server()
+    return report
+
+
+def stop_fork_server() -> None:
+    """Stop this process's pool fork server (drivewm.workers), as the end of a ``drivewm curate`` process
+    does: each pool run then pays the server's imports once, as a CLI run does, and the CPU of the server
+    and of its workers (which it reaps) reaches this process's RUSAGE_CHILDREN only once it is reaped."""
+    import multiprocessing.forkserver
+
+    multiprocessing.forkserver._forkserver._stop()  # CPython's own stop (used by its tests); no public one
 
 
 def step_ms(report: dict, frames: int) -> dict[str, float]:
@@ -236,9 +248,10 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
         )
     stage, smoother = worker_startup_cpu_s()
     print(
-        f"a pool worker's start-up costs {stage:.2f} CPU s (spawn + importing the stage) + {smoother:.2f} s (filterpy, "
-        f"at its first log), i.e. {1e3 * 2 * (stage + smoother) / frames:.3f} ms per camera-frame of this input for 2 "
-        "workers (1 worker runs in-process)"
+        f"a pool's fork server imports the stage ({stage:.2f} CPU s) and filterpy ({smoother:.2f} s) once per run, "
+        f"i.e. {1e3 * (stage + smoother) / frames:.3f} ms per camera-frame of this input, whatever the workers "
+        f"(spawned, each of 2 workers paid it: {1e3 * 2 * (stage + smoother) / frames:.3f} ms); 1 worker runs "
+        "in-process"
     )
     print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock; outside: rest of the run):")
     names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
@@ -268,8 +281,8 @@ def _out(work: Path, run: str) -> Path:
 
 
 def worker_startup_cpu_s() -> tuple[float, float]:
-    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does,
-    and then filterpy (scipy.stats), which the stage imports when it first smooths a log's poses."""
+    """CPU seconds a fresh interpreter spends importing the per-log stage and then filterpy (scipy.stats), as a
+    pool's fork server does once (drivewm.curate.pool.WORKER_PRELOAD) and each spawned worker did."""
     code = (
         "import time; import drivewm.curate.executors; a = time.process_time(); import filterpy.kalman; "
         "print(a, time.process_time() - a)"
@@ -332,15 +345,18 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
     for name, extra in (("fleet", []), ("fleet 160x96", SMALL)):
         runs.update({f"{name}, 1 worker": ("fleet", 1, off + extra), f"{name}, 2 workers": ("fleet", 2, off + extra)})
     wall, cpu, frames = {k: [] for k in runs}, {k: [] for k in runs}, 0
+    stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
     for r in range(rounds):
         for name, spec in runs.items():
             with Meter() as m:
                 if spec is None:
                     frames = raw_decode(long_logs)
                 else:
-                    curate_run(long_logs, _out(work, f"loop {name}"), *spec)
+                    report = curate_run(long_logs, _out(work, f"loop {name}"), *spec)
             wall[name].append(m.wall)
             cpu[name].append(m.cpu)
+            if spec is not None:
+                stage_cpu[name].append(sum(step_ms(report, frames).values()))
         print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
     med = {k: float(np.median(v)) for k, v in wall.items()}
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
@@ -352,9 +368,12 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
             f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU)"
         )
     for name in ("fleet", "fleet 160x96"):
+        one, two = f"{name}, 1 worker", f"{name}, 2 workers"
+        steady = np.median(stage_cpu[one]), np.median(stage_cpu[two])
         print(
-            f"1 -> 2 workers ({name}): {med[f'{name}, 1 worker'] / med[f'{name}, 2 workers']:.2f}x wall on "
-            f"{os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f})"
+            f"1 -> 2 workers ({name}): {med[one] / med[two]:.2f}x wall, {med_cpu[one] / med_cpu[two]:.2f}x CPU per "
+            f"frame on {os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f}); stage CPU ms per "
+            f"camera-frame per worker: {steady[0]:.3f} with 1 worker, {steady[1]:.3f} with 2"
         )
 
 
