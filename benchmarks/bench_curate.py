@@ -19,7 +19,8 @@ Everything is measured in this run on the same input, in interleaved rounds (med
   the 1/2-scale JPEG decode against full decode + INTER_AREA.
 
 On a machine shared with other jobs, wall-clock ratios move with the load; CPU seconds per
-camera-frame (this process and its workers) move much less, so both are printed.
+camera-frame (this process and its workers) move much less, so both are printed, and beside each run
+the cores other processes kept busy while it ran (/proc/stat less this process tree; 0 when idle).
 
     python benchmarks/bench_curate.py                 # 4 simulated nuscenes6 drives of 20 s
     python benchmarks/bench_curate.py --hour          # + a 1 h, 6-camera log (looped frames)
@@ -64,19 +65,28 @@ def simulate_logs(out: Path, drives: int, duration_s: float) -> list[Path]:
 
 
 class Meter:
-    """Wall seconds and CPU seconds of this process plus its finished children (pool workers)."""
+    """Wall seconds and CPU seconds of this process plus its finished children (pool workers), and ``others``:
+    the cores other processes on the machine kept busy meanwhile (1.0 = one core; 0 on an idle machine)."""
 
     def __enter__(self) -> Meter:
-        self.wall, self.cpu = time.perf_counter(), self._cpu()
+        self.wall, self.cpu, self.busy = time.perf_counter(), self._cpu(), self._machine_busy()
         return self
 
     def __exit__(self, *exc) -> None:
         self.wall, self.cpu = time.perf_counter() - self.wall, self._cpu() - self.cpu
+        self.others = max(0.0, self._machine_busy() - self.busy - self.cpu) / self.wall
 
     @staticmethod
     def _cpu() -> float:
         kids = resource.getrusage(resource.RUSAGE_CHILDREN)
         return time.process_time() + kids.ru_utime + kids.ru_stime
+
+    @staticmethod
+    def _machine_busy() -> float:
+        """CPU seconds all processes have used since boot (/proc/stat: all but idle and iowait)."""
+        with open("/proc/stat") as f:
+            ticks = [int(v) for v in f.readline().split()[1:]]
+        return (sum(ticks) - ticks[3] - ticks[4]) / os.sysconf("SC_CLK_TCK")
 
 
 def raw_decode(logs: list[Path]) -> int:
@@ -209,6 +219,7 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
     runs = {k: spec for k, spec in runs.items() if spec is None or spec[1] <= max_workers}
     wall = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
+    others = {k: [] for k in runs}
     steps: dict[str, list[dict]] = {k: [] for k, spec in runs.items() if spec is not None and spec[1] == 1}
     stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
     frames, reports = 0, {}
@@ -221,6 +232,7 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
                     reports[name] = curate_run(logs, _out(work, name), *spec)
             wall[name].append(m.wall)
             cpu[name].append(m.cpu)
+            others[name].append(m.others)
             if spec is not None:
                 stage = step_ms(reports[name], frames)
                 stage_cpu[name].append(sum(stage.values()))
@@ -231,11 +243,14 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
     kept = {k: reports[k]["kept"] for k in reports}
     print(f"\ninput: {len(logs)} logs, {frames} camera-frames; clips kept {kept}")
-    print(f"{'':24s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s}")
+    print(
+        f"{'':24s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s} "
+        f"{'other jobs (cores)':>19s}"
+    )
     for k in runs:
         print(
             f"{k:24s} {frames / med[k]:12.1f} {med['raw decode'] / med[k]:12.2f} "
-            f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f}"
+            f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f} {_spread(others[k]):>19s}"
         )
     steady = {k: float(np.median(v)) for k, v in stage_cpu.items()}
     pairs = (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers"))
@@ -274,6 +289,11 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
             f"min {low:.2f} dB, {kb:.0f} kB per camera per {cfg.clip_frames}-frame clip"
         )
     reduced_decode(logs, (160, 96), rounds)
+
+
+def _spread(values: list[float]) -> str:
+    """Per-round values as "median (min-max)"."""
+    return f"{np.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
 
 
 def _out(work: Path, run: str) -> Path:
@@ -344,7 +364,7 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
     runs = {"raw decode": None}
     for name, extra in (("fleet", []), ("fleet 160x96", SMALL)):
         runs.update({f"{name}, 1 worker": ("fleet", 1, off + extra), f"{name}, 2 workers": ("fleet", 2, off + extra)})
-    wall, cpu, frames = {k: [] for k in runs}, {k: [] for k in runs}, 0
+    wall, cpu, others, frames = {k: [] for k in runs}, {k: [] for k in runs}, {k: [] for k in runs}, 0
     stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
     for r in range(rounds):
         for name, spec in runs.items():
@@ -355,6 +375,7 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
                     report = curate_run(long_logs, _out(work, f"loop {name}"), *spec)
             wall[name].append(m.wall)
             cpu[name].append(m.cpu)
+            others[name].append(m.others)
             if spec is not None:
                 stage_cpu[name].append(sum(step_ms(report, frames).values()))
         print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
@@ -365,7 +386,7 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
         print(
             f"{k:24s} {frames / med[k]:12.1f} cam-frames/s, {med['raw decode'] / med[k]:.2f}x raw (wall), "
             f"{1e3 * med_cpu[k] / frames:.3f} CPU ms per camera-frame, "
-            f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU)"
+            f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU); other jobs kept {_spread(others[k])} cores busy"
         )
     for name in ("fleet", "fleet 160x96"):
         one, two = f"{name}, 1 worker", f"{name}, 2 workers"
