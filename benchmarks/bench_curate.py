@@ -19,7 +19,8 @@ Everything is measured in this run on the same input, in interleaved rounds (med
   the 1/2-scale JPEG decode against full decode + INTER_AREA.
 
 On a machine shared with other jobs, wall-clock ratios move with the load; CPU seconds per
-camera-frame (this process and its workers) move much less, so both are printed.
+camera-frame (this process and its workers) move much less, so both are printed, and beside each run
+the cores other processes kept busy while it ran (/proc/stat less this process tree; 0 when idle).
 
     python benchmarks/bench_curate.py                 # 4 simulated nuscenes6 drives of 20 s
     python benchmarks/bench_curate.py --hour          # + a 1 h, 6-camera log (looped frames)
@@ -64,19 +65,28 @@ def simulate_logs(out: Path, drives: int, duration_s: float) -> list[Path]:
 
 
 class Meter:
-    """Wall seconds and CPU seconds of this process plus its finished children (pool workers)."""
+    """Wall seconds and CPU seconds of this process plus its finished children (pool workers), and ``others``:
+    the cores other processes on the machine kept busy meanwhile (1.0 = one core; 0 on an idle machine)."""
 
     def __enter__(self) -> Meter:
-        self.wall, self.cpu = time.perf_counter(), self._cpu()
+        self.wall, self.cpu, self.busy = time.perf_counter(), self._cpu(), self._machine_busy()
         return self
 
     def __exit__(self, *exc) -> None:
         self.wall, self.cpu = time.perf_counter() - self.wall, self._cpu() - self.cpu
+        self.others = max(0.0, self._machine_busy() - self.busy - self.cpu) / self.wall
 
     @staticmethod
     def _cpu() -> float:
         kids = resource.getrusage(resource.RUSAGE_CHILDREN)
         return time.process_time() + kids.ru_utime + kids.ru_stime
+
+    @staticmethod
+    def _machine_busy() -> float:
+        """CPU seconds all processes have used since boot (/proc/stat: all but idle and iowait)."""
+        with open("/proc/stat") as f:
+            ticks = [int(v) for v in f.readline().split()[1:]]
+        return (sum(ticks) - ticks[3] - ticks[4]) / os.sysconf("SC_CLK_TCK")
 
 
 def raw_decode(logs: list[Path]) -> int:
@@ -140,7 +150,19 @@ def curate_run(logs: list[Path], out: Path, recipe: str, workers: int, overrides
 
     shutil.rmtree(out, ignore_errors=True)
     cfg = load_curate_config(recipe, list(overrides))
-    return curate(logs, out, cfg, executor="local", workers=workers, progress=False)
+    report = curate(logs, out, cfg, executor="local", workers=workers, progress=False)
+    if workers > 1:
+        stop_fork_server()
+    return report
+
+
+def stop_fork_server() -> None:
+    """Stop this process's pool fork server (drivewm.workers), as the end of a ``drivewm curate`` process
+    does: each pool run then pays the server's imports once, as a CLI run does, and the CPU of the server
+    and of its workers (which it reaps) reaches this process's RUSAGE_CHILDREN only once it is reaped."""
+    import multiprocessing.forkserver
+
+    multiprocessing.forkserver._forkserver._stop()  # CPython's own stop (used by its tests); no public one
 
 
 def step_ms(report: dict, frames: int) -> dict[str, float]:
@@ -197,6 +219,7 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
     runs = {k: spec for k, spec in runs.items() if spec is None or spec[1] <= max_workers}
     wall = {k: [] for k in runs}
     cpu = {k: [] for k in runs}
+    others = {k: [] for k in runs}
     steps: dict[str, list[dict]] = {k: [] for k, spec in runs.items() if spec is not None and spec[1] == 1}
     stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
     frames, reports = 0, {}
@@ -209,6 +232,7 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
                     reports[name] = curate_run(logs, _out(work, name), *spec)
             wall[name].append(m.wall)
             cpu[name].append(m.cpu)
+            others[name].append(m.others)
             if spec is not None:
                 stage = step_ms(reports[name], frames)
                 stage_cpu[name].append(sum(stage.values()))
@@ -219,11 +243,14 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
     kept = {k: reports[k]["kept"] for k in reports}
     print(f"\ninput: {len(logs)} logs, {frames} camera-frames; clips kept {kept}")
-    print(f"{'':24s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s}")
+    print(
+        f"{'':24s} {'cam-frames/s':>12s} {'x raw (wall)':>12s} {'CPU ms/frame':>13s} {'x raw (CPU)':>12s} "
+        f"{'other jobs (cores)':>19s}"
+    )
     for k in runs:
         print(
             f"{k:24s} {frames / med[k]:12.1f} {med['raw decode'] / med[k]:12.2f} "
-            f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f}"
+            f"{1e3 * med_cpu[k] / frames:13.3f} {med_cpu['raw decode'] / med_cpu[k]:12.2f} {_spread(others[k]):>19s}"
         )
     steady = {k: float(np.median(v)) for k, v in stage_cpu.items()}
     pairs = (("fleet, 1 worker", "fleet, 2 workers"), ("fleet 160x96, 1 worker", "fleet 160x96, 2 workers"))
@@ -236,9 +263,10 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
         )
     stage, smoother = worker_startup_cpu_s()
     print(
-        f"a pool worker's start-up costs {stage:.2f} CPU s (spawn + importing the stage) + {smoother:.2f} s (filterpy, "
-        f"at its first log), i.e. {1e3 * 2 * (stage + smoother) / frames:.3f} ms per camera-frame of this input for 2 "
-        "workers (1 worker runs in-process)"
+        f"a pool's fork server imports the stage ({stage:.2f} CPU s) and filterpy ({smoother:.2f} s) once per run, "
+        f"i.e. {1e3 * (stage + smoother) / frames:.3f} ms per camera-frame of this input, whatever the workers "
+        f"(spawned, each of 2 workers paid it: {1e3 * 2 * (stage + smoother) / frames:.3f} ms); 1 worker runs "
+        "in-process"
     )
     print("\nwhere the CPU goes, ms per camera-frame (medians over rounds, stage StepClock; outside: rest of the run):")
     names = sorted({k for rows in steps.values() for row in rows for k in row}, key=_step_order)
@@ -263,13 +291,18 @@ def throughput(logs: list[Path], work: Path, rounds: int, max_workers: int = 2) 
     reduced_decode(logs, (160, 96), rounds)
 
 
+def _spread(values: list[float]) -> str:
+    """Per-round values as "median (min-max)"."""
+    return f"{np.median(values):.2f} ({min(values):.2f}-{max(values):.2f})"
+
+
 def _out(work: Path, run: str) -> Path:
     return work / run.replace(", ", "_").replace(" ", "")
 
 
 def worker_startup_cpu_s() -> tuple[float, float]:
-    """CPU seconds a fresh interpreter spends importing the per-log stage, as each spawned pool worker does,
-    and then filterpy (scipy.stats), which the stage imports when it first smooths a log's poses."""
+    """CPU seconds a fresh interpreter spends importing the per-log stage and then filterpy (scipy.stats), as a
+    pool's fork server does once (drivewm.curate.pool.WORKER_PRELOAD) and each spawned worker did."""
     code = (
         "import time; import drivewm.curate.executors; a = time.process_time(); import filterpy.kalman; "
         "print(a, time.process_time() - a)"
@@ -331,16 +364,20 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
     runs = {"raw decode": None}
     for name, extra in (("fleet", []), ("fleet 160x96", SMALL)):
         runs.update({f"{name}, 1 worker": ("fleet", 1, off + extra), f"{name}, 2 workers": ("fleet", 2, off + extra)})
-    wall, cpu, frames = {k: [] for k in runs}, {k: [] for k in runs}, 0
+    wall, cpu, others, frames = {k: [] for k in runs}, {k: [] for k in runs}, {k: [] for k in runs}, 0
+    stage_cpu = {k: [] for k in runs if runs[k] is not None}  # StepClock ms per camera-frame, without start-up
     for r in range(rounds):
         for name, spec in runs.items():
             with Meter() as m:
                 if spec is None:
                     frames = raw_decode(long_logs)
                 else:
-                    curate_run(long_logs, _out(work, f"loop {name}"), *spec)
+                    report = curate_run(long_logs, _out(work, f"loop {name}"), *spec)
             wall[name].append(m.wall)
             cpu[name].append(m.cpu)
+            others[name].append(m.others)
+            if spec is not None:
+                stage_cpu[name].append(sum(step_ms(report, frames).values()))
         print(f"  round {r + 1}/{rounds}: " + ", ".join(f"{k} {wall[k][-1]:.1f} s" for k in runs), flush=True)
     med = {k: float(np.median(v)) for k, v in wall.items()}
     med_cpu = {k: float(np.median(v)) for k, v in cpu.items()}
@@ -349,12 +386,15 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
         print(
             f"{k:24s} {frames / med[k]:12.1f} cam-frames/s, {med['raw decode'] / med[k]:.2f}x raw (wall), "
             f"{1e3 * med_cpu[k] / frames:.3f} CPU ms per camera-frame, "
-            f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU)"
+            f"{med_cpu['raw decode'] / med_cpu[k]:.2f}x raw (CPU); other jobs kept {_spread(others[k])} cores busy"
         )
     for name in ("fleet", "fleet 160x96"):
+        one, two = f"{name}, 1 worker", f"{name}, 2 workers"
+        steady = np.median(stage_cpu[one]), np.median(stage_cpu[two])
         print(
-            f"1 -> 2 workers ({name}): {med[f'{name}, 1 worker'] / med[f'{name}, 2 workers']:.2f}x wall on "
-            f"{os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f})"
+            f"1 -> 2 workers ({name}): {med[one] / med[two]:.2f}x wall, {med_cpu[one] / med_cpu[two]:.2f}x CPU per "
+            f"frame on {os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f}); stage CPU ms per "
+            f"camera-frame per worker: {steady[0]:.3f} with 1 worker, {steady[1]:.3f} with 2"
         )
 
 

@@ -3,49 +3,80 @@
 A ``spawn`` worker of :class:`concurrent.futures.ProcessPoolExecutor` waits for work on a pipe whose
 writing end it holds itself, so when the parent is killed (``kill -9``, the OOM killer) the
 worker never sees end-of-file and blocks forever. Every pool here is made by :func:`process_pool`,
-whose workers start a watchdog thread that exits the worker within ``POLL_S`` of the parent's death
-(the worker is re-parented, so ``os.getppid()`` changes).
+whose workers start a watchdog thread that exits the worker as soon as the driver (the process that
+made the pool) ends: it waits on a pidfd of the driver (Linux >= 5.3), which becomes readable when that
+process ends, reaped or not, and cannot name another process that reuses its pid.
+
+A pool with ``preload`` modules forks its workers from a ``forkserver`` that imported them once,
+instead of spawning interpreters that each import them again: a curate worker's ~2 CPU s of imports
+(the stage, OpenCV, filterpy's scipy.stats) is paid once per driver process, not once per worker.
+The fork server is a fresh interpreter that only imported modules (no thread pool ever ran a
+task in it), so forking it is as safe as spawning. It does not exit with the driver while its workers
+live (CPython gives each forked child a copy of the server's "alive" pipe), which is why the workers
+watch the driver itself, not their parent; once they exit, the server does.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.forkserver
 import os
+import select
 import threading
-import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 
-POLL_S = 0.5
 
+def process_pool(
+    workers: int, initializer: Callable[[], None] | None = None, preload: tuple[str, ...] = ()
+) -> ProcessPoolExecutor:
+    """A pool of ``workers`` processes that exit when this process dies; ``initializer`` (picklable,
+    e.g. a module-level function) runs first in each worker.
 
-def process_pool(workers: int, initializer: Callable[[], None] | None = None) -> ProcessPoolExecutor:
-    """A ``spawn`` pool of ``workers`` processes that exit when this process dies; ``initializer``
-    (picklable, e.g. a module-level function) runs first in each worker.
-
-    Spawn, not fork: a parent that already ran torch or OpenCV holds thread-pool locks a forked
-    child inherits locked, and the child hangs.
+    Without ``preload``: ``spawn`` workers, each a fresh interpreter. Never plain fork: a parent that
+    already ran torch or OpenCV holds thread-pool locks a forked child inherits locked, and the child
+    hangs. With ``preload`` (module names): ``forkserver`` workers forked from one server process that
+    imported those modules (this process's ``sys.path``). The server is started once per process and
+    reused by later pools; a preload list given after it started is not imported by it (the workers
+    then import what they use themselves, as spawned ones do).
     """
+    if preload:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(list(preload))
+    else:
+        context = multiprocessing.get_context("spawn")
     return ProcessPoolExecutor(
         max_workers=workers,
-        mp_context=multiprocessing.get_context("spawn"),
+        mp_context=context,
         initializer=_start_worker,
         initargs=(os.getpid(), initializer),
     )
 
 
-def _start_worker(parent_pid: int, initializer: Callable[[], None] | None) -> None:
-    exit_with_parent(parent_pid)
+def start_fork_server(preload: tuple[str, ...]) -> None:
+    """Start this process's fork server now, importing ``preload``, so that it imports while this
+    process goes on (a pool with the same ``preload`` made later forks its workers from it)."""
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(list(preload))
+    multiprocessing.forkserver.ensure_running()
+
+
+def _start_worker(driver_pid: int, initializer: Callable[[], None] | None) -> None:
+    exit_with_driver(driver_pid)
     if initializer is not None:
         initializer()
 
 
-def exit_with_parent(parent_pid: int) -> None:
-    """Exit this process (status 1, no cleanup) soon after ``parent_pid`` is no longer its parent."""
+def exit_with_driver(driver_pid: int) -> None:
+    """Exit this process (status 1, no cleanup) as soon as process ``driver_pid`` ends (a spawned
+    worker's parent, a forked one's grandparent)."""
+    try:
+        pidfd = os.pidfd_open(driver_pid)
+    except ProcessLookupError:  # the driver died before this worker started
+        os._exit(1)
 
     def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(POLL_S)
-        os._exit(1)  # the parent is gone: nobody will collect this worker's result
+        select.select([pidfd], [], [])  # readable once the driver has ended
+        os._exit(1)  # nobody will collect this worker's result
 
-    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+    threading.Thread(target=watch, name="exit-with-driver", daemon=True).start()

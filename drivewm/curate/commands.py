@@ -14,6 +14,7 @@ from pathlib import Path
 from drivewm.choices import add_registry_argument
 from drivewm.config import to_dict
 from drivewm.curate.config import CURATE_RECIPES
+from drivewm.curate.pool import start_fork_server
 from drivewm.errors import BatchError, DrivewmError
 
 
@@ -59,6 +60,8 @@ def _expand(paths: list[Path]) -> list[Path]:
 
 
 def _curate(args: argparse.Namespace) -> int:
+    if args.executor == "local" and args.workers > 1 and not args.dry_run:
+        start_fork_server()  # the pool's workers' imports, on another core while this process imports the stage
     from drivewm.curate import curate
 
     cfg = CURATE_RECIPES.from_args(args)

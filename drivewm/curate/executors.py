@@ -3,7 +3,8 @@
 Both call :func:`drivewm.curate.stage.curate_log` once per log and return its results in input
 order; each log's shards and done-marker are written by the worker itself, so results survive
 a crash of the driver. ``workers=1`` runs in-process (easiest to debug); more workers use a
-``spawn`` process pool (drivewm.workers) whose workers exit when the driver dies. Ray runs the same
+process pool (drivewm.workers) whose workers exit when the driver dies, forked from a server that
+imported the stage and filterpy once (:mod:`drivewm.curate.pool`). Ray runs the same
 function as a ``map`` over a dataset of log paths; Ray (the optional ``ray`` extra, seconds to import) is
 imported only when the Ray executor runs.
 """
@@ -17,9 +18,8 @@ import traceback
 from collections.abc import Callable
 from concurrent.futures import as_completed
 
-import cv2
-
 from drivewm.curate.config import CurateConfig
+from drivewm.curate.pool import WORKER_PRELOAD, one_thread_per_worker
 from drivewm.curate.stage import curate_log, load_embeddings
 from drivewm.errors import DrivewmError
 from drivewm.workers import process_pool
@@ -44,11 +44,6 @@ def _safe_curate(log: str, out_dir: str, cfg: CurateConfig, name: str) -> dict:
         }
 
 
-def _one_thread_per_worker() -> None:
-    """Parallelism comes from the pool: keep OpenCV in each worker on one thread (no oversubscription)."""
-    cv2.setNumThreads(1)
-
-
 def run_local(
     jobs: list[tuple[str, str]], out_dir: str, cfg: CurateConfig, workers: int, progress: Progress
 ) -> list[dict]:
@@ -61,7 +56,7 @@ def run_local(
         return results
 
     by_index: dict[int, dict] = {}
-    with process_pool(workers, _one_thread_per_worker) as pool:
+    with process_pool(workers, one_thread_per_worker, preload=WORKER_PRELOAD) as pool:
         futures = {pool.submit(_safe_curate, log, out_dir, cfg, name): i for i, (log, name) in enumerate(jobs)}
         for fut in as_completed(futures):
             by_index[futures[fut]] = load_embeddings(out_dir, fut.result())
@@ -75,7 +70,7 @@ RAY_TASK_RETRIES = 3
 
 def _ray_row(row: dict, out_dir: str, cfg: CurateConfig) -> dict:
     """One log on a Ray worker; the result travels as JSON text (Arrow would coerce its ragged dicts)."""
-    _one_thread_per_worker()
+    one_thread_per_worker()
     return {"i": row["i"], "result": json.dumps(_safe_curate(row["log"], out_dir, cfg, row["name"]))}
 
 
