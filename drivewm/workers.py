@@ -23,6 +23,7 @@ import multiprocessing.forkserver
 import os
 import select
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 
@@ -70,6 +71,8 @@ def _start_worker(driver_pid: int, initializer: Callable[[], None] | None) -> No
 def exit_with_driver(driver_pid: int) -> None:
     """Exit this process (status 1, no cleanup) as soon as process ``driver_pid`` ends (a spawned
     worker's parent, a forked one's grandparent)."""
+    if not hasattr(os, "pidfd_open"):  # not Linux (macOS): poll the driver's pid instead
+        return _poll_driver(driver_pid)
     try:
         pidfd = os.pidfd_open(driver_pid)
     except ProcessLookupError:  # the driver died before this worker started
@@ -78,5 +81,25 @@ def exit_with_driver(driver_pid: int) -> None:
     def watch() -> None:
         select.select([pidfd], [], [])  # readable once the driver has ended
         os._exit(1)  # nobody will collect this worker's result
+
+    threading.Thread(target=watch, name="exit-with-driver", daemon=True).start()
+
+
+POLL_S = 0.5
+
+
+def _poll_driver(driver_pid: int) -> None:
+    """Without pidfds: exit within ``POLL_S`` of ``driver_pid`` no longer existing (a pid reused by
+    another process in between keeps the worker alive until that one ends too)."""
+
+    def watch() -> None:
+        while True:
+            try:
+                os.kill(driver_pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:  # the pid now belongs to another user's process: the driver is gone
+                os._exit(1)
+            time.sleep(POLL_S)
 
     threading.Thread(target=watch, name="exit-with-driver", daemon=True).start()

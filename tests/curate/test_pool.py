@@ -70,3 +70,21 @@ def test_two_workers_write_the_same_shards_as_one(tmp_path):
     assert shards == sorted(p.name for p in (tmp_path / "two").glob("*.tar"))
     for name in [*shards, "manifest.jsonl"]:
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("watch", ["exit_with_driver", "_poll_driver"])  # pidfd (Linux), polling (macOS)
+def test_a_worker_exits_when_its_driver_ends(watch):
+    """The watchdog both ways: a process watching another (here a `sleep`) exits with status 1 once
+    that one ends, and lives while it runs."""
+    driver = subprocess.Popen(["sleep", "30"])
+    code = f"import time; from drivewm.workers import {watch}; {watch}({driver.pid}); time.sleep(30)"
+    worker = subprocess.Popen([sys.executable, "-c", code], env={**os.environ, "PYTHONPATH": str(REPO)})
+    try:
+        with pytest.raises(subprocess.TimeoutExpired):
+            worker.wait(timeout=1.5)  # the driver runs: the worker stays
+        driver.kill()
+        driver.wait()
+        assert worker.wait(timeout=5) == 1
+    finally:
+        driver.kill()
+        worker.kill()
