@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -86,10 +87,12 @@ def run_sfm(
     matcher=None,
     epi_cfg: EpipolarConfig | None = None,
     pairs: list[tuple[str, str]] | None = None,
+    database_ready: Callable[[], None] | None = None,
 ) -> SfmResult:
     """Reconstruct the clip. ``videos``: uint8 RGB (T, H, W, 3) per camera of ``rig`` (rig order).
     ``matcher``: the FrameMatcher whose features to share (a new SIFT one if None); ``pairs``: the
-    overlapping camera pairs (drivewm.eval.consistency.overlapping_pairs if None)."""
+    overlapping camera pairs (drivewm.eval.consistency.overlapping_pairs if None);
+    ``database_ready``: called once the database is written (or failed), before the one-thread mapping."""
     import pycolmap
 
     from drivewm.eval.matching import FrameMatcher
@@ -103,18 +106,11 @@ def run_sfm(
         tmp = Path(tmp)
         images, db_path = tmp / "images", tmp / "database.db"
         images.mkdir()
-        if shared:
-            names = _write_shared(pycolmap, db_path, videos, rig, cfg, matcher, epi_cfg or EpipolarConfig(), pairs)
-        else:
-            _write_frames(videos, images)
-            for cam in rig.cameras:
-                _extract(pycolmap, db_path, images, cam, len(videos[cam.name]), cfg)
-        if rig_aware and len(rig.cameras) > 1:
-            _apply_rig(pycolmap, db_path, rig)
-        if not shared:
-            _match(pycolmap, db_path, cfg, rig_aware)
-        elif cfg.verify == "colmap":
-            _verify(pycolmap, db_path, names, cfg)
+        try:
+            _write_database(pycolmap, db_path, images, videos, rig, cfg, rig_aware, matcher, epi_cfg, pairs, shared)
+        finally:
+            if database_ready is not None:
+                database_ready()
         t1 = time.perf_counter()
         models = _map(pycolmap, db_path, images, tmp / "sparse", cfg)
         t2 = time.perf_counter()
@@ -122,6 +118,22 @@ def run_sfm(
     result = _poses_from_models(models, rig, num_frames)
     result.seconds = {"database": t1 - t0, "mapping": t2 - t1}
     return result
+
+
+def _write_database(pycolmap, db_path, images, videos, rig, cfg, rig_aware, matcher, epi_cfg, pairs, shared) -> None:
+    """The COLMAP database the mapper reads: shared features and verified matches, or COLMAP's own."""
+    if shared:
+        names = _write_shared(pycolmap, db_path, videos, rig, cfg, matcher, epi_cfg or EpipolarConfig(), pairs)
+    else:
+        _write_frames(videos, images)
+        for cam in rig.cameras:
+            _extract(pycolmap, db_path, images, cam, len(videos[cam.name]), cfg)
+    if rig_aware and len(rig.cameras) > 1:
+        _apply_rig(pycolmap, db_path, rig)
+    if not shared:
+        _match(pycolmap, db_path, cfg, rig_aware)
+    elif cfg.verify == "colmap":
+        _verify(pycolmap, db_path, names, cfg)
 
 
 def _default_match_cfg():

@@ -9,8 +9,10 @@ separately instead of averaging zeros in.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
+import threading
 import time
 import traceback
 from concurrent.futures import ThreadPoolExecutor, as_completed
@@ -110,11 +112,16 @@ def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResu
         pose = None
         if threads > 1 and "pose" in names and {"tse", "cse"} & set(names):
             # Structure from motion beside TSE and CSE: its mapping is a one-thread chain (COLMAP, GIL
-            # released) whose idle core their threads fill. Features first, so neither extracts twice.
+            # released) whose idle core their threads fill. Features first, so neither extracts twice,
+            # then its database on all threads, so the chain starts as early as it can.
             t0 = time.perf_counter()
             matcher.prefetch(((c, t), frame) for c, frames in videos.items() for t, frame in enumerate(frames))
             metrics["seconds"]["features"] = time.perf_counter() - t0  # else part of the first stage's
-            pose = side.submit(_timed_stage, "pose", _pose, item, videos, cfg, matcher, _new_metrics(), {})
+            ready = threading.Event()
+            pose_fn = functools.partial(_pose, database_ready=ready.set)
+            pose = side.submit(_timed_stage, "pose", pose_fn, item, videos, cfg, matcher, _new_metrics(), {})
+            while not ready.wait(0.05) and not pose.done():  # done: it failed before its database
+                pass
         for name, fn in stages:
             if name == "pose" and pose is not None:
                 _merge(metrics, artifacts, *pose.result())  # in stage order: the same JSON as one thread
@@ -214,9 +221,11 @@ def _put_sampson(metrics: dict, name: str, r: dict) -> None:
             metrics[f"{key}_pair_matches"] = k["pair_matches"]
 
 
-def _pose(item, videos, cfg, matcher, metrics, artifacts) -> None:
+def _pose(item, videos, cfg, matcher, metrics, artifacts, database_ready=None) -> None:
     pairs = overlapping_pairs(item.rig, cfg.consistency)
-    sfm = run_sfm(videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs)
+    sfm = run_sfm(
+        videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs, database_ready=database_ready
+    )
     metrics["pose_success"] = float(sfm.all_registered)
     metrics["registered_fraction"] = sfm.registered_fraction
     metrics["seconds"].update({f"pose_{stage}": s for stage, s in sfm.seconds.items()})  # parts of "pose"

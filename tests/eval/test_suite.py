@@ -231,3 +231,16 @@ def test_matcher_threads_run_in_parallel_and_keep_order():
     assert [x for x, _ in out] == list(range(20)) and len({t for _, t in out}) == 2
     with pytest.raises(DrivewmError, match="threads"):
         FrameMatcher(MatchConfig(), threads=0)
+
+
+def test_a_pose_stage_failing_beside_tse_is_the_clips_error_not_a_hang(synth_item, monkeypatch):
+    """With threads, structure from motion runs beside TSE and CSE, which wait for its database: a
+    failure before the database exists must end the clip with its error, not leave TSE waiting."""
+    import drivewm.eval.suite as suite
+
+    def broken(*args, **kwargs):
+        raise DrivewmError("sfm: no database today")
+
+    monkeypatch.setattr(suite, "run_sfm", broken)
+    m = evaluate_item(synth_item, EvalConfig(metrics=["tse", "pose"]), threads=2).metrics
+    assert m == {"error": "sfm: no database today"}
