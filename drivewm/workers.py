@@ -27,6 +27,8 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 
+POLL_S = 0.5  # seconds between checks of the driver's pid where there are no pidfds
+
 
 def process_pool(
     workers: int, initializer: Callable[[], None] | None = None, preload: tuple[str, ...] = ()
@@ -85,9 +87,6 @@ def exit_with_driver(driver_pid: int) -> None:
     threading.Thread(target=watch, name="exit-with-driver", daemon=True).start()
 
 
-POLL_S = 0.5
-
-
 def _poll_driver(driver_pid: int) -> None:
     """Without pidfds: exit within ``POLL_S`` of ``driver_pid`` no longer existing (a pid reused by
     another process in between keeps the worker alive until that one ends too)."""
@@ -96,9 +95,7 @@ def _poll_driver(driver_pid: int) -> None:
         while True:
             try:
                 os.kill(driver_pid, 0)
-            except ProcessLookupError:
-                os._exit(1)
-            except PermissionError:  # the pid now belongs to another user's process: the driver is gone
+            except (ProcessLookupError, PermissionError):  # gone, or its pid is another user's process now
                 os._exit(1)
             time.sleep(POLL_S)
 

@@ -140,7 +140,7 @@ def temporal_sampson(
     (T, 4, 4) or None; ``ego_at_camera`` (optional): per camera, the ego poses (T, 4, 4) at that
     camera's exposure times (drivewm.eval.exposure.ego_at_cameras), used instead of ``T_world_from_ego``."""
     K_c = canonical_K(epi_cfg)
-    matcher.prefetch(((c, t), frame) for c, frames in videos.items() for t, frame in enumerate(frames))
+    matcher.prefetch(videos)
 
     def score(task: tuple[Camera, int]) -> dict:
         cam, t = task
@@ -208,7 +208,7 @@ def cross_sampson(
             T_rel = [T_b_from_a] * num_frames
         return _score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, False), pooled
 
-    matcher.prefetch(((c, t), frame) for c in {c for p in pairs for c in p} for t, frame in enumerate(videos[c]))
+    matcher.prefetch(videos, {c for p in pairs for c in p})
     for (name_a, name_b), (scored, pooled) in zip(pairs, matcher.map(score, pairs)):
         per_pair[f"{name_a}~{name_b}"] = [scored]
         if matches_out is not None:

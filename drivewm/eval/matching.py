@@ -114,6 +114,12 @@ def squared_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.maximum(d2, 0.0, out=d2)
 
 
+def check_threads(threads: int) -> None:
+    """A thread count for one clip's work must be at least 1."""
+    if threads < 1:
+        raise DrivewmError(f"eval threads must be >= 1, got {threads}")
+
+
 class FrameMatcher:
     """Matches pairs of frames with the configured matcher, caching features per frame id and
     matches per pair of ids: TSE, CSE and structure from motion share both (drivewm.eval.sfm).
@@ -124,8 +130,7 @@ class FrameMatcher:
     threads read it."""
 
     def __init__(self, cfg: MatchConfig, threads: int = 1):
-        if threads < 1:
-            raise DrivewmError(f"eval threads must be >= 1, got {threads}")
+        check_threads(threads)
         self.cfg = cfg
         self.threads = threads
         self._cache: dict[object, Features] = {}
@@ -139,9 +144,11 @@ class FrameMatcher:
             self._cache[frame_id] = detect_sift(image, self.cfg)
         return self._cache[frame_id]
 
-    def prefetch(self, frames: Iterable[tuple[object, np.ndarray]]) -> None:
-        """Detect the features of every (id, image) not cached yet, over ``threads`` threads."""
-        todo = {i: image for i, image in frames if i not in self._cache}
+    def prefetch(self, videos: dict[str, np.ndarray], cameras: Iterable[str] | None = None) -> None:
+        """Detect the features of every frame (id ``(camera, t)``) of ``videos`` (uint8 (T, H, W, 3)
+        per camera; only ``cameras`` if given) not cached yet, over ``threads`` threads."""
+        names = videos if cameras is None else cameras
+        todo = {(c, t): image for c in names for t, image in enumerate(videos[c]) if (c, t) not in self._cache}
         if self._learned is None:
             self._cache.update(zip(todo, self.map(lambda image: detect_sift(image, self.cfg), todo.values())))
 

@@ -177,7 +177,7 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
             idx = idx[verified_mask(F, m, epi_cfg)]
         return idx
 
-    matcher.prefetch(((c, t), frame) for c, frames in videos.items() for t, frame in enumerate(frames))
+    matcher.prefetch(videos)
     db = pycolmap.Database.open(db_path)
     try:
         ids = {}

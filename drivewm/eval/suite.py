@@ -30,7 +30,7 @@ from drivewm.eval.config import EvalConfig
 from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, overlapping_pairs, temporal_sampson
 from drivewm.eval.epipolar import canonical_K
 from drivewm.eval.inputs import EvalItem, load_items
-from drivewm.eval.matching import FrameMatcher
+from drivewm.eval.matching import FrameMatcher, check_threads
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
 from drivewm.eval.trajectory import ego_from_sfm, flow_fallback
@@ -115,19 +115,27 @@ def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResu
             # released) whose idle core their threads fill. Features first, so neither extracts twice,
             # then its database on all threads, so the chain starts as early as it can.
             t0 = time.perf_counter()
-            matcher.prefetch(((c, t), frame) for c, frames in videos.items() for t, frame in enumerate(frames))
+            matcher.prefetch(videos)
             metrics["seconds"]["features"] = time.perf_counter() - t0  # else part of the first stage's
             ready = threading.Event()
-            pose_fn = functools.partial(_pose, database_ready=ready.set)
-            pose = side.submit(_timed_stage, "pose", pose_fn, item, videos, cfg, matcher, _new_metrics(), {})
-            while not ready.wait(0.05) and not pose.done():  # done: it failed before its database
-                pass
+            pose = side.submit(_pose_beside, ready, item, videos, cfg, matcher)
+            ready.wait()
         for name, fn in stages:
             if name == "pose" and pose is not None:
                 _merge(metrics, artifacts, *pose.result())  # in stage order: the same JSON as one thread
             else:
                 _timed_stage(name, fn, item, videos, cfg, matcher, metrics, artifacts)
     return ClipResult(item.key, metrics, artifacts)
+
+
+def _pose_beside(ready: threading.Event, item, videos, cfg, matcher) -> tuple[dict, dict]:
+    """The pose stage into its own metrics and artifacts; ``ready`` is set once its database is
+    written, or when the stage ends before that (a failure), so a waiter never hangs."""
+    try:
+        pose_fn = functools.partial(_pose, database_ready=ready.set)
+        return _timed_stage("pose", pose_fn, item, videos, cfg, matcher, _new_metrics(), {})
+    finally:
+        ready.set()
 
 
 def _stages() -> tuple:
@@ -331,7 +339,8 @@ def _mean_seconds(results: list[ClipResult]) -> dict[str, float]:
 def clip_threads(workers: int, clips: int, cores: int | None = None) -> int:
     """Threads per clip that fill the cores: the cores over the clips scored at once (``workers``,
     at most ``clips``), at least 1. One clip on 2 cores gets 2 threads; 2 workers get 1 each."""
-    cores = cores or len(os.sched_getaffinity(0))
+    if cores is None:  # the cores this process may run on (sched_getaffinity is Linux-only)
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
     return max(1, cores // max(1, min(workers, clips)))
 
 
@@ -341,8 +350,7 @@ def run_items(
     """Evaluate items, in a process pool when ``workers`` > 1; results in input order. ``threads``
     per clip: :func:`clip_threads` when None."""
     threads = clip_threads(workers, len(items)) if threads is None else threads
-    if threads < 1:
-        raise DrivewmError(f"eval threads must be >= 1, got {threads}")
+    check_threads(threads)  # here, not per clip: a bad value is the run's error, not every clip's
     bar = tqdm(total=len(items), desc="eval clips", unit="clip", disable=not progress)
     results: dict[int, ClipResult] = {}
     if workers <= 1:
