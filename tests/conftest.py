@@ -11,6 +11,7 @@ from __future__ import annotations
 import fcntl
 import hashlib
 import os
+import platform
 from pathlib import Path
 
 import pytest
@@ -18,6 +19,22 @@ import pytest
 os.environ.setdefault("RAY_AUTH_MODE", "disabled")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
+
+#: x86-64: the vector instruction sets the tests' numerics run on, set before numpy and torch load (also for the
+#: processes the tests start). NumPy's sin/cos/exp (AVX-512 vs AVX2 code paths) and ATen's and oneDNN's kernels
+#: give results that differ in the last bits between CPUs, so the simulator's poses (~1e-15 m apart) and a few
+#: training steps' weights differ between an AVX-512 machine and an AVX2 one, while the byte-for-byte references
+#: (tests/test_outputs_unchanged.py, tests/curate/test_golden.py) are recorded on AVX2 paths. Users' runs keep
+#: their machine's fastest paths: outputs are bit-identical on one kind of CPU, within rounding across kinds.
+PINNED_ISA = {
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+    "ATEN_CPU_CAPABILITY": "avx2",
+    "ONEDNN_MAX_CPU_ISA": "AVX2",
+    "OPENBLAS_CORETYPE": "Haswell",
+}
+if platform.machine().lower() in ("x86_64", "amd64"):
+    for _name, _value in PINNED_ISA.items():
+        os.environ.setdefault(_name, _value)
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = (REPO / ".." / "shared" / "data").resolve()
@@ -38,7 +55,7 @@ CLIP_SOURCES = (*LOG_SOURCES, "drivewm/curate", "drivewm/clips", "drivewm/recipe
 
 
 def _source_hash(*parts: str) -> str:
-    digest = hashlib.sha256()
+    digest = hashlib.sha256(repr(sorted((k, os.environ.get(k)) for k in PINNED_ISA)).encode())  # data built pinned
     for part in parts:
         root = REPO / part
         for path in sorted(root.rglob("*")) if root.is_dir() else [root]:
