@@ -468,6 +468,11 @@ def main() -> None:
         print(f"simulating {args.drives} nuscenes6 drives of {args.duration:g} s (kept in {args.work}) ...", flush=True)
         logs = simulate_logs(args.work, args.drives, args.duration)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
+    # what every curation process sets (drivewm.curate.stage.curate_log), set first here: the raw decode
+    # runs in this process too, and so reads the logs with the same allocator as curation, in every round
+    from drivewm.workers import reuse_freed_memory
+
+    print(f"malloc: freed blocks reused (glibc mallopt): {reuse_freed_memory()}")
     if not args.skip_throughput:
         throughput(logs, args.work, args.rounds, args.max_workers)
     if args.scaling_seconds:

@@ -18,6 +18,8 @@ watch the driver itself, not their parent; once they exit, the server does.
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import multiprocessing
 import multiprocessing.forkserver
 import os
@@ -100,3 +102,32 @@ def _poll_driver(driver_pid: int) -> None:
             time.sleep(POLL_S)
 
     threading.Thread(target=watch, name="exit-with-driver", daemon=True).start()
+
+
+#: glibc mallopt parameters (malloc.h) and the values :func:`reuse_freed_memory` sets
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+MMAP_THRESHOLD = 32 << 20  # glibc's largest (DEFAULT_MMAP_THRESHOLD_MAX on 64-bit)
+TRIM_THRESHOLD = 256 << 20
+
+
+@functools.cache
+def reuse_freed_memory() -> bool:
+    """Let glibc's malloc reuse freed blocks of up to 32 MB instead of unmapping them, and keep up to
+    256 MB of free heap before giving it back; True if set (glibc), False elsewhere (macOS, musl).
+
+    glibc serves blocks from 128 kB up (raised to the largest block freed so far) with fresh ``mmap``
+    pages, zero-filled by the kernel one page fault at a time on first touch, and unmaps them on free.
+    It also gives the heap above twice the largest block freed so far back to the kernel. A log
+    streamed chunk by chunk allocates the same few MB again and again (an MCAP chunk read and
+    decompressed, a clip's frames), so curating 1,800 camera-frames (fleet 160x96) took 18,000-24,000
+    page faults against 3,700 with this set, and 2-5 % more CPU (3 interleaved pairs of runs).
+    Memory stays bounded by what is live at once (the clip window), plus up to 256 MB of free heap
+    held for reuse; blocks of 32 MB and more are still mapped and unmapped. Process-wide and lasting:
+    called where curation runs (the stage, each worker), it also applies to whatever that process does
+    afterwards.
+    """
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))

@@ -24,6 +24,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from drivewm import workers
 from drivewm.atomic import write_bytes, write_json
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
@@ -83,6 +84,7 @@ def curate_log(log_path: str, out_dir: str, cfg: CurateConfig, name: str | None 
     """Curate one log (skipping it when its done-marker exists). Never raises for bad input:
     a DrivewmError becomes ``{"status": "failed", "error": ...}``."""
     out, name = Path(out_dir), name or log_name(log_path)
+    workers.reuse_freed_memory()
     done = read_marker(out, name, cfg)
     if done is not None:
         return {**done, "resumed": True}
