@@ -30,7 +30,7 @@ from safetensors.torch import load_file
 from drivewm import release
 from drivewm.cli import build_parser
 from drivewm.clips import iter_clips, read_manifest
-from drivewm.curate.contact_sheet import THUMB_W
+from drivewm.curate.contact_sheet import thumb_width
 from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_fields
 from drivewm.quickstart import FINETUNED, FIRST_LOG, MODELS, load_profile, stage_commands
 from drivewm.report import command_lines
@@ -237,8 +237,9 @@ def test_generated_contact_sheets_have_a_row_per_camera_like_the_real_one(quicks
         clips = list(iter_clips(folder))
         sheet = cv2.imread(str(folder / "contact_sheet.png"))
         v, _, h, w, _ = clips[0].videos().shape
-        assert all(len(f"{c.key}: {c.meta.caption}") < 3 * THUMB_W // 6 for c in clips)  # one caption line
-        view_h = round(h * THUMB_W / w)  # each camera a row of THUMB_W-wide thumbnails, as on the real sheet
+        view_w = thumb_width(w)  # each camera a row of thumbnails, as on the real sheet
+        assert all(len(f"{c.key}: {c.meta.caption}") < 3 * view_w // 6 for c in clips)  # one caption line
+        view_h = round(h * view_w / w)
         assert sheet.shape[:2] == (len(clips) * (20 + v * view_h + 6), real.shape[1]), model
 
 

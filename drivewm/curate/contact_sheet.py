@@ -10,10 +10,19 @@ import numpy as np
 from drivewm.atomic import write_bytes
 from drivewm.clips.shards import iter_shard
 
+#: Width (px) of a view on the sheet: wider frames are shrunk to it, narrower ones (160x96 clips) shown as
+#: they are (upscaled, they only blurred and cost a third more PNG encoding, the sheet's largest cost after decoding)
 THUMB_W = 192
 
 
+def thumb_width(frame_width: int) -> int:
+    """The width of a ``frame_width``-wide view on the sheet."""
+    return min(THUMB_W, frame_width)
+
+
 def _thumb(img: np.ndarray) -> np.ndarray:
+    if img.shape[1] <= THUMB_W:  # a copy in row order: a frame of an in-memory video may be a strided view
+        return np.ascontiguousarray(img)
     h = round(img.shape[0] * THUMB_W / img.shape[1])
     return cv2.resize(img, (THUMB_W, h), interpolation=cv2.INTER_AREA)
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from drivewm.clips import iter_clips
-from drivewm.curate.contact_sheet import THUMB_W
+from drivewm.curate.contact_sheet import thumb_width
 from drivewm.geometry import load_rig
 from drivewm.multiview.writer import GeneratedSample, sample_clip, write_samples
 from drivewm.text.conditions import caption_conditions
@@ -30,15 +30,17 @@ def test_contact_sheet_has_a_row_per_camera_like_the_curated_one(tmp_path):
     samples = [_sample(rig, 0), _sample(rig, 1)]
     write_samples(tmp_path, samples, fps=10.0)
     sheet = cv2.cvtColor(cv2.imread(str(tmp_path / "contact_sheet.png")), cv2.COLOR_BGR2RGB)
-    view_h = round(96 * THUMB_W / 160)  # each view is a THUMB_W-wide thumbnail, as on the curated sheet
+    view_w = thumb_width(160)  # each view as on the curated sheet: 160x96 views at their own size
+    view_h = round(96 * view_w / 160)
+    assert (view_w, view_h) == (160, 96)
     caption_h = 20  # one caption line: 14 px + 6 px margin
     block_h = caption_h + len(rig.names) * view_h + 6  # 6 px white between clips
-    assert sheet.shape == (len(samples) * block_h, 3 * THUMB_W, 3)  # 6 camera rows, not one 2880x384 strip
+    assert sheet.shape == (len(samples) * block_h, 3 * view_w, 3)  # 6 camera rows, not one 2880x384 strip
     for i, s in enumerate(samples):
         for view in range(len(rig.names)):
             # the lower-right part of each row (clear of the camera label) is that camera's colour
             y = i * block_h + caption_h + view * view_h + view_h - 10
-            patch = sheet[y - 20 : y, THUMB_W - 60 : THUMB_W - 10].reshape(-1, 3).astype(int)
+            patch = sheet[y - 20 : y, view_w - 60 : view_w - 10].reshape(-1, 3).astype(int)
             assert np.abs(patch - s.videos[view, 0, 0, 0]).max() <= 3, (i, view)
     clips = list(iter_clips(tmp_path))
     assert [c.meta.cameras for c in clips] == [rig.names, rig.names]
