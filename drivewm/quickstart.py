@@ -234,6 +234,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--profile",
         default="full",
         choices=sorted(load_yaml(RECIPE)),
-        help="a profile of drivewm/recipes/quickstart.yaml: full (about 20 min on 2 cores) or smoke (a few minutes)",
+        help="a profile of drivewm/recipes/quickstart.yaml: full (~9 min on 2 idle cores) or smoke (a few minutes)",
     )
     p.set_defaults(func=lambda args: quickstart(Path(args.out), args.profile) and 0)

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Install drivewm into .venv and run the simulated end-to-end pipeline (CPU, about 20 minutes).
+# Install drivewm into .venv and run the simulated end-to-end pipeline (CPU, about 10 minutes on 2 cores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python3 -m venv .venv
