@@ -16,7 +16,8 @@ an EDM-form denoiser D(x; sigma), so the same noised inputs x = x0 + sigma n go 
     python tests/diffusion/study_flow_vs_edm.py --data CLIPDIR/latents/TOK --steps 4000 --out runs/fve \\
         --set model.hidden_dim=256 --set model.depth=8 --set train.batch_size=16
 
-Results are printed and written to OUT/results.json.
+Results are printed and written to OUT/results.json;
+``--plot OUT.png RUN1/results.json RUN2/results.json ...`` draws finished runs side by side.
 """
 
 from __future__ import annotations
@@ -116,6 +117,36 @@ def report(results: dict) -> None:
         print(f"{key:>18s} " + " ".join(f"{results[p][key]:10.4f}" for p in PARAMETERIZATIONS if p in results))
 
 
+def plot(result_files: list[str], out: str) -> None:
+    """x0 error against sigma of every parameterization in every results.json given (one line per
+    run, labelled by parameterization and seed), and each one's error relative to the first EDM run's."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = []
+    for f in result_files:
+        res = json.loads(Path(f).read_text())
+        seed = next((o.split("=", 1)[1] for o in res["overrides"] if o.startswith("train.seed=")), "0")
+        runs += [
+            (f"{p}, seed {seed}", res["sigmas"], res[p]["x0_error_by_sigma"]) for p in PARAMETERIZATIONS if p in res
+        ]
+    base = next(errors for label, _, errors in runs if label.startswith("edm"))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for label, sigmas, errors in runs:
+        style = "-" if label.startswith("edm") else "--"
+        axes[0].plot(sigmas, errors, style, marker="o", ms=3, label=label)
+        axes[1].plot(sigmas, [e / b for e, b in zip(errors, base)], style, marker="o", ms=3, label=label)
+    axes[0].set(xscale="log", yscale="log", xlabel="sigma", ylabel="x0 error (held-out, per element)")
+    axes[1].set(xscale="log", xlabel="sigma", ylabel=f"relative to {runs[0][0]}")
+    axes[1].axhline(1.0, color="grey", lw=0.8)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(out)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", help="latent cache folder (default: a synthetic one)")
@@ -131,7 +162,12 @@ def main(argv: list[str] | None = None) -> None:
         help="which to train (default both; one per process runs them on two cores at once, same split)",
     )
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument(
+        "--plot", nargs="+", metavar="FILE", help="PNG RESULTS.json...: plot finished runs, train nothing"
+    )
     args = parser.parse_args(argv)
+    if args.plot:
+        return plot(args.plot[1:], args.plot[0])
     torch.set_num_threads(1)
     report(run(args))
 
