@@ -120,7 +120,7 @@ def reuse_freed_memory() -> bool:
     It also gives the heap above twice the largest block freed so far back to the kernel. A log
     streamed chunk by chunk allocates the same few MB again and again (an MCAP chunk read and
     decompressed, a clip's frames), so curating 1,800 camera-frames (fleet 160x96) took 18,000-24,000
-    page faults against 3,700 with this set, and 2-5 % more CPU (3 interleaved pairs of runs).
+    page faults and 2-5 % more CPU than with this set (3,700 faults; 3 interleaved pairs of runs).
     Memory stays bounded by what is live at once (the clip window), plus up to 256 MB of free heap
     held for reuse; blocks of 32 MB and more are still mapped and unmapped. Process-wide and lasting:
     called where curation runs (the stage, each worker), it also applies to whatever that process does

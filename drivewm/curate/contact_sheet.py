@@ -21,10 +21,10 @@ def thumb_width(frame_width: int) -> int:
 
 
 def _thumb(img: np.ndarray) -> np.ndarray:
-    if img.shape[1] <= THUMB_W:  # a copy in row order: a frame of an in-memory video may be a strided view
+    w = thumb_width(img.shape[1])
+    if w == img.shape[1]:  # a copy in row order: a frame of an in-memory video may be a strided view
         return np.ascontiguousarray(img)
-    h = round(img.shape[0] * THUMB_W / img.shape[1])
-    return cv2.resize(img, (THUMB_W, h), interpolation=cv2.INTER_AREA)
+    return cv2.resize(img, (w, round(img.shape[0] * w / img.shape[1])), interpolation=cv2.INTER_AREA)
 
 
 def clip_block(clip) -> np.ndarray:
