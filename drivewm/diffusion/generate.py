@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,16 @@ def video_to_uint8(video: torch.Tensor) -> np.ndarray:
 
 
 @torch.no_grad()
+def warn_if_preview(model_dir: str | Path, tokenizer_dir: str | None) -> None:
+    """Say on stderr that a model folder without a tokenizer generates latent previews, not images."""
+    if not tokenizer_dir:
+        print(
+            f"warning: {model_dir} records no tokenizer: its samples are latent previews (the first three latent "
+            "channels as colours), not images; retrain it with --tokenizer TOKDIR",
+            file=sys.stderr,
+        )
+
+
 def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None, device: torch.device | str = "cpu") -> np.ndarray:
     """Raw latents (B, c, t, h, w) -> uint8 video (B, T, H, W, 3) with the tokenizer on ``device``
     (a preview of the latents themselves if None)."""
@@ -139,6 +150,7 @@ def write_generated(
 def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir: str | Path) -> list[Path]:
     """Sample ``options.num_samples`` clips per prompt from a Text2World folder and write them."""
     model = Text2World.from_pretrained(model_dir).to(options.device)
+    warn_if_preview(model_dir, model.latent.tokenizer)
     prompts = [p for p in options.prompts for _ in range(options.num_samples)]
     seeds = [options.seed + i for i in range(len(prompts))]
     latents = []

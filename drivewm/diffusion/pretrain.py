@@ -8,6 +8,7 @@ on the latent cache ``CLIPDIR/latents/NAME`` written by ``drivewm tokenizer enco
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 
 import torch
@@ -130,6 +131,21 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
         )
 
 
+def encoding_tokenizer(cache: LatentCache) -> tuple[Path | None, str]:
+    """The tokenizer folder that encoded ``cache`` (recorded by ``drivewm tokenizer encode``), for a run given
+    no ``--tokenizer``: the model then decodes its samples with it (checked like a given one); and the line
+    that says so. None when the cache records none (synthetic latents) or the folder is gone: the model's
+    samples are then latent previews, and the line a warning."""
+    recorded = cache.tokenizer.get("path")
+    if recorded and Path(recorded).is_dir():
+        return Path(recorded), f"pretrain: decoding with {recorded}, the tokenizer that encoded {cache.dir}"
+    where = f"its tokenizer {recorded} is gone" if recorded else "it records no tokenizer"
+    return None, (
+        f"warning: pretrain: {cache.dir}: {where}; the model's samples will be latent previews, not images "
+        "(pass --tokenizer TOKDIR to decode them)"
+    )
+
+
 def _close(a: list[float] | None, b: list[float] | None) -> bool:
     """Equal up to half precision: shipped tokenizers store their statistics' buffers in fp16 (an 11-bit
     significand, so rounding moves a value by up to 2^-11 = 4.9e-4 of it) while their config.json keeps
@@ -232,6 +248,9 @@ def pretrain(
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
     cache = find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents)
     dataset = LatentDataset(cache, cfg.edm.sigma_data, cfg.data.frames or None)
+    note = ""
+    if tokenizer_dir is None:
+        tokenizer_dir, note = encoding_tokenizer(dataset.cache)
     if tokenizer_dir is not None:
         check_tokenizer(dataset.cache, tokenizer_dir)
     cfg = resolve_for_data(cfg, dataset)
@@ -239,6 +258,8 @@ def pretrain(
     task = Text2WorldTask(cfg, dataset, latent_info(dataset, tokenizer_dir))
     if cfg.init:
         warm_start(task.bundle, Path(cfg.init))
+    if note:  # said once the run's config has proved good, so a bad one's error stands alone
+        print(note, file=sys.stderr)
     return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)
 
 

@@ -15,7 +15,7 @@ import torch
 from tqdm import tqdm
 
 from drivewm.curate.captions import camera_direction
-from drivewm.diffusion.generate import GenerateOptions, decode_latents
+from drivewm.diffusion.generate import GenerateOptions, decode_latents, warn_if_preview
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
 from drivewm.multiview.model import MultiView
@@ -63,6 +63,7 @@ def generate_multiview(
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer)."""
     model = MultiView.from_pretrained(model_dir).to(options.device)
+    warn_if_preview(model_dir, model.latent.tokenizer)
     mv = model.cfg.multiview
     rig = load_rig(rig_spec) if rig_spec else None
     cond, speed = None, mv.speed_mps

@@ -209,3 +209,27 @@ def test_progressive_schedule_images_then_video_warm_starts_the_same_network(cli
         "model.depth=2",
     )
     assert code == 2 and "config differs from this run's at ['depth']" in err
+
+
+def test_pretrain_without_tokenizer_decodes_with_the_one_that_encoded_the_latents(tmp_path, capsys):
+    """No --tokenizer: the cache's own tokenizer is recorded in the model (its samples are images); once
+    that folder is gone, pretrain and generate both say the samples are latent previews."""
+    tok_dir = tmp_path / "tok"
+    tok = _save_tokenizer(tok_dir)
+    _write_cache(tmp_path / "clips" / "latents" / "tok", tok, tok_dir, 2)
+    flags = [a for o in [*TINY, "train.steps=1", "data.latents=tok"] for a in ("--set", o)]
+    code, _, err = _run(capsys, "pretrain", "--data", tmp_path / "clips", "--out", tmp_path / "a", *flags)
+    assert code == 0, err
+    assert json.loads((tmp_path / "a" / "config.json").read_text())["latent"]["tokenizer"] == str(tok_dir.resolve())
+    assert "decoding with" in err and "warning" not in err
+    import shutil
+
+    shutil.rmtree(tok_dir)
+    code, _, err = _run(capsys, "pretrain", "--data", tmp_path / "clips", "--out", tmp_path / "b", *flags)
+    assert code == 0, err
+    assert json.loads((tmp_path / "b" / "config.json").read_text())["latent"]["tokenizer"] is None
+    assert f"its tokenizer {tok_dir.resolve()} is gone" in err and "latent previews" in err
+    code, _, err = _run(
+        capsys, "generate", "--model", tmp_path / "b", "--prompt", "snow", "--steps", "1", "--out", tmp_path / "g"
+    )
+    assert code == 0 and "records no tokenizer: its samples are latent previews" in err
