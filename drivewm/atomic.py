@@ -5,6 +5,8 @@
   flush the folder entry. A killed run leaves the old file or the new one, never half of one, and a
   power cut after the call returns loses neither. A folder replacing a folder is swapped in with one
   atomic exchange (Linux ``renameat2(RENAME_EXCHANGE)``), so readers never see the path missing.
+  The temporary, ``.NAME.HOST-PID.XXXX.tmp``, names its maker: :func:`remove_dead_temporaries` deletes
+  those whose maker was killed outright (``kill -9``, a lost node) and leaves live writers' alone.
 - :class:`JsonlAppender` (and :func:`read_jsonl`): JSON-lines logs such as ``metrics.jsonl``, which
   grow by appends. Each row is one ``write`` of ``json + "\\n"`` to a file opened ``O_APPEND``; a
   kill mid-append can tear only the last row, which readers drop and the next appender cuts off
@@ -18,12 +20,19 @@ import ctypes
 import errno
 import json
 import os
+import re
 import shutil
+import socket
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from drivewm.errors import DrivewmError
+
+#: A temporary's name carries its maker, ``HOST-PID`` (the host name in letters, digits and dashes), which
+#: remove_dead_temporaries reads back.
+_HOST = re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname())[:40]
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?P<host>[A-Za-z0-9-]*)-(?P<pid>\d+)\.[^.]+\.tmp")
 
 
 @contextlib.contextmanager
@@ -35,7 +44,8 @@ def atomic_path(path: str | Path, durable: bool = True) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    owner = f"{_HOST}-{os.getpid()}"  # per call: a forked worker is its own owner
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{owner}.", suffix=".tmp", dir=path.parent))
     target = tmp / path.name
     try:
         yield target
@@ -49,6 +59,34 @@ def atomic_path(path: str | Path, durable: bool = True) -> Iterator[Path]:
             _fsync_dir(path.parent)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def remove_dead_temporaries(folder: str | Path) -> list[Path]:
+    """Delete the temporaries in ``folder`` that a process killed outright (``kill -9``, a lost node, a
+    power cut) left behind: an unfinished log, shard or checkpoint under ``.NAME.HOST-PID.XXXX.tmp``.
+    Only those made on this host by a process that no longer runs go; a live writer's (this host's or
+    another's sharing the folder) stay, so any run may call this on its output folder without a lock.
+    Returns what was deleted."""
+    gone = []
+    for tmp in Path(folder).glob(".*.tmp"):
+        m = _TEMPORARY.fullmatch(tmp.name)
+        if m and m["host"] == _HOST and tmp.is_dir() and not _alive(int(m["pid"])):
+            shutil.rmtree(tmp, ignore_errors=True)
+            gone.append(tmp)
+    return gone
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs on this host (a reused pid counts as alive: its temporary stays)."""
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
 
 
 def write_bytes(path: str | Path, data: bytes) -> None:

@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 import threading
+import time
 
 import pytest
 import torch
 
-from drivewm.atomic import JsonlAppender, atomic_path, read_jsonl, write_bytes
+from drivewm.atomic import JsonlAppender, atomic_path, read_jsonl, remove_dead_temporaries, write_bytes
+from drivewm.cli import main
 from drivewm.errors import DrivewmError
 from drivewm.train import checkpoint
 from drivewm.train.checkpoint import load_model_folder, save_model_folder
@@ -115,3 +119,63 @@ def test_equal_saves_give_equal_bytes(tmp_path):
     for name in ("model.safetensors", "config.json"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
     assert len(json.loads((tmp_path / "a" / "config.json").read_text())["revision"]) == 32
+
+
+_WRITER = """
+import sys, time
+from drivewm.atomic import atomic_path
+with atomic_path(sys.argv[1]) as tmp:
+    tmp.write_bytes(b"half a file")
+    print("writing", flush=True)
+    time.sleep(120)
+"""
+
+
+def _writer(target) -> subprocess.Popen:
+    """A process stopped in the middle of an atomic write of ``target``."""
+    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(target)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline() == "writing\n"
+    return proc
+
+
+def test_only_temporaries_of_writers_killed_outright_are_removed(tmp_path):
+    killed, live = _writer(tmp_path / "a.bin"), _writer(tmp_path / "b.bin")
+    try:
+        killed.kill()  # SIGKILL: no finally runs, the temporary stays behind
+        killed.wait()
+        elsewhere = tmp_path / ".c.bin.node-7-12345.k2j4x8y1.tmp"  # another host's writer sharing the folder
+        older = tmp_path / ".d.bin.k2j4x8y1.tmp"  # a name without its maker (drivewm before this change)
+        for folder in (elsewhere, older):
+            folder.mkdir()
+        left = sorted(p.name for p in tmp_path.glob(".*.tmp"))
+        assert len(left) == 4 and [n.split(".")[1] for n in left] == ["a", "b", "c", "d"]
+        gone = remove_dead_temporaries(tmp_path)
+        assert [p.name for p in gone] == [left[0]]  # the killed writer's
+        assert sorted(p.name for p in tmp_path.glob(".*.tmp")) == left[1:]
+    finally:
+        live.kill()
+        live.wait()
+    assert [p.name for p in remove_dead_temporaries(tmp_path)] == [left[1]]
+    assert not (tmp_path / "a.bin").exists() and not (tmp_path / "b.bin").exists()
+
+
+@pytest.mark.slow
+def test_simulate_killed_mid_drive_then_rerun_leaves_no_temporaries_and_the_same_log(tmp_path):
+    """``drivewm simulate`` killed with SIGKILL while writing a drive, run again: the rerun removes the dead
+    run's hidden half-written log and writes the drive, byte for byte as an uninterrupted run does."""
+    argv = ["simulate", "--duration", "4", "--width", "160", "--height", "96", "--seed", "3"]
+    cmd = [sys.executable, "-m", "drivewm.cli", *argv, "--out", str(tmp_path / "killed")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while proc.poll() is None and time.time() < deadline:  # until some ticks are written
+        if sum(f.stat().st_size for f in (tmp_path / "killed").glob(".*.tmp/*.mcap")) > 100_000:
+            break
+        time.sleep(0.005)
+    proc.kill()
+    proc.wait()
+    assert list((tmp_path / "killed").glob(".*.tmp")) and not list((tmp_path / "killed").glob("*.mcap"))
+    assert subprocess.run(cmd, capture_output=True, timeout=300).returncode == 0
+    assert not list((tmp_path / "killed").glob(".*.tmp"))
+    assert main([*argv, "--out", str(tmp_path / "whole")]) == 0
+    (log,) = (tmp_path / "killed").glob("*.mcap")
+    assert log.read_bytes() == (tmp_path / "whole" / log.name).read_bytes()

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from drivewm.atomic import remove_dead_temporaries
 from drivewm.logs.types import RoadLine, SceneInfo
 from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
@@ -126,6 +127,7 @@ def simulate_many(
     simulation per process).
     """
     out_dir = Path(out_dir)
+    remove_dead_temporaries(out_dir)  # the unfinished logs of a killed run: resumed below from scratch
     todo = [dataclasses.replace(cfg, seed=cfg.seed + i) for i in range(drives)]
     paths = [out_dir / drive_name(c) for c in todo]
     missing = [(c, p) for c, p in zip(todo, paths) if not p.is_file()]

@@ -9,6 +9,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from drivewm.atomic import remove_dead_temporaries
 from drivewm.clips import Clip
 from drivewm.clips.latents import latent_cache_dir, write_latent_clip, write_latent_index
 from drivewm.clips.shards import BadClip, read_clips
@@ -41,6 +42,7 @@ def encode_clips(
     tok = Tokenizer.from_pretrained(model_dir)
     cache_dir = latent_cache_dir(clip_dir, name, model_dir)
     cache_dir.mkdir(parents=True, exist_ok=True)
+    remove_dead_temporaries(cache_dir)  # a killed encode's unfinished latent files
     tiling = tiling or TilingConfig(chunk_latent_frames=None, tile_latent=None)
     rows, skipped = [], []
     for clip in tqdm(read_clips(clip_dir), desc="tokenizer encode", disable=not progress):

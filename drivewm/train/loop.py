@@ -27,7 +27,7 @@ import torch.distributed as dist
 from torch import nn
 from tqdm import tqdm
 
-from drivewm.atomic import JsonlAppender
+from drivewm.atomic import JsonlAppender, remove_dead_temporaries
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import load_train_state, save_train_state
 from drivewm.train.config import TrainConfig
@@ -267,6 +267,8 @@ def train(
     out_dir = Path(out_dir)
     torch.manual_seed(cfg.seed)
     run = _setup(task, cfg)
+    for folder in (out_dir, out_dir / "samples"):  # a killed run's unfinished checkpoint or sample grid
+        remove_dead_temporaries(folder)
     _resume(run, task, out_dir)
     start, last = run.step, {}
     end = cfg.steps if stop_after is None else min(cfg.steps, start + stop_after)
