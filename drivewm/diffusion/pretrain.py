@@ -263,12 +263,23 @@ def pretrain(
     return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)
 
 
+#: The denoiser settings a network's weights are tied to: its input and output scalings follow from them.
+SCALING_KEYS = ("parameterization", "sigma_data")
+
+
 def warm_start(bundle: Text2World, init_dir: Path) -> None:
-    """Load the DiT weights of the Text2World folder ``init_dir`` into ``bundle`` (same DiT and text config)."""
+    """Load the DiT weights of the Text2World folder ``init_dir`` into ``bundle`` (same DiT and text config,
+    and the same :data:`SCALING_KEYS` of the denoiser: an EDM network trained on as flow, or the reverse,
+    would be a different function from its first step)."""
     parent = Text2World.from_pretrained(init_dir)
     for name in ("dit", "text"):
         ours, theirs = to_dict(getattr(bundle.cfg, name)), to_dict(getattr(parent.cfg, name))
         differ = sorted(k for k in ours if ours[k] != theirs.get(k))
         if differ:
             raise DrivewmError(f"{init_dir}: --init model's {name} config differs from this run's at {differ}")
+    theirs = {k: getattr(parent.cfg.edm, k) for k in SCALING_KEYS}
+    ours = {k: getattr(bundle.cfg.edm, k) for k in SCALING_KEYS}
+    if ours != theirs:
+        fix = " ".join(f"--set edm.{k}={v}" for k, v in theirs.items() if ours[k] != v)
+        raise DrivewmError(f"{init_dir}: --init model was trained with edm {theirs}, this run has {ours}; pass {fix}")
     bundle.dit.load_state_dict(parent.dit.state_dict())

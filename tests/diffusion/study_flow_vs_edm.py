@@ -18,6 +18,16 @@ an EDM-form denoiser D(x; sigma), so the same noised inputs x = x0 + sigma n go 
 
 Results are printed and written to OUT/results.json;
 ``--plot OUT.png RUN1/results.json RUN2/results.json ...`` draws finished runs side by side.
+
+``--pixels MODEL...`` scores trained models in pixels instead, on the split's held-out clips (front
+view, its caption, seed = clip index, Heun): each sample decoded by the tokenizer that encoded the
+cache and set beside the same tokenizer's decoding of the real clip, scored by the eval's condition
+classifier (drivewm.eval.adherence, its ``coded`` domain): weather and time-of-day adherence to the
+clip's tags, the real clips' own as the ceiling; the condition features' distance between samples
+and real clips (z-scored as the classifier scores them, class means per weather x time of day,
+averaged over classes); and texture, mean |Laplacian| (``edge_energy``) over the real clips'.
+
+    python tests/diffusion/study_flow_vs_edm.py --out RUN --pixels RUN/edm RUN/flow [--max-clips 120]
 """
 
 from __future__ import annotations
@@ -108,6 +118,64 @@ def run(args: argparse.Namespace) -> dict:
     return results
 
 
+def pixel_scores(model_dirs: list[str], held_dir: Path, steps: int, guidance: float, max_clips: int) -> dict:
+    """The ``--pixels`` figures of each model folder, and of the real clips coded by the tokenizer."""
+    import numpy as np
+
+    from drivewm.clips.latents import LatentCache
+    from drivewm.diffusion.generate import decode_latents
+    from drivewm.eval.adherence import adherence, condition_scores, load_calibration
+
+    cache = LatentCache(held_dir)
+    tokenizer = cache.tokenizer["path"]
+    picks = np.unique(np.linspace(0, len(cache) - 1, min(max_clips, len(cache))).round().astype(int))
+    clips = [cache[int(i)] for i in picks]
+    captions = [c.meta.view_captions.get(c.meta.cameras[0]) or c.meta.caption for c in clips]
+    tags = [c.meta.tags for c in clips]
+    calibration = load_calibration()
+    mean, std = np.asarray(calibration["mean"]), np.asarray(calibration["std"])
+
+    def score(latents: torch.Tensor) -> dict:
+        video = decode_latents(latents, tokenizer)  # (N, T, H, W, 3)
+        feats = [condition_scores(v[None]) for v in video]
+        adh = [adherence(f, t) for f, t in zip(feats, tags)]
+        z = np.array([[f[k] for k in calibration["features"]] for f in feats])
+        return {
+            "weather": float(np.mean([a["weather_match"] for a in adh])),
+            "time_of_day": float(np.mean([a["time_of_day_match"] for a in adh])),
+            "z": (z - mean) / std,
+            "edge_energy": float(np.mean([f["edge_energy"] for f in feats])),
+        }
+
+    classes = [f"{t['weather']}/{t['time_of_day']}" for t in tags]
+    real = score(torch.stack([c.latents[0, :, :1] for c in clips]))
+    out = {"clips": len(clips), "tokenizer": tokenizer, "real": {k: v for k, v in real.items() if k != "z"}}
+    for folder in model_dirs:
+        model = Text2World.from_pretrained(folder)
+        seeds = [int(i) for i in picks]
+        gen = score(
+            torch.cat(
+                [
+                    model.sample_latents(captions[a : a + 16], seeds[a : a + 16], steps, guidance)
+                    for a in range(0, len(clips), 16)
+                ]
+            )
+        )
+        gaps = [
+            float(np.linalg.norm(gen["z"][m].mean(0) - real["z"][m].mean(0)))
+            for c in sorted(set(classes))
+            for m in [np.array([k == c for k in classes])]
+        ]
+        out[str(folder)] = {
+            "parameterization": model.cfg.edm.parameterization,
+            "weather": gen["weather"],
+            "time_of_day": gen["time_of_day"],
+            "feature_gap": float(np.mean(gaps)),
+            "edge_energy_ratio": gen["edge_energy"] / real["edge_energy"],
+        }
+    return out
+
+
 def report(results: dict) -> None:
     print(f"{'sigma':>8s} " + " ".join(f"{p:>10s}" for p in PARAMETERIZATIONS))
     for i, sigma in enumerate(results["sigmas"]):
@@ -165,9 +233,18 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument(
         "--plot", nargs="+", metavar="FILE", help="PNG RESULTS.json...: plot finished runs, train nothing"
     )
+    parser.add_argument("--pixels", nargs="+", metavar="MODEL", help="score these trained models in pixels")
+    parser.add_argument("--max-clips", type=int, default=120, help="held-out clips --pixels samples")
     args = parser.parse_args(argv)
     if args.plot:
         return plot(args.plot[1:], args.plot[0])
+    if args.pixels:
+        torch.set_num_threads(2)
+        result = pixel_scores(
+            args.pixels, Path(args.out) / "split" / "held", args.sample_steps, args.guidance, args.max_clips
+        )
+        write_text(Path(args.out) / "pixels.json", json.dumps(result, indent=2) + "\n")
+        return print(json.dumps(result, indent=2))
     torch.set_num_threads(1)
     report(run(args))
 

@@ -233,3 +233,18 @@ def test_pretrain_without_tokenizer_decodes_with_the_one_that_encoded_the_latent
         capsys, "generate", "--model", tmp_path / "b", "--prompt", "snow", "--steps", "1", "--out", tmp_path / "g"
     )
     assert code == 0 and "records no tokenizer: its samples are latent previews" in err
+
+
+def test_init_from_a_model_of_another_parameterization_is_refused_naming_the_setting(clipdir, tmp_path, capsys):
+    """A flow-trained image model warm-starting a run left at the default (EDM) scalings would be another
+    function from step one: refused, with the --set that continues it as it was trained."""
+    data, tok_dir = clipdir
+    flags = [a for o in [*TINY, "train.steps=1"] for a in ("--set", o)]
+    common = ("--data", data, "--tokenizer", tok_dir, *flags)
+    flow = ("--set", "edm.parameterization=flow")
+    code, _, err = _run(capsys, "pretrain", *common, *flow, "--set", "data.frames=1", "--out", tmp_path / "img")
+    assert code == 0, err
+    code, _, err = _run(capsys, "pretrain", *common, "--init", tmp_path / "img", "--out", tmp_path / "vid")
+    assert code == 2 and "pass --set edm.parameterization=flow" in err and not (tmp_path / "vid").exists()
+    code, _, err = _run(capsys, "pretrain", *common, *flow, "--init", tmp_path / "img", "--out", tmp_path / "vid")
+    assert code == 0, err
