@@ -7,6 +7,13 @@ Gaussian vector from it needs no vocabulary file and no download, gives every wo
 ones) a vector that is identical in every process and on every rank, and has no parameters, so it is
 frozen like Cosmos' T5 and its embeddings cache per caption. Word order enters through a small
 sinusoidal position term. The DiT's learned text projection and cross-attention do the rest.
+
+A hashed vector carries no meaning, so "snowy" would be as far from "snow" as from "tram": a model
+trained on the template captions' "snow" would not hear a prompt for "snowfall". The words that
+:mod:`drivewm.text.conditions` reads as a weather or time of day (the eval's own lexicon) are
+therefore hashed as that condition's name, the one word the captions of drivewm's logs use ("snowy",
+"snowfall", "blizzard" -> "snow"; "nighttime", "dark" -> "night"); every other word, the condition
+names included, keeps its own vector, so models trained on those captions see the same embeddings.
 """
 
 from __future__ import annotations
@@ -17,15 +24,20 @@ import re
 
 import torch
 
+from drivewm.text.conditions import KEYWORDS
 from drivewm.text.encoder import TextEncoder
 
 WORD = re.compile(r"[a-z0-9]+")
 POSITION_SCALE = 0.1  # position term is small next to the unit-variance word vectors
 
 
+#: word -> the condition name it is hashed as (single words of drivewm.text.conditions.KEYWORDS).
+SYNONYMS = {w: value for values in KEYWORDS.values() for value, ws in values.items() for w in ws if " " not in w}
+
+
 def words(caption: str) -> list[str]:
-    """Lower-cased alphanumeric words of ``caption``."""
-    return WORD.findall(caption.lower())
+    """Lower-cased alphanumeric words of ``caption``, condition words as their condition's name."""
+    return [SYNONYMS.get(w, w) for w in WORD.findall(caption.lower())]
 
 
 def word_seed(word: str, seed: int) -> int:

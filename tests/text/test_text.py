@@ -26,6 +26,27 @@ def test_hashed_encoder_is_deterministic_masked_and_separates_conditions():
     assert torch.equal(emb[2], torch.zeros(8, 64))
 
 
+def test_condition_words_embed_as_the_caption_word_the_models_were_trained_on():
+    """The benchmark's "snowfall" / "foggy" / "nighttime" prompts reach a model trained on template captions
+    ("snow", "fog", "night") as those words; the captions' own words keep the vectors they always had."""
+    from drivewm.text.conditions import caption_conditions
+    from drivewm.text.hashed import HashedWordEncoder
+
+    enc = HashedWordEncoder(dim=64, max_length=8)
+    for prompt, trained in [
+        ("snowfall on a two-lane road", "snow on a two-lane road"),
+        ("a snowy road through fields", "a snow road through fields"),
+        ("foggy morning on a city street", "fog day on a city street"),
+        ("nighttime highway with headlights", "night highway with headlights"),
+    ]:
+        assert caption_conditions(prompt) == caption_conditions(trained)  # what the eval checks the sample for
+        assert torch.equal(enc.encode([prompt])[0], enc.encode([trained])[0]), prompt
+    emb = enc.encode(["snow tram"])[0][0]
+    for j, word in enumerate(["snow", "tram"]):
+        assert torch.equal(emb[j], enc.word_vector(word) + enc.positions[j])  # the vectors models trained on
+    assert abs(torch.cosine_similarity(enc.word_vector("snow"), enc.word_vector("fog"), dim=0)) < 0.4
+
+
 def test_cache_returns_same_tensors_and_is_bounded():
     enc = build_text_encoder(TextConfig(dim=16, max_length=4, cache_size=2))
     a = enc.encode(["a b", "c"])[0]
