@@ -31,7 +31,7 @@ from drivewm import release
 from drivewm.cli import build_parser
 from drivewm.clips import iter_clips, read_manifest
 from drivewm.curate.contact_sheet import thumb_width
-from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_fields
+from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_config
 from drivewm.quickstart import FINETUNED, FIRST_LOG, MODELS, load_profile, stage_commands
 from drivewm.report import command_lines
 from drivewm.train.checkpoint import WEIGHTS_NAME
@@ -68,7 +68,7 @@ def without(argv: list[str], *flags: str) -> list[str]:
 def same_dit(saved: dict, shipped: dict) -> bool:
     """A saved DiT config is the shipped one: equal fields, and fields added since the shipped folder
     was written at the value it loads with (drivewm.diffusion.dit_config.SAVED_BEFORE, else the default)."""
-    expected = {**dataclasses.asdict(DiTConfig()), **upgrade_saved_fields(shipped)}
+    expected = {**dataclasses.asdict(DiTConfig()), **upgrade_saved_config({"dit": shipped})["dit"]}
     return saved == {k: expected[k] for k in saved} and shipped.keys() <= saved.keys()
 
 

@@ -31,9 +31,11 @@ LOG_SIGMA_DEFAULTS = {"edm": (-1.2, 1.2), "flow": (0.0, 1.0)}
 class EDMConfig:
     """Formulation (EDM or rectified flow), preconditioning, noise distribution and conditioning dropout."""
 
-    parameterization: Literal["edm", "flow"] = "edm"
-    """``edm``: EDM's c_skip/c_out/c_in/c_noise and loss weight (Table 1); ``flow``: rectified flow with a
-    velocity target (SD3 / Cosmos-Predict2.5 / GAIA-2) written in the same form (drivewm.diffusion.flow)."""
+    parameterization: Literal["edm", "flow"] = "flow"
+    """``flow`` (default): rectified flow with a velocity target (SD3 / Cosmos-Predict2.5 / GAIA-2) written in
+    the same form (drivewm.diffusion.flow); ``edm``: EDM's c_skip/c_out/c_in/c_noise and loss weight (Table
+    1). Flow became the default on decoded samples at equal compute (docs/quality-vs-compute.md); folders
+    saved before name ``edm`` or are read as it (dit_config.EDM_SAVED_BEFORE)."""
     sigma_data: float = 0.5
     """Standard deviation of the (normalised) data, EDM Table 1."""
     p_mean: float | None = None

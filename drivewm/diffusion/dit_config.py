@@ -96,9 +96,20 @@ DIT_PRESETS: dict[str, dict] = {
 }
 
 
-def upgrade_saved_fields(fields: dict) -> dict:
-    """A saved DiTConfig dict with the fields it predates filled in as it was trained (:data:`SAVED_BEFORE`)."""
-    return {**SAVED_BEFORE, **fields}
+#: EDMConfig fields whose default changed after model folders were first written, with the value those folders
+#: were trained with: the default became rectified flow on measured evidence (docs/quality-vs-compute.md), and a
+#: folder whose config.json names no parameterization was trained as EDM.
+EDM_SAVED_BEFORE = {"parameterization": "edm"}
+
+
+def upgrade_saved_config(config: dict) -> dict:
+    """A saved model config (its ``dit`` and ``edm`` sections) with the fields they predate filled in as the
+    folder was trained (:data:`SAVED_BEFORE`, :data:`EDM_SAVED_BEFORE`), so old folders load unchanged."""
+    return {
+        **config,
+        "dit": {**SAVED_BEFORE, **config.get("dit", {})},
+        "edm": {**EDM_SAVED_BEFORE, **config.get("edm", {})},
+    }
 
 
 def dit_preset(name: str) -> dict:

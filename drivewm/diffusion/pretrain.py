@@ -18,8 +18,8 @@ from drivewm.config import at_least, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
-from drivewm.diffusion.dit_config import DiTConfig, dit_preset
-from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+from drivewm.diffusion.dit_config import DiTConfig, dit_preset, upgrade_saved_config
+from drivewm.diffusion.text2world import MODEL_TYPE, LatentInfo, Text2World, Text2WorldConfig
 from drivewm.errors import DrivewmError
 from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
@@ -118,9 +118,9 @@ def pretrain_config(preset: str, overrides: list[str] | None = None) -> Pretrain
 
 def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     """The cache must have been encoded by ``tokenizer_dir`` (same config and latent statistics)."""
-    from drivewm.tokenizer.model import MODEL_TYPE
+    from drivewm.tokenizer.model import MODEL_TYPE as TOKENIZER
 
-    info = read_model_config(tokenizer_dir, MODEL_TYPE)
+    info = read_model_config(tokenizer_dir, TOKENIZER)
     recorded = cache.tokenizer
     same_config = "config" not in recorded or info.get("config") == recorded["config"]
     same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
@@ -245,6 +245,7 @@ def pretrain(
 ) -> dict:
     """Train a Text2World model folder into ``out_dir`` (resuming when it holds a train state)."""
     resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
+    check_resume(Path(out_dir), cfg)
     data_dir, tokenizer_dir = Path(data_dir), Path(tokenizer_dir) if tokenizer_dir else None
     cache = find_latent_cache(data_dir, tokenizer_dir, cfg.data.latents)
     dataset = LatentDataset(cache, cfg.edm.sigma_data, cfg.data.frames or None)
@@ -267,6 +268,24 @@ def pretrain(
 SCALING_KEYS = ("parameterization", "sigma_data")
 
 
+def same_scalings(what: str, saved_edm: dict, edm: EDMConfig) -> None:
+    """Refuse to train on weights saved with other :data:`SCALING_KEYS` than ``edm``'s, naming the --set that
+    continues them as they were trained. ``saved_edm``: the ``edm`` section of a saved config."""
+    theirs = {k: upgrade_saved_config({"edm": saved_edm})["edm"].get(k) for k in SCALING_KEYS}
+    ours = {k: getattr(edm, k) for k in SCALING_KEYS}
+    if ours != theirs:
+        fix = " ".join(f"--set edm.{k}={v}" for k, v in theirs.items() if ours[k] != v)
+        raise DrivewmError(f"{what} was trained with edm {theirs}, this run has {ours}; pass {fix}")
+
+
+def check_resume(out_dir: Path, cfg: PretrainConfig) -> None:
+    """A run folder that already holds a model resumes only with the scalings it was trained with (a run
+    started before flow became the default, resumed with the default recipe, would switch mid-run)."""
+    if (out_dir / "config.json").is_file():
+        saved = read_model_config(out_dir, MODEL_TYPE)["config"].get("edm", {})
+        same_scalings(f"{out_dir}: the run in this folder", saved, cfg.edm)
+
+
 def warm_start(bundle: Text2World, init_dir: Path) -> None:
     """Load the DiT weights of the Text2World folder ``init_dir`` into ``bundle`` (same DiT and text config,
     and the same :data:`SCALING_KEYS` of the denoiser: an EDM network trained on as flow, or the reverse,
@@ -277,9 +296,5 @@ def warm_start(bundle: Text2World, init_dir: Path) -> None:
         differ = sorted(k for k in ours if ours[k] != theirs.get(k))
         if differ:
             raise DrivewmError(f"{init_dir}: --init model's {name} config differs from this run's at {differ}")
-    theirs = {k: getattr(parent.cfg.edm, k) for k in SCALING_KEYS}
-    ours = {k: getattr(bundle.cfg.edm, k) for k in SCALING_KEYS}
-    if ours != theirs:
-        fix = " ".join(f"--set edm.{k}={v}" for k, v in theirs.items() if ours[k] != v)
-        raise DrivewmError(f"{init_dir}: --init model was trained with edm {theirs}, this run has {ours}; pass {fix}")
+    same_scalings(f"{init_dir}: --init model", to_dict(parent.cfg.edm), bundle.cfg.edm)
     bundle.dit.load_state_dict(parent.dit.state_dict())

@@ -17,7 +17,7 @@ from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_fields
+from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.text import TextConfig, build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
@@ -90,7 +90,7 @@ class Text2World:
     def from_pretrained(cls, path: str | Path) -> Text2World:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
+        config = upgrade_saved_config(info["config"])
         model = cls(
             from_dict(Text2WorldConfig, config, where),
             read_latent_info(info, path),

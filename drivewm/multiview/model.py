@@ -23,7 +23,7 @@ from drivewm.diffusion.blocks import register_sublayer
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.dit_config import upgrade_saved_fields
+from drivewm.diffusion.dit_config import upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.errors import DrivewmError
@@ -153,7 +153,7 @@ class MultiView:
     def from_pretrained(cls, path: str | Path) -> MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
+        config = upgrade_saved_config(info["config"])
         model = cls(
             from_dict(MultiViewModelConfig, config, where),
             read_latent_info(info, path),

@@ -22,7 +22,7 @@ from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMDenoiser
 from drivewm.diffusion.dit import DiT
-from drivewm.diffusion.dit_config import upgrade_saved_fields
+from drivewm.diffusion.dit_config import upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.multiview.warp import WarpEncoder
@@ -117,7 +117,7 @@ class Transfer:
     def from_pretrained(cls, path: str | Path) -> Transfer:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = {**info["config"], "dit": upgrade_saved_fields(info["config"].get("dit", {}))}
+        config = upgrade_saved_config(info["config"])
         parent = str(info.get("parent", ""))
         if parent and not Path(parent).is_absolute():  # shipped weights point at ../text2world
             parent = str((Path(path) / parent).resolve())

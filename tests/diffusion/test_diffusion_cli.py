@@ -235,16 +235,21 @@ def test_pretrain_without_tokenizer_decodes_with_the_one_that_encoded_the_latent
     assert code == 0 and "records no tokenizer: its samples are latent previews" in err
 
 
-def test_init_from_a_model_of_another_parameterization_is_refused_naming_the_setting(clipdir, tmp_path, capsys):
-    """A flow-trained image model warm-starting a run left at the default (EDM) scalings would be another
-    function from step one: refused, with the --set that continues it as it was trained."""
+def test_weights_of_another_parameterization_are_refused_naming_the_setting(clipdir, tmp_path, capsys):
+    """An EDM-trained image model warm-starting a run left at the default (flow) scalings, or an EDM run
+    resumed with the default, would train another function from step one: both refused, with the --set
+    that continues the weights as they were trained."""
     data, tok_dir = clipdir
-    flags = [a for o in [*TINY, "train.steps=1"] for a in ("--set", o)]
-    common = ("--data", data, "--tokenizer", tok_dir, *flags)
-    flow = ("--set", "edm.parameterization=flow")
-    code, _, err = _run(capsys, "pretrain", *common, *flow, "--set", "data.frames=1", "--out", tmp_path / "img")
+    common = ("--data", data, "--tokenizer", tok_dir, *[a for o in [*TINY, "train.steps=1"] for a in ("--set", o)])
+    edm = ("--set", "edm.parameterization=edm")
+    code, _, err = _run(capsys, "pretrain", *common, *edm, "--set", "data.frames=1", "--out", tmp_path / "img")
     assert code == 0, err
     code, _, err = _run(capsys, "pretrain", *common, "--init", tmp_path / "img", "--out", tmp_path / "vid")
-    assert code == 2 and "pass --set edm.parameterization=flow" in err and not (tmp_path / "vid").exists()
-    code, _, err = _run(capsys, "pretrain", *common, *flow, "--init", tmp_path / "img", "--out", tmp_path / "vid")
+    assert code == 2 and "pass --set edm.parameterization=edm" in err and not (tmp_path / "vid").exists()
+    code, _, err = _run(capsys, "pretrain", *common, *edm, "--init", tmp_path / "img", "--out", tmp_path / "vid")
+    assert code == 0, err
+    more = ("--set", "train.steps=2", "--set", "data.frames=1")
+    code, _, err = _run(capsys, "pretrain", *common, *more, "--out", tmp_path / "img")  # resumed, default recipe
+    assert code == 2 and "the run in this folder was trained with edm" in err and "edm.parameterization=edm" in err
+    code, _, err = _run(capsys, "pretrain", *common, *more, *edm, "--out", tmp_path / "img")
     assert code == 0, err

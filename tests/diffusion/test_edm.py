@@ -58,7 +58,7 @@ def test_scalings_match_edm_table1():
 
 
 def test_sigma_distribution_is_lognormal():
-    sigma = sample_sigma(20000, EDMConfig(), torch.Generator().manual_seed(0))
+    sigma = sample_sigma(20000, EDMConfig(parameterization="edm"), torch.Generator().manual_seed(0))
     assert abs(sigma.log().mean().item() + 1.2) < 0.05 and abs(sigma.log().std().item() - 1.2) < 0.05
 
 
@@ -74,7 +74,7 @@ class LinearBackbone(torch.nn.Module):
 
 
 def test_loss_matches_formula_and_video2world_masks_frames():
-    cfg = EDMConfig()
+    cfg = EDMConfig(parameterization="edm")
     den = EDMDenoiser(LinearBackbone(0.3), cfg)
     g = torch.Generator().manual_seed(0)
     x0, noise = torch.randn(3, 2, 4, 2, 2, generator=g), torch.randn(3, 2, 4, 2, 2, generator=g)
@@ -89,7 +89,7 @@ def test_loss_matches_formula_and_video2world_masks_frames():
     ).mean()
     assert torch.allclose(loss, by_hand, rtol=1e-5)
     # Video2World: the given frames come back exactly, and the loss ignores them.
-    v2w = EDMDenoiser(LinearBackbone(0.3), EDMConfig(cond_frames=2))
+    v2w = EDMDenoiser(LinearBackbone(0.3), EDMConfig(parameterization="edm", cond_frames=2))
     out = v2w(y, sigma, Conditioning(cond.text_emb, cond.text_mask, cond.fps, cond_latents=x0, cond_frames=2))
     assert torch.equal(out[:, :, :2], x0[:, :, :2]) and not torch.allclose(out[:, :, 2:], x0[:, :, 2:])
     loss_v2w = edm_loss(v2w, v2w.cfg, x0, cond, sigma, noise, torch.ones(3, dtype=torch.bool))
@@ -199,7 +199,7 @@ def test_flow_time_distribution_is_shifted_logit_normal():
     assert abs(t.logit().mean().item()) < 0.03 and abs(t.logit().std().item() - 1.0) < 0.03
     shifted = sample_sigma(20000, EDMConfig(parameterization="flow", sigma_shift=3.0), torch.Generator().manual_seed(0))
     assert torch.allclose(shifted / (1 + shifted), 3 * t / (1 + 2 * t), atol=1e-5)
-    assert EDMConfig().log_sigma_normal() == (-1.2, 1.2)  # EDM keeps Table 1
+    assert EDMConfig(parameterization="edm").log_sigma_normal() == (-1.2, 1.2)  # EDM keeps Table 1
 
 
 def _oracle_backbone(parameterization: str):

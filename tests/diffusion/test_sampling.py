@@ -50,7 +50,7 @@ def tiny(seed: int, cond_frames: int = 0) -> Text2World:
     )
     rig = load_rig("front1").to_dict()
     model = Text2World(
-        Text2WorldConfig(dit, EDMConfig(cond_frames=cond_frames)),
+        Text2WorldConfig(dit, EDMConfig(parameterization="edm", cond_frames=cond_frames)),  # as recorded
         LatentInfo([4, 3, 4, 6], [0.1] * 4, [0.9] * 4, 10.0, None, rig),
     )
     with torch.no_grad():
