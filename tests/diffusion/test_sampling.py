@@ -144,3 +144,23 @@ def test_an_sdedit_start_is_the_guide_noised_to_start_sigma_with_each_samples_ow
     torch.testing.assert_close(x_first, guide + 2.0 * seeded_noise((2, 4, 3, 4, 6), [5, 6]))
     with pytest.raises(DrivewmError, match="start_sigma"):
         sample(record, cond, (4, 3, 4, 6), [5, 6], steps=3, start=guide)
+
+
+def test_a_saved_folder_naming_no_parameterization_loads_as_the_edm_it_was_trained_with(tmp_path):
+    """Flow became the default after EDM folders were written without the key: such a folder (and the
+    multi-view model made from it) still loads, and samples, as EDM; a folder naming flow loads as flow."""
+    import json
+
+    model = tiny(0)
+    model.save_pretrained(tmp_path / "old")
+    path = tmp_path / "old" / "config.json"
+    info = json.loads(path.read_text())
+    del info["config"]["edm"]["parameterization"]
+    path.write_text(json.dumps(info))
+    old = Text2World.from_pretrained(tmp_path / "old")
+    assert old.cfg.edm.parameterization == "edm" and EDMConfig().parameterization == "flow"
+    torch.testing.assert_close(old.sample_latents(["snow"], [3], steps=2), model.sample_latents(["snow"], [3], steps=2))
+    flow = tiny(0)
+    flow.cfg = dataclasses.replace(flow.cfg, edm=EDMConfig(parameterization="flow"))
+    flow.save_pretrained(tmp_path / "flow")
+    assert Text2World.from_pretrained(tmp_path / "flow").cfg.edm.parameterization == "flow"
