@@ -5,7 +5,7 @@
   flush the folder entry. A killed run leaves the old file or the new one, never half of one, and a
   power cut after the call returns loses neither. A folder replacing a folder is swapped in with one
   atomic exchange (Linux ``renameat2(RENAME_EXCHANGE)``), so readers never see the path missing.
-  The temporary, ``.NAME.HOST-PID.XXXX.tmp``, names its maker: :func:`remove_dead_temporaries` deletes
+  The temporary, ``.NAME.HOST-PIDNS-PID.XXXX.tmp``, names its maker: :func:`remove_dead_temporaries` deletes
   those whose maker was killed outright (``kill -9``, a lost node) and leaves live writers' alone.
 - :class:`JsonlAppender` (and :func:`read_jsonl`): JSON-lines logs such as ``metrics.jsonl``, which
   grow by appends. Each row is one ``write`` of ``json + "\\n"`` to a file opened ``O_APPEND``; a
@@ -29,10 +29,21 @@ from pathlib import Path
 
 from drivewm.errors import DrivewmError
 
-#: A temporary's name carries its maker, ``HOST-PID`` (the host name in letters, digits and dashes), which
-#: remove_dead_temporaries reads back.
+#: A temporary's name carries its maker, ``HOST-PIDNS-PID`` (the host name in letters, digits and dashes, the
+#: inode of the maker's PID namespace, so containers sharing a host name and a folder never judge each other's
+#: pids), which remove_dead_temporaries reads back.
 _HOST = re.sub(r"[^A-Za-z0-9-]", "-", socket.gethostname())[:40]
-_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?P<host>[A-Za-z0-9-]*)-(?P<pid>\d+)\.[^.]+\.tmp")
+_TEMPORARY = re.compile(r"\.(?P<name>.+)\.(?P<host>[A-Za-z0-9-]*)-(?P<ns>\d+)-(?P<pid>\d+)\.[^.]+\.tmp")
+
+
+def _pid_namespace() -> str:
+    try:
+        return re.sub(r"\D", "", os.readlink("/proc/self/ns/pid")) or "0"
+    except OSError:  # no procfs (not Linux): the host name alone
+        return "0"
+
+
+_PIDNS = _pid_namespace()
 
 
 @contextlib.contextmanager
@@ -44,7 +55,7 @@ def atomic_path(path: str | Path, durable: bool = True) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    owner = f"{_HOST}-{os.getpid()}"  # per call: a forked worker is its own owner
+    owner = f"{_HOST}-{_PIDNS}-{os.getpid()}"  # per call: a forked worker is its own owner
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{owner}.", suffix=".tmp", dir=path.parent))
     target = tmp / path.name
     try:
@@ -63,14 +74,16 @@ def atomic_path(path: str | Path, durable: bool = True) -> Iterator[Path]:
 
 def remove_dead_temporaries(folder: str | Path) -> list[Path]:
     """Delete the temporaries in ``folder`` that a process killed outright (``kill -9``, a lost node, a
-    power cut) left behind: an unfinished log, shard or checkpoint under ``.NAME.HOST-PID.XXXX.tmp``.
-    Only those made on this host by a process that no longer runs go; a live writer's (this host's or
-    another's sharing the folder) stay, so any run may call this on its output folder without a lock.
+    power cut) left behind: an unfinished log, shard or checkpoint under ``.NAME.HOST-PIDNS-PID.XXXX.tmp``.
+    Only those made on this host and in this PID namespace by a process that no longer runs go; a live
+    writer's (this host's or another's sharing the folder) stay, so any run may call this on its output
+    folder without a lock.
     Returns what was deleted."""
     gone = []
     for tmp in Path(folder).glob(".*.tmp"):
         m = _TEMPORARY.fullmatch(tmp.name)
-        if m and m["host"] == _HOST and tmp.is_dir() and not _alive(int(m["pid"])):
+        ours = m and m["host"] == _HOST and m["ns"] == _PIDNS
+        if ours and tmp.is_dir() and not _alive(int(m["pid"])):
             shutil.rmtree(tmp, ignore_errors=True)
             gone.append(tmp)
     return gone

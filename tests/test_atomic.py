@@ -143,12 +143,15 @@ def test_only_temporaries_of_writers_killed_outright_are_removed(tmp_path):
     try:
         killed.kill()  # SIGKILL: no finally runs, the temporary stays behind
         killed.wait()
-        elsewhere = tmp_path / ".c.bin.node-7-12345.k2j4x8y1.tmp"  # another host's writer sharing the folder
+        host, ns = next(tmp_path.glob(".a.bin.*.tmp")).name.split(".")[3].rsplit("-", 2)[:2]
+        elsewhere = tmp_path / ".c.bin.node-7-4026531836-12345.k2j4x8y1.tmp"  # another host's writer
         older = tmp_path / ".d.bin.k2j4x8y1.tmp"  # a name without its maker (drivewm before this change)
-        for folder in (elsewhere, older):
+        # a container sharing this host name: the killed writer's pid means nothing in its PID namespace
+        container = tmp_path / f".e.bin.{host}-{int(ns) + 1}-{killed.pid}.k2j4x8y1.tmp"
+        for folder in (elsewhere, older, container):
             folder.mkdir()
         left = sorted(p.name for p in tmp_path.glob(".*.tmp"))
-        assert len(left) == 4 and [n.split(".")[1] for n in left] == ["a", "b", "c", "d"]
+        assert len(left) == 5 and [n.split(".")[1] for n in left] == ["a", "b", "c", "d", "e"]
         gone = remove_dead_temporaries(tmp_path)
         assert [p.name for p in gone] == [left[0]]  # the killed writer's
         assert sorted(p.name for p in tmp_path.glob(".*.tmp")) == left[1:]
