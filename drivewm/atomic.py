@@ -91,8 +91,6 @@ def remove_dead_temporaries(folder: str | Path) -> list[Path]:
 
 def _alive(pid: int) -> bool:
     """Whether a process ``pid`` runs on this host (a reused pid counts as alive: its temporary stays)."""
-    if pid == os.getpid():
-        return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

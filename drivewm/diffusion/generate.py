@@ -70,7 +70,6 @@ def video_to_uint8(video: torch.Tensor) -> np.ndarray:
     return rearrange(frames, "b c t h w -> b t h w c").cpu().numpy()
 
 
-@torch.no_grad()
 def warn_if_preview(model_dir: str | Path, tokenizer_dir: str | None) -> None:
     """Say on stderr that a model folder without a tokenizer generates latent previews, not images."""
     if not tokenizer_dir:
@@ -81,6 +80,7 @@ def warn_if_preview(model_dir: str | Path, tokenizer_dir: str | None) -> None:
         )
 
 
+@torch.no_grad()
 def decode_latents(latents: torch.Tensor, tokenizer_dir: str | None, device: torch.device | str = "cpu") -> np.ndarray:
     """Raw latents (B, c, t, h, w) -> uint8 video (B, T, H, W, 3) with the tokenizer on ``device``
     (a preview of the latents themselves if None)."""
