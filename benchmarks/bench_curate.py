@@ -14,6 +14,9 @@ Everything is measured in this run on the same input, in interleaved rounds (med
 - per step CPU seconds per camera-frame (the stage's own StepClock: index, read, decode, resize,
   shots, filters, encode, write, other) and "outside": the run's CPU outside the per-log stage
   (contact sheet, manifest, report: a fixed cost per run);
+- ``--scaling-seconds S``: 1 vs 2 workers on the logs looped to S seconds, timed twice: in this process
+  (one worker then has the stage's imports already; two pay a fresh fork server's every run) and as
+  fresh ``drivewm curate`` processes beside a fresh raw-decode process, where start-up costs every run alike;
 - PSNR of the encoded clips against the log's frames at each camera's exposure times (decoded in
   full, INTER_AREA-resized to the clip's size), with the H.264 settings that produced them, and of
   the 1/2-scale JPEG decode against full decode + INTER_AREA.
@@ -24,6 +27,7 @@ the cores other processes kept busy while it ran (/proc/stat less this process t
 
     python benchmarks/bench_curate.py                 # 4 simulated nuscenes6 drives of 20 s
     python benchmarks/bench_curate.py --hour          # + a 1 h, 6-camera log (looped frames)
+    python benchmarks/bench_curate.py --drives 2 --duration 15 --rounds 2 --skip-throughput --scaling-seconds 600
     python benchmarks/bench_curate.py --logs DIR      # your own MCAP logs instead of simulating
 """
 
@@ -396,6 +400,56 @@ def scaling(logs: list[Path], work: Path, seconds: float, rounds: int) -> None:
             f"frame on {os.cpu_count()} CPUs (load average now {os.getloadavg()[0]:.1f}); stage CPU ms per "
             f"camera-frame per worker: {steady[0]:.3f} with 1 worker, {steady[1]:.3f} with 2"
         )
+    print(
+        "  (in this process: 1 worker runs with the stage and filterpy already imported, 2 workers pay a fresh\n"
+        "   fork server's imports every run; the runs below pay every import alike)"
+    )
+    cold(long_logs, work, rounds, off)
+
+
+def cold(logs: list[Path], work: Path, rounds: int, off: list[str]) -> None:
+    """1 -> 2 workers as a shell runs them: every run a fresh ``drivewm curate`` process (its start-up and
+    imports included, the same for both), beside a fresh process decoding the logs raw; wall seconds,
+    interleaved rounds, medians. (Wall only: a pool's workers are reaped by its fork server, which a
+    finished CLI process leaves to exit on its own, so their CPU does not reach this process.)"""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "benchmarks")])}
+    raw = [sys.executable, "-c", RAW_SCRIPT, *map(str, logs)]
+    runs = {"raw decode (fresh process)": raw}
+    for name, extra in (("fleet", []), ("fleet 160x96", SMALL)):
+        for n in (1, 2):
+            out = _out(work, f"cold {name} {n}")
+            sets = [a for kv in off + extra for a in ("--set", kv)]
+            cmd = [sys.executable, "-m", "drivewm.cli", "curate", *map(str, logs), "--out", str(out)]
+            runs[f"{name}, {n} worker{'s' * (n > 1)}"] = cmd + ["--recipe", "fleet", "--workers", str(n), *sets]
+    wall = {k: [] for k in runs}
+    for r in range(rounds):
+        for name, cmd in runs.items():
+            if "--out" in cmd:
+                shutil.rmtree(cmd[cmd.index("--out") + 1], ignore_errors=True)
+            t0 = time.perf_counter()
+            proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+            wall[name].append(time.perf_counter() - t0)
+            if proc.returncode != 0:
+                raise SystemExit(f"{name}: {proc.stderr[-2000:]}")
+        print(f"  cold round {r + 1}/{rounds}: " + ", ".join(f"{k} {v[-1]:.1f} s" for k, v in wall.items()), flush=True)
+    med = {k: float(np.median(v)) for k, v in wall.items()}
+    raw_s = med["raw decode (fresh process)"]
+    print("\nfresh processes (as from a shell), wall seconds, medians:")
+    for k, v in med.items():
+        print(f"  {k:28s} {v:7.2f} s  {raw_s / v:.2f}x raw decode")
+    for name in ("fleet", "fleet 160x96"):
+        one, two = med[f"{name}, 1 worker"], med[f"{name}, 2 workers"]
+        print(f"  1 -> 2 workers ({name}): {one / two:.2f}x wall")
+
+
+#: raw decode in a fresh process, with the allocator setting every curation process makes (as main() does here)
+RAW_SCRIPT = """
+import sys
+from drivewm.workers import reuse_freed_memory
+reuse_freed_memory()
+from bench_curate import raw_decode
+raw_decode(sys.argv[1:])
+"""
 
 
 HOUR_SCRIPT = """
