@@ -13,6 +13,8 @@ build the conditioning and (de)normalise latents; nothing here knows a tokenizer
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 
@@ -60,6 +62,9 @@ def sample(
         raise DrivewmError(
             f"sampling: needs steps >= 1 and a start_sigma > 0 with a start (got {steps}, {start_sigma})"
         )
+    for name, weight in (("guidance", guidance), ("trajectory guidance", trajectory_guidance)):
+        if not math.isfinite(weight) or weight < 0:  # NaN would decode to a black video, not an error
+            raise DrivewmError(f"sampling: {name} must be a finite number >= 0, got {weight}")
     device = resolve_device(device)
     sigmas = (karras_sigmas(steps, sigma_max=start_sigma) if start is not None else karras_sigmas(steps)).to(device)
     noise = seeded_noise((len(seeds), *shape), seeds)  # on the CPU: the same sample on every device

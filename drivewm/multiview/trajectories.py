@@ -97,7 +97,10 @@ def load_waypoints(path: str | Path) -> np.ndarray:
             raw = json.loads(path.read_text())
             data = np.asarray(raw["trajectory_ego"] if isinstance(raw, dict) else raw, dtype=np.float64)
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise DrivewmError(f"{path}: cannot read waypoints ({exc.__class__.__name__}: {exc})") from None
+        raise DrivewmError(
+            f"{path}: cannot read waypoints ({exc.__class__.__name__}: {exc}); expected a .npy array or a .json "
+            'file of [[x, y, z], ...] or {"trajectory_ego": [...]} (metres, in the first frame\'s ego frame)'
+        ) from None
     data = np.asarray(data, dtype=np.float64)
     if data.ndim != 2 or data.shape[1] != 3 or not np.all(np.isfinite(data)) or len(data) == 0:
         raise DrivewmError(f"{path}: waypoints must be a finite (N, 3) array, got shape {data.shape}")

@@ -173,6 +173,11 @@ def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
     assert "nonexistent_rig" in capsys.readouterr().err
     assert main(["posttrain", "--init", str(tmp_path), "--data", str(cache), "--out", str(tmp_path / "m")]) == 2
     assert "not a drivewm model folder" in capsys.readouterr().err
+    for weight in ("nan", "-1"):  # NaN guidance had decoded to a black clip, written without a word
+        command = ["generate", "--model", str(root / "mv"), "--prompt", "x", "--steps", "1"]
+        assert main([*command, "--trajectory-guidance", weight, "--out", str(tmp_path / "tg")]) == 2
+        assert f"trajectory guidance must be a finite number >= 0, got {float(weight)}" in capsys.readouterr().err
+        assert not (tmp_path / "tg").exists()
 
 
 def test_training_moves_the_trajectory_encoder_and_the_samples_follow_its_input(trained_mv):
