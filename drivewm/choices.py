@@ -68,3 +68,15 @@ def model_folder(value: str) -> Path:
         return resolve_model_folder(value)
     except DrivewmError as exc:  # argparse turns this into the CLI's one-line error, exit 2
         raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def at_least_one(value: str) -> int:
+    """argparse ``type`` of a count option (``--workers``, ``--max-clips``, ``--num-samples``, ...): an
+    integer >= 1. ``--workers -3`` had run on one process and ``--max-clips -1`` had left out the last clip."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {value!r}") from None
+    if number < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {number}")
+    return number

@@ -83,7 +83,7 @@ def test_cli_bad_values_exit_2_with_one_line(capsys, tmp_path):
     )
     assert rc == 2 and err == "error: pretrain.train: lr must be > 0, got -0.1\n"
     rc, err = _run(capsys, ["simulate", "--drives", "0", "--out", str(tmp_path / "logs")])
-    assert rc == 2 and err == "error: --drives must be >= 1, got 0\n"
+    assert rc == 2 and err == "error: drivewm simulate: argument --drives: must be >= 1, got 0\n"
     assert not (tmp_path / "logs").exists() and not (tmp_path / "o").exists()
 
 

@@ -6,7 +6,9 @@ import json
 import subprocess
 import sys
 
-from drivewm.cli import build_parser
+import pytest
+
+from drivewm.cli import build_parser, main
 
 #: Not imported by the parser. (The simulator package, with OpenCV and matplotlib, is: see drivewm/sim/__init__.py.)
 HEAVY = ("torch", "filterpy", "pycolmap", "highway_env", "libsumo", "rerun", "scenedetect", "ray", "transformers")
@@ -29,3 +31,29 @@ def test_help_imports_no_heavy_module():
 def test_every_stage_has_its_command():
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     assert set(COMMANDS) <= set(sub.choices)
+
+
+#: Every count option of the CLI, with the arguments its command needs besides it.
+COUNT_OPTIONS = [
+    (["curate", "logs", "--out", "o"], "--workers"),
+    (["simulate", "--out", "o"], "--workers"),
+    (["simulate", "--out", "o"], "--drives"),
+    (["eval", "clips", "--out", "o"], "--workers"),
+    (["eval", "clips", "--out", "o"], "--threads"),
+    (["eval", "clips", "--out", "o"], "--max-clips"),
+    (["tokenizer", "eval", "--model", "m", "--data", "d", "--out", "o"], "--max-clips"),
+    (["tokenizer", "eval", "--model", "m", "--data", "d", "--out", "o"], "--max-views"),
+    (["transfer", "clips", "--to", "snow", "--out", "o"], "--max-clips"),
+    (["generate", "--prompt", "x", "--out", "o"], "--num-samples"),
+]
+
+
+@pytest.mark.parametrize(("argv", "option"), COUNT_OPTIONS, ids=lambda v: v if isinstance(v, str) else v[0])
+def test_count_options_refuse_zero_negative_and_non_integers(argv, option, capsys):
+    """``--workers -3`` had run on one process and ``--max-clips -1`` had scored all clips but the last;
+    every count is now refused below 1 by the parser, before any work, with the CLI's one-line error."""
+    assert build_parser().parse_args([*argv, option, "3"]).__dict__[option[2:].replace("-", "_")] == 3
+    for bad, says in (("0", "must be >= 1, got 0"), ("-1", "must be >= 1, got -1"), ("2.5", "got '2.5'")):
+        assert main([*argv, option, bad]) == 2
+        err = capsys.readouterr().err
+        assert f"argument {option}: " in err and says in err and len(err.strip().splitlines()) == 1

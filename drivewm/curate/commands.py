@@ -11,7 +11,7 @@ import json
 import sys
 from pathlib import Path
 
-from drivewm.choices import add_registry_argument
+from drivewm.choices import add_registry_argument, at_least_one
 from drivewm.config import to_dict
 from drivewm.curate.config import CURATE_RECIPES
 from drivewm.curate.pool import start_fork_server
@@ -31,7 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         p, "--executor", "drivewm.curate.pipeline:EXECUTORS", "where logs run (default local)", default="local"
     )
     p.add_argument(
-        "--workers", type=int, default=1, help="parallel logs (local processes, or Ray CPUs when starting Ray locally)"
+        "--workers",
+        type=at_least_one,
+        default=1,
+        help="parallel logs (local processes, or Ray CPUs when starting Ray locally)",
     )
     p.add_argument("--ray-address", default=None, help="connect to a Ray cluster instead of starting one")
     p.set_defaults(func=_curate)

@@ -11,6 +11,7 @@ import json
 import sys
 
 from drivewm import resources
+from drivewm.choices import at_least_one
 from drivewm.config import to_dict
 from drivewm.errors import BatchError
 from drivewm.eval.config import ALL_METRICS, EVAL_RECIPES
@@ -29,10 +30,10 @@ def register(subparsers) -> None:
     p.add_argument(
         "--out", required=True, help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd"
     )
-    p.add_argument("--workers", type=int, default=1, help="clips scored in parallel (processes)")
+    p.add_argument("--workers", type=at_least_one, default=1, help="clips scored in parallel (processes)")
     p.add_argument(
         "--threads",
-        type=int,
+        type=at_least_one,
         default=None,
         help="threads per clip for its features and matches (default: the cores over the clips scored at once; "
         "the figures do not depend on it)",
@@ -56,7 +57,7 @@ def register(subparsers) -> None:
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
-    p.add_argument("--max-clips", type=int, default=None, help="score N clips spread evenly over the input")
+    p.add_argument("--max-clips", type=at_least_one, default=None, help="score N clips spread evenly over the input")
     p.set_defaults(func=run_eval)
 
 

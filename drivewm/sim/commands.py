@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument
+from drivewm.choices import add_registry_argument, at_least_one
 from drivewm.recipe import add_override_arguments
 
 
@@ -49,11 +49,11 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
     p.add_argument(
         "--drives",
-        type=int,
+        type=at_least_one,
         default=1,
         help="number of drives (seeds seed, seed+1, ...); recipes give their own counts",
     )
-    p.add_argument("--workers", type=int, default=1, help="drives simulated in parallel processes (default 1)")
+    p.add_argument("--workers", type=at_least_one, default=1, help="drives simulated in parallel processes (default 1)")
     p.add_argument(
         "--recipe",
         default=None,
@@ -83,13 +83,10 @@ FLAG_FIELDS = {
 
 def run_simulate(args: argparse.Namespace) -> int:
     from drivewm.config import to_dict
-    from drivewm.errors import DrivewmError
     from drivewm.sim import simulate_many
     from drivewm.sim.recipe import load_recipe, plan_drives
     from drivewm.sim.world import sim_rig
 
-    if args.drives < 1:
-        raise DrivewmError(f"--drives must be >= 1, got {args.drives}")
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
         plan = load_recipe(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drivewm.choices import model_folder
+from drivewm.choices import at_least_one, model_folder
 from drivewm.tokenizer.recipe import RECIPES
 
 
@@ -52,8 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="which clips: all, or those held out (or not) from training by key hash",
     )
     v.add_argument("--holdout-percent", type=int, default=10, help="the training run's holdout_percent")
-    v.add_argument("--max-clips", type=int, default=None, help="score only the first N clips")
-    v.add_argument("--max-views", type=int, default=None, help="score only the first N cameras of each clip")
+    v.add_argument("--max-clips", type=at_least_one, default=None, help="score only the first N clips")
+    v.add_argument("--max-views", type=at_least_one, default=None, help="score only the first N cameras of each clip")
     _threads(v)
     v.set_defaults(func=_eval)
 

@@ -63,6 +63,9 @@ def evaluate_tokenizer(
 ) -> dict:
     """Score the tokenizer in ``model_dir`` on the clips of ``clip_dir`` (the first ``max_clips``
     clips, the first ``max_views`` cameras of each); writes metrics.json and side_by_side.png."""
+    for name, limit in (("max_clips", max_clips), ("max_views", max_views)):
+        if limit is not None and limit < 1:  # a slice [:-1] would quietly leave out the last one
+            raise DrivewmError(f"tokenizer eval: {name} must be >= 1, got {limit}")
     tok = Tokenizer.from_pretrained(model_dir)
     clips = load_clips(clip_dir, split, holdout_percent)[:max_clips]
     out_dir = Path(out_dir)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from drivewm.choices import model_folder
+from drivewm.choices import at_least_one, model_folder
 
 WEATHERS = ["clear", "overcast", "rain", "snow", "fog"]  # drivewm.logs.types.WEATHERS (not imported: --help stays fast)
 TIMES_OF_DAY = ["day", "dusk", "night"]
@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
-    p.add_argument("--max-clips", type=int, default=None, help="transfer only the first N clips (a preview)")
+    p.add_argument("--max-clips", type=at_least_one, default=None, help="transfer only the first N clips (a preview)")
     p.add_argument(
         "--no-detail",
         action="store_true",
