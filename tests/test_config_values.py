@@ -116,3 +116,25 @@ def test_text_encoder_folder_with_pickled_weights_is_refused_before_loading(tmp_
     (tmp_path / "pytorch_model.bin").write_bytes(pickle.dumps({"weight": [1.0]}))
     with pytest.raises(DrivewmError, match=r"no \*\.safetensors weights \(only pickled \['pytorch_model\.bin'\]"):
         build_text_encoder(TextConfig(kind="t5", path=str(tmp_path)))
+
+
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["rollout", "--clip", "c", "--speed", "nan"], "rollout: --speed must be a finite number of m/s >= 0"),
+        (["rollout", "--clip", "c", "--speed", "-5"], "rollout: --speed must be a finite number of m/s >= 0"),
+        (["rollout", "--clip", "c", "--trajectory-guidance", "inf"], "rollout: trajectory guidance must be a finite"),
+        (["transfer", "c", "--to", "snow", "--guidance", "nan"], "transfer: --guidance must be a finite number >= 0"),
+        (["transfer", "c", "--to", "snow", "--start-sigma", "-1"], "transfer: --start-sigma must be a finite number"),
+    ],
+)
+def test_sampling_settings_are_refused_before_any_work(argv, message, capsys, tmp_path):
+    """A NaN speed had made a blank rollout without a word, and a NaN transfer guidance failed every clip of
+    every shard one after another (each clip only after its sampling): both are now one line at the start."""
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    argv = [str(clips) if a == "c" else a for a in argv]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +73,11 @@ class TransferOptions:
     def validate(self) -> None:
         if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
             raise DrivewmError(f"transfer: --steps ({self.steps}) and --max-clips ({self.max_clips}) must be >= 1")
+        # checked here, not per clip: a bad value would fail every clip of every shard, one after another
+        if not math.isfinite(self.guidance) or self.guidance < 0:
+            raise DrivewmError(f"transfer: --guidance must be a finite number >= 0, got {self.guidance}")
+        if self.start_sigma is not None and not (math.isfinite(self.start_sigma) and self.start_sigma > 0):
+            raise DrivewmError(f"transfer: --start-sigma must be a finite number > 0, got {self.start_sigma}")
 
     def is_done(self, written: int) -> bool:
         """True once ``written`` clips reach ``max_clips``."""
