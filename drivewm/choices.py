@@ -80,3 +80,19 @@ def at_least_one(value: str) -> int:
     if number < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {number}")
     return number
+
+
+#: Largest seed a command takes (the simulator's, SUMO's ``--seed``); sample, window or view i adds i to it.
+MAX_SEED = 2**31 - 1
+
+
+def seed(value: str) -> int:
+    """argparse ``type`` of ``--seed``: a whole number in [0, MAX_SEED] (a larger one had ended ``drivewm
+    generate`` in PyTorch's overflow traceback)."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {value!r}") from None
+    if not 0 <= number <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_SEED}], got {number}")
+    return number

@@ -57,3 +57,22 @@ def test_count_options_refuse_zero_negative_and_non_integers(argv, option, capsy
         assert main([*argv, option, bad]) == 2
         err = capsys.readouterr().err
         assert f"argument {option}: " in err and says in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["generate", "--prompt", "x", "--out", "o"],
+        ["rollout", "--clip", "c", "--out", "o"],
+        ["transfer", "clips", "--to", "snow", "--out", "o"],
+        ["simulate", "--out", "o"],
+    ],
+    ids=lambda argv: argv[0],
+)
+def test_seeds_out_of_range_are_refused_by_the_parser(argv, capsys):
+    """A seed past 2**63 had ended ``drivewm generate`` in PyTorch's overflow traceback."""
+    assert build_parser().parse_args([*argv, "--seed", "2147483647"]).seed == 2**31 - 1
+    for bad in ("99999999999999999999999", "-1", "x"):
+        assert main([*argv, "--seed", bad]) == 2
+        err = capsys.readouterr().err
+        assert "argument --seed: " in err and len(err.strip().splitlines()) == 1

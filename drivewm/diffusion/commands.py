@@ -12,7 +12,7 @@ import importlib
 import json
 from pathlib import Path
 
-from drivewm.choices import add_registry_argument, at_least_one, model_folder
+from drivewm.choices import add_registry_argument, at_least_one, model_folder, seed
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -53,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--out", required=True, type=Path, help="output folder: clip shards, mp4s, contact_sheet.png")
     g.add_argument("--steps", type=int, default=35, help="sampler steps")
     g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
-    g.add_argument("--seed", type=int, default=0, help="sample i uses seed + i")
+    g.add_argument("--seed", type=seed, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=at_least_one, default=1, help="samples per prompt")
     add_registry_argument(
         g, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"

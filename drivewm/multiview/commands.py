@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument, model_folder
+from drivewm.choices import add_registry_argument, model_folder, seed
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -62,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
-    r.add_argument("--seed", type=int, default=0, help="window w uses seed + w")
+    r.add_argument("--seed", type=seed, default=0, help="window w uses seed + w")
     add_registry_argument(
         r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
     )

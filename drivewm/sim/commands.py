@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument, at_least_one
+from drivewm.choices import add_registry_argument, at_least_one, seed
 from drivewm.recipe import add_override_arguments
 
 
@@ -46,7 +46,7 @@ def register(subparsers) -> None:
         default=None,
         help="camera i exposes at tick + i x this (ms), like rigs that fire cameras in turn (default 0: together)",
     )
-    p.add_argument("--seed", type=int, default=None, help="first seed (drive i uses seed + i)")
+    p.add_argument("--seed", type=seed, default=None, help="first seed (drive i uses seed + i)")
     p.add_argument(
         "--drives",
         type=at_least_one,

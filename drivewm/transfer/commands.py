@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from drivewm.choices import at_least_one, model_folder
+from drivewm.choices import at_least_one, model_folder, seed
 
 WEATHERS = ["clear", "overcast", "rain", "snow", "fog"]  # drivewm.logs.types.WEATHERS (not imported: --help stays fast)
 TIMES_OF_DAY = ["day", "dusk", "night"]
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--steps", type=int, default=8, help="sampler steps (default 8)")
     p.add_argument("--guidance", type=float, default=1.0, help="guidance on the target condition (1 = none)")
     p.add_argument("--sampler", default="euler", choices=["euler", "heun"])
-    p.add_argument("--seed", type=int, default=0, help="view v draws its noise from seed + v")
+    p.add_argument("--seed", type=seed, default=0, help="view v draws its noise from seed + v")
     p.add_argument(
         "--start-sigma",
         type=float,
