@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from drivewm.errors import DrivewmError
@@ -70,16 +70,24 @@ def model_folder(value: str) -> Path:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
-def at_least_one(value: str) -> int:
-    """argparse ``type`` of a count option (``--workers``, ``--max-clips``, ``--num-samples``, ...): an
-    integer >= 1. ``--workers -3`` had run on one process and ``--max-clips -1`` had left out the last clip."""
-    try:
-        number = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {value!r}") from None
-    if number < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {number}")
-    return number
+def whole_number(minimum: int) -> Callable[[str], int]:
+    """argparse ``type`` of a whole number >= ``minimum``."""
+
+    def parse(value: str) -> int:
+        try:
+            number = int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {value!r}") from None
+        if number < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {number}")
+        return number
+
+    return parse
+
+
+#: argparse ``type`` of a count option (``--workers``, ``--max-clips``, ``--num-samples``, ...): ``--workers -3``
+#: had run on one process and ``--max-clips -1`` had left out the last clip.
+at_least_one = whole_number(1)
 
 
 #: Largest seed a command takes (the simulator's, SUMO's ``--seed``); sample, window or view i adds i to it.

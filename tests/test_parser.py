@@ -48,6 +48,14 @@ COUNT_OPTIONS = [
 ]
 
 
+def test_tokenizer_threads_take_zero_for_torchs_default_and_refuse_negatives(capsys):
+    """``--threads -2`` had ended in PyTorch's set_num_threads traceback."""
+    argv = ["tokenizer", "eval", "--model", "m", "--data", "d", "--out", "o", "--threads"]
+    assert build_parser().parse_args([*argv, "0"]).threads == 0
+    assert main([*argv, "-2"]) == 2
+    assert "argument --threads: must be >= 0, got -2" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(("argv", "option"), COUNT_OPTIONS, ids=lambda v: v if isinstance(v, str) else v[0])
 def test_count_options_refuse_zero_negative_and_non_integers(argv, option, capsys):
     """``--workers -3`` had run on one process and ``--max-clips -1`` had scored all clips but the last;

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drivewm.choices import at_least_one, model_folder
+from drivewm.choices import at_least_one, model_folder, whole_number
 from drivewm.tokenizer.recipe import RECIPES
 
 
@@ -59,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _threads(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    p.add_argument("--threads", type=whole_number(0), default=0, help="torch CPU threads (0: torch's default)")
     p.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
