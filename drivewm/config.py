@@ -143,6 +143,14 @@ def require(ok: bool, field: str, value: Any, rule: str) -> None:
         raise DrivewmError(f"{field} must be {rule}, got {value!r}")
 
 
+def finite_at_least(where: str, low: float, **values: float) -> None:
+    """Every value is a finite number >= ``low``, else ``DrivewmError("WHERE: NAME must be a finite number
+    >= LOW, got VALUE")``: for run settings that no config loader checked (guidance weights, speeds)."""
+    for name, value in values.items():
+        if not (math.isfinite(value) and value >= low):
+            raise DrivewmError(f"{where}: {name} must be a finite number >= {low:g}, got {value}")
+
+
 def at_least(cfg: Any, low: float, *fields: str) -> None:
     """Every named field of ``cfg`` is >= ``low`` (NaN fails)."""
     for name in fields:

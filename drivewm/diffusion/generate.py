@@ -8,7 +8,6 @@ sample and ``contact_sheet.png``.
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from drivewm.atomic import atomic_path, write_bytes
 from drivewm.clips.format import ClipMeta, clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
+from drivewm.config import finite_at_least
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer import Tokenizer
@@ -51,8 +51,7 @@ class GenerateOptions:
     def __post_init__(self) -> None:
         if not self.prompts or self.steps < 1 or self.num_samples < 1 or self.batch_size < 1:
             raise DrivewmError("generate: needs at least one prompt, steps >= 1 and num_samples >= 1")
-        if not math.isfinite(self.guidance) or self.guidance < 0:
-            raise DrivewmError(f"generate: --guidance must be a finite number >= 0, got {self.guidance}")
+        finite_at_least("generate", 0, **{"--guidance": self.guidance})
 
 
 def latents_preview(latents: torch.Tensor, upscale: int = 8) -> np.ndarray:

@@ -13,11 +13,10 @@ build the conditioning and (de)normalise latents; nothing here knows a tokenizer
 
 from __future__ import annotations
 
-import math
-
 import torch
 from torch import nn
 
+from drivewm.config import finite_at_least
 from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import Conditioning
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
@@ -62,9 +61,8 @@ def sample(
         raise DrivewmError(
             f"sampling: needs steps >= 1 and a start_sigma > 0 with a start (got {steps}, {start_sigma})"
         )
-    for name, weight in (("guidance", guidance), ("trajectory guidance", trajectory_guidance)):
-        if not math.isfinite(weight) or weight < 0:  # NaN would decode to a black video, not an error
-            raise DrivewmError(f"sampling: {name} must be a finite number >= 0, got {weight}")
+    # NaN would decode to a black video, not an error
+    finite_at_least("sampling", 0, guidance=guidance, **{"trajectory guidance": trajectory_guidance})
     device = resolve_device(device)
     sigmas = (karras_sigmas(steps, sigma_max=start_sigma) if start is not None else karras_sigmas(steps)).to(device)
     noise = seeded_noise((len(seeds), *shape), seeds)  # on the CPU: the same sample on every device

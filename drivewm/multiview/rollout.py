@@ -11,7 +11,6 @@ is laid out once for the whole rollout and handed to each window in that window'
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 import cv2
@@ -22,6 +21,7 @@ from tqdm import tqdm
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
+from drivewm.config import finite_at_least
 from drivewm.diffusion.generate import video_to_uint8
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
@@ -62,13 +62,9 @@ class RolloutOptions:
     def __post_init__(self) -> None:
         if self.windows < 1 or self.steps < 1:
             raise DrivewmError("rollout: windows and steps must be >= 1")
-        for name, value in (("guidance", self.guidance), ("trajectory guidance", self.trajectory_guidance)):
-            if not math.isfinite(value) or value < 0:
-                raise DrivewmError(f"rollout: {name} must be a finite number >= 0, got {value}")
-        if not math.isfinite(self.speed_mps) or self.speed_mps < 0:  # NaN had made NaN waypoints, a blank clip
-            raise DrivewmError(
-                f"rollout: --speed must be a finite number of m/s >= 0 (0: the clip's), got {self.speed_mps}"
-            )
+        weights = {"guidance": self.guidance, "trajectory guidance": self.trajectory_guidance}
+        # a NaN speed had made NaN waypoints, a blank clip
+        finite_at_least("rollout", 0, **weights, **{"--speed": self.speed_mps})
 
 
 def load_clip(path: str | Path, key: str | None = None) -> Clip:

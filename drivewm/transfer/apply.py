@@ -25,6 +25,7 @@ from tqdm import tqdm
 from drivewm.atomic import write_json
 from drivewm.clips.format import Clip, clip_from_arrays
 from drivewm.clips.shards import ShardWriter, iter_shard, list_shards, write_manifest
+from drivewm.config import finite_at_least
 from drivewm.curate.stage import manifest_row
 from drivewm.diffusion.generate import write_grid_png
 from drivewm.diffusion.text2world import LatentInfo
@@ -74,8 +75,7 @@ class TransferOptions:
         if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
             raise DrivewmError(f"transfer: --steps ({self.steps}) and --max-clips ({self.max_clips}) must be >= 1")
         # checked here, not per clip: a bad value would fail every clip of every shard, one after another
-        if not math.isfinite(self.guidance) or self.guidance < 0:
-            raise DrivewmError(f"transfer: --guidance must be a finite number >= 0, got {self.guidance}")
+        finite_at_least("transfer", 0, **{"--guidance": self.guidance})
         if self.start_sigma is not None and not (math.isfinite(self.start_sigma) and self.start_sigma > 0):
             raise DrivewmError(f"transfer: --start-sigma must be a finite number > 0, got {self.start_sigma}")
 
