@@ -70,16 +70,17 @@ def model_folder(value: str) -> Path:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
-def whole_number(minimum: int) -> Callable[[str], int]:
-    """argparse ``type`` of a whole number >= ``minimum``."""
+def whole_number(minimum: int, maximum: int | None = None) -> Callable[[str], int]:
+    """argparse ``type`` of a whole number >= ``minimum`` (and <= ``maximum`` when given)."""
+    bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"
 
     def parse(value: str) -> int:
         try:
             number = int(value)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {value!r}") from None
-        if number < minimum:
-            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {number}")
+            raise argparse.ArgumentTypeError(f"expected a whole number {bounds}, got {value!r}") from None
+        if number < minimum or (maximum is not None and number > maximum):
+            raise argparse.ArgumentTypeError(f"must be {bounds}, got {number}")
         return number
 
     return parse
@@ -93,14 +94,5 @@ at_least_one = whole_number(1)
 #: Largest seed a command takes (the simulator's, SUMO's ``--seed``); sample, window or view i adds i to it.
 MAX_SEED = 2**31 - 1
 
-
-def seed(value: str) -> int:
-    """argparse ``type`` of ``--seed``: a whole number in [0, MAX_SEED] (a larger one had ended ``drivewm
-    generate`` in PyTorch's overflow traceback)."""
-    try:
-        number = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {value!r}") from None
-    if not 0 <= number <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"must be in [0, {MAX_SEED}], got {number}")
-    return number
+#: argparse ``type`` of ``--seed`` (a larger one had ended ``drivewm generate`` in PyTorch's overflow traceback).
+seed = whole_number(0, MAX_SEED)
