@@ -56,6 +56,23 @@ def test_tokenizer_threads_take_zero_for_torchs_default_and_refuse_negatives(cap
     assert "argument --threads: must be >= 0, got -2" in capsys.readouterr().err
 
 
+def test_tokenizer_holdout_percent_is_a_percentage_below_100(tmp_path, capsys):
+    """``--holdout-percent 150`` had held out every clip without a word; the parser and load_clips refuse it."""
+    from drivewm.errors import DrivewmError
+    from drivewm.tokenizer.data import load_clips
+
+    argv = ["tokenizer", "eval", "--model", "m", "--data", "d", "--out", "o", "--holdout-percent"]
+    assert build_parser().parse_args([*argv, "0"]).holdout_percent == 0
+    for bad in ("100", "150", "-5", "10.5"):
+        assert main([*argv, bad]) == 2
+        err = capsys.readouterr().err
+        assert "argument --holdout-percent: " in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(DrivewmError, match=r"holdout_percent in \[0, 100\), got 'holdout' and 150"):
+        load_clips(tmp_path, "holdout", 150)  # refused before the folder is read
+    with pytest.raises(DrivewmError, match="split must be all, train or holdout"):
+        load_clips(tmp_path, "test", 10)
+
+
 @pytest.mark.parametrize(("argv", "option"), COUNT_OPTIONS, ids=lambda v: v if isinstance(v, str) else v[0])
 def test_count_options_refuse_zero_negative_and_non_integers(argv, option, capsys):
     """``--workers -3`` had run on one process and ``--max-clips -1`` had scored all clips but the last;

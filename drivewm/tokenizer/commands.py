@@ -51,7 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="all",
         help="which clips: all, or those held out (or not) from training by key hash",
     )
-    v.add_argument("--holdout-percent", type=int, default=10, help="the training run's holdout_percent")
+    v.add_argument(
+        "--holdout-percent", type=whole_number(0, 99), default=10, help="the training run's holdout_percent (0-99)"
+    )
     v.add_argument("--max-clips", type=at_least_one, default=None, help="score only the first N clips")
     v.add_argument("--max-views", type=at_least_one, default=None, help="score only the first N cameras of each clip")
     _threads(v)

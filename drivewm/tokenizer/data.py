@@ -27,6 +27,12 @@ def is_holdout(key: str, holdout_percent: int) -> bool:
 
 def load_clips(clip_dir: str | Path, split: str = "all", holdout_percent: int = 0) -> list[Clip]:
     """Clips of a folder/tar: ``split`` is ``all``, ``train`` (not held out) or ``holdout``."""
+    if split not in ("all", "train", "holdout") or not 0 <= holdout_percent < 100:
+        # 150 % had held out every clip without a word ("train" then found none, after reading them all)
+        raise DrivewmError(
+            f"tokenizer data: split must be all, train or holdout and holdout_percent in [0, 100), "
+            f"got {split!r} and {holdout_percent}"
+        )
     clips = list(iter_clips(clip_dir))
     if split == "train":
         clips = [c for c in clips if not is_holdout(c.key, holdout_percent)]
