@@ -10,7 +10,7 @@ class DrivewmError(Exception):
 
 
 class BatchError(DrivewmError):
-    """A batch command (curate, import-video, encode, decode, eval) produced nothing usable.
+    """A batch command (curate, import-video, encode, decode, eval, transfer) produced nothing usable.
 
     The CLI prints ``error: <message>`` and then one line per failed item (``failures``), and exits 2.
     """

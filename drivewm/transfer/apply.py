@@ -8,7 +8,8 @@ model's size instead, as before) and written as a clip (``OUT/transferred-NNNNNN
 the model's size), ego poses, trajectory, pair id and the other tags; the weather / time-of-day tags
 and captions are the target's (drivewm.transfer.retarget).
 Beside them: ``sheets/KEY.png`` (source above, transferred below, six frames over time) and
-``contact_sheet.png``. A clip that cannot be transferred is reported and skipped.
+``contact_sheet.png``. A clip that cannot be transferred is reported and skipped; none transferred is
+a BatchError (exit 2), as in curate and encode.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from drivewm.config import finite_at_least
 from drivewm.curate.stage import manifest_row
 from drivewm.diffusion.generate import write_grid_png
 from drivewm.diffusion.text2world import LatentInfo
-from drivewm.errors import DrivewmError
+from drivewm.errors import BatchError, DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
 from drivewm.multiview.rollout import decode_views, encode_views, resize_views
 from drivewm.multiview.writer import grid_layout, tile_views
@@ -180,7 +181,8 @@ def transfer_clips(
 ) -> dict:
     """Transfer every clip of ``inputs`` (shards or clip folders; the first ``options.max_clips``) into
     ``out_dir``; returns the report (also ``report.json``): clips written, and clips or shards skipped
-    with the reason."""
+    with the reason. No clip written raises :class:`BatchError` (after writing the report) with one line
+    per skipped clip or shard."""
     options.validate()
     transferer = load_transferer(model_dir, options)
     tokenizer = load_tokenizer(options.tokenizer or transferer.latent.tokenizer, model_dir, transferer.device)
@@ -214,6 +216,9 @@ def transfer_clips(
         write_grid_png(np.stack([v for _, v, _ in sheet[: 2 * SHEET_CLIPS]]), out / "contact_sheet.png", captions)
     report = {"written": [r["key"] for r in rows], "failed": failed, **transferer.record}
     write_json(out / "report.json", report)
+    if not rows:  # as curate and encode: a run that wrote nothing is an error, with every reason
+        lines = [f"{f.get('clip', f['shard'])}: {f['error']}" for f in failed] or ["no clips found"]
+        raise BatchError(f"transfer: no clip transferred ({len(failed)} skipped; {out / 'report.json'})", lines)
     return report
 
 

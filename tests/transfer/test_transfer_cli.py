@@ -124,6 +124,23 @@ def test_sdedit_baseline_through_the_same_command(models, inputs, tmp_path, caps
     assert {c.meta.extra["transfer"]["method"] for c in iter_clips(tmp_path / "y")} == {"sdedit"}
 
 
+def test_nothing_transferred_is_an_error_with_each_reason(models, inputs, tmp_path, capsys) -> None:
+    """A wrong-length clip and a corrupt shard and nothing else: exit 2 (it had exited 0 after
+    "wrote 0 transferred clip(s)"), one line per skipped item, report.json still written."""
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for name in ("short-000000.tar", "broken-000000.tar"):
+        (bad / name).write_bytes((inputs / name).read_bytes())
+    argv = ["transfer", str(bad), "--model", str(models["transfer"]), "--to", "snow", "--steps", "1"]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    failures = err[err.index("error: transfer: no clip transferred (2 skipped") :].splitlines()[1:]
+    assert any("short" in line and "17-frame clips" in line for line in failures), err
+    assert any("broken-000000.tar" in line for line in failures), err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["written"] == [] and len(report["failed"]) == 2
+
+
 def test_a_missing_model_is_one_clear_error(inputs, tmp_path, capsys) -> None:
     assert (
         main(["transfer", str(inputs), "--model", str(tmp_path / "nope"), "--to", "snow", "--out", str(tmp_path)]) == 2
