@@ -40,12 +40,14 @@ def bad_exposure_fraction(
     ``dark_highlight`` (a night street with lamps and headlights is footage; a fade to black is not).
     One dark camera (a rear camera at night) does not condemn the tick."""
     V, T = grey.shape[:2]
-    per_tick = np.moveaxis(grey, 1, 0).reshape(T, -1)  # (T, V*h*w)
-    mean = per_tick.mean(axis=1)
+    pixels = grey[:, 0].size  # per tick, all cameras
+    # exact integer sums over (V, h, w) in place: the same means as float64 over a (T, V*h*w) copy, at half the CPU
+    mean = grey.sum(axis=(0, 2, 3), dtype=np.uint64) / pixels
     dark = mean < dark_luma
     if dark.any():  # the percentile (a partial sort of every pixel) only where it can matter
-        dark[dark] = np.percentile(per_tick[dark], 99, axis=1) < dark_highlight
-    blown = (per_tick >= 250).mean(axis=1) > bright_fraction
+        per_tick = np.moveaxis(grey[:, dark], 1, 0).reshape(int(dark.sum()), -1)  # (dark ticks, V*h*w)
+        dark[dark] = np.percentile(per_tick, 99, axis=1) < dark_highlight
+    blown = np.count_nonzero(grey >= 250, axis=(0, 2, 3)) / pixels > bright_fraction
     return float((dark | blown).mean()), float(mean.mean())
 
 

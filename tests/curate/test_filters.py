@@ -9,7 +9,7 @@ import numpy as np
 from drivewm.curate.captions import Captioner, ClipInfo, TemplateCaptioner, classify_manoeuvre, load_captioner
 from drivewm.curate.config import FilterConfig
 from drivewm.curate.dedup import clip_embedding, near_duplicates
-from drivewm.curate.filters import judge, score_clip
+from drivewm.curate.filters import bad_exposure_fraction, judge, score_clip
 from drivewm.geometry import load_rig
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -38,6 +38,23 @@ def test_filters_drop_with_reasons():
     still[:, :, 30:55, 60:100] = good[:, :, 30:55, 60:100]  # something moves before a fixed camera
     assert judge(score_clip(still, None, static), static) == "static_camera"
     assert judge(score_clip(good, None, static), static) is None
+
+
+def test_bad_exposure_per_tick_over_all_cameras():
+    """Each tick's picture is every camera's pixels together, from exact sums: checked against the
+    plain (T, V*h*w) float64 formulation on random clips, some ticks dark with lamps, some blown out."""
+    rng = np.random.default_rng(0)
+    for case in range(100):
+        V, T = int(rng.integers(1, 7)), int(rng.integers(2, 18))
+        grey = rng.integers(0, int(rng.integers(1, 256)), (V, T, 24, 40), dtype=np.uint8)
+        grey[:, rng.random(T) < 0.3] = 255
+        dark_luma, highlight, bright = rng.uniform(0, 120), rng.uniform(0, 255), rng.uniform(0, 1)
+        per_tick = np.moveaxis(grey, 1, 0).reshape(T, -1).astype(np.float64)
+        mean = per_tick.mean(axis=1)
+        dark = (mean < dark_luma) & (np.percentile(per_tick, 99, axis=1) < highlight)
+        blown = (per_tick >= 250).mean(axis=1) > bright
+        got = bad_exposure_fraction(grey, dark_luma, highlight, bright)
+        assert got == (float((dark | blown).mean()), float(mean.mean())), case
 
 
 def test_dedup_embedding_separates_copies_from_other_moments():
