@@ -8,6 +8,8 @@ SUMO's ``getAngle`` is in degrees, 0 = north, clockwise, and ``getPosition`` is 
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import os
 import subprocess
@@ -16,7 +18,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import libsumo
 import numpy as np
 import sumo
 import sumolib
@@ -26,6 +27,23 @@ from drivewm.geometry import T_from_xyz_yaw
 from drivewm.sim.config import SimConfig
 from drivewm.sim.road_edges import road_edges_from_boundaries, stable_unit, vehicle_look
 from drivewm.sim.scene import LaneBoundary, RoadMap, SceneRecording, SceneTick, box_from_center, polyline_normals
+
+
+def _import_libsumo():
+    """libsumo without its pyarrow warning on stdout. libsumo prints "Warning! pyarrow is installed with
+    version ..." at import whenever pyarrow (rerun-sdk's dependency) is not the Arrow it was built
+    against; its wheel bundles that Arrow under a mangled name (libsumo.libs/libarrow-<hash>.so), so
+    the two never meet, and the lines only broke drivewm simulate's output. Anything else is printed."""
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        import libsumo
+    rest = [line for line in printed.getvalue().splitlines() if "pyarrow" not in line]
+    if rest:
+        print("\n".join(rest))
+    return libsumo
+
+
+libsumo = _import_libsumo()
 
 REAR_OVERHANG_M = 1.0  # rear bumper to rear axle
 WARMUP_S = 40.0  # simulated time before the first logged tick, so the streets already have traffic

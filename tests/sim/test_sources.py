@@ -97,3 +97,13 @@ def test_shared_logs_read_back_with_tags_and_calibration(sim_log_dir) -> None:
         kinds = {(line.kind, line.line_type) for line in log.road}
         assert {("lane_center", ""), ("lane_boundary", "solid"), ("road_edge", "")} <= kinds
         assert len(log.agents) == 60 and all(boxes for _, boxes in log.agents)
+
+
+def test_libsumo_import_prints_nothing() -> None:
+    """libsumo printed a pyarrow version warning on stdout at import (pyarrow is rerun-sdk's, libsumo
+    bundles its own Arrow under a mangled name): two lines per process in ``drivewm simulate``'s output."""
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, "-c", "import drivewm.sim.source_sumo"], capture_output=True, text=True)
+    assert run.returncode == 0 and run.stdout == "", run.stdout
