@@ -44,7 +44,11 @@ def init_distributed(device: str = "auto") -> DistInfo:
 
 
 def shutdown_distributed() -> None:
+    """Leave the process group together: a rank that tears gloo down while a peer still works (rank 0
+    drawing the sample grid) aborted one CI run in rank 1 ("terminate called without an active
+    exception"), so every rank first waits for the others."""
     if dist.is_initialized():
+        dist.barrier()
         dist.destroy_process_group()
 
 
