@@ -244,9 +244,16 @@ def heading_change_deg(T_world_from_ego: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
 
 
-def waypoint_heading_deg(waypoints_ego: np.ndarray) -> float:
-    """Heading of the last segment of ego-frame waypoints (N, >=2), origin first (degrees, left
-    positive): the turn a trajectory conditions, comparable with :func:`heading_change_deg`."""
+def waypoint_heading_deg(waypoints_ego: np.ndarray, min_chord_m: float = 1.0) -> float:
+    """The turn a trajectory conditions (degrees, left positive), comparable with
+    :func:`heading_change_deg`: the heading of the chord from the last waypoint back to the latest
+    earlier one (the origin first) at least ``min_chord_m`` away, which is the last segment itself at
+    driving speeds. A shorter reach would read a car that stops and creeps back a few centimetres
+    (highway-env's intersection ego does) as turning by ~180 degrees. 0.0 when no waypoint is that
+    far from the last one: a standing ego conditions no turn."""
     w = np.concatenate([np.zeros((1, 2)), np.asarray(waypoints_ego, dtype=np.float64)[:, :2]])
-    d = w[-1] - w[-2]
+    far = np.flatnonzero(np.linalg.norm(w[-1] - w[:-1], axis=1) >= min_chord_m)
+    if len(far) == 0:
+        return 0.0
+    d = w[-1] - w[far[-1]]
     return float(np.degrees(np.arctan2(d[1], d[0])))

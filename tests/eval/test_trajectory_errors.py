@@ -108,6 +108,21 @@ def test_heading_change_reads_a_turn_in_any_world_gauge(turn_deg):
     assert np.sign(waypoint_heading_deg(waypoints)) == np.sign(turn_deg)
 
 
+def test_conditioned_heading_of_an_ego_that_stops_and_creeps_back_is_its_turn():
+    """A slow left turn of 30 deg (0.3 m steps) that stops and rolls back 4 cm a step for 4 steps, as
+    highway-env's intersection ego does: the last segment points backwards (~ -150 deg) but the turn
+    is the heading of the last metre driven; a standing ego (1 cm jitter) conditions no turn."""
+    yaw = np.radians(np.linspace(0.0, 30.0, 12))
+    xy = np.cumsum(np.stack([np.cos(yaw), np.sin(yaw)], 1) * 0.3, 0)
+    back = xy[-1] - np.arange(1, 5)[:, None] * 0.04 * np.array([np.cos(yaw[-1]), np.sin(yaw[-1])])
+    waypoints = np.concatenate([np.concatenate([xy, back]), np.zeros((16, 1))], 1)
+    last = waypoints[-1, :2] - waypoints[-2, :2]
+    assert abs(np.degrees(np.arctan2(last[1], last[0]))) > 140  # what the last segment alone reads
+    assert waypoint_heading_deg(waypoints) == pytest.approx(27.0, abs=3.0)
+    standing = np.random.default_rng(0).normal(0.0, 0.01, (16, 3))
+    assert waypoint_heading_deg(standing) == 0.0
+
+
 def rig_images(ego: np.ndarray, rig_name: str = "nuscenes6") -> dict[str, np.ndarray]:
     """T_world_from_cam (T, 4, 4) per camera of a rig driven along ``ego``."""
     from drivewm.geometry import load_rig
