@@ -60,6 +60,21 @@ def test_highway_env_scenarios(scenario: str) -> None:
     assert rec.tags["source"] == "highway-env" and rec.tags["road_type"] == scenario
 
 
+def test_intersection_ego_waits_without_rolling_back() -> None:
+    """Seed 1580 of the worldmodel recipe's intersection drives: highway-env's IDM ego backed up for
+    61 of its 200 ticks (down to -0.9 m/s) while waiting; drivewm's ego holds the brake, so its speed
+    and its motion along its own heading are never negative, and it still stops and drives on."""
+    cfg = SimConfig(source="highway", scenario="intersection", duration_s=20.0, seed=1580)
+    rec = record(cfg)
+    speed = np.array([t.ego_speed_mps for t in rec.ticks])
+    assert speed.min() >= 0.0
+    step = np.diff(rec.ego_xy(), axis=0)
+    yaw = np.array([yaw_of(t.T_world_from_ego) for t in rec.ticks[:-1]])
+    along = step[:, 0] * np.cos(yaw) + step[:, 1] * np.sin(yaw)
+    assert along.min() > -1e-6, f"the ego moved {along.min():.3f} m backwards in one tick"
+    assert speed.min() < 3.0 < speed.max()  # it slowed down for the junction and drove on
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["spider", "random"])
 def test_sumo_networks_generated_from_nothing(scenario: str) -> None:
