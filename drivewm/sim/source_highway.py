@@ -4,7 +4,7 @@ highway-env is 2D with its y axis pointing down in its own render (docs/DESIGN.m
 z-up world is X = x, Y = -y, yaw = -heading. Its vehicle position is the box centre; the ego
 origin is on the ground under the rear axle. The ego is an IDM + MOBIL driver (car following and
 lane changes, Treiber 2000 / Kesting 2007), so drives are sensible without a trained policy; it
-holds the brake at a standstill (:class:`EgoDriver`).
+holds the brake at a standstill, as does the intersection's traffic (:class:`HoldingIDMVehicle`).
 """
 
 from __future__ import annotations
@@ -29,9 +29,10 @@ REAR_AXLE_BEHIND_CENTER_M = 1.5
 MAX_SUBSTEP_S = 1.0 / 15.0
 LINE_TYPES = {0: "none", 1: "dashed", 2: "solid", 3: "solid"}
 DENSITY = {"low": (15, 0.7), "medium": (30, 1.0), "high": (50, 1.6)}  # (vehicles_count, vehicles_density)
-#: IDMVehicle class constants that highway-env's IntersectionEnv overwrites on the shared class when
-#: it places its vehicles (DISTANCE_WANTED = 7, COMFORT_ACC_MAX = 6, COMFORT_ACC_MIN = -3): left so,
-#: every later drive in the same process would follow other traffic rules than in a fresh one.
+#: IDMVehicle class constants that highway-env's IntersectionEnv overwrites on its traffic's class
+#: (IDMVehicle, or here HoldingIDMVehicle) when it places its vehicles (DISTANCE_WANTED = 7,
+#: COMFORT_ACC_MAX = 6, COMFORT_ACC_MIN = -3): left so, every later drive in the same process would
+#: follow other traffic rules than in a fresh one.
 IDM_CLASS_CONSTANTS = {
     name: vars(IDMVehicle)[name] for name in ("DISTANCE_WANTED", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN")
 }
@@ -48,7 +49,11 @@ def make_env(scenario: str, traffic_density: str, seed: int):
     }
     config = {"vehicles_count": count, "vehicles_density": density} if scenario == "highway" else {}
     if scenario == "intersection":
-        config = {"initial_vehicle_count": count // 3, "spawn_probability": min(0.3 * density, 0.9)}
+        config = {
+            "initial_vehicle_count": count // 3,
+            "spawn_probability": min(0.3 * density, 0.9),
+            "other_vehicles_type": f"{__name__}.HoldingIDMVehicle",
+        }
     env = classes[scenario](config=config)
     env.reset(seed=seed)
     return env
@@ -72,21 +77,27 @@ def record_highway(cfg: SimConfig) -> SceneRecording:
 def idm_class_constants() -> Iterator[None]:
     """Start from highway-env's own IDM constants and put them back afterwards, so a drive's traffic
     does not depend on which scenarios ran before it in the process (see IDM_CLASS_CONSTANTS)."""
-    for name, value in IDM_CLASS_CONSTANTS.items():
-        setattr(IDMVehicle, name, value)
+    _reset_idm_class_constants()
     try:
         yield
     finally:
-        for name, value in IDM_CLASS_CONSTANTS.items():
-            setattr(IDMVehicle, name, value)
+        _reset_idm_class_constants()
 
 
-class EgoDriver(IDMVehicle):
-    """highway-env's IDM + MOBIL driver that never backs up. IDM's braking term still pulls at a
-    standstill when the gap ahead is short, and highway-env lets speeds go negative (MIN_SPEED -40):
-    its ego rolled backwards in 9 of the worldmodel recipe's 15 intersection drives, for up to 6 s
-    and at up to 2 m/s. A driver waiting at a junction holds the brake instead, so each step's
-    deceleration stops at zero speed."""
+def _reset_idm_class_constants() -> None:
+    for name, value in IDM_CLASS_CONSTANTS.items():
+        setattr(IDMVehicle, name, value)
+        if name in vars(HoldingIDMVehicle):  # the intersection sets them on its traffic's class: ours
+            delattr(HoldingIDMVehicle, name)
+
+
+class HoldingIDMVehicle(IDMVehicle):
+    """highway-env's IDM + MOBIL driver that never backs up: the ego of every scenario and the
+    intersection's traffic. IDM's braking term still pulls at a standstill when the gap ahead is
+    short, and highway-env lets speeds go negative (MIN_SPEED -40): its ego rolled backwards in 9 of
+    the worldmodel recipe's 15 intersection drives, for up to 6 s and at up to 2 m/s, and up to 2 %
+    of the other cars' ticks there backed up. A driver waiting at a junction holds the brake
+    instead, so each step's deceleration stops at zero speed."""
 
     def step(self, dt: float) -> None:
         self.action["acceleration"] = max(float(self.action["acceleration"]), -self.speed / dt)
@@ -96,7 +107,7 @@ class EgoDriver(IDMVehicle):
 def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> SceneRecording | None:
     env = make_env(cfg.scenario, cfg.traffic_density, sim_seed)
     old = env.vehicle
-    ego = EgoDriver.create_from(old)
+    ego = HoldingIDMVehicle.create_from(old)
     env.road.vehicles[env.road.vehicles.index(old)] = ego
     env.controlled_vehicles = [ego]
     substeps = max(1, math.ceil((1.0 / cfg.fps) / MAX_SUBSTEP_S))

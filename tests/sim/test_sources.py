@@ -61,11 +61,11 @@ def test_highway_env_scenarios(scenario: str) -> None:
 
 
 def test_intersection_ego_waits_without_rolling_back() -> None:
-    """Seed 1580 of the worldmodel recipe's intersection drives: highway-env's IDM ego backed up for
-    61 of its 200 ticks (down to -0.9 m/s) while waiting; drivewm's ego holds the brake, so its speed
-    and its motion along its own heading are never negative, and it still stops and drives on."""
-    cfg = SimConfig(source="highway", scenario="intersection", duration_s=20.0, seed=1580)
-    rec = record(cfg)
+    """Seed 1580 of the worldmodel recipe's intersection drives: with highway-env's IDM the ego backed
+    up for 61 of its 200 ticks (down to -0.9 m/s) while waiting; drivewm's ego holds the brake, so
+    its speed and its motion along its own heading are never negative, and it still stops and
+    drives on."""
+    rec = record(SimConfig(source="highway", scenario="intersection", duration_s=20.0, seed=1580))
     speed = np.array([t.ego_speed_mps for t in rec.ticks])
     assert speed.min() >= 0.0
     step = np.diff(rec.ego_xy(), axis=0)
@@ -73,6 +73,22 @@ def test_intersection_ego_waits_without_rolling_back() -> None:
     along = step[:, 0] * np.cos(yaw) + step[:, 1] * np.sin(yaw)
     assert along.min() > -1e-6, f"the ego moved {along.min():.3f} m backwards in one tick"
     assert speed.min() < 3.0 < speed.max()  # it slowed down for the junction and drove on
+
+
+def test_intersection_traffic_waits_without_rolling_back() -> None:
+    """Seed 1540: with highway-env's IDM other cars backed up for 59 of their 3,066 ticks (down to
+    -1.8 m/s); the intersection's traffic is drivewm's brake-holding driver too, so no car moves
+    backwards along its heading. (Cars that crash into each other are pushed apart, backwards for
+    one of them: seed 1580 has such a crash, this one none.)"""
+    rec = record(SimConfig(source="highway", scenario="intersection", duration_s=20.0, seed=1540))
+    backwards = []
+    for a, b in zip(rec.ticks[:-1], rec.ticks[1:]):
+        later = {x.track_id: x for x in b.agents}
+        for x in a.agents:
+            if x.track_id in later:
+                d = later[x.track_id].center_xyz[:2] - x.center_xyz[:2]
+                backwards.append(d[0] * np.cos(x.yaw_rad) + d[1] * np.sin(x.yaw_rad))
+    assert len(backwards) > 1000 and min(backwards) > -1e-6, f"a car moved {min(backwards):.3f} m backwards"
 
 
 @pytest.mark.slow
