@@ -13,50 +13,20 @@ LATENT_CACHE: a folder of ``drivewm encode`` latents (the clips the model traine
 ones). Prints, per noise level, the mean losses and "mirrored - true" with its t statistic over
 clips (consecutive clips of one drive overlap, so it overstates the evidence) and the number of
 clips whose own waypoints give the lower loss. Forward passes only: about a
-minute for 16 clips on 2 CPU cores. Numbers: docs/quality-vs-compute.md.
+minute for 16 clips on 2 CPU cores (drivewm.multiview.trajectory_probe; post-training logs the
+same gap as ``trajectory_loss_gap``). Numbers: docs/quality-vs-compute.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import numpy as np
 import torch
 
-from drivewm.diffusion.denoiser import edm_loss
-from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.multiview.data import MultiViewDataset
-from drivewm.multiview.model import MultiView, build_conditioning
-
-
-def turning_clips(ds: MultiViewDataset, count: int, min_turn_deg: float, match: str = "") -> list[int]:
-    """Indices of the first ``count`` distinct clips whose key contains ``match`` and whose waypoints
-    turn by more than ``min_turn_deg``."""
-    seen, out = set(), []
-    for i in range(len(ds)):
-        key = ds.cache[i].meta.key
-        if key not in seen and match in key and abs(waypoint_heading_deg(ds[i].trajectory)) > min_turn_deg:
-            out.append(i)
-        seen.add(key)
-        if len(out) == count:
-            break
-    return out
-
-
-def losses(model: MultiView, ds: MultiViewDataset, index: int, sigma: float, captions: bool, seed: int) -> list[float]:
-    """EDM loss of one clip under its own, its mirrored and no trajectory (the same noise)."""
-    s = ds[index]
-    views = s.latents.shape[0]
-    noise = torch.randn(s.latents.shape, generator=torch.Generator().manual_seed(seed))
-    edm = dataclasses.replace(model.cfg.edm, cond_frames=0)
-    mirrored = s.trajectory * np.array([1.0, -1.0, 1.0])
-    out = []
-    for traj in (s.trajectory, mirrored, None):
-        cond = build_conditioning(model, s.rig, [s.view_captions], None if traj is None else traj[None], s.fps)
-        keep = torch.full((views,), captions)
-        out.append(float(edm_loss(model.net, edm, s.latents, cond, torch.full((views,), sigma), noise, keep)))
-    return out
+from drivewm.multiview.model import MultiView
+from drivewm.multiview.trajectory_probe import clip_losses, turning_clips
 
 
 def main() -> None:
@@ -79,7 +49,7 @@ def main() -> None:
     )
     for captions in (True, False):
         for sigma in (float(s) for s in args.sigmas.split(",")):
-            r = np.array([losses(model, ds, i, sigma, captions, 1000 + j) for j, i in enumerate(clips)])
+            r = np.array([clip_losses(model.net, model, ds, i, sigma, captions, 1000 + j) for j, i in enumerate(clips)])
             gap = r[:, 1] - r[:, 0]
             t = gap.mean() / (gap.std(ddof=1) / np.sqrt(len(gap)))
             print(

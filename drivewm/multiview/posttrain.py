@@ -9,6 +9,7 @@ the clips' latent cache with the shared loop (EMA, resume, activation checkpoint
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import torch
@@ -27,6 +28,7 @@ from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
+from drivewm.multiview.trajectory_probe import loss_gap, turning_clips
 from drivewm.recipe import RecipeBook
 from drivewm.train.checkpoint import load_weights, read_model_type
 from drivewm.train.loop import TrainConfig, train
@@ -51,10 +53,18 @@ class PosttrainConfig:
     """Latent cache selection."""
     sample_steps: int = 12
     """Sampler steps for the sample grids written during training."""
+    trajectory_probe_every: int = 250
+    """Every this many steps (in the next metrics row), log ``trajectory_loss_gap`` and its t
+    statistic: the loss of turning clips under mirrored minus under their own waypoints
+    (drivewm.multiview.trajectory_probe; > 0 = the trajectory is followed). 0 = never."""
+    trajectory_probe_clips: int = 8
+    """Turning clips the probe scores: the first ones of the data whose waypoints turn by more than
+    ``trajectory_probe_min_turn_deg``; none there, no probe."""
+    trajectory_probe_min_turn_deg: float = 15.0
 
     def validate(self) -> None:
-        at_least(self, 0, "cond_frames")
-        at_least(self, 1, "sample_steps")
+        at_least(self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg")
+        at_least(self, 1, "sample_steps", "trajectory_probe_clips")
 
 
 #: Per-preset training defaults. Batches are clips of V views, so they are V times the tokens of
@@ -117,6 +127,7 @@ class MultiViewTask(BundleTask):
     cfg: PosttrainConfig
     dataset: MultiViewDataset
     bundle: MultiView
+    _probe_clips: list[int] | None = None  # the trajectory probe's clips, chosen at its first run
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
@@ -148,6 +159,21 @@ class MultiViewTask(BundleTask):
         )
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
+
+    def after_step(self, step: int) -> dict[str, float]:
+        """The trajectory probe, in the first metrics row at or after each ``trajectory_probe_every``
+        steps (every rank runs it: under FSDP its forwards gather the shards)."""
+        every, log_every = self.cfg.trajectory_probe_every, self.cfg.train.log_every
+        if not every or step % log_every or step // every == (step - log_every) // every:
+            return {}
+        if self._probe_clips is None:
+            self._probe_clips = turning_clips(
+                self.dataset, self.cfg.trajectory_probe_clips, self.cfg.trajectory_probe_min_turn_deg
+            )
+        if not self._probe_clips:  # no turning clip in the data: nothing to tell the turns apart by
+            return {}
+        gap, t = loss_gap(self.model, self.bundle, self.dataset, self._probe_clips)
+        return {"trajectory_loss_gap": gap, **({"trajectory_loss_gap_t": t} if math.isfinite(t) else {})}
 
     def new_bundle(self) -> MultiView:
         return MultiView(self.bundle.cfg, self.bundle.latent)

@@ -1,0 +1,90 @@
+"""Does a multi-view model use its trajectory conditioning, and which way round?
+
+Sampling and reading the yaw back needs dozens of samples to tell a weak effect from chance. The
+probe asks the denoiser instead: the EDM loss of turning clips (Text2World frames, the same noise
+each time) under their mirrored waypoints (y -> -y: the other turn, the camera rays moving with it)
+minus under their own, with the captions dropped so that only the trajectory can tell the turns
+apart. A model that ignores the trajectory scores exactly 0; one that follows it, above 0; one
+that learned turns mirrored, below. Post-training logs it (``trajectory_loss_gap`` and its t
+statistic over the clips, drivewm.multiview.posttrain); studies/trajectory_loss_gap.py prints it for
+a model folder. Measured on the shipped model: docs/quality-vs-compute.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import torch
+
+from drivewm.diffusion.denoiser import edm_loss
+from drivewm.eval.trajectory_errors import waypoint_heading_deg
+from drivewm.multiview.data import MultiViewDataset
+from drivewm.multiview.model import MultiView, build_conditioning
+
+#: Clips whose waypoints turn by more than this (degrees) are probed.
+MIN_TURN_DEG = 15.0
+MIRROR = np.array([1.0, -1.0, 1.0])
+
+
+def turning_clips(ds: MultiViewDataset, count: int, min_turn_deg: float = MIN_TURN_DEG, match: str = "") -> list[int]:
+    """Indices of the first ``count`` distinct clips (by key) whose key contains ``match`` and whose
+    waypoints turn by more than ``min_turn_deg``; fewer, or none, when the data has fewer."""
+    seen, out = set(), []
+    for i in range(len(ds)):
+        if len(out) == count:
+            break
+        key = ds.cache[i].meta.key
+        if key not in seen and match in key and abs(waypoint_heading_deg(ds[i].trajectory)) > min_turn_deg:
+            out.append(i)
+        seen.add(key)
+    return out
+
+
+@torch.no_grad()
+def clip_losses(
+    net: torch.nn.Module,
+    bundle: MultiView,
+    ds: MultiViewDataset,
+    index: int,
+    sigma: float,
+    captions: bool,
+    seed: int,
+    trajectories: tuple[str, ...] = ("own", "mirrored", "none"),
+) -> list[float]:
+    """EDM loss of clip ``index`` under each of ``trajectories`` (its own waypoints, the mirrored ones,
+    none), with the same noise. ``net``: the denoiser to call (``bundle.net`` or a training wrapper
+    of it); ``bundle``: the :class:`~drivewm.multiview.model.MultiView` whose text encoder and
+    camera geometry build the conditioning."""
+    s = ds[index]
+    views = s.latents.shape[0]
+    device = next(net.parameters()).device
+    noise = torch.randn(s.latents.shape, generator=torch.Generator().manual_seed(seed)).to(device)
+    edm = dataclasses.replace(bundle.cfg.edm, cond_frames=0)
+    sigmas, keep = torch.full((views,), sigma, device=device), torch.full((views,), captions, device=device)
+    waypoints = {"own": s.trajectory, "mirrored": s.trajectory * MIRROR, "none": None}
+    out = []
+    for name in trajectories:
+        traj = waypoints[name]
+        cond = build_conditioning(bundle, s.rig, [s.view_captions], None if traj is None else traj[None], s.fps)
+        out.append(float(edm_loss(net, edm, s.latents.to(device), cond.to(device), sigmas, noise, keep)))
+    return out
+
+
+def loss_gap(
+    net: torch.nn.Module,
+    bundle: MultiView,
+    ds: MultiViewDataset,
+    clips: list[int],
+    sigma: float = 1.0,
+    seed: int = 1000,
+) -> tuple[float, float]:
+    """(mean over ``clips`` of the mirrored minus the own trajectory's loss, its t statistic over the
+    clips), captions dropped; clip j uses noise seed ``seed + j``. t is nan without spread (fewer
+    than two clips, or a model that ignores the trajectory)."""
+    pairs = [clip_losses(net, bundle, ds, i, sigma, False, seed + j, ("own", "mirrored")) for j, i in enumerate(clips)]
+    gaps = np.array([mirrored - own for own, mirrored in pairs])
+    spread = gaps.std(ddof=1) if len(gaps) > 1 else 0.0
+    t = gaps.mean() / (spread / math.sqrt(len(gaps))) if spread > 0 else math.nan
+    return float(gaps.mean()), float(t)
