@@ -26,7 +26,7 @@ import torch
 
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.trajectory_probe import clip_losses, turning_clips
+from drivewm.multiview.trajectory_probe import clip_losses, t_statistic, turning_clips
 
 
 def main() -> None:
@@ -51,7 +51,7 @@ def main() -> None:
         for sigma in (float(s) for s in args.sigmas.split(",")):
             r = np.array([clip_losses(model.net, model, ds, i, sigma, captions, 1000 + j) for j, i in enumerate(clips)])
             gap = r[:, 1] - r[:, 0]
-            t = gap.mean() / (gap.std(ddof=1) / np.sqrt(len(gap)))
+            t = t_statistic(gap)
             print(
                 f"captions {'kept   ' if captions else 'dropped'} sigma {sigma:4.1f}: loss own {r[:, 0].mean():.4f}, "
                 f"mirrored {r[:, 1].mean():.4f}, none {r[:, 2].mean():.4f}; mirrored - own {gap.mean():+.5f} "

@@ -35,7 +35,7 @@ def turning_clips(ds: MultiViewDataset, count: int, min_turn_deg: float = MIN_TU
     for i in range(len(ds)):
         if len(out) == count:
             break
-        key = ds.cache[i].meta.key
+        key = ds.cache.rows[i]["key"]  # from the index: reading the clip's file for its key would read it twice
         if key not in seen and match in key and abs(waypoint_heading_deg(ds[i].trajectory)) > min_turn_deg:
             out.append(i)
         seen.add(key)
@@ -85,6 +85,10 @@ def loss_gap(
     than two clips, or a model that ignores the trajectory)."""
     pairs = [clip_losses(net, bundle, ds, i, sigma, False, seed + j, ("own", "mirrored")) for j, i in enumerate(clips)]
     gaps = np.array([mirrored - own for own, mirrored in pairs])
+    return float(gaps.mean()), t_statistic(gaps)
+
+
+def t_statistic(gaps: np.ndarray) -> float:
+    """One-sample t of the per-clip gaps against 0; nan without spread (fewer than two, or all equal)."""
     spread = gaps.std(ddof=1) if len(gaps) > 1 else 0.0
-    t = gaps.mean() / (spread / math.sqrt(len(gaps))) if spread > 0 else math.nan
-    return float(gaps.mean()), float(t)
+    return float(gaps.mean() / (spread / math.sqrt(len(gaps)))) if spread > 0 else math.nan
