@@ -10,8 +10,11 @@ import pytest
 
 from drivewm.cli import build_parser, main
 
-#: Not imported by the parser. (The simulator package, with OpenCV and matplotlib, is: see drivewm/sim/__init__.py.)
-HEAVY = ("torch", "filterpy", "pycolmap", "highway_env", "libsumo", "rerun", "scenedetect", "ray", "transformers")
+#: Not imported by the parser. (The simulator package, with OpenCV, is: see drivewm/sim/__init__.py.)
+HEAVY = (
+    "torch", "filterpy", "pycolmap", "highway_env", "libsumo", "rerun", "scenedetect", "ray", "transformers",
+    "matplotlib",
+)  # fmt: skip
 COMMANDS = (
     "simulate", "view", "curate", "import-video", "tokenizer", "pretrain", "generate", "posttrain", "rollout", "eval",
     "quickstart",

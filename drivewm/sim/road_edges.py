@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import hashlib
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.path import Path as MplPath
 
 from drivewm.sim.scene import LaneBoundary, polyline_normals
+
+if TYPE_CHECKING:
+    from matplotlib.path import Path as MplPath
 
 #: Body colours (RGB in [0, 1]) of simulated vehicles: the common real-world car colours.
 CAR_PALETTE = (
@@ -52,6 +55,8 @@ def road_edges_from_boundaries(
 
     A border is an edge where points ``probe_m`` to one side lie off every surface polygon.
     """
+    from matplotlib.path import Path as MplPath  # here: ~0.3 s of import that every CLI command would pay
+
     paths = [MplPath(p) for p in surface_polygons if len(p) >= 3]
     edges = []
     for b in boundaries:
