@@ -27,7 +27,7 @@ COMMAND_MODULES = (
     "drivewm.eval.commands",  # eval
     "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.quickstart",  # quickstart
-    "drivewm.worldmodel",  # worldmodel train|export
+    "drivewm.worldmodel",  # worldmodel train|figures|export
 )
 
 

@@ -4,7 +4,7 @@ Every parameter of the parent is copied; the new ones are built so that they add
 the cross-view sub-layer's output projection, the last layers of the camera and trajectory MLPs
 (all zero-initialised) and, when Video2World adds a mask input channel to a parent without one,
 zero patch-embedding columns for that channel. Hence the zero-step model equals the parent on
-every view (tests/multiview/test_model.py).
+every view (tests/multiview/test_multiview_model.py).
 """
 
 from __future__ import annotations
