@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
 import pytest
 
-from drivewm.cli import build_parser, main
+from drivewm.cli import BROKEN_PIPE_STATUS, build_parser, main
 
 #: Not imported by the parser. (The simulator package, with OpenCV, is: see drivewm/sim/__init__.py.)
 HEAVY = (
@@ -104,3 +105,16 @@ def test_seeds_out_of_range_are_refused_by_the_parser(argv, capsys):
         assert main([*argv, "--seed", bad]) == 2
         err = capsys.readouterr().err
         assert "argument --seed: " in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_reader_that_goes_away_ends_the_command_quietly():
+    """``drivewm ... | head`` had ended in a BrokenPipeError traceback: now no word on stderr and the
+    shell's status for SIGPIPE, as from any command-line tool."""
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before the first line
+    try:
+        argv = ["simulate", "--recipe", "worldmodel", "--dry-run", "--out", "x"]  # 105 lines of resolved config
+        proc = subprocess.run([sys.executable, "-m", "drivewm.cli", *argv], stdout=write, stderr=subprocess.PIPE)
+    finally:
+        os.close(write)
+    assert (proc.returncode, proc.stderr) == (BROKEN_PIPE_STATUS, b"")
