@@ -15,4 +15,10 @@ fi
 ruff check .
 ruff format --check .
 export RAY_AUTH_MODE=disabled RAY_USAGE_STATS_ENABLED=0 SDL_VIDEODRIVER=offscreen
+# Bytecode for every process the tests start (CLI subprocesses, torchrun ranks, Ray and pool workers),
+# compiled on first import and cached in .venv: the install above compiles nothing (--no-compile: most of
+# torch is never imported), and where PYTHONDONTWRITEBYTECODE is set each process would otherwise
+# compile torch, scipy and the rest from source again (~1 CPU s per process).
+unset PYTHONDONTWRITEBYTECODE
+export PYTHONPYCACHEPREFIX="$PWD/.venv/pycache"
 python -m pytest -q --durations=15 "$@"
