@@ -18,6 +18,8 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import T_from_xyz_yaw, invert_T, transform_points
 
 NAMED = ("straight", "left", "right", "stop")
+#: Largest |coordinate| (m) in a waypoint file: a drive's horizon with room to spare, not a typo's 1e200.
+MAX_WAYPOINT_M = 10_000.0
 
 
 def arc_poses(arc_length_m: np.ndarray, curvature_per_m: float) -> np.ndarray:
@@ -88,23 +90,40 @@ def poses_from_waypoints(waypoints_ego: np.ndarray, num_frames: int, dt_s: float
 
 
 def load_waypoints(path: str | Path) -> np.ndarray:
-    """(N, 3) waypoints from ``.npy`` or ``.json`` ([[x, y, z], ...] or {"trajectory_ego": [...]})."""
+    """(N, 3) waypoints from ``.npy`` or ``.json`` ([[x, y, z], ...] or {"trajectory_ego": [...]}),
+    finite, real and within :data:`MAX_WAYPOINT_M` of the first frame."""
     path = Path(path)
     try:
         if path.suffix == ".npy":
             data = np.load(path, allow_pickle=False)
         else:
             raw = json.loads(path.read_text())
-            data = np.asarray(raw["trajectory_ego"] if isinstance(raw, dict) else raw, dtype=np.float64)
+            data = raw["trajectory_ego"] if isinstance(raw, dict) else raw
+        data = np.asarray(data)
+        if data.dtype.kind not in "iuf":  # strings, complex numbers, booleans are no positions
+            raise ValueError(f"{data.dtype} values are not numbers of metres")
+        data = data.astype(np.float64)
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise DrivewmError(
             f"{path}: cannot read waypoints ({exc.__class__.__name__}: {exc}); expected a .npy array or a .json "
             'file of [[x, y, z], ...] or {"trajectory_ego": [...]} (metres, in the first frame\'s ego frame)'
         ) from None
-    data = np.asarray(data, dtype=np.float64)
-    if data.ndim != 2 or data.shape[1] != 3 or not np.all(np.isfinite(data)) or len(data) == 0:
-        raise DrivewmError(f"{path}: waypoints must be a finite (N, 3) array, got shape {data.shape}")
+    check_waypoints(data, str(path))
     return data
+
+
+def check_waypoints(waypoints: np.ndarray, where: str) -> None:
+    """Refuse waypoints that are not a finite (N >= 1, 3) array within :data:`MAX_WAYPOINT_M`."""
+    if waypoints.ndim != 2 or waypoints.shape[1] != 3 or len(waypoints) == 0:
+        raise DrivewmError(f"{where}: waypoints must be a finite (N, 3) array, got shape {waypoints.shape}")
+    if not np.all(np.isfinite(waypoints)):
+        row = np.argwhere(~np.isfinite(waypoints))[0][0]
+        raise DrivewmError(f"{where}: waypoints must be finite, got NaN or inf in row {row}")
+    if np.abs(waypoints).max() > MAX_WAYPOINT_M:  # far ones overflow float32 in the network: a black video
+        raise DrivewmError(
+            f"{where}: waypoints must lie within {MAX_WAYPOINT_M:g} m of the first frame, "
+            f"got {np.abs(waypoints).max():g} m"
+        )
 
 
 def resolve_trajectory(spec: str, num: int, dt_s: float, speed_mps: float = 15.0) -> np.ndarray:

@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from drivewm.diffusion.denoiser import Conditioning
+from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.cross_view import view_neighbors
@@ -185,3 +186,26 @@ def test_importing_multiview_registers_no_sublayer():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "['cross_attn', 'joint_attn', 'mlp', 'self_attn']"
+
+
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("far.json", "[[1e200, 0, 0], [2e200, 0, 0]]", "within 10000 m of the first frame, got 2e+200 m"),
+        ("nan.json", "[[1, 0, 0], [NaN, 0, 0]]", "waypoints must be finite, got NaN or inf in row 1"),
+        ("text.npy", np.array([["a", "b", "c"]]), "<U1 values are not numbers of metres"),
+        ("complex.npy", np.ones((2, 3)) * 1j, "complex128 values are not numbers of metres"),
+        ("flags.json", "[[true, false, true]]", "bool values are not numbers of metres"),
+    ],
+)
+def test_waypoint_files_out_of_reason_are_refused_by_name(tmp_path, name, content, message):
+    """A waypoint file the network cannot use is a one-line error, not a traceback (strings) or a black
+    video written with exit 0 (1e200 m overflows float32 in the trajectory encoder)."""
+    path = tmp_path / name
+    if name.endswith(".npy"):
+        np.save(path, content)
+    else:
+        path.write_text(content)
+    with pytest.raises(DrivewmError) as info:
+        resolve_trajectory(str(path), 16, 0.1)
+    assert str(info.value).startswith(str(path)) and message in str(info.value)
