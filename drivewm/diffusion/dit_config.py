@@ -105,10 +105,11 @@ EDM_SAVED_BEFORE = {"parameterization": "edm"}
 def upgrade_saved_config(config: dict) -> dict:
     """A saved model config (its ``dit`` and ``edm`` sections) with the fields they predate filled in as the
     folder was trained (:data:`SAVED_BEFORE`, :data:`EDM_SAVED_BEFORE`), so old folders load unchanged."""
-    return {
+    dit, edm = config.get("dit", {}), config.get("edm", {})
+    return {  # a section that is no mapping stays as it is, for from_dict to name it
         **config,
-        "dit": {**SAVED_BEFORE, **config.get("dit", {})},
-        "edm": {**EDM_SAVED_BEFORE, **config.get("edm", {})},
+        "dit": {**SAVED_BEFORE, **dit} if isinstance(dit, dict) else dit,
+        "edm": {**EDM_SAVED_BEFORE, **edm} if isinstance(edm, dict) else edm,
     }
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from drivewm.config import from_dict, to_dict
+from drivewm.config import above, from_dict, require, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
@@ -53,6 +53,14 @@ class LatentInfo:
     """Tokenizer model folder that decodes the latents (absolute path)."""
     rig: dict = dataclasses.field(default_factory=dict)
     """Single-camera rig (dict form) written into generated clips."""
+
+    def validate(self) -> None:
+        shape = self.latent_shape
+        require(len(shape) == 4 and min(shape) >= 1, "latent_shape", shape, "4 sizes (c, t, h, w) >= 1")
+        for name in ("latent_mean", "latent_std"):  # one per channel: a shorter list broadcasts silently
+            require(len(getattr(self, name)) == shape[0], name, getattr(self, name), f"{shape[0]} numbers (c)")
+        require(min(self.latent_std) > 0, "latent_std", self.latent_std, "> 0 (a 0 turns every sample flat)")
+        above(self, 0, "fps")
 
 
 def read_latent_info(info: dict, folder: str | Path) -> LatentInfo:

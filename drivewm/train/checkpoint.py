@@ -180,6 +180,10 @@ def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None
     if not isinstance(info, dict) or (types is not None and info.get("model_type") not in types):
         model = info.get("model_type") if isinstance(info, dict) else None
         raise DrivewmError(f"{path}: model_type is {model!r}, expected {' or '.join(types)}")
+    if types is not None and not isinstance(info.get("config"), dict):  # every loader builds its network from it
+        raise DrivewmError(
+            f"{cfg_path}: 'config' must be a mapping of the network's settings, got {info.get('config')!r}"
+        )
     return info
 
 

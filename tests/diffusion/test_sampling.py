@@ -164,3 +164,32 @@ def test_a_saved_folder_naming_no_parameterization_loads_as_the_edm_it_was_train
     flow.cfg = dataclasses.replace(flow.cfg, edm=EDMConfig(parameterization="flow"))
     flow.save_pretrained(tmp_path / "flow")
     assert Text2World.from_pretrained(tmp_path / "flow").cfg.edm.parameterization == "flow"
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda i: i["latent"].update(latent_std=[0.0] * 4), "latent: latent_std must be > 0"),
+        (lambda i: i["latent"].update(latent_std=[1.0]), "latent: latent_std must be 4 numbers (c), got [1.0]"),
+        (lambda i: i["latent"].update(latent_mean=[1.0, 2.0]), "latent: latent_mean must be 4 numbers (c)"),
+        (lambda i: i["latent"].update(latent_shape=[4, 3, 4]), "latent_shape must be 4 sizes (c, t, h, w) >= 1"),
+        (lambda i: i["latent"].update(latent_shape=[4, -3, 4, 6]), "latent_shape must be 4 sizes (c, t, h, w) >= 1"),
+        (lambda i: i["latent"].update(fps=0), "latent: fps must be > 0, got 0.0"),
+        (lambda i: i.update(config=5), "'config' must be a mapping of the network's settings, got 5"),
+        (lambda i: i.pop("config"), "'config' must be a mapping of the network's settings, got None"),
+        (lambda i: i["config"].update(dit=5), "config.json.dit: expected a mapping, got 5"),
+    ],
+)
+def test_a_hand_edited_config_json_is_refused_naming_the_value(tmp_path, edit, message):
+    """A config.json whose latent statistics or sections make no sense is a one-line error when the folder
+    loads: before, a latent_std of 0 sampled flat videos with exit 0, and the rest ended in tracebacks."""
+    import json
+
+    tiny(0).save_pretrained(tmp_path / "m")
+    path = tmp_path / "m" / "config.json"
+    info = json.loads(path.read_text())
+    edit(info)
+    path.write_text(json.dumps(info))
+    with pytest.raises(DrivewmError) as error:
+        Text2World.from_pretrained(tmp_path / "m")
+    assert str(tmp_path / "m") in str(error.value) and message in str(error.value)
