@@ -19,6 +19,7 @@ from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
 from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_config
 from drivewm.diffusion.sampling import sample
+from drivewm.errors import DrivewmError
 from drivewm.text import TextConfig, build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
@@ -63,10 +64,17 @@ class LatentInfo:
         above(self, 0, "fps")
 
 
-def read_latent_info(info: dict, folder: str | Path) -> LatentInfo:
-    """The ``latent`` entry of a model folder's config.json; a relative tokenizer path (shipped
-    weights point at ``../tokenizer``) is resolved against the model folder."""
-    latent = from_dict(LatentInfo, info.get("latent", {}), f"{Path(folder) / 'config.json'} latent")
+def read_latent_info(info: dict, folder: str | Path, dit: DiTConfig) -> LatentInfo:
+    """The ``latent`` entry of a model folder's config.json, checked to fit the folder's ``dit``; a relative
+    tokenizer path (shipped weights point at ``../tokenizer``) is resolved against the model folder."""
+    where = f"{Path(folder) / 'config.json'} latent"
+    latent = from_dict(LatentInfo, info.get("latent", {}), where)
+    c, t, h, w = latent.latent_shape
+    if c != dit.in_channels or t % dit.patch_t or h % dit.patch_size or w % dit.patch_size:
+        raise DrivewmError(
+            f"{where}: latent_shape {latent.latent_shape} does not fit the network (in_channels {dit.in_channels}, "
+            f"t a multiple of patch_t {dit.patch_t}, h and w multiples of patch_size {dit.patch_size})"
+        )
     if latent.tokenizer and not Path(latent.tokenizer).is_absolute():
         latent = dataclasses.replace(latent, tokenizer=str((Path(folder) / latent.tokenizer).resolve()))
     return latent
@@ -98,11 +106,8 @@ class Text2World:
     def from_pretrained(cls, path: str | Path) -> Text2World:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = upgrade_saved_config(info["config"])
-        model = cls(
-            from_dict(Text2WorldConfig, config, where),
-            read_latent_info(info, path),
-        )
+        config = from_dict(Text2WorldConfig, upgrade_saved_config(info["config"]), where)
+        model = cls(config, read_latent_info(info, path, config.dit))
         load_weights(model.dit, state, path)
         return model
 

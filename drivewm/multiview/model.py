@@ -153,11 +153,8 @@ class MultiView:
     def from_pretrained(cls, path: str | Path) -> MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = upgrade_saved_config(info["config"])
-        model = cls(
-            from_dict(MultiViewModelConfig, config, where),
-            read_latent_info(info, path),
-        )
+        config = from_dict(MultiViewModelConfig, upgrade_saved_config(info["config"]), where)
+        model = cls(config, read_latent_info(info, path, config.dit))
         load_weights(model.net, state, path)
         return model
 

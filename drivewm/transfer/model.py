@@ -117,11 +117,11 @@ class Transfer:
     def from_pretrained(cls, path: str | Path) -> Transfer:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = upgrade_saved_config(info["config"])
+        config = from_dict(TransferModelConfig, upgrade_saved_config(info["config"]), where)
         parent = str(info.get("parent", ""))
         if parent and not Path(parent).is_absolute():  # shipped weights point at ../text2world
             parent = str((Path(path) / parent).resolve())
-        model = cls(from_dict(TransferModelConfig, config, where), read_latent_info(info, path), parent)
+        model = cls(config, read_latent_info(info, path, config.dit), parent)
         load_weights(model.net, state, path)
         return model
 

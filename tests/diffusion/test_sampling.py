@@ -178,11 +178,14 @@ def test_a_saved_folder_naming_no_parameterization_loads_as_the_edm_it_was_train
         (lambda i: i.update(config=5), "'config' must be a mapping of the network's settings, got 5"),
         (lambda i: i.pop("config"), "'config' must be a mapping of the network's settings, got None"),
         (lambda i: i["config"].update(dit=5), "config.json.dit: expected a mapping, got 5"),
+        (lambda i: i["latent"].update(latent_shape=[4, 3, 5, 6]), "latent_shape [4, 3, 5, 6] does not fit the network"),
+        (lambda i: i["config"]["dit"].update(in_channels=8), "does not fit the network (in_channels 8,"),
     ],
 )
 def test_a_hand_edited_config_json_is_refused_naming_the_value(tmp_path, edit, message):
     """A config.json whose latent statistics or sections make no sense is a one-line error when the folder
-    loads: before, a latent_std of 0 sampled flat videos with exit 0, and the rest ended in tracebacks."""
+    loads: before, a latent_std of 0 sampled flat videos with exit 0, and the rest ended in tracebacks (a
+    latent_shape the DiT cannot patchify or whose channels are not its in_channels: at the first sample)."""
     import json
 
     tiny(0).save_pretrained(tmp_path / "m")
