@@ -104,6 +104,7 @@ class LatentCache:
         if not isinstance(index.get("tokenizer"), dict) or not isinstance(index.get("clips"), list):
             raise DrivewmError(f"{index_path}: needs 'tokenizer' (a mapping) and 'clips' (a list)")
         self.tokenizer: dict = index["tokenizer"]
+        _check_stats(self.tokenizer, index_path)
         self.rows: list[dict] = [_check_row(row, index_path) for row in index["clips"]]
         if not self.rows:
             raise DrivewmError(f"{self.dir}: latent cache holds no clips")
@@ -129,7 +130,29 @@ class LatentCache:
         meta = ClipMeta.from_json(row["meta"], str(path))
         if set(tensors) != {"latents", "T_world_from_ego"} or tensors["latents"].ndim != 5:
             raise DrivewmError(f"{path}: expected tensors latents (V, c, t, h, w) and T_world_from_ego")
+        channels = len(self.tokenizer["latent_mean"])
+        if tensors["latents"].shape[1] != channels:
+            raise DrivewmError(
+                f"{path}: latents have {tensors['latents'].shape[1]} channels, the index's stats {channels}"
+            )
+        if not torch.isfinite(tensors["latents"]).all():  # one NaN in a batch turns every weight of a run NaN
+            raise DrivewmError(f"{path}: latents hold NaN or inf (a damaged file); re-encode the clip")
         return LatentClip(meta, tensors["latents"], tensors["T_world_from_ego"].numpy())
+
+
+def _check_stats(tokenizer: dict, index_path: Path) -> None:
+    """The index's statistics are one finite mean and one std > 0 per latent channel."""
+    try:
+        mean, std = (np.asarray(tokenizer.get(k), dtype=np.float64) for k in ("latent_mean", "latent_std"))
+    except (TypeError, ValueError):  # strings, ragged lists
+        mean = std = np.zeros(0)
+    same = mean.ndim == std.ndim == 1 and 0 < len(mean) == len(std)
+    if not (same and np.isfinite(mean).all() and np.isfinite(std).all() and (std > 0).all()):
+        raise DrivewmError(
+            f"{index_path}: tokenizer.latent_mean and latent_std must be one finite number per latent channel each, "
+            f"every std > 0 (training divides by it); got {tokenizer.get('latent_mean')!r:.80} and "
+            f"{tokenizer.get('latent_std')!r:.80}"
+        )
 
 
 def _check_row(row: object, index_path: Path) -> dict:
