@@ -31,6 +31,8 @@ from drivewm.train.loop import TrainConfig
         ("warmup_steps=-1", r"^train: warmup_steps must be >= 0, got -1$"),
         ("log_every=0", r"^train: log_every must be >= 1, got 0$"),
         ("betas=[0.9]", r"^train: betas must be two numbers in \[0, 1\), got \[0\.9\]$"),
+        ("seed=18446744073709551616", r"^train: seed must be in \[0, 2147483647\], got 18446744073709551616$"),  # torch
+        ("seed=-1", r"^train: seed must be in \[0, 2147483647\], got -1$"),  # --seed's range
     ],
 )
 def test_train_config_values_are_refused_with_the_field_named(override, message):

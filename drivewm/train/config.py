@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+from drivewm.choices import MAX_SEED
 from drivewm.config import above, at_least, in_range, require
 
 Parallel = Literal["auto", "ddp", "fsdp"]
@@ -37,7 +38,7 @@ class TrainConfig:
     ema_decay: float = 0.999
     """EMA decay of the shipped weights."""
     seed: int = 0
-    """Seeds initialisation, data order and every per-sample draw."""
+    """Seeds initialisation, data order and every per-sample draw; in [0, 2^31 - 1] as every ``--seed``."""
     log_every: int = 10
     """Steps between metrics.jsonl rows."""
     checkpoint_every: int = 200
@@ -61,6 +62,7 @@ class TrainConfig:
         above(self, 0, "lr")
         in_range(self, "ema_decay", 0, 1, high_open=True)
         in_range(self, "min_lr_ratio", 0, 1)
+        in_range(self, "seed", 0, MAX_SEED)  # torch.manual_seed overflowed past 2^64 (a traceback)
         require(
             len(self.betas) == 2 and all(0 <= b < 1 for b in self.betas), "betas", self.betas, "two numbers in [0, 1)"
         )
