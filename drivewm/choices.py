@@ -70,6 +70,18 @@ def model_folder(value: str) -> Path:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
+def output_folder(value: str) -> Path:
+    """argparse ``type`` of an ``--out`` folder: a folder, or a path that can become one; a file there or on
+    the way to it is refused before any work (mkdir had ended the command in a FileExistsError traceback)."""
+    path = Path(value)
+    for part in (path, *path.parents):
+        if part.exists():
+            if not part.is_dir():
+                raise argparse.ArgumentTypeError(f"{value}: {part} is a file, not a folder")
+            break
+    return path
+
+
 def whole_number(minimum: int, maximum: int | None = None) -> Callable[[str], int]:
     """argparse ``type`` of a whole number >= ``minimum`` (and <= ``maximum`` when given)."""
     bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"

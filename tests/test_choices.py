@@ -34,3 +34,30 @@ def test_missing_or_unknown_shipped_models_are_one_line_errors(fake_shipped_weig
     code = main(["posttrain", "--init", value, "--data", "c", "--out", "m"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and message in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["generate", "--prompt", "snow"],
+        ["rollout", "--clip", "c.tar", "--trajectory", "left"],
+        ["pretrain", "--data", "c"],
+        ["posttrain", "--data", "c"],
+        ["eval", "c"],
+        ["transfer", "c", "--to", "snow"],
+        ["transfer-train", "--init", "t", "--data", "c"],
+        ["tokenizer", "train", "--data", "c"],
+        ["tokenizer", "eval", "--model", "t", "--data", "c"],
+        ["tokenizer", "decode", "--model", "t", "--data", "c"],
+    ],
+)
+@pytest.mark.parametrize("below", [False, True])
+def test_an_out_folder_that_is_a_file_is_a_one_line_error(tmp_path, capsys, argv, below):
+    """A file at --out (or on the way to it) ended every model command in mkdir's FileExistsError or
+    NotADirectoryError traceback; now the parser refuses it and the file is kept."""
+    (tmp_path / "taken").write_text("keep me")
+    out = tmp_path / "taken" / "sub" if below else tmp_path / "taken"
+    code = main([*argv, "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.endswith(f"{out}: {tmp_path / 'taken'} is a file, not a folder"), err
+    assert len(err.splitlines()) == 1 and (tmp_path / "taken").read_text() == "keep me"

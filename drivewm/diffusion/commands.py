@@ -12,7 +12,7 @@ import importlib
 import json
 from pathlib import Path
 
-from drivewm.choices import add_registry_argument, at_least_one, model_folder, seed
+from drivewm.choices import add_registry_argument, at_least_one, model_folder, output_folder, seed
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -35,7 +35,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--tokenizer", type=model_folder, help="tokenizer model folder that encoded the latents (or shipped:tokenizer)"
     )
-    p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    p.add_argument(
+        "--out", required=True, type=output_folder, help="model folder to write (resumes if it holds train_state.pt)"
+    )
     p.add_argument(
         "--device",
         choices=["auto", "cpu", "cuda"],
@@ -50,7 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="model folder (config.json + model.safetensors) or shipped:KIND; default: shipped:multiview",
     )
     g.add_argument("--prompt", required=True, action="append", help="caption (repeat for several)")
-    g.add_argument("--out", required=True, type=Path, help="output folder: clip shards, mp4s, contact_sheet.png")
+    g.add_argument(
+        "--out", required=True, type=output_folder, help="output folder: clip shards, mp4s, contact_sheet.png"
+    )
     g.add_argument("--steps", type=int, default=35, help="sampler steps")
     g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
     g.add_argument("--seed", type=seed, default=0, help="sample i uses seed + i")

@@ -11,7 +11,7 @@ import json
 import sys
 
 from drivewm import resources
-from drivewm.choices import at_least_one
+from drivewm.choices import at_least_one, output_folder
 from drivewm.config import to_dict
 from drivewm.errors import BatchError
 from drivewm.eval.config import ALL_METRICS, EVAL_RECIPES
@@ -28,7 +28,10 @@ def register(subparsers) -> None:
     )
     p.add_argument("--rig", default=None, help="rig name or YAML (required for mp4 inputs; overrides a clip's own rig)")
     p.add_argument(
-        "--out", required=True, help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd"
+        "--out",
+        required=True,
+        type=output_folder,
+        help="output folder: metrics.json, metrics.md, error_distributions.png, eval.rrd",
     )
     p.add_argument("--workers", type=at_least_one, default=1, help="clips scored in parallel (processes)")
     p.add_argument(

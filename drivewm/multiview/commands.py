@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument, model_folder, seed
+from drivewm.choices import add_registry_argument, model_folder, output_folder, seed
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -31,7 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--rig", help="cameras to train on: rig name or YAML (default: the recipe's, else all cameras of the clips)"
     )
-    p.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    p.add_argument(
+        "--out", required=True, type=output_folder, help="model folder to write (resumes if it holds train_state.pt)"
+    )
     p.add_argument(
         "--device",
         choices=["auto", "cpu", "cuda"],
@@ -51,7 +53,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--trajectory", default="straight", help="straight|left|right|stop or a waypoint file (.npy/.json, (N, 3) m)"
     )
     r.add_argument("--windows", type=int, default=2, help="windows to generate after the conditioning frames")
-    r.add_argument("--out", required=True, type=Path, help="output folder: clip shard, grid mp4, contact sheet")
+    r.add_argument(
+        "--out", required=True, type=output_folder, help="output folder: clip shard, grid mp4, contact sheet"
+    )
     r.add_argument("--prompt", default="", help="caption for every view (default: the clip's own captions)")
     r.add_argument("--speed", type=float, default=0.0, help="speed of a named trajectory in m/s (default: the clip's)")
     r.add_argument("--steps", type=int, default=35, help="sampler steps per window")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drivewm.choices import at_least_one, model_folder, whole_number
+from drivewm.choices import at_least_one, model_folder, output_folder, whole_number
 from drivewm.tokenizer.recipe import RECIPES
 
 
@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     RECIPES.add_arguments(t)
     t.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
-    t.add_argument("--out", required=True, type=Path, help="model folder; rerun with the same --out to resume")
+    t.add_argument("--out", required=True, type=output_folder, help="model folder; rerun with the same --out to resume")
     _threads(t)
     t.set_defaults(func=_train)
 
@@ -37,14 +37,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--latents", type=Path, help="latent cache folder (CLIPDIR/latents/NAME)")
     d.add_argument("--data", type=Path, help="clip folder or tar to reconstruct (encode + decode)")
     d.add_argument("--key", action="append", default=None, help="only these clip keys (repeatable)")
-    d.add_argument("--out", required=True, type=Path, help="folder for KEY.CAMERA.mp4")
+    d.add_argument("--out", required=True, type=output_folder, help="folder for KEY.CAMERA.mp4")
     _tiling(d)
     d.set_defaults(func=_decode)
 
     v = tsub.add_parser("eval", help="PSNR, SSIM, temporal stability + side-by-side PNG")
     v.add_argument("--model", required=True, type=model_folder, help="tokenizer model folder (or shipped:tokenizer)")
     v.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
-    v.add_argument("--out", required=True, type=Path, help="folder for metrics.json and side_by_side.png")
+    v.add_argument("--out", required=True, type=output_folder, help="folder for metrics.json and side_by_side.png")
     v.add_argument(
         "--split",
         choices=("all", "holdout", "train"),

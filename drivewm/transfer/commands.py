@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from drivewm.choices import at_least_one, model_folder, seed
+from drivewm.choices import at_least_one, model_folder, output_folder, seed
 
 WEATHERS = ["clear", "overcast", "rain", "snow", "fog"]  # drivewm.logs.types.WEATHERS (not imported: --help stays fast)
 TIMES_OF_DAY = ["day", "dusk", "night"]
@@ -22,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--to", required=True, choices=WEATHERS, dest="weather", help="target weather")
     p.add_argument("--time-of-day", choices=TIMES_OF_DAY, help="target time of day (default: each clip's own)")
-    p.add_argument("--out", required=True, type=Path, help="output folder: clip shards, sheets/, contact_sheet.png")
+    p.add_argument(
+        "--out", required=True, type=output_folder, help="output folder: clip shards, sheets/, contact_sheet.png"
+    )
     p.add_argument("--steps", type=int, default=8, help="sampler steps (default 8)")
     p.add_argument("--guidance", type=float, default=1.0, help="guidance on the target condition (1 = none)")
     p.add_argument("--sampler", default="euler", choices=["euler", "heun"])
@@ -61,7 +63,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="Text2World model folder (or shipped:text2world) to start from, or a transfer folder to fine-tune",
     )
     t.add_argument("--data", required=True, type=Path, help="paired clip folder holding latents/NAME (or the cache)")
-    t.add_argument("--out", required=True, type=Path, help="model folder to write (resumes if it holds train_state.pt)")
+    t.add_argument(
+        "--out", required=True, type=output_folder, help="model folder to write (resumes if it holds train_state.pt)"
+    )
     # the flags of drivewm.recipe.RecipeBook.add_arguments, spelled out: importing the book's presets
     # (drivewm.transfer.train) would pull in torch for `drivewm --help`
     t.add_argument("--preset", help="debug | small | base (default: the recipe's, else debug)")
