@@ -29,7 +29,7 @@ from pathlib import Path
 
 from drivewm import resources
 from drivewm.atomic import write_json
-from drivewm.choices import SHIPPED_PREFIX
+from drivewm.choices import SHIPPED_PREFIX, output_folder
 from drivewm.cli import main
 from drivewm.config import from_dict, load_yaml
 from drivewm.errors import DrivewmError
@@ -229,7 +229,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "quickstart",
         help="simulate, curate, fine-tune the shipped model, generate with both, evaluate, transfer; write a report",
     )
-    p.add_argument("--out", default="quickstart", help="output folder (a rerun resumes in it)")
+    p.add_argument("--out", default="quickstart", type=output_folder, help="output folder (a rerun resumes in it)")
     p.add_argument(
         "--profile",
         default="full",

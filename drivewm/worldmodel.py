@@ -34,6 +34,7 @@ import dataclasses
 from pathlib import Path
 
 from drivewm import resources
+from drivewm.choices import output_folder
 from drivewm.errors import DrivewmError
 
 PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
@@ -225,14 +226,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     wsub = p.add_subparsers(dest="worldmodel_command", metavar="ACTION", required=True)
     t = wsub.add_parser("train", help="simulate, curate, train tokenizer/Text2World/multi-view, generate, evaluate")
     t.add_argument("--profile", default="cpu", help="cpu (the shipped weights) or gpu (one GPU, ~25 minutes)")
-    t.add_argument("--out", required=True, type=Path, help="run folder (a rerun resumes in it)")
+    t.add_argument("--out", required=True, type=output_folder, help="run folder (a rerun resumes in it)")
     t.set_defaults(func=lambda args: train_worldmodel(args.out, args.profile))
     f = wsub.add_parser("figures", help="the must-hold figures of a run's evals: RUN/eval/figures.json and .md")
     f.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
     f.set_defaults(func=_figures)
     e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")
     e.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
-    e.add_argument("--out", required=True, type=Path, help="where to write tokenizer/, text2world/, multiview/")
+    e.add_argument(
+        "--out", required=True, type=output_folder, help="where to write tokenizer/, text2world/, multiview/"
+    )
     e.add_argument("--notes", type=Path, help="Markdown file: the model card's notes (deviations, predictions)")
     e.set_defaults(func=_export)
 

@@ -49,12 +49,18 @@ def test_missing_or_unknown_shipped_models_are_one_line_errors(fake_shipped_weig
         ["tokenizer", "train", "--data", "c"],
         ["tokenizer", "eval", "--model", "t", "--data", "c"],
         ["tokenizer", "decode", "--model", "t", "--data", "c"],
+        ["simulate"],
+        ["curate", "log.mcap"],
+        ["import-video", "v.mp4", "--calibration", "rig.yaml"],
+        ["quickstart"],
+        ["worldmodel", "train"],
+        ["worldmodel", "export", "run"],
     ],
 )
 @pytest.mark.parametrize("below", [False, True])
 def test_an_out_folder_that_is_a_file_is_a_one_line_error(tmp_path, capsys, argv, below):
-    """A file at --out (or on the way to it) ended every model command in mkdir's FileExistsError or
-    NotADirectoryError traceback; now the parser refuses it and the file is kept."""
+    """A file at --out (or on the way to it) ended every command that writes a folder in mkdir's
+    FileExistsError or NotADirectoryError traceback; now the parser refuses it and the file is kept."""
     (tmp_path / "taken").write_text("keep me")
     out = tmp_path / "taken" / "sub" if below else tmp_path / "taken"
     code = main([*argv, "--out", str(out)])

@@ -11,7 +11,7 @@ import json
 import sys
 from pathlib import Path
 
-from drivewm.choices import add_registry_argument, at_least_one
+from drivewm.choices import add_registry_argument, at_least_one, output_folder
 from drivewm.config import to_dict
 from drivewm.curate.config import CURATE_RECIPES
 from drivewm.curate.pool import start_fork_server
@@ -24,7 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "logs", nargs="+", type=Path, help="MCAP drive logs: files, folders of *.mcap, or split ROS 2 bag folders"
     )
     p.add_argument(
-        "--out", required=True, type=Path, help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png"
+        "--out",
+        required=True,
+        type=output_folder,
+        help="clip folder: shards, manifest.jsonl, report.json, contact_sheet.png",
     )
     CURATE_RECIPES.add_arguments(p)
     add_registry_argument(
@@ -42,7 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     v = sub.add_parser("import-video", help="a folder of mp4 files + a one-camera calibration YAML -> drive logs")
     v.add_argument("videos", nargs="+", type=Path, help="mp4 files or folders of them")
     v.add_argument("--calibration", required=True, help="rig YAML with one camera (its size is the stored image size)")
-    v.add_argument("--out", required=True, type=Path, help="folder for the NAME.mcap logs")
+    v.add_argument("--out", required=True, type=output_folder, help="folder for the NAME.mcap logs")
     v.add_argument(
         "--tag",
         action="append",

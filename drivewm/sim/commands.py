@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument, at_least_one, seed
+from drivewm.choices import add_registry_argument, at_least_one, output_folder, seed
 from drivewm.recipe import add_override_arguments
 
 
@@ -61,7 +61,7 @@ def register(subparsers) -> None:
         f"({', '.join(resources.names('recipes/simulate'))}); flags and --set apply to every drive",
     )
     add_override_arguments(p, "a SimConfig field in every drive, e.g. jpeg_quality=80", "drives")
-    p.add_argument("--out", required=True, help="output folder for the .mcap logs")
+    p.add_argument("--out", required=True, type=output_folder, help="output folder for the .mcap logs")
     p.set_defaults(func=run_simulate)
 
 
