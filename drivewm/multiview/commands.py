@@ -57,7 +57,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--out", required=True, type=output_folder, help="output folder: clip shard, grid mp4, contact sheet"
     )
     r.add_argument("--prompt", default="", help="caption for every view (default: the clip's own captions)")
-    r.add_argument("--speed", type=float, default=0.0, help="speed of a named trajectory in m/s (default: the clip's)")
+    r.add_argument(
+        "--speed", type=float, default=0.0, help="speed of a named trajectory in m/s, at most 100 (default: the clip's)"
+    )
     r.add_argument("--steps", type=int, default=35, help="sampler steps per window")
     r.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
     r.add_argument(

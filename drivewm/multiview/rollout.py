@@ -35,6 +35,9 @@ from drivewm.multiview.trajectories import (
 )
 from drivewm.multiview.writer import GeneratedSample
 
+#: Fastest named-trajectory speed a rollout takes (m/s): beyond any road vehicle (100 m/s = 360 km/h).
+MAX_SPEED_MPS = 100.0
+
 
 @dataclasses.dataclass
 class RolloutOptions:
@@ -65,6 +68,8 @@ class RolloutOptions:
         weights = {"guidance": self.guidance, "trajectory guidance": self.trajectory_guidance}
         # a NaN speed had made NaN waypoints, a blank clip
         finite_at_least("rollout", 0, **weights, **{"--speed": self.speed_mps})
+        if self.speed_mps > MAX_SPEED_MPS:  # 1e30 m/s had written waypoints of 1e29 m into the clip
+            raise DrivewmError(f"rollout: --speed must be at most {MAX_SPEED_MPS:g} m/s, got {self.speed_mps:g}")
 
 
 def load_clip(path: str | Path, key: str | None = None) -> Clip:
