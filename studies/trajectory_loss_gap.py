@@ -8,6 +8,7 @@ trajectory has the same loss under all three; one that learned turns mirrored ha
 the mirrored waypoints. Captions are kept (as in training) or dropped (the trajectory alone).
 
     python studies/trajectory_loss_gap.py MODEL_DIR LATENT_CACHE [--clips 16] [--min-turn-deg 20] [--match roundabout]
+        [--video2world]
 
 LATENT_CACHE: a folder of ``drivewm encode`` latents (the clips the model trained on, or held-out
 ones). Prints, per noise level, the mean losses and "mirrored - true" with its t statistic over
@@ -37,6 +38,9 @@ def main() -> None:
     parser.add_argument("--min-turn-deg", type=float, default=20.0)
     parser.add_argument("--sigmas", default="0.3,1,3")
     parser.add_argument("--match", default="", help="only clips whose key contains this (e.g. a scenario)")
+    parser.add_argument(
+        "--video2world", action="store_true", help="give the first latent frame (as rollouts do): the rest is scored"
+    )
     args = parser.parse_args()
     torch.set_grad_enabled(False)
     model = MultiView.from_pretrained(args.model)
@@ -49,7 +53,12 @@ def main() -> None:
     )
     for captions in (True, False):
         for sigma in (float(s) for s in args.sigmas.split(",")):
-            r = np.array([clip_losses(model.net, model, ds, i, sigma, captions, 1000 + j) for j, i in enumerate(clips)])
+            r = np.array(
+                [
+                    clip_losses(model.net, model, ds, i, sigma, captions, 1000 + j, cond_frames=int(args.video2world))
+                    for j, i in enumerate(clips)
+                ]
+            )
             gap = r[:, 1] - r[:, 0]
             t = t_statistic(gap)
             print(
