@@ -16,7 +16,8 @@ Everything is measured in this run on the same input, in interleaved rounds (med
   (contact sheet, manifest, report: a fixed cost per run);
 - ``--scaling-seconds S``: 1 vs 2 workers on the logs looped to S seconds, timed twice: in this process
   (one worker then has the stage's imports already; two pay a fresh fork server's every run) and as
-  fresh ``drivewm curate`` processes beside a fresh raw-decode process, where start-up costs every run alike;
+  fresh ``drivewm curate`` processes beside a fresh raw-decode process, where start-up costs every run alike
+  (reading compiled bytecode, as a pip install leaves it);
 - PSNR of the encoded clips against the log's frames at each camera's exposure times (decoded in
   full, INTER_AREA-resized to the clip's size), with the H.264 settings that produced them, and of
   the 1/2-scale JPEG decode against full decode + INTER_AREA.
@@ -497,6 +498,24 @@ def hour(source: Path, work: Path, seconds: float, recipe: str) -> None:
     )
 
 
+def cache_bytecode(work: Path) -> Path:
+    """Every process this benchmark starts (fresh ``drivewm curate`` runs, fork servers, workers) reads
+    compiled bytecode, as after a pip install (pip compiles at install; Python caches what it imports).
+    Where PYTHONDONTWRITEBYTECODE is set over a ``--no-compile`` install (as on the machine of the
+    curate README's figures), each would first compile scipy.stats and the rest from source: ~1 CPU s
+    per process. The modules a curation and the raw decode import are compiled once here, before any timed round."""
+    os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+    os.environ["PYTHONPYCACHEPREFIX"] = str(work / "pycache")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(REPO / "benchmarks")])}
+    warm = (
+        "from drivewm.cli import build_parser; build_parser(); import drivewm.clips.shards, drivewm.lock, "
+        "drivewm.curate.contact_sheet, drivewm.curate.executors, drivewm.curate.pool, av.subtitles.stream, "
+        "filterpy.kalman, bench_curate"
+    )
+    subprocess.run([sys.executable, "-c", warm], env=env, check=True)
+    return work / "pycache"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--logs", type=Path, help="benchmark these MCAP logs instead of simulating")
@@ -522,6 +541,7 @@ def main() -> None:
         print(f"simulating {args.drives} nuscenes6 drives of {args.duration:g} s (kept in {args.work}) ...", flush=True)
         logs = simulate_logs(args.work, args.drives, args.duration)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start")
+    print(f"bytecode: compiled once, cached in {cache_bytecode(args.work)} for every process started here")
     # what every curation process sets (drivewm.curate.stage.curate_log), set first here: the raw decode
     # runs in this process too, and so reads the logs with the same allocator as curation, in every round
     from drivewm.workers import reuse_freed_memory
