@@ -104,10 +104,10 @@ class LatentCache:
         if not isinstance(index.get("tokenizer"), dict) or not isinstance(index.get("clips"), list):
             raise DrivewmError(f"{index_path}: needs 'tokenizer' (a mapping) and 'clips' (a list)")
         self.tokenizer: dict = index["tokenizer"]
-        _check_stats(self.tokenizer, index_path)
         self.rows: list[dict] = [_check_row(row, index_path) for row in index["clips"]]
         if not self.rows:
             raise DrivewmError(f"{self.dir}: latent cache holds no clips")
+        _check_stats(self.tokenizer, index_path)  # after: an empty cache has no statistics to name
 
     def __len__(self) -> int:
         return len(self.rows)
