@@ -157,16 +157,16 @@ def _router(tmap: TopicMap):
 
     def route(info: ChannelInfo) -> tuple[str, str | None] | None:
         s = info.schema_name
+        if info.topic == pose_topic:
+            return _mapped(tmap, info, "ego_pose", ros.POSE_TYPES, ("pose", None))
         if tmap.cameras and info.topic in image_topics:
-            return "image", image_topics[info.topic]
+            return _mapped(tmap, info, "image", _IMAGE_SCHEMAS, ("image", image_topics[info.topic]))
         if tmap.cameras and info.topic in calib_topics:
-            return "calibration", calib_topics[info.topic]
+            return _mapped(tmap, info, "calibration", _CALIBRATION_SCHEMAS, ("calibration", calib_topics[info.topic]))
         if not tmap.cameras and s in _IMAGE_SCHEMAS:
             return "image", None
         if not tmap.cameras and s in _CALIBRATION_SCHEMAS:
             return "calibration", None
-        if info.topic == pose_topic:
-            return "pose", None
         if s in _TF_SCHEMAS:
             return "tf", None
         if s == names.SCENE_SCHEMA_NAME or (info.topic == names.SCENE_TOPIC and info.encoding == "json"):
@@ -178,6 +178,18 @@ def _router(tmap: TopicMap):
         return None
 
     return route
+
+
+def _mapped(tmap: TopicMap, info: ChannelInfo, role: str, schemas: tuple[str, ...], routed: tuple) -> tuple:
+    """``routed`` for a topic the topic map names as ``role``, if its schema is one that role reads: a
+    map naming e.g. a TF topic as an image had passed transforms off as images, or as an ego pose had
+    ended in an AttributeError traceback."""
+    if info.schema_name not in schemas:
+        raise DrivewmError(
+            f"topic map {tmap.source}: {role} topic {info.topic} has schema {info.schema_name!r}, "
+            f"expected one of {list(schemas)}"
+        )
+    return routed
 
 
 def _stamp(tmap: TopicMap, stamp_ns: int, msg: Message) -> int:

@@ -77,3 +77,23 @@ def test_log_without_images(tmp_path, synthetic_log):
     with pytest.raises(DrivewmError, match=f"^{path}: log has no camera images"):
         read_log(path)
     assert len(read_log(path, require_images=False).pose_timestamps_ns) == len(synthetic_log.pose_timestamps_ns)
+
+
+@pytest.mark.parametrize(
+    "mapping, role, topic, schema",
+    [
+        ("cameras: {CAM_FRONT: {image: /tf, calibration: /CAM_FRONT/calibration}}", "image", "/tf", "FrameTransforms"),
+        ("cameras: {CAM_FRONT: {image: /CAM_FRONT/image, calibration: /scene}}", "calibration", "/scene", "Scene"),
+        ("ego_pose: {topic: /tf}", "ego_pose", "/tf", "FrameTransforms"),  # had been an AttributeError traceback
+        ("ego_pose: {topic: /CAM_FRONT/image}", "ego_pose", "/CAM_FRONT/image", "CompressedImage"),  # had been ignored
+    ],
+)
+def test_topic_map_naming_a_topic_of_the_wrong_type(tmp_path, synthetic_mcap, mapping, role, topic, schema):
+    """A mapped topic whose schema is not one its role reads is refused, not decoded as something else
+    (a TF topic mapped as images had been read as 20 'images' of transform bytes)."""
+    (tmp_path / "map.yaml").write_text(mapping + "\n")
+    with pytest.raises(
+        DrivewmError,
+        match=rf"^{synthetic_mcap}: topic map {tmp_path / 'map.yaml'}: {role} topic {topic} has schema '\S*{schema}'",
+    ):
+        read_log(synthetic_mcap, topic_map=tmp_path / "map.yaml", require_images=False)
