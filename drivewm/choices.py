@@ -82,6 +82,17 @@ def output_folder(value: str) -> Path:
     return path
 
 
+def output_file(value: str) -> Path:
+    """argparse ``type`` of an ``--out`` file: a file, or a path that can become one; a folder there or a
+    file on the way to it is refused before any work (``view --out`` had ended in an IsADirectoryError or
+    FileExistsError traceback after reading the whole log)."""
+    path = Path(value)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{value}: is a folder, not a file")
+    output_folder(str(path.parent))
+    return path
+
+
 def whole_number(minimum: int, maximum: int | None = None) -> Callable[[str], int]:
     """argparse ``type`` of a whole number >= ``minimum`` (and <= ``maximum`` when given)."""
     bounds = f">= {minimum}" if maximum is None else f"in [{minimum}, {maximum}]"

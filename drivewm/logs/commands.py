@@ -9,12 +9,13 @@ import argparse
 from pathlib import Path
 
 from drivewm import resources
+from drivewm.choices import output_file
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("view", help="write a Rerun recording (.rrd) of a drive log", description=__doc__)
     p.add_argument("log", help="MCAP drive log, or a folder of split-bag .mcap files")
-    p.add_argument("--out", default=None, help="output .rrd (default: next to the log, LOG.rrd)")
+    p.add_argument("--out", default=None, type=output_file, help="output .rrd (default: next to the log, LOG.rrd)")
     p.add_argument(
         "--topic-map",
         default=None,
@@ -29,7 +30,7 @@ def run_view(args: argparse.Namespace) -> int:
     from drivewm.logs.reader import LogStream
     from drivewm.logs.viewer import write_recording
 
-    out = Path(args.out) if args.out else Path(args.log).with_suffix(".rrd")
+    out = args.out or Path(args.log).with_suffix(".rrd")
     n = write_recording(LogStream(args.log, topic_map=args.topic_map), out)
     print(
         f"{args.log}: {n['cameras']} cameras, {n['image']} images, {n['poses']} poses, "

@@ -23,6 +23,7 @@ import numpy as np
 import rerun as rr
 
 from drivewm.atomic import atomic_path
+from drivewm.errors import DrivewmError
 from drivewm.logs.reader import LogStream
 from drivewm.logs.transforms import quat_xyzw_from_yaw
 from drivewm.logs.types import LogIndex
@@ -106,8 +107,10 @@ def _boxes(boxes):
 def write_recording(stream: LogStream, out_path: str | Path) -> dict[str, int]:
     """Write the streamed log as a Rerun recording at ``out_path`` (atomic); returns the counts of
     cameras, images, poses and agent ticks."""
-    log = stream.index(require_images=False, road=True)
     out_path = Path(out_path)
+    if out_path.resolve() in {f.resolve() for f in stream.files}:  # the rename had replaced the log itself
+        raise DrivewmError(f"{out_path}: is the drive log being read; write the recording elsewhere")
+    log = stream.index(require_images=False, road=True)
     with atomic_path(out_path) as tmp:
         rec = rr.RecordingStream("drivewm", recording_id=Path(log.path).stem)
         rec.set_log_time_enabled(False)  # else Rerun stamps every row with the wall clock under the same name

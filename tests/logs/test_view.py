@@ -78,3 +78,23 @@ def test_view_of_a_bad_file_is_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.strip() == f"error: {tmp_path / 'x.mcap'}: not an MCAP file (bad magic bytes)"
     assert not (tmp_path / "x.rrd").exists()
+
+
+def test_view_out_that_cannot_be_written_is_one_line_error(tmp_path, capsys, synthetic_mcap):
+    """An --out that is a folder, lies under a file, or is the log itself is refused before any work:
+    the first two had ended in an IsADirectoryError / FileExistsError traceback, the last had replaced
+    the drive log with its recording."""
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file").write_text("kept")
+    log = tmp_path / "drive.mcap"
+    log.write_bytes(open(synthetic_mcap, "rb").read())
+    for out, message in [
+        (tmp_path / "folder", f"{tmp_path / 'folder'}: is a folder, not a file"),
+        (tmp_path / "file" / "x.rrd", f"{tmp_path / 'file'}: {tmp_path / 'file'} is a file, not a folder"),
+        (log, f"{log}: is the drive log being read; write the recording elsewhere"),
+    ]:
+        assert main(["view", str(log), "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("error: ") and err.endswith(message) and "Traceback" not in err
+    assert (tmp_path / "file").read_text() == "kept" and list((tmp_path / "folder").iterdir()) == []
+    assert log.read_bytes() == open(synthetic_mcap, "rb").read()
