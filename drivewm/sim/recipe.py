@@ -23,6 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from drivewm import resources
+from drivewm.choices import MAX_SEED
 from drivewm.config import apply_overrides, load_yaml
 from drivewm.errors import DrivewmError
 from drivewm.sim.config import SimConfig
@@ -38,6 +39,7 @@ def plan_drives(
     """One kind of drive (SimConfig ``fields`` with ``KEY=VALUE`` overrides), ``drives`` of it, once per
     WEATHER:TIME of ``conditions`` when given (same seeds, so the same drives)."""
     cfg = apply_overrides(SimConfig, fields, list(overrides), "drivewm simulate")
+    _check_seeds(cfg, drives, "drivewm simulate")
     return [(c, drives) for c in in_conditions(cfg, parse_conditions(conditions))] if conditions else [(cfg, drives)]
 
 
@@ -65,9 +67,20 @@ def load_recipe(
         if not isinstance(count, int) or isinstance(count, bool) or count < 1:
             raise DrivewmError(f"{path}: drives[{i}].count must be a positive integer, got {count!r}")
         cfg = apply_overrides(SimConfig, entry, list(overrides), f"{path}: drives[{i}]")
+        _check_seeds(cfg, count, f"{path}: drives[{i}]")
         for one in in_conditions(cfg, _conditions(conditions, f"{path}: drives[{i}]")) if conditions else [cfg]:
             out.append((one, count))
     return out
+
+
+def _check_seeds(cfg: SimConfig, drives: int, where: str) -> None:
+    """Drive i uses seed + i, so the last seed must fit too: it had failed after the earlier drives were
+    simulated and written (``--seed 2147483647 --drives 2``)."""
+    last = cfg.seed + drives - 1
+    if last > MAX_SEED:
+        raise DrivewmError(
+            f"{where}: {drives} drives from seed {cfg.seed} use seeds up to {last}, past the largest seed {MAX_SEED}"
+        )
 
 
 def _conditions(value, where: str) -> list[tuple[str, str]]:

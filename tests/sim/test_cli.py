@@ -160,3 +160,20 @@ def test_choices_are_the_registries(capsys) -> None:
     assert main(["simulate", "--weather", "hail", "--out", "x"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "invalid choice: 'hail'" in err[0]
+
+
+def test_drive_seeds_past_the_largest_seed_are_refused_before_any_drive(tmp_path, capsys) -> None:
+    """Drive i uses seed + i: ``--seed 2147483647 --drives 2`` had written the first drive, then failed
+    on the second's seed."""
+    argv = ["simulate", "--seed", "2147483647", "--drives", "2", "--duration", "0.5", "--rig", "front1"]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    message = "2 drives from seed 2147483647 use seeds up to 2147483648, past the largest seed 2147483647"
+    assert err == f"error: drivewm simulate: {message}"
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+    (tmp_path / "r.yaml").write_text("drives:\n  - {seed: 2147483640, count: 9}\n")
+    with pytest.raises(
+        DrivewmError, match=r"r.yaml: drives\[0\]: 9 drives from seed 2147483640 use seeds up to 2147483648"
+    ):
+        load_recipe(tmp_path / "r.yaml")
+    assert main(["simulate", "--seed", "2147483646", "--drives", "2", "--dry-run", "--out", str(tmp_path)]) == 0
