@@ -90,7 +90,9 @@ def run_simulate(args: argparse.Namespace) -> int:
     given = {field: getattr(args, flag) for flag, field in FLAG_FIELDS.items() if getattr(args, flag) is not None}
     if args.recipe:
         plan = load_recipe(
-            args.recipe, given | ({"conditions": args.conditions} if args.conditions else {}), args.overrides
+            args.recipe,
+            given | ({"conditions": args.conditions} if args.conditions is not None else {}),
+            args.overrides,
         )
     else:
         plan = plan_drives(given, args.overrides, args.drives, args.conditions)

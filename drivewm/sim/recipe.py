@@ -40,7 +40,9 @@ def plan_drives(
     WEATHER:TIME of ``conditions`` when given (same seeds, so the same drives)."""
     cfg = apply_overrides(SimConfig, fields, list(overrides), "drivewm simulate")
     _check_seeds(cfg, drives, "drivewm simulate")
-    return [(c, drives) for c in in_conditions(cfg, parse_conditions(conditions))] if conditions else [(cfg, drives)]
+    if conditions is None:  # "" is not "none given": it names no condition, an error
+        return [(cfg, drives)]
+    return [(c, drives) for c in in_conditions(cfg, parse_conditions(conditions))]
 
 
 def load_recipe(
@@ -68,8 +70,8 @@ def load_recipe(
             raise DrivewmError(f"{path}: drives[{i}].count must be a positive integer, got {count!r}")
         cfg = apply_overrides(SimConfig, entry, list(overrides), f"{path}: drives[{i}]")
         _check_seeds(cfg, count, f"{path}: drives[{i}]")
-        for one in in_conditions(cfg, _conditions(conditions, f"{path}: drives[{i}]")) if conditions else [cfg]:
-            out.append((one, count))
+        variants = [cfg] if conditions is None else in_conditions(cfg, _conditions(conditions, f"{path}: drives[{i}]"))
+        out += [(one, count) for one in variants]
     return out
 
 

@@ -177,3 +177,14 @@ def test_drive_seeds_past_the_largest_seed_are_refused_before_any_drive(tmp_path
     ):
         load_recipe(tmp_path / "r.yaml")
     assert main(["simulate", "--seed", "2147483646", "--drives", "2", "--dry-run", "--out", str(tmp_path)]) == 0
+
+
+def test_empty_conditions_are_an_error_not_ignored(tmp_path, capsys) -> None:
+    """``conditions: []`` in a recipe and ``--conditions ''`` had been taken as "no conditions" and
+    rendered the default weather, while ``--conditions ,`` was refused."""
+    (tmp_path / "r.yaml").write_text("drives:\n  - {conditions: []}\n")
+    with pytest.raises(DrivewmError, match=r"r.yaml: drives\[0\].conditions: conditions \[\]: name at least one"):
+        load_recipe(tmp_path / "r.yaml")
+    for recipe in ([], ["--recipe", "smoke"]):
+        assert main(["simulate", *recipe, "--conditions", "", "--dry-run", "--out", str(tmp_path / "o")]) == 2
+        assert capsys.readouterr().err.strip().endswith("conditions '': name at least one WEATHER:TIME")
