@@ -215,6 +215,10 @@ def sampson_distance_sq(F: np.ndarray, x_a: np.ndarray, x_b: np.ndarray) -> np.n
 # ----------------------------------------------------------------------------- rigs
 
 
+#: Largest image side (px) a camera may have: twice an 8K video's width, far beyond any automotive camera.
+MAX_IMAGE_PX = 16384
+
+
 @dataclasses.dataclass
 class Camera:
     """One calibrated camera of a rig.
@@ -236,10 +240,10 @@ class Camera:
         one clear error at the input, never a LinAlgError deep inside a metric."""
         where = f"camera {self.name!r}"
         check_name(self.name, "camera name")
-        if isinstance(self.width, bool) or not isinstance(self.width, (int, np.integer)) or self.width <= 0:
-            raise DrivewmError(f"{where}: width must be a positive integer, got {self.width!r}")
-        if isinstance(self.height, bool) or not isinstance(self.height, (int, np.integer)) or self.height <= 0:
-            raise DrivewmError(f"{where}: height must be a positive integer, got {self.height!r}")
+        for side in ("width", "height"):  # a typo's 1e8 px had sized every frame buffer and video to it
+            value = getattr(self, side)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 < value <= MAX_IMAGE_PX:
+                raise DrivewmError(f"{where}: {side} must be a positive integer <= {MAX_IMAGE_PX}, got {value!r}")
         check_intrinsics(self.K, where)
         check_pose(self.T_ego_from_cam, f"{where} T_ego_from_cam")
         if not np.all(np.isfinite(self.distortion)):

@@ -93,6 +93,7 @@ def test_cli_bad_values_exit_2_with_one_line(capsys, tmp_path):
     "camera,message",
     [
         ("{name: CAM, width: abc, height: 10, hfov_deg: 90, xyz: [0, 0, 1]}", "width must be a positive integer"),
+        ("{name: CAM, width: 10, height: 100000000, hfov_deg: 90, xyz: [0, 0, 1]}", r"height must be .* <= 16384"),
         ("{name: CAM, width: 10, height: 10, K: [[5, 0, 5], [0, 5], [0, 0, 1]], xyz: [0, 0, 1]}", "K: expected 3x3"),
         ("{name: CAM, width: 10, height: 10, K: [[0, 0, 0], [0, 0, 0], [0, 0, 1]], xyz: [0, 0, 1]}", "K is singular"),
         ("{name: CAM, width: 10, height: 10, hfov_deg: 200, xyz: [0, 0, 1]}", "hfov_deg must be in"),
