@@ -27,7 +27,6 @@ import time
 import numpy as np
 import torch
 
-from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.posttrain import MultiViewTask, posttrain_config
@@ -54,8 +53,7 @@ def main() -> None:
     ds = MultiViewDataset(args.cache, None, model.cfg.multiview.trajectory_waypoints, model.cfg.edm.sigma_data)
     task = MultiViewTask(posttrain_config("tiny", ["multiview.trajectory_dropout=0"]), ds, model)
     net = task.model
-    first = {ds.cache.rows[i]["key"]: i for i in reversed(range(len(ds)))}  # one index per clip
-    draws = [i for i in sorted(first.values()) if abs(waypoint_heading_deg(ds[i].trajectory)) > TRAIN_TURN_DEG]
+    draws = turning_clips(ds, len(ds), TRAIN_TURN_DEG)  # every distinct clip that turns
     probe = turning_clips(ds, 8, match=args.match)
     branches = [net.trajectory_encoder, net.camera_encoder]
     trained = list(net.parameters()) if args.train == "all" else [p for m in branches for p in m.parameters()]
