@@ -9,7 +9,7 @@ import numpy as np
 from drivewm.curate.captions import Captioner, ClipInfo, TemplateCaptioner, classify_manoeuvre, load_captioner
 from drivewm.curate.config import FilterConfig
 from drivewm.curate.dedup import clip_embedding, near_duplicates
-from drivewm.curate.filters import bad_exposure_fraction, judge, score_clip
+from drivewm.curate.filters import bad_exposure_fraction, frozen_fraction, judge, score_clip, sharpness
 from drivewm.geometry import load_rig
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -116,3 +116,23 @@ def test_captioner_is_swappable_from_a_recipe():
     assert caption == "3 views" and set(views) == set(rig.names)
     with pytest.raises(DrivewmError, match="importable"):
         load_captioner("no.such.module:Nope")
+
+
+def test_sharpness_and_frozen_fraction_are_exact():
+    """The Laplacian variance and the mean absolute frame differences from OpenCV's sums equal the
+    exact integer formulation (Python integers over int64 numpy), on random and binary thumbnails."""
+    rng = np.random.default_rng(1)
+    for case in range(60):
+        h = int(rng.integers(2, 120))
+        g = rng.integers(0, 256, (h, 160), dtype=np.uint8) if case % 2 else rng.integers(0, 2, (h, 160), np.uint8) * 255
+        lap = cv2.Laplacian(g, cv2.CV_16S).astype(np.int64).ravel()
+        n = lap.size
+        assert sharpness(g[None, None]) == (n * int((lap * lap).sum()) - int(lap.sum()) ** 2) / (n * n), case
+    for case in range(40):
+        V, T = int(rng.integers(1, 7)), int(rng.integers(2, 18))
+        grey = rng.integers(0, int(rng.integers(1, 256)), (V, T, 24, 40), dtype=np.uint8)
+        grey[:, rng.random(T) < 0.3] = grey[:, :1]  # some frames repeat the first
+        sad = np.abs(np.diff(grey.astype(np.int64), axis=1)).sum(axis=(2, 3))
+        threshold = rng.uniform(0, 3)
+        expected = float((sad / (24 * 40) < threshold).any(axis=0).mean())
+        assert frozen_fraction(grey, threshold) == expected, case
