@@ -6,6 +6,7 @@ The reader and Rerun are imported inside the handler, so that ``drivewm --help``
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from drivewm import resources
@@ -31,7 +32,9 @@ def run_view(args: argparse.Namespace) -> int:
     from drivewm.logs.viewer import write_recording
 
     out = args.out or Path(args.log).with_suffix(".rrd")
-    n = write_recording(LogStream(args.log, topic_map=args.topic_map), out)
+    n, warnings = write_recording(LogStream(args.log, topic_map=args.topic_map), out)
+    for line in warnings:
+        print(f"warning: {line}", file=sys.stderr)
     print(
         f"{args.log}: {n['cameras']} cameras, {n['image']} images, {n['poses']} poses, "
         f"{n['agents']} agent ticks -> {out} (open with: rerun {out})"

@@ -27,6 +27,10 @@ class FrameGraph:
         if len(samples) > 1 and samples[-2][0] > samples[-1][0]:
             samples.sort(key=lambda s: s[0])  # rare: messages out of stamp order
 
+    def frames(self) -> list[str]:
+        """Every frame named by an edge, sorted."""
+        return sorted({f for edge in self._edges for f in edge})
+
     def path(self, a: str, b: str) -> list[tuple[str, str, bool]] | None:
         """Edges from frame a to frame b as (parent, child, forward); None if not connected."""
         links = collections.defaultdict(list)

@@ -265,6 +265,8 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
         warnings.append(f"the log's metadata lists camera(s) {listed} but it has no calibration or images for them")
     stamps = {name: np.asarray(col.image_stamps.get(name, []), dtype=np.int64) for name in order}
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
+    if not len(pose_ts):
+        warnings.append(_no_poses(col, tmap, world, ego))
     return LogIndex(str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road, warnings)
 
 
@@ -316,6 +318,19 @@ def _ego_poses(col: _Collected, world: str, ego: str) -> tuple[np.ndarray, np.nd
     ts = np.array([s[0] for s in series], dtype=np.int64)
     Ts = np.stack([s[1] for s in series]) if series else np.zeros((0, 4, 4))
     return ts, Ts
+
+
+def _no_poses(col: _Collected, tmap: TopicMap, world: str, ego: str) -> str:
+    """Why the log gave no ego poses, and what to set: curation then treats the ego motion as unknown."""
+    if tmap.ego_pose:
+        return f"no ego poses: the pose topic {tmap.ego_pose.topic!r} has no messages"
+    frames = col.frames.frames()
+    if not frames:
+        return "no ego poses: the log has no pose topic mapped and no transforms"
+    return (
+        f"no ego poses: no transform from world frame {world!r} to ego frame {ego!r} (the log's transform "
+        f"frames: {', '.join(frames)}); name them with world_frame and ego_frame in a topic map"
+    )
 
 
 def _scene(col: _Collected, tmap: TopicMap) -> SceneInfo:

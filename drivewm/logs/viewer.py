@@ -104,9 +104,9 @@ def _boxes(boxes):
     )
 
 
-def write_recording(stream: LogStream, out_path: str | Path) -> dict[str, int]:
+def write_recording(stream: LogStream, out_path: str | Path) -> tuple[dict[str, int], list[str]]:
     """Write the streamed log as a Rerun recording at ``out_path`` (atomic); returns the counts of
-    cameras, images, poses and agent ticks."""
+    cameras, images, poses and agent ticks, and the reader's warnings about the log."""
     out_path = Path(out_path)
     if out_path.resolve() in {f.resolve() for f in stream.files}:  # the rename had replaced the log itself
         raise DrivewmError(f"{out_path}: is the drive log being read; write the recording elsewhere")
@@ -120,4 +120,4 @@ def write_recording(stream: LogStream, out_path: str | Path) -> dict[str, int]:
         counts = log_ticks(rec, log, stream)
         rec.flush()
         rec.disconnect()
-    return {"cameras": len(log.rig.cameras), "poses": len(log.pose_timestamps_ns), **counts}
+    return {"cameras": len(log.rig.cameras), "poses": len(log.pose_timestamps_ns), **counts}, list(log.warnings)

@@ -98,3 +98,19 @@ def test_view_out_that_cannot_be_written_is_one_line_error(tmp_path, capsys, syn
         assert err.startswith("error: ") and err.endswith(message) and "Traceback" not in err
     assert (tmp_path / "file").read_text() == "kept" and list((tmp_path / "folder").iterdir()) == []
     assert log.read_bytes() == open(synthetic_mcap, "rb").read()
+
+
+def test_view_says_why_a_log_gave_no_ego_poses(tmp_path, capsys, synthetic_mcap):
+    """A topic map naming a world frame the log lacks had given a recording with 0 poses and no word
+    why; the warning names the frames looked for and the ones the log has."""
+    tmap = tmp_path / "map.yaml"
+    tmap.write_text("world_frame: odom\n")
+    out = tmp_path / "drive.rrd"
+    assert main(["view", synthetic_mcap, "--out", str(out), "--topic-map", str(tmap)]) == 0
+    captured = capsys.readouterr()
+    assert " 0 poses" in captured.out
+    (line,) = [x for x in captured.err.splitlines() if "no ego poses" in x]
+    assert "from world frame 'odom' to ego frame 'ego'" in line and "world" in line.split("frames: ")[1]
+    assert _rows(_chunks(out), "/world/ego", "Transform3D:translation", static=False) == []
+    assert main(["view", synthetic_mcap, "--out", str(out)]) == 0  # the log's own frames: poses, no warning
+    assert "no ego poses" not in capsys.readouterr().err
