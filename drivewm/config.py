@@ -165,6 +165,18 @@ def above(cfg: Any, low: float, *fields: str) -> None:
         require(value > low, name, value, f"> {low}")
 
 
+#: Frame rates (Hz) a config may name, from one frame a minute to 1 kHz: beyond is a typo (1e-300 Hz had
+#: overflowed the frame period in ns deep inside a run).
+FPS_RANGE = (1 / 60, 1000.0)
+
+
+def frame_rate(cfg: Any, *fields: str) -> None:
+    """Every named field of ``cfg`` is a frame rate in :data:`FPS_RANGE` (NaN fails)."""
+    for name in fields:
+        value = getattr(cfg, name)
+        require(FPS_RANGE[0] <= value <= FPS_RANGE[1], name, value, "a frame rate in [1/60, 1000] Hz")
+
+
 def in_range(cfg: Any, name: str, low: float, high: float, high_open: bool = False) -> None:
     """``low <= cfg.name <= high`` (``< high`` with ``high_open``)."""
     value = getattr(cfg, name)

@@ -142,3 +142,22 @@ def test_sampling_settings_are_refused_before_any_work(argv, message, capsys, tm
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("fps", ["1e-300", "0", "-10", "1e9"])
+def test_every_frame_rate_is_a_rate_a_camera_could_have(fps):
+    """A frame rate of 1e-300 Hz had passed '> 0' and overflowed the frame period in ns deep inside a run
+    (curation's tick clock, the simulator's ticks, a model's latent info); 1e9 Hz made clips of 1 ns."""
+    from drivewm.curate.config import CurateConfig
+    from drivewm.diffusion.text2world import LatentInfo
+    from drivewm.sim.config import SimConfig
+
+    rule = r"fps must be a frame rate in \[1/60, 1000\] Hz, got "
+    for cls, base in [
+        (CurateConfig, {}),
+        (SimConfig, {}),
+        (LatentInfo, {"latent_shape": [4, 2, 8, 8], "latent_mean": [0.0] * 4, "latent_std": [1.0] * 4}),
+    ]:
+        with pytest.raises(DrivewmError, match=rule):
+            apply_overrides(cls, base, [f"fps={fps}"], "cfg")
+        assert apply_overrides(cls, base, ["fps=12.5"], "cfg").fps == 12.5

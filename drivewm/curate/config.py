@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from drivewm.config import above, at_least, in_range, require
+from drivewm.config import above, at_least, frame_rate, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
@@ -153,7 +153,7 @@ class CurateConfig:
         at_least(self, 2, "clip_frames")
         at_least(self, 1, "stride_frames", "trajectory_waypoints", "shot_min_frames", "clips_per_shard")
         at_least(self, 0, "shot_threshold", "sync_tolerance_ms", "contact_sheet_clips")
-        above(self, 0, "fps")
+        frame_rate(self, "fps")
         in_range(self, "crf", 0, 51)  # libx264's range
         if self.cameras is not None:
             require(

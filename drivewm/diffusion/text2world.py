@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from drivewm.config import above, from_dict, require, to_dict
+from drivewm.config import frame_rate, from_dict, require, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
 from drivewm.diffusion.denoiser import Conditioning, EDMConfig, EDMDenoiser
@@ -61,7 +61,7 @@ class LatentInfo:
         for name in ("latent_mean", "latent_std"):  # one per channel: a shorter list broadcasts silently
             require(len(getattr(self, name)) == shape[0], name, getattr(self, name), f"{shape[0]} numbers (c)")
         require(min(self.latent_std) > 0, "latent_std", self.latent_std, "> 0 (a 0 turns every sample flat)")
-        above(self, 0, "fps")
+        frame_rate(self, "fps")
 
 
 def read_latent_info(info: dict, folder: str | Path, dit: DiTConfig) -> LatentInfo:

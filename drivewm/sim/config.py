@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from drivewm.config import above, at_least, in_range, require
+from drivewm.config import above, at_least, frame_rate, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY, TRAFFIC_DENSITIES, WEATHERS
 
@@ -73,7 +73,8 @@ class SimConfig:
                 f"for source {self.source}"
             )
         at_least(self, 0, "exposure_stagger_ms")
-        above(self, 0, "duration_s", "fps", "max_range_m")
+        above(self, 0, "duration_s", "max_range_m")
+        frame_rate(self, "fps")
         require(self.num_ticks >= 1, "duration_s * fps", self.duration_s * self.fps, ">= 0.5 (at least one frame)")
         in_range(self, "jpeg_quality", 1, 100)
         in_range(self, "seed", 0, 2**31 - 1)  # SUMO takes a 32-bit signed seed

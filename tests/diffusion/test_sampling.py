@@ -174,7 +174,7 @@ def test_a_saved_folder_naming_no_parameterization_loads_as_the_edm_it_was_train
         (lambda i: i["latent"].update(latent_mean=[1.0, 2.0]), "latent: latent_mean must be 4 numbers (c)"),
         (lambda i: i["latent"].update(latent_shape=[4, 3, 4]), "latent_shape must be 4 sizes (c, t, h, w) >= 1"),
         (lambda i: i["latent"].update(latent_shape=[4, -3, 4, 6]), "latent_shape must be 4 sizes (c, t, h, w) >= 1"),
-        (lambda i: i["latent"].update(fps=0), "latent: fps must be > 0, got 0.0"),
+        (lambda i: i["latent"].update(fps=0), "latent: fps must be a frame rate in [1/60, 1000] Hz, got 0.0"),
         (lambda i: i.update(config=5), "'config' must be a mapping of the network's settings, got 5"),
         (lambda i: i.pop("config"), "'config' must be a mapping of the network's settings, got None"),
         (lambda i: i["config"].update(dit=5), "config.json.dit: expected a mapping, got 5"),
