@@ -26,8 +26,8 @@ os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 
 from drivewm.sim import SimConfig  # noqa: E402
 from drivewm.sim.conditions import condition_for  # noqa: E402
+from drivewm.sim.drives import record  # noqa: E402
 from drivewm.sim.render import Renderer  # noqa: E402
-from drivewm.sim.simulate import record  # noqa: E402
 from drivewm.sim.world import TEXTURE_MARGIN_M, build_renderer, sim_rig  # noqa: E402
 
 SHEET_ORDER = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT", "CAM_BACK_LEFT", "CAM_BACK", "CAM_BACK_RIGHT"]

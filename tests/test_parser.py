@@ -11,10 +11,10 @@ import pytest
 
 from drivewm.cli import BROKEN_PIPE_STATUS, build_parser, main
 
-#: Not imported by the parser. (The simulator package, with OpenCV, is: see drivewm/sim/__init__.py.)
+#: Not imported by the parser: each stage imports its libraries in its handler (drivewm/lazy.py).
 HEAVY = (
     "torch", "filterpy", "pycolmap", "highway_env", "libsumo", "rerun", "scenedetect", "ray", "transformers",
-    "matplotlib",
+    "matplotlib", "cv2", "numpy", "drivewm.sim.drives",
 )  # fmt: skip
 COMMANDS = (
     "simulate", "view", "curate", "import-video", "tokenizer", "pretrain", "generate", "posttrain", "rollout", "eval",

@@ -7,7 +7,7 @@ import pytest
 
 from drivewm.logs.reader import read_log
 from drivewm.sim import SimConfig, simulate
-from drivewm.sim.simulate import record
+from drivewm.sim.drives import record
 
 pytestmark = pytest.mark.slow  # simulates drives twice
 

@@ -14,10 +14,10 @@ from drivewm.eval.config import MatchConfig
 from drivewm.eval.matching import FrameMatcher
 from drivewm.logs.reader import read_log
 from drivewm.sim import SimConfig
+from drivewm.sim.drives import record
 from drivewm.sim.paired import drive_id, parse_conditions
 from drivewm.sim.props import place_props
 from drivewm.sim.recipe import load_recipe
-from drivewm.sim.simulate import record
 
 
 def _agents(rec) -> list:

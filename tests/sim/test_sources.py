@@ -10,7 +10,7 @@ import pytest
 from drivewm.geometry import check_pose, yaw_of
 from drivewm.logs.reader import read_log
 from drivewm.sim import SimConfig
-from drivewm.sim.simulate import record
+from drivewm.sim.drives import record
 
 
 def _distance_to_lanes(xy: np.ndarray, centers: list[np.ndarray]) -> float:

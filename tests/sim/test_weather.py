@@ -18,9 +18,9 @@ import pytest
 
 from drivewm.sim import SimConfig
 from drivewm.sim.conditions import condition_for
+from drivewm.sim.drives import record
 from drivewm.sim.props import place_props
 from drivewm.sim.render import Renderer
-from drivewm.sim.simulate import record
 from drivewm.sim.world import TEXTURE_MARGIN_M, sim_rig
 
 pytestmark = pytest.mark.slow  # renders one drive in every condition
