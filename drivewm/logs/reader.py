@@ -326,7 +326,7 @@ def _no_poses(col: _Collected, tmap: TopicMap, world: str, ego: str) -> str:
         return f"no ego poses: the pose topic {tmap.ego_pose.topic!r} has no messages"
     frames = col.frames.frames()
     if not frames:
-        return "no ego poses: the log has no pose topic mapped and no transforms"
+        return "no ego poses: the log has no transforms; map its pose topic with ego_pose.topic in a topic map"
     return (
         f"no ego poses: no transform from world frame {world!r} to ego frame {ego!r} (the log's transform "
         f"frames: {', '.join(frames)}); name them with world_frame and ego_frame in a topic map"

@@ -54,3 +54,7 @@ def test_gnss_car_log_gives_ego_poses(shared_data):
     R = log.T_world_from_ego[:, :3, :3]
     np.testing.assert_allclose(R @ R.transpose(0, 2, 1), np.broadcast_to(np.eye(3), R.shape), atol=1e-9)
     assert log.scene.tags["source"] == "fleet"
+    assert not [w for w in log.warnings if "no ego poses" in w]
+    bare = read_log(shared_data / GNSS_LOG, require_images=False)  # no topic map: the pose topic is not known
+    assert len(bare.pose_timestamps_ns) == 0
+    assert "no ego poses: the log has no transforms; map its pose topic with ego_pose.topic" in " ".join(bare.warnings)
