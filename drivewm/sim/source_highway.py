@@ -112,7 +112,9 @@ def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> Scene
     env.controlled_vehicles = [ego]
     substeps = max(1, math.ceil((1.0 / cfg.fps) / MAX_SUBSTEP_S))
     dt = 1.0 / cfg.fps / substeps
-    ids: dict[int, str] = {}
+    # id(vehicle) -> (vehicle, track id): holding every vehicle keeps its id() from going to a later one (the
+    # intersection removes cars that left and spawns new ones, which CPython may place at a freed address)
+    ids: dict[int, tuple[object, str]] = {}
     ticks = []
     step_cpu_s = 0.0
     for i in range(cfg.simulated_ticks):
@@ -134,7 +136,7 @@ def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> Scene
     return SceneRecording(road, ticks, tags, step_cpu_s=step_cpu_s)
 
 
-def _tick(env, ego, timestamp_ns: int, ids: dict[int, str], seed: int) -> SceneTick:
+def _tick(env, ego, timestamp_ns: int, ids: dict[int, tuple[object, str]], seed: int) -> SceneTick:
     yaw = -float(ego.heading)
     cx, cy = float(ego.position[0]), -float(ego.position[1])
     rear_x = cx - REAR_AXLE_BEHIND_CENTER_M * math.cos(yaw)
@@ -143,7 +145,7 @@ def _tick(env, ego, timestamp_ns: int, ids: dict[int, str], seed: int) -> SceneT
     for v in env.road.vehicles:
         if v is ego:
             continue
-        track_id = ids.setdefault(id(v), f"veh{len(ids):03d}")
+        track_id = ids.setdefault(id(v), (v, f"veh{len(ids):03d}"))[1]
         category, height, color = vehicle_look(seed, track_id)
         agents.append(
             box_from_center(
