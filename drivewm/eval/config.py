@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from drivewm.choices import MAX_SEED
 from drivewm.config import above, at_least, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.recipe import RecipeBook
@@ -192,7 +193,7 @@ class PoseConfig:
         require(
             0 < self.init_min_tri_angle_deg < 180, "init_min_tri_angle_deg", self.init_min_tri_angle_deg, "in (0, 180)"
         )
-        in_range(self, "seed", 0, 2**31 - 1)
+        in_range(self, "seed", 0, MAX_SEED)
 
 
 @dataclasses.dataclass

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from drivewm.choices import MAX_SEED
 from drivewm.config import above, at_least, frame_rate, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY, TRAFFIC_DENSITIES, WEATHERS
@@ -77,7 +78,7 @@ class SimConfig:
         frame_rate(self, "fps")
         require(self.num_ticks >= 1, "duration_s * fps", self.duration_s * self.fps, ">= 0.5 (at least one frame)")
         in_range(self, "jpeg_quality", 1, 100)
-        in_range(self, "seed", 0, 2**31 - 1)  # SUMO takes a 32-bit signed seed
+        in_range(self, "seed", 0, MAX_SEED)  # SUMO takes a 32-bit signed seed
         if (self.width is None) != (self.height is None) or (
             self.width is not None and min(self.width, self.height) < 16
         ):
