@@ -139,6 +139,24 @@ def sim_clip_dir(sim_log_dir: Path) -> Path:
     return sim_clips()
 
 
+@pytest.fixture(scope="session")
+def dashcam_clips(shared_data, tmp_path_factory) -> Path:
+    """The shared real dashcam drive through ``import-video`` (no ego poses: 320x192, one CAM_FRONT)
+    and curation with the ``test`` recipe: 5 clips of 17 frames whose ego motion is unknown."""
+    from drivewm.curate import curate, load_curate_config
+    from drivewm.curate.import_video import import_videos
+
+    root = tmp_path_factory.mktemp("dashcam")
+    (root / "cam.yaml").write_text(
+        "name: dashcam\ncameras:\n"
+        "  - {name: CAM_FRONT, width: 320, height: 192, hfov_deg: 60, xyz: [1.7, 0.0, 1.4], yaw_deg: 0}\n"
+    )
+    video = shared_data / "video/dashcam_highway/solidWhiteRight.mp4"
+    logs = import_videos([video], root / "cam.yaml", root / "logs").logs
+    curate(logs, root / "clips", load_curate_config("test"), progress=False)
+    return root / "clips"
+
+
 @pytest.fixture
 def fake_shipped_weights(tmp_path, monkeypatch) -> Path:
     """drivewm/weights/ replaced by folders that only look shipped (multiview, tokenizer): for

@@ -36,6 +36,8 @@ class ClipMeta:
     ``extra``: anything else (generated clips record model, prompt, seed, trajectory name).
     ``pair_id``: the same drive window in other conditions has the same id (simulated drives:
     ``<drive_id>-t<start tick>``, see drivewm.sim.paired); "" = no known partner.
+    ``tags["ego_motion"] == "unknown"`` (clips of logs without ego poses, e.g. ``import-video``): the
+    ego poses are identity placeholders and ``trajectory_ego`` is empty; read :attr:`ego_motion_known`.
     """
 
     key: str
@@ -63,6 +65,12 @@ class ClipMeta:
     @property
     def cameras(self) -> list[str]:
         return [c["name"] for c in self.rig["cameras"]]
+
+    @property
+    def ego_motion_known(self) -> bool:
+        """False for clips whose log had no ego poses: their ``KEY.ego.npy`` holds identity placeholders,
+        which no reader may take for a car standing still."""
+        return self.tags.get("ego_motion") != "unknown"
 
     def get_rig(self) -> Rig:
         """The rig, checked (camera names, finite invertible K, rigid poses)."""

@@ -159,7 +159,7 @@ def _clip_item(clip: Clip | BadClip, rig: Rig | None, fit: str) -> EvalItem:
         m.key,
         clip_rig,
         m.fps,
-        clip.T_world_from_ego,
+        clip.T_world_from_ego if m.ego_motion_known else None,  # identity placeholders are no reference
         dict(m.tags),
         list(m.trajectory_ego),
         m.trajectory_dt_s,

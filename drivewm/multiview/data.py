@@ -23,13 +23,16 @@ from drivewm.multiview.trajectories import resample_waypoints, waypoints_from_po
 
 @dataclasses.dataclass
 class MultiViewSample:
-    """One clip: ``latents`` (V, c, t, h, w) normalised, captions per view, waypoints (W, 3) m, rig, fps."""
+    """One clip: ``latents`` (V, c, t, h, w) normalised, captions per view, waypoints (W, 3) m, rig, fps;
+    ``trajectory_known`` False for a clip without ego poses (its waypoints are zeros: post-training
+    treats it as a trajectory-dropped clip)."""
 
     latents: torch.Tensor
     view_captions: list[str]
     trajectory: np.ndarray
     rig: Rig
     fps: float
+    trajectory_known: bool = True
 
 
 class MultiViewDataset:
@@ -50,11 +53,13 @@ class MultiViewDataset:
         t = self.latent_shape[1]
         self.temporal_compression = max(1, (first.meta.num_frames - 1) // (t - 1)) if t > 1 else 1
 
-    def median_speed_mps(self) -> float:
-        """Median speed over the first waypoint step of every clip (the named trajectories' default)."""
-        return float(
-            np.median([np.linalg.norm(self[i].trajectory[0, :2]) / self.trajectory_dt_s for i in range(len(self))])
-        )
+    def median_speed_mps(self, default: float) -> float:
+        """Median speed over the first waypoint step of every clip whose ego motion is known (the named
+        trajectories' default); ``default`` when no clip's is."""
+        known = [s for s in (self[i] for i in range(len(self))) if s.trajectory_known and len(s.trajectory)]
+        if not known:
+            return default
+        return float(np.median([np.linalg.norm(s.trajectory[0, :2]) / self.trajectory_dt_s for s in known]))
 
     def __len__(self) -> int:
         return len(self.cache)
@@ -74,7 +79,9 @@ class MultiViewDataset:
         z = normalize_latents(clip.latents[views], self.cache.latent_mean, self.cache.latent_std, self.sigma_data)
         captions = [clip.meta.view_captions.get(c) or clip.meta.caption for c in self.camera_names]
         rig = clip.meta.get_rig().subset(self.camera_names)
-        return MultiViewSample(z, captions, self._trajectory(clip, where), rig, float(clip.meta.fps))
+        known = clip.meta.ego_motion_known
+        trajectory = self._trajectory(clip, where) if known else np.zeros((self.num_waypoints, 3))
+        return MultiViewSample(z, captions, trajectory, rig, float(clip.meta.fps), known)
 
     def _trajectory(self, clip, where: str) -> np.ndarray:
         """(W, 3) ClipMeta.trajectory_ego resampled to W; from the ego poses when the clip has none."""

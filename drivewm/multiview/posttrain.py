@@ -150,8 +150,11 @@ class MultiViewTask(BundleTask):
             float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0])))
             < self.cfg.multiview.video2world_prob
         )
-        keep_traj = torch.cat(
-            [(torch.rand(1, generator=g) >= self.cfg.multiview.trajectory_dropout).expand(v) for g in gens]
+        keep_traj = torch.cat(  # a clip without ego poses has no trajectory to keep
+            [
+                ((torch.rand(1, generator=g) >= self.cfg.multiview.trajectory_dropout) & s.trajectory_known).expand(v)
+                for s, g in zip(samples, gens)
+            ]
         )
         edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
         cond = cat_conditioning(
@@ -235,7 +238,7 @@ def posttrain(
     mv = dataclasses.replace(
         cfg.multiview,
         trajectory_dt_s=dataset.trajectory_dt_s,
-        speed_mps=round(dataset.median_speed_mps(), 2),
+        speed_mps=round(dataset.median_speed_mps(cfg.multiview.speed_mps), 2),
         temporal_compression=dataset.temporal_compression,
     )
     model = from_text2world(parent, mv, cfg.cond_frames) if init is None else continue_from(init, mv, init_dir)

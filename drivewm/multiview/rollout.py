@@ -121,9 +121,9 @@ def code_views(
 
 
 def initial_speed_mps(clip: Clip) -> float:
-    """Ego speed between the clip's first two frames (NaN when the poses are missing)."""
+    """Ego speed between the clip's first two frames (NaN when the poses are missing or unknown)."""
     T = clip.T_world_from_ego
-    if len(T) < 2:
+    if len(T) < 2 or not clip.meta.ego_motion_known:
         return float("nan")
     return float(np.linalg.norm(T[1, :3, 3] - T[0, :3, 3]) * clip.meta.fps)
 

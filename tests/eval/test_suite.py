@@ -244,3 +244,17 @@ def test_a_pose_stage_failing_beside_tse_is_the_clips_error_not_a_hang(synth_ite
     monkeypatch.setattr(suite, "run_sfm", broken)
     m = evaluate_item(synth_item, EvalConfig(metrics=["tse", "pose"]), threads=2).metrics
     assert m == {"error": "sfm: no database today"}
+
+
+def test_a_clip_without_ego_poses_has_no_pose_or_trajectory_error(dashcam_clips):
+    """The real dashcam through import-video stores identity placeholder poses (ego motion unknown):
+    they are no reference. Before, the drive read as standing still: ATE 0.000 m, rotation error 156 deg."""
+    from drivewm.eval.inputs import items_from_clips
+
+    items = items_from_clips(dashcam_clips, None)
+    assert len(items) == 5 and all(i.T_world_from_ego is None for i in items)
+    m = evaluate_item(items[0], EvalConfig(metrics=["tse", "pose", "traj"])).metrics
+    assert m["pose_success"] == 1.0  # the frames register: a real forward drive
+    for key in ("ate", "rpe_trans", "rpe_rot", "pose_error_m", "pose_error_deg", "tse_calibrated"):
+        assert math.isnan(m.get(key, math.nan)), (key, m[key])
+    assert m["status"]["traj"] == "no_reference" and abs(m["yaw_change_deg"]) < 10  # a straight highway

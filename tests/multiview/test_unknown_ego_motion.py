@@ -1,0 +1,72 @@
+"""Clips without ego poses (the real dashcam through import-video): their identity placeholder poses
+are never read as a car standing still, by post-training or by rollouts (DESIGN.md section 4)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from einops import rearrange
+
+from drivewm.clips import iter_clips
+from drivewm.clips.latents import write_latent_clip, write_latent_index
+from drivewm.diffusion.text2world import Text2World
+from drivewm.multiview.data import MultiViewDataset
+from drivewm.multiview.init import from_text2world
+from drivewm.multiview.posttrain import MultiViewTask, posttrain_config
+from drivewm.multiview.rollout import initial_speed_mps
+
+
+@pytest.fixture(scope="module")
+def mixed_cache(sim_clip_dir, dashcam_clips, tmp_path_factory):
+    """The front views of the simulated clips (ego poses known) and of the dashcam clips (unknown),
+    coded by the pooling stand-in into one latent cache: (3, 5, 6, 10) per view."""
+    from mv_standin import PoolTokenizer
+
+    tok, out, rows = PoolTokenizer(32), tmp_path_factory.mktemp("mixed_latents"), []
+    for clip_dir in (sim_clip_dir, dashcam_clips):
+        for clip in iter_clips(clip_dir):
+            front = clip.meta.cameras.index("CAM_FRONT")
+            video = torch.from_numpy(clip.videos()[[front]]).float() / 127.5 - 1
+            z = tok.encode(rearrange(video, "v t h w c -> v c t h w"))
+            rows.append(write_latent_clip(out, clip.meta, z, clip.T_world_from_ego))
+    write_latent_index(out, {"path": None, "latent_mean": [0.0] * 3, "latent_std": [0.5] * 3}, rows)
+    return out
+
+
+def _split(ds):
+    known = [i for i in range(len(ds)) if ds[i].trajectory_known]
+    return known, [i for i in range(len(ds)) if i not in known]
+
+
+def test_a_clip_without_ego_poses_has_no_trajectory_and_no_speed(mixed_cache):
+    ds = MultiViewDataset(mixed_cache, ["CAM_FRONT"], 16)
+    known, unknown = _split(ds)
+    assert len(unknown) == 5 and all(ds.cache.rows[i]["key"].startswith("solidWhiteRight") for i in unknown)
+    assert all(np.all(ds[i].trajectory == 0) for i in unknown)
+    # The named trajectories' default speed comes from the clips that have one: the dashcam's 5
+    # identity placeholders (0 m/s) do not pull it down.
+    speeds = [np.linalg.norm(ds[i].trajectory[0, :2]) / ds.trajectory_dt_s for i in known]
+    assert min(speeds) > 1.0
+    assert ds.median_speed_mps(99.0) == pytest.approx(float(np.median(speeds)))
+
+
+def test_post_training_drops_the_trajectory_of_a_clip_without_ego_poses(mixed_cache, mv_parent_dir):
+    ds = MultiViewDataset(mixed_cache, ["CAM_FRONT"], 16)
+    known, unknown = _split(ds)
+    cfg = posttrain_config("debug", ["multiview.trajectory_dropout=0", "multiview.video2world_prob=0"])
+    model = from_text2world(Text2World.from_pretrained(mv_parent_dir), cfg.multiview, cfg.cond_frames)
+    task = MultiViewTask(cfg, ds, model)
+    seen = []
+
+    def forward(x, sigma, cond):
+        seen.append(cond.trajectory_keep.tolist())
+        return torch.zeros_like(x)
+
+    task.loss(forward, [known[0], unknown[0], known[1]], [1, 2, 3], torch.device("cpu"))
+    assert seen == [[True, False, True]]  # with dropout 0 only the clip without poses loses its trajectory
+
+
+def test_rollouts_from_a_clip_without_ego_poses_use_the_models_speed(sim_clip_dir, dashcam_clips):
+    assert all(math.isnan(initial_speed_mps(c)) for c in iter_clips(dashcam_clips))  # was 0.0 m/s
+    assert all(initial_speed_mps(c) > 1.0 for c in iter_clips(sim_clip_dir))
