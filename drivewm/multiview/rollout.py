@@ -137,12 +137,11 @@ def rollout_poses(spec: str, num: int, dt_s: float, speed_mps: float, horizon_s:
 
 
 def clip_rig(model: MultiView, clip: Clip) -> Rig:
-    """The model's cameras, with the clip's own calibration."""
-    names = model.training_rig.names
-    missing = [n for n in names if n not in clip.meta.cameras]
-    if missing:
-        raise DrivewmError(f"clip {clip.key}: lacks cameras {missing} the model was trained on")
-    return clip.meta.get_rig().subset(names)
+    """The model's training cameras when the clip has them all, else every camera of the clip (a
+    dashcam's one): the model conditions on each camera's K and pose, so any rig works; always with
+    the clip's own calibration."""
+    rig, names = clip.meta.get_rig(), model.training_rig.names
+    return rig.subset(names) if set(names) <= set(rig.names) else rig
 
 
 @dataclasses.dataclass

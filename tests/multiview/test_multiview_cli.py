@@ -135,6 +135,20 @@ def test_rollout_continues_a_real_clip_and_keeps_its_frames(trained_mv, sim_clip
     )  # uniform stop over 3.2 s: v T / 2
 
 
+def test_rollout_of_a_one_camera_dashcam_clip_on_a_three_camera_model(trained_mv, dashcam_clips):
+    """Any rig: the real dashcam's one camera rolls out on a front3 model (it was refused for lacking
+    the model's side cameras); its ego motion is unknown, so the named trajectory runs at the model's
+    default speed, not at the 0 m/s of its identity placeholder poses."""
+    root, _ = trained_mv
+    model = MultiView.from_pretrained(root / "mv")
+    clip = load_clip(dashcam_clips)
+    sample = rollout(model, clip, RolloutOptions("straight", windows=1, steps=2, guidance=1.0), PoolTokenizer(32))
+    assert sample.rig.names == ["CAM_FRONT"] and sample.videos.shape[:2] == (1, 17)
+    np.testing.assert_allclose(sample.rig.cameras[0].K, clip.meta.get_rig().cameras[0].K)  # the clip's calibration
+    assert sample.extra["speed_mps"] == model.cfg.multiview.speed_mps > 1.0
+    assert sample.trajectory_ego[-1][0] == pytest.approx(model.cfg.multiview.speed_mps * 1.6, rel=0.02)
+
+
 def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
     root, cache = trained_mv
     assert (
