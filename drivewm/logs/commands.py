@@ -14,7 +14,11 @@ from drivewm.choices import output_file
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("view", help="write a Rerun recording (.rrd) of a drive log", description=__doc__)
+    p = subparsers.add_parser(
+        "view",
+        help="write a Rerun recording (.rrd) of a drive log",
+        description="A drive log as a Rerun recording: cameras on the ego, images, trajectory, agent boxes.",
+    )
     p.add_argument("log", help="MCAP drive log, or a folder of split-bag .mcap files")
     p.add_argument("--out", default=None, type=output_file, help="output .rrd (default: next to the log, LOG.rrd)")
     p.add_argument(
