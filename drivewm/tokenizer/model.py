@@ -85,7 +85,11 @@ class Tokenizer(nn.Module):
         if not first_chunk and (frames == 0 or frames % f):
             raise DrivewmError(f"a continuation chunk has {frames} frames; it needs a positive multiple of {f}")
         if height % s or width % s:
-            raise DrivewmError(f"video is {height}x{width} (HxW); height and width must be multiples of {s}")
+            raise DrivewmError(
+                f"video is {height}x{width} (HxW); height and width must be multiples of {s} "
+                f"(e.g. {width // s * s}x{height // s * s} WxH: curate clips at such a size with "
+                f"--set 'resolution=[{width // s * s},{height // s * s}]')"
+            )
 
     def check_latents(self, latents: torch.Tensor) -> None:
         c = self.config.code_channels

@@ -120,8 +120,8 @@ def test_bad_input_is_a_clear_error(tmp_path):
         model.encode(torch.zeros(1, 4, 5, 64, 64))
     with pytest.raises(DrivewmError, match=r"6 frames.*1 \+ k\*4"):
         model.encode(torch.zeros(1, 3, 6, 64, 64))
-    with pytest.raises(DrivewmError, match="multiples of 8"):
-        model.encode(torch.zeros(1, 3, 5, 60, 64))
+    with pytest.raises(DrivewmError, match=r"multiples of 8 \(e.g. 64x56 WxH.*resolution=\[64,56\]"):
+        model.encode(torch.zeros(1, 3, 5, 60, 64))  # the message names a size that works
     with pytest.raises(DrivewmError, match=r"\(B, 3, T, H, W\)"):
         model.encode(torch.zeros(3, 5, 64, 64))
     with pytest.raises(DrivewmError, match="latents must be"):
