@@ -235,10 +235,11 @@ def posttrain(
             f"{init_dir} was trained on {start.cfg.dit.in_channels}"
         )
     torch.manual_seed(cfg.train.seed)  # the new parameters' initial weights
+    speed = init.cfg.multiview.speed_mps if init is not None else cfg.multiview.speed_mps
     mv = dataclasses.replace(
         cfg.multiview,
         trajectory_dt_s=dataset.trajectory_dt_s,
-        speed_mps=round(dataset.median_speed_mps(cfg.multiview.speed_mps), 2),
+        speed_mps=round(dataset.median_speed_mps(speed), 2),  # data without ego motion: the init's
         temporal_compression=dataset.temporal_compression,
     )
     model = from_text2world(parent, mv, cfg.cond_frames) if init is None else continue_from(init, mv, init_dir)

@@ -13,18 +13,18 @@ from drivewm.clips.latents import write_latent_clip, write_latent_index
 from drivewm.diffusion.text2world import Text2World
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.init import from_text2world
+from drivewm.multiview.model import MultiView
 from drivewm.multiview.posttrain import MultiViewTask, posttrain_config
 from drivewm.multiview.rollout import initial_speed_mps
 
 
-@pytest.fixture(scope="module")
-def mixed_cache(sim_clip_dir, dashcam_clips, tmp_path_factory):
-    """The front views of the simulated clips (ego poses known) and of the dashcam clips (unknown),
-    coded by the pooling stand-in into one latent cache: (3, 5, 6, 10) per view."""
+def _front_cache(clip_dirs, out):
+    """The front views of the clips of ``clip_dirs`` coded by the pooling stand-in into one latent
+    cache: (3, 5, 6, 10) per view."""
     from mv_standin import PoolTokenizer
 
-    tok, out, rows = PoolTokenizer(32), tmp_path_factory.mktemp("mixed_latents"), []
-    for clip_dir in (sim_clip_dir, dashcam_clips):
+    tok, rows = PoolTokenizer(32), []
+    for clip_dir in clip_dirs:
         for clip in iter_clips(clip_dir):
             front = clip.meta.cameras.index("CAM_FRONT")
             video = torch.from_numpy(clip.videos()[[front]]).float() / 127.5 - 1
@@ -32,6 +32,12 @@ def mixed_cache(sim_clip_dir, dashcam_clips, tmp_path_factory):
             rows.append(write_latent_clip(out, clip.meta, z, clip.T_world_from_ego))
     write_latent_index(out, {"path": None, "latent_mean": [0.0] * 3, "latent_std": [0.5] * 3}, rows)
     return out
+
+
+@pytest.fixture(scope="module")
+def mixed_cache(sim_clip_dir, dashcam_clips, tmp_path_factory):
+    """Simulated clips (ego poses known) and the dashcam's (unknown) in one latent cache."""
+    return _front_cache([sim_clip_dir, dashcam_clips], tmp_path_factory.mktemp("mixed_latents"))
 
 
 def _split(ds):
@@ -65,6 +71,21 @@ def test_post_training_drops_the_trajectory_of_a_clip_without_ego_poses(mixed_ca
 
     task.loss(forward, [known[0], unknown[0], known[1]], [1, 2, 3], torch.device("cpu"))
     assert seen == [[True, False, True]]  # with dropout 0 only the clip without poses loses its trajectory
+
+
+def test_fine_tuning_on_clips_without_ego_poses_keeps_the_models_speed(dashcam_clips, mv_parent_dir, tmp_path):
+    """Fine-tuning a multi-view model on dashcam clips alone: no clip has a speed, so the named
+    trajectories keep the model's (they were 0 m/s, then the preset's 15 m/s)."""
+    from drivewm.multiview.config import MultiViewConfig
+    from drivewm.multiview.posttrain import posttrain
+
+    init = from_text2world(Text2World.from_pretrained(mv_parent_dir), MultiViewConfig(speed_mps=7.25))
+    init.save_pretrained(tmp_path / "init")
+    cache = _front_cache([dashcam_clips], tmp_path / "cache")
+    posttrain(
+        posttrain_config("debug", ["train.steps=1", "train.batch_size=1"]), tmp_path / "init", cache, tmp_path / "ft"
+    )
+    assert MultiView.from_pretrained(tmp_path / "ft").cfg.multiview.speed_mps == 7.25
 
 
 def test_rollouts_from_a_clip_without_ego_poses_use_the_models_speed(sim_clip_dir, dashcam_clips):
