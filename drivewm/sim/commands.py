@@ -102,9 +102,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         print(f"simulate {count} drive(s): {to_dict(cfg)}")
     if args.dry_run:
         return 0
-    paths = []
-    for cfg, count in plan:
-        paths += simulate_many(cfg, count, args.out, workers=args.workers)
+    paths = simulate_many(plan, args.out, workers=args.workers)  # one pool over every entry's drives
     for p in paths:
         print(p)
     return 0

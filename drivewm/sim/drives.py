@@ -117,21 +117,25 @@ def drive_name(cfg: SimConfig) -> str:
 
 
 def simulate_many(
-    cfg: SimConfig, drives: int, out_dir: str | Path, progress: bool = True, workers: int = 1
+    plan: list[tuple[SimConfig, int]], out_dir: str | Path, progress: bool = True, workers: int = 1
 ) -> list[Path]:
-    """``drives`` drives with seeds cfg.seed, cfg.seed + 1, ... into ``out_dir``; returns their paths.
+    """Every drive of ``plan`` into ``out_dir``; returns their paths. Each (config, n) entry is n drives
+    with seeds cfg.seed, cfg.seed + 1, ... (a dataset recipe is one entry per line).
 
     A drive whose file already exists is kept (runs are deterministic and writes atomic, so a
-    rerun of an interrupted call resumes where it stopped). ``workers`` > 1 simulates drives in
-    that many processes (each simulator and renderer is single-threaded; libsumo is one
-    simulation per process).
+    rerun of an interrupted call resumes where it stopped). ``workers`` > 1 simulates the drives of
+    all entries in that many processes (each simulator and renderer is single-threaded; libsumo is
+    one simulation per process).
     """
     out_dir = Path(out_dir)
     remove_dead_temporaries(out_dir)  # the unfinished logs of a killed run: resumed below from scratch
-    todo = [dataclasses.replace(cfg, seed=cfg.seed + i) for i in range(drives)]
-    paths = [out_dir / drive_name(c) for c in todo]
-    missing = [(c, p) for c, p in zip(todo, paths) if not p.is_file()]
-    bar = tqdm(total=drives, initial=drives - len(missing), desc="drives", unit="drive", disable=not progress)
+    todo = {}  # path -> config, in plan order; a drive named twice is simulated once
+    for cfg, drives in plan:
+        for i in range(drives):
+            c = dataclasses.replace(cfg, seed=cfg.seed + i)
+            todo.setdefault(out_dir / drive_name(c), c)
+    missing = [(c, p) for p, c in todo.items() if not p.is_file()]
+    bar = tqdm(total=len(todo), initial=len(todo) - len(missing), desc="drives", unit="drive", disable=not progress)
     if workers <= 1:
         for c, p in missing:
             simulate(c, p, progress)
@@ -142,7 +146,7 @@ def simulate_many(
                 future.result()
                 bar.update()
     bar.close()
-    return paths
+    return list(todo)
 
 
 def _worker_init() -> None:

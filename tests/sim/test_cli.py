@@ -188,3 +188,26 @@ def test_empty_conditions_are_an_error_not_ignored(tmp_path, capsys) -> None:
     for recipe in ([], ["--recipe", "smoke"]):
         assert main(["simulate", *recipe, "--conditions", "", "--dry-run", "--out", str(tmp_path / "o")]) == 2
         assert capsys.readouterr().err.strip().endswith("conditions '': name at least one WEATHER:TIME")
+
+
+def test_a_recipe_is_one_batch_of_drives_and_a_drive_named_twice_is_simulated_once(tmp_path, capsys) -> None:
+    """Every entry of a recipe goes into one pool of --workers processes (entries of one drive each
+    had run one after another), and two entries naming the same drive write it once."""
+    from drivewm.sim import simulate_many
+
+    (tmp_path / "r.yaml").write_text(
+        "common: {source: highway, duration_s: 0.3, width: 160, height: 96, rig: front3}\n"
+        "drives:\n"
+        "  - {scenario: merge, weather: fog, seed: 4}\n"
+        "  - {scenario: highway, weather: snow, seed: 7, count: 2}\n"
+        "  - {scenario: merge, weather: fog, seed: 3, count: 2}\n"  # seeds 3 and 4: s0004 again
+    )
+    plan = load_recipe(tmp_path / "r.yaml")
+    paths = simulate_many(plan, tmp_path / "logs", progress=False, workers=2)
+    names = ["highway_merge_fog_day_s0004", "highway_highway_snow_day_s0007", "highway_highway_snow_day_s0008"]
+    assert [p.stem for p in paths] == [*names, "highway_merge_fog_day_s0003"]
+    assert sorted(p.stem for p in (tmp_path / "logs").glob("*.mcap")) == sorted(p.stem for p in paths)
+    assert (
+        main(["simulate", "--recipe", str(tmp_path / "r.yaml"), "--workers", "2", "--out", str(tmp_path / "logs")]) == 0
+    )
+    assert capsys.readouterr().out.count(".mcap") == 4  # the rerun finds every drive written: none twice
