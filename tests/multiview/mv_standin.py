@@ -35,10 +35,14 @@ class PoolTokenizer:
         return frames.repeat_interleave(s, dim=3).repeat_interleave(s, dim=4)
 
 
-def write_pooled_cache(clip_dir: Path, out: Path, tokenizer: PoolTokenizer, cameras: list[str] | None = None) -> Path:
-    """A real latent cache (drivewm.clips.latents) of every clip in ``clip_dir`` coded by ``tokenizer``."""
+def write_pooled_cache(
+    clip_dir: Path | list[Path], out: Path, tokenizer: PoolTokenizer, cameras: list[str] | None = None
+) -> Path:
+    """A real latent cache (drivewm.clips.latents) of every clip in ``clip_dir`` (one folder or several)
+    coded by ``tokenizer``."""
     rows = []
-    for clip in iter_clips(clip_dir):
+    clips = (clip for d in (clip_dir if isinstance(clip_dir, list) else [clip_dir]) for clip in iter_clips(d))
+    for clip in clips:
         names = cameras or clip.meta.cameras
         video = torch.from_numpy(clip.videos()[[clip.meta.cameras.index(n) for n in names]]).float() / 127.5 - 1
         z = tokenizer.encode(rearrange(video, "v t h w c -> v c t h w"))

@@ -6,10 +6,8 @@ import math
 import numpy as np
 import pytest
 import torch
-from einops import rearrange
 
 from drivewm.clips import iter_clips
-from drivewm.clips.latents import write_latent_clip, write_latent_index
 from drivewm.diffusion.text2world import Text2World
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.init import from_text2world
@@ -21,17 +19,9 @@ from drivewm.multiview.rollout import initial_speed_mps
 def _front_cache(clip_dirs, out):
     """The front views of the clips of ``clip_dirs`` coded by the pooling stand-in into one latent
     cache: (3, 5, 6, 10) per view."""
-    from mv_standin import PoolTokenizer
+    from mv_standin import PoolTokenizer, write_pooled_cache
 
-    tok, rows = PoolTokenizer(32), []
-    for clip_dir in clip_dirs:
-        for clip in iter_clips(clip_dir):
-            front = clip.meta.cameras.index("CAM_FRONT")
-            video = torch.from_numpy(clip.videos()[[front]]).float() / 127.5 - 1
-            z = tok.encode(rearrange(video, "v t h w c -> v c t h w"))
-            rows.append(write_latent_clip(out, clip.meta, z, clip.T_world_from_ego))
-    write_latent_index(out, {"path": None, "latent_mean": [0.0] * 3, "latent_std": [0.5] * 3}, rows)
-    return out
+    return write_pooled_cache(clip_dirs, out, PoolTokenizer(32), ["CAM_FRONT"])
 
 
 @pytest.fixture(scope="module")
