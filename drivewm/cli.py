@@ -62,12 +62,17 @@ BROKEN_PIPE_STATUS = 128 + 13
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        return _main(argv)
+        code = _main(argv)
     except BrokenPipeError:
         if not _stdout_closed():  # another pipe (a worker's, a socket's): a fault, not a reader gone
             raise
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # so the exit's flush cannot raise again
         return BROKEN_PIPE_STATUS
+    # A torchrun worker that trained leaves without finalisation (exit_worker says why). Looked up,
+    # not imported: only a command that trained has loaded it, and the CLI itself stays free of torch.
+    if (distributed := sys.modules.get("drivewm.train.distributed")) is not None:
+        distributed.exit_worker(code)
+    return code
 
 
 def _stdout_closed() -> bool:
