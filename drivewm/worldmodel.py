@@ -22,7 +22,9 @@ each training stage by its own train state:
 
 Profiles (``drivewm/recipes/worldmodel.yaml``) change only sizes and steps: ``cpu`` is what the shipped
 weights were trained with on 2 cores; ``gpu`` is the same recipe sized for one GPU in about 25
-minutes (``scripts/gpu-recipe.sh``). ``drivewm worldmodel export RUN --out DIR`` writes the three
+minutes (``scripts/gpu-recipe.sh``). ``drivewm worldmodel benchmark --model MVDIR --heldout CLIPS --out
+RUN`` runs steps 6 and 7 alone on any multi-view model folder (a fleet fine-tune of the shipped one, a
+GPU run), so its figures compare with the model card's. ``drivewm worldmodel export RUN --out DIR`` writes the three
 model folders (four with the transfer model of the paired-drive stages) in fp16 safetensors with a
 model card (what ``drivewm/weights/`` ships).
 """
@@ -34,7 +36,7 @@ import dataclasses
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import output_folder
+from drivewm.choices import output_folder, whole_number
 from drivewm.errors import DrivewmError
 
 PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
@@ -93,13 +95,7 @@ def load_profile(name: str, path: Path = PROFILES) -> WorldModelProfile:
 def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]]]:
     """The recipe as (stage name, drivewm argv) in order."""
     logs, clips, tok = run / "logs", run / "clips", run / "tokenizer"
-    img, vid, mv, gen, ev = (
-        run / "text2world_image",
-        run / "text2world",
-        run / "multiview",
-        run / "generated",
-        run / "eval",
-    )
+    img, vid, mv, ev = run / "text2world_image", run / "text2world", run / "multiview", run / "eval"
     stages = [
         ("simulate-train", ["simulate", *p.simulate_train, "--rig", p.rig, "--out", str(logs / "train")]),
         ("simulate-heldout", ["simulate", *p.simulate_heldout, "--rig", p.rig, "--out", str(logs / "heldout")]),
@@ -170,24 +166,67 @@ def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]
             ],
         ),
     ]
+    stages += benchmark_stages(p, str(mv), run, clips / "heldout")
+    if p.transfer_train is not None:
+        stages += transfer_stages(p, run)
+    return stages
+
+
+def benchmark_stages(
+    p: WorldModelProfile, model: str, run: Path, heldout: Path, samples: int | None = None
+) -> list[tuple[str, list[str]]]:
+    """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
+    generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
+    profile's; seeds are per sample, so more samples keep the first ones' bytes), the held-out clips
+    ``heldout`` and the generated ones scored into ``RUN/eval``, and the must-hold figures."""
+    gen, ev = run / "generated", run / "eval"
+    samples = samples or p.samples_per_benchmark
+    stages = []
     for b in p.benchmarks:
-        argv = ["generate", "--model", str(mv), "--rig", p.rig, "--prompt", b.prompt, "--trajectory", b.trajectory]
-        argv += ["--seed", str(b.seed), "--num-samples", str(p.samples_per_benchmark), "--out", str(gen / b.name)]
+        argv = ["generate", "--model", model, "--rig", p.rig, "--prompt", b.prompt, "--trajectory", b.trajectory]
+        argv += ["--seed", str(b.seed), "--num-samples", str(samples), "--out", str(gen / b.name)]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
-        (
-            "eval-heldout",
-            ["eval", str(clips / "heldout"), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout],
-        )
+        ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
     )
     reference = ["--reference", str(ev / "heldout" / "metrics.json")]
     stages.append(
         ("eval-generated", ["eval", str(gen), "--rig", p.rig, "--out", str(ev / "generated"), *reference, *p.eval])
     )
     stages.append(("figures", ["worldmodel", "figures", str(run)]))
-    if p.transfer_train is not None:
-        stages += transfer_stages(p, run)
     return stages
+
+
+def benchmark_worldmodel(
+    model: str, heldout: Path, run: Path, profile_name: str, samples: int | None, tokenizer_eval: Path | None
+) -> None:
+    """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
+    multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig."""
+    from drivewm.choices import resolve_model_folder
+    from drivewm.quickstart import run_stage
+
+    folder = resolve_model_folder(model)  # a missing folder fails here, not at the first of twelve stages
+    if not (folder / "config.json").is_file():
+        raise DrivewmError(f"worldmodel benchmark: --model {model} is not a model folder (no config.json)")
+    if not heldout.is_dir():
+        raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder")
+    profile = load_profile(profile_name)
+    if tokenizer_eval is not None:  # the tokenizer's held-out PSNR figure, from its own eval
+        import json
+
+        from drivewm.atomic import write_json
+
+        try:
+            metrics = json.loads(tokenizer_eval.read_text())
+        except (OSError, ValueError) as exc:
+            raise DrivewmError(f"worldmodel benchmark: --tokenizer-eval {tokenizer_eval}: {exc}") from None
+        if not isinstance(metrics, dict) or "psnr" not in metrics:
+            raise DrivewmError(f"worldmodel benchmark: {tokenizer_eval} is not a `tokenizer eval` metrics.json")
+        write_json(run / "eval" / "tokenizer" / "metrics.json", metrics)
+    stages = benchmark_stages(profile, model, run, heldout, samples)
+    print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
+    for name, argv in stages:
+        run_stage(name, argv, run, "worldmodel")
 
 
 def transfer_stages(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]]]:
@@ -231,6 +270,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     f = wsub.add_parser("figures", help="the must-hold figures of a run's evals: RUN/eval/figures.json and .md")
     f.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
     f.set_defaults(func=_figures)
+    b = wsub.add_parser(
+        "benchmark",
+        help="the shipped models' benchmark on any multi-view model: generate its prompts, eval, figures",
+    )
+    b.add_argument("--model", default="shipped:multiview", help="multi-view model folder (default shipped:multiview)")
+    b.add_argument(
+        "--heldout",
+        required=True,
+        type=Path,
+        help="held-out clips of the model's rig and size (e.g. the worldmodel_heldout simulate recipe, "
+        "curated with --recipe worldmodel)",
+    )
+    b.add_argument("--out", required=True, type=output_folder, help="run folder (a rerun resumes in it)")
+    b.add_argument("--profile", default="cpu", help="profile whose prompts, sampler and eval settings to use")
+    b.add_argument(
+        "--samples-per-prompt",
+        type=whole_number(1, 64),
+        help="seeds per prompt (default the profile's, 2: 24 clips; 4 reads the turn sign on 32 left/right samples)",
+    )
+    b.add_argument("--tokenizer-eval", type=Path, help="a `tokenizer eval` metrics.json for the PSNR figure")
+    b.set_defaults(
+        func=lambda args: benchmark_worldmodel(
+            args.model, args.heldout, args.out, args.profile, args.samples_per_prompt, args.tokenizer_eval
+        )
+    )
     e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")
     e.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
     e.add_argument(

@@ -55,6 +55,7 @@ def test_missing_or_unknown_shipped_models_are_one_line_errors(fake_shipped_weig
         ["quickstart"],
         ["worldmodel", "train"],
         ["worldmodel", "export", "run"],
+        ["worldmodel", "benchmark", "--heldout", "c"],
     ],
 )
 @pytest.mark.parametrize("below", [False, True])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from drivewm import resources
-from drivewm.cli import build_parser
-from drivewm.worldmodel import load_profile, stage_commands
+from drivewm.cli import build_parser, main
+from drivewm.worldmodel import benchmark_stages, load_profile, stage_commands
 
 
 @pytest.mark.parametrize("profile", ["cpu", "gpu"])
@@ -32,6 +32,44 @@ def test_every_stage_parses_and_chains_its_outputs(profile, tmp_path):
     for _, argv in stages:  # packaged recipes, found by name for their stage
         if "--recipe" in argv:
             assert resources.find(f"recipes/{argv[0]}", argv[argv.index("--recipe") + 1], "recipe").is_file()
+
+
+def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
+    """`drivewm worldmodel benchmark` scores a given model (a fleet fine-tune) on the stages the recipe
+    scores its own multi-view model with: same prompts, seeds, sampler and eval, another --model."""
+    p = load_profile("cpu")
+    recipe = [(n, a) for n, a in stage_commands(p, tmp_path) if n.startswith(("generate-", "eval-", "figures"))]
+    mine = benchmark_stages(p, "shipped:multiview", tmp_path, tmp_path / "clips" / "heldout")
+    assert [n for n, _ in mine] == [n for n, _ in recipe]
+    for (_, a), (_, b) in zip(mine, recipe):
+        if a[0] == "generate":
+            i = a.index("--model")
+            assert a[i + 1] == "shipped:multiview" and b[i + 1] == str(tmp_path / "multiview")
+            a, b = a[:i] + a[i + 2 :], b[:i] + b[i + 2 :]
+        assert a == b
+    more = dict(benchmark_stages(p, "m", tmp_path, tmp_path, samples=4))
+    assert all(a[a.index("--num-samples") + 1] == "4" for n, a in more.items() if n.startswith("generate-"))
+    parser = build_parser()
+    assert all(callable(parser.parse_args(argv).func) for _, argv in mine)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--model", "{tmp}/MISSING"], "--model {tmp}/MISSING is not a model folder (no config.json)"),
+        (["--heldout", "{tmp}/nowhere"], "--heldout {tmp}/nowhere is not a clip folder"),
+        (["--tokenizer-eval", "{tmp}/heldout/bad.json"], "bad.json is not a `tokenizer eval` metrics.json"),
+        (["--samples-per-prompt", "0"], "must be in [1, 64], got 0"),
+    ],
+)
+def test_benchmark_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, args, message):
+    (tmp_path / "heldout").mkdir()
+    (tmp_path / "heldout" / "bad.json").write_text('{"ssim": 0.7}')
+    argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "heldout"), "--out", str(tmp_path / "run")]
+    assert main([*argv, *[a.format(tmp=tmp_path) for a in args]]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("error: ") and message.format(tmp=tmp_path) in err, err
+    assert not (tmp_path / "run").exists()
 
 
 def _clip(weather, time_of_day, cond_yaw, yaw, tfe=1.0, match_w=1.0, match_t=1.0):
