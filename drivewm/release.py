@@ -91,6 +91,36 @@ def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
     return [*files, out / "MANIFEST.json", write_model_card(run, out, manifest, notes)]
 
 
+def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR) -> dict:
+    """Replace the shipped folder ``kind`` by ``src``, a fine-tune of it (``drivewm posttrain --init
+    shipped:multiview``), exported as :func:`export_run` exports a run's folders; rewrites
+    ``MANIFEST.json``: every file's sha256 and bytes, and ``kind``'s training record with the fine-tune's
+    steps and seconds added to the folder's own and listed under ``fine_tunes``. Returns the manifest;
+    the model card's figures and sha256 are the caller's to update (tests/test_shipped_weights.py checks
+    the sha256)."""
+    if kind not in RUN_FOLDERS:
+        raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
+    manifest = check_manifest(root)  # never build on a manifest that no longer matches its files
+    record = training_record(Path(src))
+    if not record:
+        raise DrivewmError(f"{src}: no train_state.pt, so no record of the fine-tune's steps to ship with it")
+    before = manifest["training"][kind]
+    export_folder(Path(src), root / kind)
+    files = sorted(p for name in RUN_FOLDERS if (root / name).is_dir() for p in (root / name).iterdir() if p.is_file())
+    sizes = {str(p.relative_to(root)): p.stat().st_size for p in files}
+    if max(sizes.values()) > MAX_FILE_BYTES or sum(sizes.values()) > MAX_TOTAL_BYTES:
+        raise DrivewmError(f"{root}: shipped weights must be <= 16 MB a file, 40 MB in all; got {sizes}")
+    seconds = [before.get("train_seconds"), record["train_seconds"]]
+    manifest["files"] = {name: {"sha256": sha256(root / name), "bytes": size} for name, size in sizes.items()}
+    manifest["training"][kind] = {
+        "steps": before["steps"] + record["steps"],
+        "train_seconds": None if None in seconds else sum(seconds),
+        "fine_tunes": [*before.get("fine_tunes", []), record],
+    }
+    write_json(root / "MANIFEST.json", manifest)
+    return manifest
+
+
 def check_manifest(root: Path = WEIGHTS_DIR) -> dict:
     """The shipped manifest, after checking every file's sha256 against it (DrivewmError on a mismatch)."""
     manifest = json.loads((root / "MANIFEST.json").read_text())

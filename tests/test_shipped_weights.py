@@ -73,6 +73,42 @@ def test_export_of_a_run_writes_fp16_folders_manifest_and_card(tmp_path):
         ).read_bytes()
 
 
+def test_a_fine_tune_replaces_one_folder_and_its_record_adds_up(tmp_path):
+    """`replace_shipped` swaps one folder for its fine-tune: fp16, a manifest that checks against the new
+    bytes, the other folders untouched, and steps and seconds added to the folder's record."""
+    import torch
+    from safetensors.torch import load_file
+
+    from drivewm.release import replace_shipped
+    from drivewm.train.checkpoint import load_model_folder, save_model_folder, save_train_state
+
+    root = tmp_path / "weights"
+    shutil.copytree(WEIGHTS_DIR, root)
+    before = json.loads((root / "MANIFEST.json").read_text())
+    info, state = load_model_folder(shipped_model("multiview"), "multiview")
+    tuned = {k: v.float() + 0.01 if v.is_floating_point() else v for k, v in state.items()}
+    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    save_model_folder(tmp_path / "ft", "multiview", info["config"], tuned, extra)
+    save_train_state(
+        tmp_path / "ft", {"step": 120, "train_seconds": 30.0, "model": {}, "ema": {}, "optimizer": {}, "rng": {}}
+    )
+    manifest = replace_shipped("multiview", tmp_path / "ft", root)
+    assert check_manifest(root) == manifest
+    after = load_file(root / "multiview" / "model.safetensors")
+    assert all(after[k].dtype == torch.float16 for k in after if after[k].is_floating_point())
+    k = next(k for k in after if after[k].is_floating_point())
+    assert torch.allclose(after[k].float(), tuned[k].half().float())
+    for kind in ("tokenizer", "text2world", "transfer"):
+        assert manifest["training"][kind] == before["training"][kind]
+        for name in ("config.json", "model.safetensors"):
+            assert manifest["files"][f"{kind}/{name}"] == before["files"][f"{kind}/{name}"]
+    record, old = manifest["training"]["multiview"], before["training"]["multiview"]
+    assert record["steps"] == old["steps"] + 120 and record["train_seconds"] == pytest.approx(old["train_seconds"] + 30)
+    assert record["fine_tunes"][-1] == {"steps": 120, "train_seconds": 30.0}
+    with pytest.raises(DrivewmError, match="no train_state.pt"):
+        replace_shipped("multiview", shipped_model("multiview"), root)
+
+
 def generation_stats(out: Path) -> dict[str, list[float]]:
     """Per camera of the generated clip: mean and std of the pixels, and the mean of the top and
     bottom thirds (sky and road, in a model that learned where they are)."""
