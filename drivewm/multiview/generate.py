@@ -22,16 +22,28 @@ from drivewm.multiview.model import MultiView
 from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
 from drivewm.multiview.trajectories import resolve_trajectory
 from drivewm.multiview.writer import GeneratedSample, write_samples
+from drivewm.text.conditions import named_values
 from drivewm.tokenizer import Tokenizer
+
+#: What a prompt that names no time of day is completed with: the captioner's own phrase for daylight.
+DEFAULT_TIME_PHRASE = "during the day"
 
 
 def view_captions(prompt: str, rig: Rig) -> list[str]:
     """Per-view captions in the curated clips' form ("The front-left camera view of ..."), unless
-    the prompt already names a camera view."""
+    the prompt already names a camera view (then it is every view's caption as it is).
+
+    Every caption the models train on names its time of day (drivewm.curate.captions), so a prompt
+    that names none ("steady rain on the motorway") left the model between day, dusk and night, and
+    rain came out as a dark, night-like blur; such a prompt asks for daylight, as a driver would read
+    it, and is completed with :data:`DEFAULT_TIME_PHRASE` (docs/quality-vs-compute.md, "A prompt that
+    names no time of day"). The eval still scores only what the prompt itself names."""
     if "camera view" in prompt:
         return [prompt] * len(rig.cameras)
     scene = prompt.strip().rstrip(".")
     scene = scene[:1].lower() + scene[1:]
+    if not named_values(scene, "time_of_day"):
+        scene = f"{scene}, {DEFAULT_TIME_PHRASE}"
     return [f"The {camera_direction(c)} camera view of {scene}." for c in rig.cameras]
 
 

@@ -27,12 +27,17 @@ KEYWORDS: dict[str, dict[str, tuple[str, ...]]] = {
 }
 
 
+def named_values(caption: str, field: str) -> list[str]:
+    """The values of ``field`` (weather, time_of_day) whose words the caption uses, in KEYWORDS order."""
+    text = caption.lower()
+    return [v for v, words in KEYWORDS[field].items() if any(re.search(rf"\b{re.escape(w)}\b", text) for w in words)]
+
+
 def caption_conditions(caption: str) -> dict[str, str]:
     """``{"weather": ..., "time_of_day": ...}`` for the fields the caption names unambiguously."""
-    text = caption.lower()
     out = {}
-    for field, values in KEYWORDS.items():
-        named = [v for v, words in values.items() if any(re.search(rf"\b{re.escape(w)}\b", text) for w in words)]
+    for field in KEYWORDS:
+        named = named_values(caption, field)
         if len(named) == 1:
             out[field] = named[0]
     return out

@@ -61,3 +61,23 @@ def test_sample_tags_are_the_conditions_its_prompt_asks_for(prompt, tags):
     s = dataclasses.replace(_sample(load_rig("nuscenes6"), 0), caption=prompt)
     clip = sample_clip("sample_000", s, fps=10.0)
     assert clip.meta.tags == tags == caption_conditions(prompt)  # the one reader of prompts (drivewm.text)
+
+
+@pytest.mark.parametrize(
+    "prompt, caption",
+    [
+        ("Steady rain on the motorway.", "The front camera view of steady rain on the motorway, during the day."),
+        ("a dark road through fields", "The front camera view of a dark road through fields."),
+        ("snow at dusk, turning left", "The front camera view of snow at dusk, turning left."),
+        ("fog from dusk to night", "The front camera view of fog from dusk to night."),  # two times named: as it is
+        ("The front camera view of rain.", "The front camera view of rain."),  # the captions' own form: verbatim
+    ],
+)
+def test_a_prompt_naming_no_time_of_day_asks_for_daylight(prompt, caption):
+    """Every training caption names its time of day; a prompt without one had left the models between
+    day, dusk and night (rain came out night-dark), so it is completed with the captions' daylight phrase."""
+    from drivewm.multiview.generate import view_captions
+
+    caps = view_captions(prompt, load_rig("nuscenes6"))  # CAM_FRONT, CAM_FRONT_RIGHT, ...
+    verbatim = "camera view" in prompt
+    assert caps[0] == caption and caps[1] == (caption if verbatim else caption.replace("front", "front-right", 1))

@@ -107,6 +107,7 @@ def test_recipes_are_valid() -> None:
         "smoke",
         "transfer",
         "transfer_heldout",
+        "weather_finetune",
         "worldmodel",
         "worldmodel_heldout",
     ]
@@ -134,6 +135,11 @@ def test_worldmodel_heldout_drives_share_no_seed_with_training() -> None:
     heldout_seeds = {c.seed + i for c, count in heldout for i in range(count)}
     assert len(heldout_seeds) >= 12 and not train_seeds & heldout_seeds
     assert {c.weather for c, _ in heldout} == {c.weather for c, _ in train}
+    drive = lambda c: (c.source, c.scenario, c.weather, c.time_of_day, c.seed)  # noqa: E731
+    finetune = {drive(c) for c, _ in load_recipe("weather_finetune")}
+    assert not {d[-1] for d in finetune} & heldout_seeds  # the benchmark's held-out drives stay unseen
+    # a fine-tune drive on a worldmodel seed is that recipe's drive, not another one on its seed
+    assert {d for d in finetune if d[-1] in train_seeds} <= {drive(c) for c, _ in train}
 
 
 def test_bad_recipe_names_the_file(tmp_path) -> None:
