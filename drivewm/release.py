@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 from pathlib import Path
 
 from drivewm.atomic import write_json
@@ -78,17 +79,25 @@ def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
     run, out = Path(run), Path(out)
     folders = {n: f for n, f in RUN_FOLDERS.items() if n not in OPTIONAL_FOLDERS or (run / f).is_dir()}
     records = {name: export_folder(run / folder, out / name) for name, folder in folders.items()}
-    files = sorted(p for name in folders for p in (out / name).iterdir() if p.is_file())
-    sizes = {str(p.relative_to(out)): p.stat().st_size for p in files}
-    too_big = [k for k, v in sizes.items() if v > MAX_FILE_BYTES]
-    if too_big or sum(sizes.values()) > MAX_TOTAL_BYTES:
-        raise DrivewmError(f"{out}: shipped weights must be <= 16 MB a file, 40 MB in all; got {sizes}")
-    manifest = {
-        "files": {str(p.relative_to(out)): {"sha256": sha256(p), "bytes": p.stat().st_size} for p in files},
-        "training": records,
-    }
+    files = folder_files(out, {name: out / name for name in folders})
+    manifest = {"files": manifest_files(out, files), "training": records}
     write_json(out / "MANIFEST.json", manifest)
     return [*files, out / "MANIFEST.json", write_model_card(run, out, manifest, notes)]
+
+
+def folder_files(root: Path, folders: dict[str, Path]) -> list[Path]:
+    """The files of the shipped ``folders`` (name -> where they are now), refused beyond the package
+    limits (16 MB a file, 40 MB in all) before anything is written over."""
+    files = sorted(p for folder in folders.values() for p in folder.iterdir() if p.is_file())
+    sizes = {f"{p.parent.name}/{p.name}": p.stat().st_size for p in files}
+    if max(sizes.values(), default=0) > MAX_FILE_BYTES or sum(sizes.values()) > MAX_TOTAL_BYTES:
+        raise DrivewmError(f"{root}: shipped weights must be <= 16 MB a file, 40 MB in all; got {sizes}")
+    return files
+
+
+def manifest_files(root: Path, files: list[Path]) -> dict:
+    """``MANIFEST.json``'s ``files``: path under ``root`` -> sha256 and bytes."""
+    return {str(p.relative_to(root)): {"sha256": sha256(p), "bytes": p.stat().st_size} for p in files}
 
 
 def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR) -> dict:
@@ -105,13 +114,19 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR) -> dic
     if not record:
         raise DrivewmError(f"{src}: no train_state.pt, so no record of the fine-tune's steps to ship with it")
     before = manifest["training"][kind]
-    export_folder(Path(src), root / kind)
-    files = sorted(p for name in RUN_FOLDERS if (root / name).is_dir() for p in (root / name).iterdir() if p.is_file())
-    sizes = {str(p.relative_to(root)): p.stat().st_size for p in files}
-    if max(sizes.values()) > MAX_FILE_BYTES or sum(sizes.values()) > MAX_TOTAL_BYTES:
-        raise DrivewmError(f"{root}: shipped weights must be <= 16 MB a file, 40 MB in all; got {sizes}")
+    staged = root / f".{kind}.new"  # exported beside the shipped folder, which is replaced only once it fits
+    shipped = {n: root / n for n in RUN_FOLDERS if (root / n).is_dir()}
+    shutil.rmtree(staged, ignore_errors=True)
+    try:
+        export_folder(Path(src), staged)
+        folder_files(root, {**shipped, kind: staged})
+    except BaseException:
+        shutil.rmtree(staged, ignore_errors=True)
+        raise
+    shutil.rmtree(root / kind)
+    staged.rename(root / kind)
     seconds = [before.get("train_seconds"), record["train_seconds"]]
-    manifest["files"] = {name: {"sha256": sha256(root / name), "bytes": size} for name, size in sizes.items()}
+    manifest["files"] = manifest_files(root, folder_files(root, shipped))
     manifest["training"][kind] = {
         "steps": before["steps"] + record["steps"],
         "train_seconds": None if None in seconds else sum(seconds),
