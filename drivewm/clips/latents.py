@@ -3,7 +3,9 @@
 Layout, next to the clips: ``CLIPDIR/latents/NAME/`` (NAME defaults to the tokenizer folder's
 name) holding ``index.json`` and one ``KEY.safetensors`` per clip with tensors
 ``latents`` ((V, c, t, h, w) float32, raw tokenizer output, *not* normalised) and
-``T_world_from_ego`` ((T, 4, 4) float64). ``index.json``::
+``T_world_from_ego`` ((T, 4, 4) float64), and in the file's metadata ``source``: a fingerprint of
+what made it (the clip's meta, pixels and poses, the tokenizer's files, the tiling), so that
+``drivewm tokenizer encode`` keeps a file it would write again byte for byte. ``index.json``::
 
     {"format_version": 1,
      "tokenizer": {"path": ..., "config": {...}, "latent_mean": [c], "latent_std": [c]},
@@ -20,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from safetensors import safe_open
 from safetensors.torch import load_file, save_file
 
 from drivewm.atomic import atomic_path, write_json
@@ -50,9 +53,10 @@ class LatentClip:
 
 
 def write_latent_clip(
-    cache_dir: str | Path, meta: ClipMeta, latents: torch.Tensor, T_world_from_ego: np.ndarray
+    cache_dir: str | Path, meta: ClipMeta, latents: torch.Tensor, T_world_from_ego: np.ndarray, source: str = ""
 ) -> dict:
-    """Atomically write one clip's latents; returns its index row."""
+    """Atomically write one clip's latents, with ``source`` (see the module docstring) in the file's
+    metadata; returns its index row."""
     if latents.ndim != 5:
         raise DrivewmError(f"clip {meta.key}: latents must be (V, c, t, h, w), got {tuple(latents.shape)}")
     path = child_path(cache_dir, meta.key, ext="safetensors", what="clip key")
@@ -61,8 +65,22 @@ def write_latent_clip(
         "T_world_from_ego": torch.as_tensor(np.asarray(T_world_from_ego, dtype=np.float64)),
     }
     with atomic_path(path) as tmp:
-        save_file(tensors, str(tmp))
+        save_file(tensors, str(tmp), metadata={"source": source})
     return {"key": meta.key, "file": path.name, "meta": meta.to_json()}
+
+
+def cached_latent_row(cache_dir: str | Path, meta: ClipMeta, source: str) -> dict | None:
+    """The index row of the latent file already in ``cache_dir`` for this clip when it was written
+    from the same ``source`` fingerprint, else None (no file, an unreadable one, or another source)."""
+    path = child_path(cache_dir, meta.key, ext="safetensors", what="clip key")
+    if not source or not path.is_file():
+        return None
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            written = (f.metadata() or {}).get("source")
+    except Exception:  # a damaged file is written again, not trusted
+        return None
+    return {"key": meta.key, "file": path.name, "meta": meta.to_json()} if written == source else None
 
 
 def write_latent_index(cache_dir: str | Path, tokenizer_info: dict, rows: list[dict]) -> None:

@@ -111,7 +111,8 @@ def _encode(args: argparse.Namespace) -> int:
     report = encode_clips(args.model, args.data, args.name, _tiling_config(args))
     for item in report["skipped"]:
         print(f"  skipped {item['key']}: {item['reason']}")
-    print(f"encoded {report['encoded']} clips, skipped {len(report['skipped'])}; cache: {report['cache']}")
+    kept = f" ({report['reused']} kept from the cache as they were)" if report["reused"] else ""
+    print(f"encoded {report['encoded']} clips{kept}, skipped {len(report['skipped'])}; cache: {report['cache']}")
     return 0
 
 
