@@ -16,7 +16,13 @@ from tqdm import tqdm
 
 from drivewm.atomic import remove_dead_temporaries
 from drivewm.clips import Clip
-from drivewm.clips.latents import cached_latent_row, latent_cache_dir, write_latent_clip, write_latent_index
+from drivewm.clips.latents import (
+    LATENT_CACHE_VERSION,
+    cached_latent_row,
+    latent_cache_dir,
+    write_latent_clip,
+    write_latent_index,
+)
 from drivewm.clips.shards import BadClip, read_clips
 from drivewm.config import to_dict
 from drivewm.errors import BatchError, DrivewmError
@@ -75,9 +81,9 @@ def encode_clips(
 
 
 def _maker_fingerprint(model_dir: Path, tiling: TilingConfig) -> str:
-    """sha256 of the tokenizer folder's config and weights and of the tiling: what, beside the clip,
-    decides the latents."""
-    digest = hashlib.sha256(json.dumps(to_dict(tiling), sort_keys=True).encode())
+    """sha256 of the cache format, the tiling and the tokenizer folder's config and weights: what,
+    beside the clip, decides the latent file."""
+    digest = hashlib.sha256(json.dumps([LATENT_CACHE_VERSION, to_dict(tiling)], sort_keys=True).encode())
     for path in sorted([model_dir / "config.json", *model_dir.glob("*.safetensors")]):
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
