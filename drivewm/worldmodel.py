@@ -201,32 +201,46 @@ def benchmark_worldmodel(
     model: str, heldout: Path, run: Path, profile_name: str, samples: int | None, tokenizer_eval: Path | None
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
-    multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig."""
+    multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
+    against the held-out eval an earlier benchmark wrote (``heldout`` its metrics.json: copied to
+    ``RUN/eval/heldout/`` and not evaluated again, so fine-tunes compared on it share one reference)."""
+    from drivewm.atomic import write_json
     from drivewm.choices import resolve_model_folder
     from drivewm.quickstart import run_stage
 
     folder = resolve_model_folder(model)  # a missing folder fails here, not at the first of twelve stages
     if not (folder / "config.json").is_file():
         raise DrivewmError(f"worldmodel benchmark: --model {model} is not a model folder (no config.json)")
-    if not heldout.is_dir():
-        raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder")
+    if not heldout.is_dir() and not heldout.is_file():
+        raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder or an eval's metrics.json")
     profile = load_profile(profile_name)
-    if tokenizer_eval is not None:  # the tokenizer's held-out PSNR figure, from its own eval
-        import json
-
-        from drivewm.atomic import write_json
-
-        try:
-            metrics = json.loads(tokenizer_eval.read_text())
-        except (OSError, ValueError) as exc:
-            raise DrivewmError(f"worldmodel benchmark: --tokenizer-eval {tokenizer_eval}: {exc}") from None
-        if not isinstance(metrics, dict) or "psnr" not in metrics:
-            raise DrivewmError(f"worldmodel benchmark: {tokenizer_eval} is not a `tokenizer eval` metrics.json")
-        write_json(run / "eval" / "tokenizer" / "metrics.json", metrics)
+    reference = _read_metrics(heldout, "--heldout", "`drivewm eval`", "clips") if heldout.is_file() else None
+    tokenizer = (
+        _read_metrics(tokenizer_eval, "--tokenizer-eval", "`tokenizer eval`", "psnr") if tokenizer_eval else None
+    )
+    if reference is not None:
+        write_json(run / "eval" / "heldout" / "metrics.json", reference)
+    if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
+        write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
     stages = benchmark_stages(profile, model, run, heldout, samples)
+    if reference is not None:
+        stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
     for name, argv in stages:
         run_stage(name, argv, run, "worldmodel")
+
+
+def _read_metrics(path: Path, flag: str, what: str, key: str) -> dict:
+    """The JSON object of metrics file ``path``, which must hold ``key``; DrivewmError naming ``flag`` else."""
+    import json
+
+    try:
+        metrics = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DrivewmError(f"worldmodel benchmark: {flag} {path}: {exc}") from None
+    if not isinstance(metrics, dict) or key not in metrics:
+        raise DrivewmError(f"worldmodel benchmark: {path} is not a {what} metrics.json")
+    return metrics
 
 
 def transfer_stages(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]]]:
@@ -280,7 +294,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         required=True,
         type=Path,
         help="held-out clips of the model's rig and size (e.g. the worldmodel_heldout simulate recipe, "
-        "curated with --recipe worldmodel)",
+        "curated with --recipe worldmodel), or the metrics.json of their eval from an earlier benchmark "
+        "(RUN/eval/heldout/metrics.json: reused, not evaluated again)",
     )
     b.add_argument("--out", required=True, type=output_folder, help="run folder (a rerun resumes in it)")
     b.add_argument("--profile", default="cpu", help="profile whose prompts, sampler and eval settings to use")

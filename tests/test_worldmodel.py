@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from drivewm import resources
@@ -53,12 +55,32 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     assert all(callable(parser.parse_args(argv).func) for _, argv in mine)
 
 
+def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
+    """--heldout an earlier benchmark's RUN/eval/heldout/metrics.json: it becomes this run's reference
+    as it is, and the held-out clips are not evaluated again; every other stage is the recipe's."""
+    import drivewm.quickstart
+
+    earlier = {"num_clips": 48, "tse_calibrated": 0.957, "clips": {"a": {"tse_calibrated": 0.9}}}
+    (tmp_path / "earlier.json").write_text(json.dumps(earlier))
+    ran = []
+    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label: ran.append((name, argv)))
+    run = tmp_path / "run"
+    argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
+    assert main(argv) == 0
+    assert json.loads((run / "eval" / "heldout" / "metrics.json").read_text()) == earlier
+    full = benchmark_stages(load_profile("cpu"), "shipped:multiview", run, tmp_path / "earlier.json")
+    assert ran == [(n, a) for n, a in full if n != "eval-heldout"] and len(ran) == len(full) - 1
+    reference = dict(ran)["eval-generated"]
+    assert reference[reference.index("--reference") + 1] == str(run / "eval" / "heldout" / "metrics.json")
+
+
 @pytest.mark.parametrize(
     "args, message",
     [
         (["--model", "{tmp}/MISSING"], "--model {tmp}/MISSING is not a model folder (no config.json)"),
         (["--heldout", "{tmp}/nowhere"], "--heldout {tmp}/nowhere is not a clip folder"),
         (["--tokenizer-eval", "{tmp}/heldout/bad.json"], "bad.json is not a `tokenizer eval` metrics.json"),
+        (["--heldout", "{tmp}/heldout/bad.json"], "bad.json is not a `drivewm eval` metrics.json"),
         (["--samples-per-prompt", "0"], "must be in [1, 64], got 0"),
     ],
 )
