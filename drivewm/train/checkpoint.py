@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 
 import torch
-from safetensors import safe_open
+from safetensors.torch import load as load_safetensors
 from safetensors.torch import save_file
 
 from drivewm import __version__
@@ -188,10 +188,14 @@ def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None
 
 
 def _read_weights(weights_path: Path) -> tuple[dict[str, torch.Tensor], str | None]:
-    """The tensors of a safetensors file and the revision in its header (None when it has none)."""
+    """The tensors of a safetensors file and the revision in its header (None when it has none).
+
+    The file is read once, into memory: a save replaces it by a rename, so one read sees one save's
+    header and tensors. (safe_open could return the header of one save and the tensors of the next.)"""
     try:
-        with safe_open(str(weights_path), framework="pt") as f:
-            return {k: f.get_tensor(k) for k in f.keys()}, (f.metadata() or {}).get(REVISION_KEY)
+        data = weights_path.read_bytes()
+        header = json.loads(data[8 : 8 + int.from_bytes(data[:8], "little")])
+        return load_safetensors(data), (header.get("__metadata__") or {}).get(REVISION_KEY)
     except Exception as exc:  # safetensors raises several types for bad files
         raise DrivewmError(f"{weights_path}: cannot read weights ({exc.__class__.__name__})") from None
 
