@@ -8,14 +8,16 @@ trajectory has the same loss under all three; one that learned turns mirrored ha
 the mirrored waypoints. Captions are kept (as in training) or dropped (the trajectory alone).
 
     python studies/trajectory_loss_gap.py MODEL_DIR LATENT_CACHE [--clips 16] [--min-turn-deg 20] [--match roundabout]
-        [--video2world]
+        [--video2world] [--split]
 
 LATENT_CACHE: a folder of ``drivewm encode`` latents (the clips the model trained on, or held-out
 ones). Prints, per noise level, the mean losses and "mirrored - true" with its t statistic over
 clips (consecutive clips of one drive overlap, so it overstates the evidence) and the number of
 clips whose own waypoints give the lower loss. Forward passes only: about a
-minute for 16 clips on 2 CPU cores (drivewm.multiview.trajectory_probe; post-training logs the
-same gap as ``trajectory_loss_gap``). Numbers: docs/quality-vs-compute.md.
+minute for 16 clips on 2 CPU cores (``--split`` adds the own waypoints with the mirrored
+moving-camera rays and the reverse: which of the two pathways carries the turn; about 2 minutes).
+drivewm.multiview.trajectory_probe holds the probe; post-training logs the same gap as
+``trajectory_loss_gap``. Numbers: docs/quality-vs-compute.md.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ import torch
 
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.trajectory_probe import clip_losses, t_statistic, turning_clips
+from drivewm.multiview.trajectory_probe import SPLIT, clip_losses, t_statistic, turning_clips
 
 
 def main() -> None:
@@ -41,6 +43,11 @@ def main() -> None:
     parser.add_argument(
         "--video2world", action="store_true", help="give the first latent frame (as rollouts do): the rest is scored"
     )
+    parser.add_argument(
+        "--split",
+        action="store_true",
+        help="also score own waypoints with the mirrored moving-camera rays and the reverse: which pathway carries it",
+    )
     args = parser.parse_args()
     torch.set_grad_enabled(False)
     model = MultiView.from_pretrained(args.model)
@@ -51,11 +58,14 @@ def main() -> None:
         f"{args.model}: {len(clips)} clips{' of ' + args.match if args.match else ''} turning more than "
         f"{args.min_turn_deg:g} deg"
     )
+    names = ("own", "mirrored", "none", *(SPLIT if args.split else ()))
     for captions in (True, False):
         for sigma in (float(s) for s in args.sigmas.split(",")):
             r = np.array(
                 [
-                    clip_losses(model.net, model, ds, i, sigma, captions, 1000 + j, cond_frames=int(args.video2world))
+                    clip_losses(
+                        model.net, model, ds, i, sigma, captions, 1000 + j, names, cond_frames=int(args.video2world)
+                    )
                     for j, i in enumerate(clips)
                 ]
             )
@@ -67,6 +77,13 @@ def main() -> None:
                 f"(t = {t:+.2f}; own lower in {(gap > 0).sum()}/{len(gap)} clips)",
                 flush=True,
             )
+            for k, name in enumerate(names[3:], start=3):
+                gap = r[:, k] - r[:, 0]
+                print(
+                    f"    {name}: minus own {gap.mean():+.5f} (t = {t_statistic(gap):+.2f}; "
+                    f"below own in {(gap < 0).sum()}/{len(gap)} clips)",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

@@ -55,8 +55,8 @@ def clip_losses(
     cond_frames: int = 0,
 ) -> list[float]:
     """EDM loss of clip ``index`` under each of ``trajectories`` (its own waypoints, the mirrored ones,
-    none), with the same noise. ``net``: the denoiser to call (``bundle.net`` or a training wrapper
-    of it); ``bundle``: the :class:`~drivewm.multiview.model.MultiView` whose text encoder and
+    none, or one of :data:`SPLIT`), with the same noise. ``net``: the denoiser to call (``bundle.net``
+    or a training wrapper of it); ``bundle``: the :class:`~drivewm.multiview.model.MultiView` whose text encoder and
     camera geometry build the conditioning; ``cond_frames``: latent frames given (Video2World), 0 =
     Text2World."""
     s = ds[index]
@@ -66,12 +66,25 @@ def clip_losses(
     edm = dataclasses.replace(bundle.cfg.edm, cond_frames=cond_frames)
     sigmas, keep = torch.full((views,), sigma, device=device), torch.full((views,), captions, device=device)
     waypoints = {"own": s.trajectory, "mirrored": s.trajectory * MIRROR, "none": None}
+
+    def conditioning(name: str):
+        traj = waypoints[name]
+        return build_conditioning(bundle, s.rig, [s.view_captions], None if traj is None else traj[None], s.fps)
+
     out = []
     for name in trajectories:
-        traj = waypoints[name]
-        cond = build_conditioning(bundle, s.rig, [s.view_captions], None if traj is None else traj[None], s.fps)
+        embedded, rays = SPLIT.get(name, (name, name))
+        cond = conditioning(embedded)
+        if rays != embedded:  # one pathway fed the other trajectory: which of the two carries the turn
+            cond = dataclasses.replace(cond, rays=conditioning(rays).rays)
         out.append(float(edm_loss(net, edm, s.latents.to(device), cond.to(device), sigmas, noise, keep)))
     return out
+
+
+#: Trajectories whose two pathways disagree: (the waypoints the trajectory encoder embeds, the ones
+#: the moving-camera rays follow). With the own and mirrored losses they tell whether the waypoint
+#: embedding or the per-frame camera rays carries what the model learned of a turn.
+SPLIT = {"own, mirrored rays": ("own", "mirrored"), "mirrored, own rays": ("mirrored", "own")}
 
 
 def loss_gap(

@@ -1,6 +1,7 @@
 """The trajectory probe (drivewm.multiview.trajectory_probe): the loss gap of mirrored against own
 waypoints flips sign exactly on mirrored data, is exactly 0 for a model whose trajectory pathway is
-closed, and post-training logs the gap of the weights it is training, in the rows it says."""
+closed, the pathway split isolates the camera rays, and post-training logs the gap of the weights it is
+training, in the rows it says."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.posttrain import posttrain, posttrain_config
-from drivewm.multiview.trajectory_probe import MIRROR, loss_gap, turning_clips
+from drivewm.multiview.trajectory_probe import MIRROR, SPLIT, clip_losses, loss_gap, turning_clips
 
 pytestmark = pytest.mark.slow  # the simulated clips coded by the stand-in tokenizer, and a post-training run
 
@@ -66,6 +67,27 @@ def test_gap_flips_on_mirrored_data_and_is_zero_without_a_pathway(mv_latents, mv
     closed = _model(mv_parent_dir, open_trajectory=False, moving_camera_rays=False)
     gap_0, t_0 = loss_gap(closed.net, closed, _dataset(mv_latents, closed), clips)
     assert gap_0 == 0.0 and math.isnan(t_0)
+
+
+def test_split_pathways_isolate_the_camera_rays(mv_latents, mv_parent_dir):
+    """With the waypoint encoder closed, only the moving-camera rays see the trajectory: own waypoints
+    with mirrored rays score exactly as the mirrored trajectory, mirrored waypoints with own rays as
+    the own one; with the encoder open as well, both splits differ from both."""
+    closed = _model(mv_parent_dir, open_trajectory=False)
+    ds = _dataset(mv_latents, closed)
+    names = ("own", "mirrored", *SPLIT)
+    for i in turning_clips(ds, 2, min_turn_deg=0.0):
+        own, mirrored, own_mirrored_rays, mirrored_own_rays = clip_losses(
+            closed.net, closed, ds, i, 1.0, True, 7, names
+        )
+        assert abs(own - mirrored) > 1e-7
+        assert own_mirrored_rays == pytest.approx(mirrored, rel=1e-6) and mirrored_own_rays == pytest.approx(
+            own, rel=1e-6
+        )
+    both = _model(mv_parent_dir, open_trajectory=True)
+    own, mirrored, own_mirrored_rays, mirrored_own_rays = clip_losses(both.net, both, ds, i, 1.0, True, 7, names)
+    assert min(abs(own_mirrored_rays - x) for x in (own, mirrored)) > 1e-7
+    assert min(abs(mirrored_own_rays - x) for x in (own, mirrored)) > 1e-7
 
 
 def test_posttrain_logs_the_gap_of_the_weights_it_trains(mv_latents, mv_parent_dir, tmp_path):
