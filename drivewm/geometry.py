@@ -53,10 +53,13 @@ def transform_points(T_b_from_a: np.ndarray, points_a: np.ndarray) -> np.ndarray
     return points_a @ T_b_from_a[:3, :3].T + T_b_from_a[:3, 3]
 
 
-def rot_z(yaw_rad: float) -> np.ndarray:
-    """Rotation about +z by ``yaw_rad`` (counter-clockwise seen from above)."""
+def rot_z(yaw_rad: float | np.ndarray) -> np.ndarray:
+    """Rotation about +z by ``yaw_rad`` (counter-clockwise seen from above): (3, 3), or (..., 3, 3)
+    for an array of angles."""
     c, s = np.cos(yaw_rad), np.sin(yaw_rad)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    R = np.zeros((*np.shape(yaw_rad), 3, 3))
+    R[..., 0, 0], R[..., 0, 1], R[..., 1, 0], R[..., 1, 1], R[..., 2, 2] = c, -s, s, c, 1.0
+    return R
 
 
 def euler_to_R(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
@@ -179,8 +182,11 @@ def pixel_rays(K: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrix [v]_x."""
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    """Cross-product matrix [v]_x of v (3,), or (..., 3, 3) of vectors (..., 3)."""
+    v = np.asarray(v)
+    out = np.zeros((*v.shape[:-1], 3, 3), dtype=np.result_type(v, np.float64))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    return out - np.swapaxes(out, -1, -2)
 
 
 def essential_from_T(T_b_from_a: np.ndarray) -> np.ndarray:
@@ -198,17 +204,18 @@ def fundamental_from_T(K_a: np.ndarray, K_b: np.ndarray, T_b_from_a: np.ndarray)
 
 
 def sampson_distance_sq(F: np.ndarray, x_a: np.ndarray, x_b: np.ndarray) -> np.ndarray:
-    """Squared Sampson distance (px^2) of correspondences x_a <-> x_b (N, 2) under x_b^T F x_a = 0.
+    """Squared Sampson distance (px^2) of correspondences x_a <-> x_b (N, 2) under x_b^T F x_a = 0:
+    (N,), or (H, N) for H matrices F (H, 3, 3) scored on the same correspondences.
 
     H&Z eq. 11.9: (x_b^T F x_a)^2 / ((F x_a)_1^2 + (F x_a)_2^2 + (F^T x_b)_1^2 + (F^T x_b)_2^2);
     the same quantity as OpenCV's ``cv2.sampsonDistance(x_a, x_b, F)``.
     """
     ha = np.concatenate([x_a, np.ones((len(x_a), 1))], axis=1)
     hb = np.concatenate([x_b, np.ones((len(x_b), 1))], axis=1)
-    Fa = ha @ F.T
+    Fa = ha @ np.swapaxes(F, -1, -2)
     Fb = hb @ F
-    num = np.sum(hb * Fa, axis=1) ** 2
-    den = Fa[:, 0] ** 2 + Fa[:, 1] ** 2 + Fb[:, 0] ** 2 + Fb[:, 1] ** 2
+    num = np.sum(hb * Fa, axis=-1) ** 2
+    den = Fa[..., 0] ** 2 + Fa[..., 1] ** 2 + Fb[..., 0] ** 2 + Fb[..., 1] ** 2
     return num / den
 
 
