@@ -8,14 +8,16 @@ trajectory has the same loss under all three; one that learned turns mirrored ha
 the mirrored waypoints. Captions are kept (as in training) or dropped (the trajectory alone).
 
     python studies/trajectory_loss_gap.py MODEL_DIR LATENT_CACHE [--clips 16] [--min-turn-deg 20] [--match roundabout]
-        [--video2world] [--split]
+        [--video2world] [--split] [--turned]
 
 LATENT_CACHE: a folder of ``drivewm encode`` latents (the clips the model trained on, or held-out
 ones). Prints, per noise level, the mean losses and "mirrored - true" with its t statistic over
 clips (consecutive clips of one drive overlap, so it overstates the evidence) and the number of
 clips whose own waypoints give the lower loss. Forward passes only: about a
 minute for 16 clips on 2 CPU cores (``--split`` adds the own waypoints with the mirrored
-moving-camera rays and the reverse: which of the two pathways carries the turn; about 2 minutes).
+moving-camera rays and the reverse: which of the two pathways carries the turn; ``--turned`` the
+static rig's rays turned by a constant 20 degrees with and against each clip's turn: whether the
+model reads a ray as a place in the rig, the layout of the road there; about 2 minutes each).
 drivewm.multiview.trajectory_probe holds the probe; post-training logs the same gap as
 ``trajectory_loss_gap``. Numbers: docs/quality-vs-compute.md.
 """
@@ -29,7 +31,7 @@ import torch
 
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.trajectory_probe import SPLIT, clip_losses, t_statistic, turning_clips
+from drivewm.multiview.trajectory_probe import SPLIT, TURNED, clip_losses, t_statistic, turning_clips
 
 
 def main() -> None:
@@ -48,6 +50,11 @@ def main() -> None:
         action="store_true",
         help="also score own waypoints with the mirrored moving-camera rays and the reverse: which pathway carries it",
     )
+    parser.add_argument(
+        "--turned",
+        action="store_true",
+        help="also score the static rig's rays turned 20 deg with and against each clip's turn: rays read as layout",
+    )
     args = parser.parse_args()
     torch.set_grad_enabled(False)
     model = MultiView.from_pretrained(args.model)
@@ -58,7 +65,7 @@ def main() -> None:
         f"{args.model}: {len(clips)} clips{' of ' + args.match if args.match else ''} turning more than "
         f"{args.min_turn_deg:g} deg"
     )
-    names = ("own", "mirrored", "none", *(SPLIT if args.split else ()))
+    names = ("own", "mirrored", "none", *(SPLIT if args.split else ()), *(TURNED if args.turned else ()))
     for captions in (True, False):
         for sigma in (float(s) for s in args.sigmas.split(",")):
             r = np.array(

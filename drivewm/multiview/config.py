@@ -28,6 +28,10 @@ class MultiViewConfig:
     """With a trajectory, each latent frame's rays are those of the cameras at the ego pose of that
     frame, in the first frame's ego frame (per-frame Plucker camera control as in CameraCtrl, He et al.
     2024), so the trajectory also conditions every token locally, not only through the global MLP."""
+    frame_motion: bool = False
+    """With a trajectory, add an embedding of the ego's pose and step at every token frame to all of
+    that frame's tokens (drivewm.multiview.frame_motion): the per-frame motion without moving the
+    rays (set ``moving_camera_rays`` false with it, so a token's rays only say where it looks)."""
     warp_condition: bool = False
     """Video2World: also give every later latent frame the first frame of the rig warped into its
     cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity

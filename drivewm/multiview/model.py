@@ -31,6 +31,7 @@ from drivewm.geometry import Rig, invert_T, rig_from_dict
 from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
 from drivewm.multiview.config import MultiViewModelConfig
 from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
+from drivewm.multiview.frame_motion import FrameMotionEncoder, frame_motion_features
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
@@ -51,6 +52,9 @@ class MultiViewConditioning(Conditioning):
     what a view is conditioned on when its trajectory is dropped."""
     trajectory: torch.Tensor | None = None
     """(B V, W, 3) future ego waypoints (m) in the first frame's ego frame (repeated per view)."""
+    frame_motion: torch.Tensor | None = None
+    """(B V, t, F) the ego's pose and step at every token frame (drivewm.multiview.frame_motion);
+    None = no per-frame motion conditioning."""
     warp_grid: torch.Tensor | None = None
     """(B V, T, h, w, 2) where every latent pixel's ray lies in the rig's first latent frame
     (drivewm.multiview.warp.warp_grid); None = no reprojected conditioning."""
@@ -84,6 +88,7 @@ class MultiViewNet(nn.Module):
         self.denoiser = EDMDenoiser(DiT(cfg.dit), cfg.edm, cfg.dit.cond_mask_channel)
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
         self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
+        self.motion_encoder = FrameMotionEncoder(dim, mv.camera_width) if mv.frame_motion else None
         self.warp_encoder = (
             WarpEncoder(cfg.dit.in_channels, dim, cfg.dit.patch_size, cfg.dit.patch_t) if mv.warp_condition else None
         )
@@ -105,6 +110,13 @@ class MultiViewNet(nn.Module):
             if keep is not None and cond.static_rays is not None:
                 rays = torch.where(keep[:, None, None], rays, cond.static_rays)
             token_cond = self.camera_encoder(rays.to(x.dtype))  # (B V, N, D)
+        if self.motion_encoder is not None and cond.frame_motion is not None:
+            motion = self.motion_encoder(cond.frame_motion.to(x.dtype))  # (B V, t, D)
+            if keep is not None:
+                motion = motion * keep[:, None, None].to(motion.dtype)
+            tokens_per_frame = x.shape[-2] * x.shape[-1] // self.cfg.dit.patch_size**2  # tokens are (t, h, w)
+            motion = motion.repeat_interleave(tokens_per_frame, dim=1)
+            token_cond = motion if token_cond is None else token_cond + motion
         if (
             self.warp_encoder is not None
             and cond.warp_grid is not None
@@ -232,6 +244,9 @@ def build_conditioning(
         if trajectories is None or not mv.moving_camera_rays
         else clip_rays(model, rig, b, trajectories, fps)
     )
+    motion = None
+    if mv.frame_motion and trajectories is not None:
+        motion = repeat(clip_frame_motion(model, trajectories, fps), "b t f -> (b v) t f", v=v)
     return MultiViewConditioning(
         emb,
         mask,
@@ -241,9 +256,22 @@ def build_conditioning(
         rays=rays,
         static_rays=static_rays,
         trajectory=traj,
+        frame_motion=motion,
         warp_grid=grid,
         warp_valid=valid,
     )
+
+
+def clip_frame_motion(model: MultiView, trajectories: np.ndarray, fps: float) -> torch.Tensor:
+    """(B, t, F) ego motion at every token frame of B clips (drivewm.multiview.frame_motion)."""
+    t, _, _ = model.token_grid()
+    mv = model.cfg.multiview
+    token_fps = fps / (mv.temporal_compression * model.cfg.dit.patch_t)
+    feats = [
+        frame_motion_features(wp, t, mv.trajectory_dt_s, token_fps, mv.trajectory_scale_m)
+        for wp in np.asarray(trajectories)
+    ]
+    return torch.from_numpy(np.stack(feats))
 
 
 def clip_warp_grids(

@@ -204,6 +204,7 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
             "rays",
             "static_rays",
             "trajectory",
+            "frame_motion",
             "warp_grid",
             "warp_valid",
             "trajectory_keep",
@@ -252,7 +253,15 @@ def posttrain(
 
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
     """A multi-view model with ``init``'s weights and this run's multi-view settings (training
-    probabilities, the data's trajectory spacing); a structural difference is a DrivewmError."""
+    probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
+    fresh (zero effect, so the model starts as ``init``); any other structural difference is a
+    DrivewmError."""
     model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
-    load_weights(model.net, init.net.state_dict(), init_dir)
+    state = init.net.state_dict()
+    added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}
+    load_weights(model.net, {**state, **added}, init_dir)
     return model
+
+
+#: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
+ADDABLE = ("motion_encoder.",)

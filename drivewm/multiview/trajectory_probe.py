@@ -20,6 +20,7 @@ import torch
 
 from drivewm.diffusion.denoiser import edm_loss
 from drivewm.eval.trajectory_errors import waypoint_heading_deg
+from drivewm.geometry import rot_z
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView, build_conditioning
 
@@ -55,7 +56,7 @@ def clip_losses(
     cond_frames: int = 0,
 ) -> list[float]:
     """EDM loss of clip ``index`` under each of ``trajectories`` (its own waypoints, the mirrored ones,
-    none, or one of :data:`SPLIT`), with the same noise. ``net``: the denoiser to call (``bundle.net``
+    none, or one of :data:`SPLIT` or :data:`TURNED`), with the same noise. ``net``: the denoiser to call (``bundle.net``
     or a training wrapper of it); ``bundle``: the :class:`~drivewm.multiview.model.MultiView` whose text encoder and
     camera geometry build the conditioning; ``cond_frames``: latent frames given (Video2World), 0 =
     Text2World."""
@@ -73,6 +74,12 @@ def clip_losses(
 
     out = []
     for name in trajectories:
+        if name in TURNED:  # the rig standing still, turned by a constant angle the way the clip turns
+            cond = conditioning("own")
+            angle = np.deg2rad(TURNED[name]) * np.sign(waypoint_heading_deg(s.trajectory))
+            cond = dataclasses.replace(cond, rays=turn_rays(cond.static_rays, angle))
+            out.append(float(edm_loss(net, edm, s.latents.to(device), cond.to(device), sigmas, noise, keep)))
+            continue
         embedded, rays = SPLIT.get(name, (name, name))
         cond = conditioning(embedded)
         if rays != embedded:  # one pathway fed the other trajectory: which of the two carries the turn
@@ -85,6 +92,20 @@ def clip_losses(
 #: the moving-camera rays follow). With the own and mirrored losses they tell whether the waypoint
 #: embedding or the per-frame camera rays carries what the model learned of a turn.
 SPLIT = {"own, mirrored rays": ("own", "mirrored"), "mirrored, own rays": ("mirrored", "own")}
+
+
+#: Rays of the rig standing still, turned at every frame by a constant yaw (deg; + = the way the clip
+#: turns, - = against it). A model that reads a ray as a place in the rig, the road's layout there,
+#: rather than as the camera's motion, scores the clips lower under one of these than under the rig's
+#: own rays; turning left, a road bending left shows its content where a straight one shows it
+#: further right (docs/quality-vs-compute.md).
+TURNED = {"static rays turned with the turn 20 deg": 20.0, "static rays turned against the turn 20 deg": -20.0}
+
+
+def turn_rays(rays: torch.Tensor, yaw_rad: float) -> torch.Tensor:
+    """(..., 6) Plucker rays (d, m) turned about the ego's up axis through its origin by ``yaw_rad``."""
+    R = torch.as_tensor(rot_z(yaw_rad), dtype=rays.dtype, device=rays.device)
+    return torch.cat([rays[..., :3] @ R.T, rays[..., 3:] @ R.T], dim=-1)
 
 
 def loss_gap(

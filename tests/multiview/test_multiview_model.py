@@ -176,6 +176,15 @@ def test_plucker_rays_are_the_camera_rays_and_move_with_the_ego():
     rig_at_T = dc.replace(rig, cameras=[dc.replace(c, T_ego_from_cam=T @ c.T_ego_from_cam) for c in rig.cameras])
     torch.testing.assert_close(moved[:, 60:], plucker_rays(rig_at_T, (6, 10)).double(), atol=1e-6, rtol=1e-6)
     torch.testing.assert_close(moved[:, :60], rays)
+    # The trajectory probe's turned rig (drivewm.multiview.trajectory_probe.turn_rays) is the rig
+    # turned in place: the ego rotated about its origin, and a quarter turn left sends +x to +y.
+    from drivewm.multiview.trajectory_probe import turn_rays
+
+    turned = moving_token_rays(rays, torch.from_numpy(T_from_xyz_yaw(0.0, 0.0, 0.0, 0.3)[None]))
+    torch.testing.assert_close(turn_rays(rays, 0.3), turned, atol=1e-9, rtol=1e-9)
+    ahead = torch.tensor([1.0, 0.0, 0.0, 0.0, 0.0, 1.0], dtype=torch.float64)  # along +x from (0, -1, 0)
+    # turned: along +y from (1, 0, 0), whose moment (1, 0, 0) x (0, 1, 0) is still +z
+    torch.testing.assert_close(turn_rays(ahead, np.pi / 2), torch.tensor([0.0, 1.0, 0, 0, 0, 1.0]).double())
 
 
 def test_importing_multiview_registers_no_sublayer():
