@@ -255,7 +255,10 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     """A multi-view model with ``init``'s weights and this run's multi-view settings (training
     probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
     fresh (zero effect, so the model starts as ``init``); any other structural difference is a
-    DrivewmError."""
+    DrivewmError. A model trained with per-frame motion keeps it, with the rays it was trained with
+    (its trained motion encoder is not dropped because this run's config left the default)."""
+    if init.cfg.multiview.frame_motion:
+        mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
     model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}
