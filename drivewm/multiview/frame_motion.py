@@ -37,7 +37,7 @@ def frame_motion_features(
     yaw = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
     prev = np.concatenate([[0], np.arange(len(rel) - 1)])
     nxt = np.concatenate([[1], np.arange(1, len(rel))])  # frame 0 looks forward, the others back
-    step = np.einsum("tij,tjk->tik", np.linalg.inv(rel[prev]), rel[nxt])
+    step = np.einsum("tij,tjk->tik", invert_T(rel[prev]), rel[nxt])
     dyaw = np.arctan2(step[:, 1, 0], step[:, 0, 0])
     out = np.stack(
         [

@@ -266,12 +266,16 @@ def clip_frame_motion(model: MultiView, trajectories: np.ndarray, fps: float) ->
     """(B, t, F) ego motion at every token frame of B clips (drivewm.multiview.frame_motion)."""
     t, _, _ = model.token_grid()
     mv = model.cfg.multiview
-    token_fps = fps / (mv.temporal_compression * model.cfg.dit.patch_t)
     feats = [
-        frame_motion_features(wp, t, mv.trajectory_dt_s, token_fps, mv.trajectory_scale_m)
+        frame_motion_features(wp, t, mv.trajectory_dt_s, token_fps(model, fps), mv.trajectory_scale_m)
         for wp in np.asarray(trajectories)
     ]
     return torch.from_numpy(np.stack(feats))
+
+
+def token_fps(model: MultiView, fps: float) -> float:
+    """Token frames per second of a clip at ``fps``: token frame i shows video frame i * tc * patch_t."""
+    return fps / (model.cfg.multiview.temporal_compression * model.cfg.dit.patch_t)
 
 
 def clip_warp_grids(
@@ -298,10 +302,8 @@ def clip_rays(model: MultiView, rig: Rig, b: int, trajectories: np.ndarray | Non
     rays_hw = plucker_rays(rig, (h, w))  # (V, h*w, 6) in the ego frame
     if trajectories is None or not mv.moving_camera_rays:
         return repeat(token_rays(rays_hw, t), "v n c -> (b v) n c", b=b)
-    token_fps = fps / (
-        mv.temporal_compression * model.cfg.dit.patch_t
-    )  # token frame i shows video frame i * tc * patch_t
     poses = [
-        torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, token_fps)) for wp in np.asarray(trajectories)
+        torch.from_numpy(poses_from_waypoints(wp, t, mv.trajectory_dt_s, token_fps(model, fps)))
+        for wp in np.asarray(trajectories)
     ]
     return torch.cat([moving_token_rays(rays_hw, T).float() for T in poses])

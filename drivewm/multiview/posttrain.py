@@ -251,6 +251,10 @@ def posttrain(
     return train(MultiViewTask(cfg, dataset, model), cfg.train, out_dir, config_record=record, stop_after=stop_after)
 
 
+#: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
+ADDABLE = ("motion_encoder.",)
+
+
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
     """A multi-view model with ``init``'s weights and this run's multi-view settings (training
     probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
@@ -264,7 +268,3 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}
     load_weights(model.net, {**state, **added}, init_dir)
     return model
-
-
-#: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
-ADDABLE = ("motion_encoder.",)

@@ -20,7 +20,8 @@ import torch
 
 from drivewm.diffusion.denoiser import edm_loss
 from drivewm.eval.trajectory_errors import waypoint_heading_deg
-from drivewm.geometry import rot_z
+from drivewm.geometry import T_from_xyz_yaw
+from drivewm.multiview.camera import moving_token_rays
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView, build_conditioning
 
@@ -78,12 +79,11 @@ def clip_losses(
             cond = conditioning("own")
             angle = np.deg2rad(TURNED[name]) * np.sign(waypoint_heading_deg(s.trajectory))
             cond = dataclasses.replace(cond, rays=turn_rays(cond.static_rays, angle))
-            out.append(float(edm_loss(net, edm, s.latents.to(device), cond.to(device), sigmas, noise, keep)))
-            continue
-        embedded, rays = SPLIT.get(name, (name, name))
-        cond = conditioning(embedded)
-        if rays != embedded:  # one pathway fed the other trajectory: which of the two carries the turn
-            cond = dataclasses.replace(cond, rays=conditioning(rays).rays)
+        else:
+            embedded, rays = SPLIT.get(name, (name, name))
+            cond = conditioning(embedded)
+            if rays != embedded:  # one pathway fed the other trajectory: which of the two carries the turn
+                cond = dataclasses.replace(cond, rays=conditioning(rays).rays)
         out.append(float(edm_loss(net, edm, s.latents.to(device), cond.to(device), sigmas, noise, keep)))
     return out
 
@@ -103,9 +103,10 @@ TURNED = {"static rays turned with the turn 20 deg": 20.0, "static rays turned a
 
 
 def turn_rays(rays: torch.Tensor, yaw_rad: float) -> torch.Tensor:
-    """(..., 6) Plucker rays (d, m) turned about the ego's up axis through its origin by ``yaw_rad``."""
-    R = torch.as_tensor(rot_z(yaw_rad), dtype=rays.dtype, device=rays.device)
-    return torch.cat([rays[..., :3] @ R.T, rays[..., 3:] @ R.T], dim=-1)
+    """(..., 6) Plucker rays (d, m) turned about the ego's up axis through its origin by ``yaw_rad``:
+    the rig moved to a pose of pure yaw (:func:`~drivewm.multiview.camera.moving_token_rays`)."""
+    pose = torch.from_numpy(T_from_xyz_yaw(0.0, 0.0, 0.0, yaw_rad)[None])
+    return moving_token_rays(rays.reshape(1, -1, 6), pose).reshape(rays.shape)
 
 
 def loss_gap(
