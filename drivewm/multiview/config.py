@@ -38,6 +38,11 @@ class MultiViewConfig:
     reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
     it predicts the simulated clips' later frames no better than copying the first frame (see
     studies/turned_following.py)."""
+    warped_noise: float = 0.0
+    """Correlation a of the diffusion noise along the trajectory (drivewm.multiview.warped_noise): each
+    later latent frame's noise is a * the first frame's warped along the ego trajectory plus
+    sqrt(1 - a^2) * its own, in training (the clip's own trajectory) and in sampling (the one asked
+    for), so the motion is in the noise as well as in the conditioning. 0 = independent noise."""
     warp_ground_m: float = 100.0
     """The warp follows rays that meet the road within this distance (m) to the road plane and all
     others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""
@@ -68,6 +73,7 @@ class MultiViewConfig:
         at_least(self, 1, "camera_width", "trajectory_width", "temporal_compression")
         above(self, 0, "trajectory_scale_m", "trajectory_dt_s", "ray_scale_m")
         in_range(self, "video2world_prob", 0, 1)
+        in_range(self, "warped_noise", 0, 1, high_open=True)
         in_range(self, "trajectory_dropout", 0, 1, high_open=True)
 
 

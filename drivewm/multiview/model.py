@@ -10,6 +10,7 @@ calls the EDM denoiser. :class:`MultiView` is the inference bundle and model fol
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,7 @@ from drivewm.multiview.frame_motion import FrameMotionEncoder, frame_motion_feat
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
+from drivewm.multiview.warped_noise import warp_noise
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 
@@ -216,8 +218,28 @@ class MultiView:
             cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
         shape = (v, *self.latent.latent_shape)  # the views of a clip share its seed, folded as (B V)
         trajectory_guidance = trajectory_guidance if trajectories is not None else 1.0
-        x = sample(self.net, cond, shape, seeds, steps, guidance, sampler, trajectory_guidance, self.device)
+        noise_fn = self.noise_warper(rig, trajectories, fps or self.latent.fps)
+        x = sample(
+            self.net, cond, shape, seeds, steps, guidance, sampler, trajectory_guidance, self.device, noise_fn=noise_fn
+        )
         return denormalize_latents(x, mean, std, self.cfg.edm.sigma_data)  # (B, V, c, t, h, w)
+
+    def noise_warper(
+        self, rig: Rig, trajectories: np.ndarray | None, fps: float
+    ) -> Callable[[torch.Tensor], torch.Tensor] | None:
+        """With ``multiview.warped_noise`` and trajectories, the map of seeded noise (B, V, c, t, h, w)
+        to noise warped along each clip's trajectory (drivewm.multiview.warped_noise); else None."""
+        a = self.cfg.multiview.warped_noise
+        if not a or trajectories is None:
+            return None
+        grid, valid = clip_warp_grids(self, rig, trajectories, fps)
+        v = len(rig.cameras)
+
+        def warp(noise: torch.Tensor) -> torch.Tensor:
+            folded = rearrange(noise, "b v c t h w -> (b v) c t h w")
+            return rearrange(warp_noise(folded, grid, valid, v, a), "(b v) c t h w -> b v c t h w", v=v)
+
+        return warp
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)

@@ -24,11 +24,12 @@ from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.data import MultiViewDataset
+from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
-from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
+from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning, clip_warp_grids
 from drivewm.multiview.trajectory_probe import loss_gap, turning_clips
+from drivewm.multiview.warped_noise import warp_noise
 from drivewm.recipe import RecipeBook
 from drivewm.train.checkpoint import load_weights, read_model_type
 from drivewm.train.loop import TrainConfig, train
@@ -144,7 +145,7 @@ class MultiViewTask(BundleTask):
         x0 = torch.cat([s.latents for s in samples]).to(device)  # (B V, c, t, h, w)
         gens = [torch.Generator().manual_seed(s) for s in seeds]
         sigma = torch.cat([sample_sigma(1, self.bundle.cfg.edm, g).expand(v) for g in gens])  # (B V,)
-        noise = torch.cat([torch.randn(s.latents.shape, generator=g) for s, g in zip(samples, gens)]).to(device)
+        noise = torch.cat([self.clip_noise(s, g) for s, g in zip(samples, gens)]).to(device)
         keep = torch.cat([torch.rand(v, generator=g) >= self.bundle.cfg.edm.text_dropout for g in gens])
         video2world = (
             float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0])))
@@ -162,6 +163,16 @@ class MultiViewTask(BundleTask):
         )
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
+
+    def clip_noise(self, s: MultiViewSample, generator: torch.Generator) -> torch.Tensor:
+        """(V, c, t, h, w) standard normal noise of one clip, warped along its own trajectory with
+        ``multiview.warped_noise`` (drivewm.multiview.warped_noise) where it has one."""
+        noise = torch.randn(s.latents.shape, generator=generator)
+        a = self.bundle.cfg.multiview.warped_noise
+        if not a or not bool(s.trajectory_known):
+            return noise
+        grid, valid = clip_warp_grids(self.bundle, s.rig, s.trajectory[None], s.fps)
+        return warp_noise(noise, grid, valid, noise.shape[0], a)
 
     def after_step(self, step: int) -> dict[str, float]:
         """The trajectory probe, in the first metrics row at or after each ``trajectory_probe_every``
@@ -260,9 +271,12 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
     fresh (zero effect, so the model starts as ``init``); any other structural difference is a
     DrivewmError. A model trained with per-frame motion keeps it, with the rays it was trained with
-    (its trained motion encoder is not dropped because this run's config left the default)."""
+    (its trained motion encoder is not dropped because this run's config left the default), and one
+    trained with warped noise keeps its correlation unless this run sets another."""
     if init.cfg.multiview.frame_motion:
         mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
+    if init.cfg.multiview.warped_noise and not mv.warped_noise:  # what its samples' noise means
+        mv = dataclasses.replace(mv, warped_noise=init.cfg.multiview.warped_noise)
     model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}

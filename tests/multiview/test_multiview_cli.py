@@ -61,7 +61,8 @@ def test_posttrain_writes_a_multiview_folder(trained_mv):
 def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     """--init a multi-view folder (the fleet fine-tuning path): its weights start the run, none
     re-initialised; a structurally different config is refused in one line; per-frame motion
-    conditioning can be added (it starts at zero), and a model with it keeps it."""
+    conditioning and warped noise can be added (the encoder starts at zero), and a model with them
+    keeps them."""
     root, cache = trained_mv
     args = ["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--rig", "front3"]
     assert main([*args, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
@@ -74,6 +75,7 @@ def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     bad = [*args, "--out", str(tmp_path / "bad"), "--set", "multiview.camera_width=64"]
     assert main(bad) == 2
     motion = ["--set", "multiview.frame_motion=true", "--set", "multiview.moving_camera_rays=false"]
+    motion += ["--set", "multiview.warped_noise=0.8"]
     two_steps = ["--set", "train.steps=2", "--set", "sample_steps=2"]
     assert main([*args, "--out", str(tmp_path / "motion"), *two_steps, *motion]) == 0
     added = MultiView.from_pretrained(tmp_path / "motion").net.state_dict()  # a fine-tune may add per-frame motion
@@ -82,7 +84,7 @@ def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     again = ["posttrain", "--init", str(tmp_path / "motion"), "--data", str(cache), "--rig", "front3"]
     assert main([*again, "--out", str(tmp_path / "again"), *two_steps]) == 0  # no settings repeated: it keeps them
     kept = MultiView.from_pretrained(tmp_path / "again").cfg.multiview
-    assert kept.frame_motion and not kept.moving_camera_rays
+    assert kept.frame_motion and not kept.moving_camera_rays and kept.warped_noise == 0.8
 
 
 @pytest.mark.parametrize("rig,views", [("front3", 3), ("nuscenes6", 6)])
