@@ -75,12 +75,17 @@ def waypoints_from_poses(T_world_from_ego: np.ndarray, start: int, num: int) -> 
 
 def poses_from_waypoints(waypoints_ego: np.ndarray, num_frames: int, dt_s: float, fps: float) -> np.ndarray:
     """(num_frames, 4, 4) T_world_from_ego (world = first frame's ego) at 1/fps from waypoints spaced
-    ``dt_s`` (first one at dt_s), positions interpolated linearly and yaw along the motion."""
+    ``dt_s`` (first one at dt_s), positions interpolated linearly and yaw along the motion: the chord
+    to the position ``dt_s`` later, or, within ``dt_s`` of the last waypoint, the last ``dt_s`` of the
+    path (so a frame at the end of the waypoints turns with them instead of keeping the heading of
+    the frame before)."""
     w = np.concatenate([np.zeros((1, 3)), np.asarray(waypoints_ego, dtype=np.float64)])
     way_t = np.arange(len(w)) * dt_s
     t = np.arange(num_frames) / fps
     p = np.stack([np.interp(t, way_t, w[:, k]) for k in range(3)], axis=1)
-    ahead = np.stack([np.interp(t + dt_s, way_t, w[:, k]) for k in range(2)], axis=1) - p[:, :2]
+    t_ahead = np.minimum(t + dt_s, way_t[-1])
+    behind = np.stack([np.interp(t_ahead - dt_s, way_t, w[:, k]) for k in range(2)], axis=1)
+    ahead = np.stack([np.interp(t_ahead, way_t, w[:, k]) for k in range(2)], axis=1) - behind
     moving = np.linalg.norm(ahead, axis=1) > 1e-3
     yaw = np.where(moving, np.arctan2(ahead[:, 1], ahead[:, 0]), 0.0)
     for i in range(1, num_frames):  # a stopped ego keeps its last heading

@@ -37,6 +37,17 @@ def test_features_of_a_circle_are_its_headings_and_steps():
     assert np.all(f[1:, 1] > 0) and np.all(np.diff(f[:, 0]) > 0)  # left of the start, moving forward
 
 
+def test_a_frame_at_the_end_of_the_waypoints_still_turns():
+    """16 waypoints cover 1.6 s, the last token frame's time: it heads along the path's last chord,
+    not the frame before's heading (which left the last frame of every turn unturned)."""
+    kappa = 0.03
+    f = frame_motion_features(_arc_waypoints(kappa, 16), 5, DT, TOKEN_FPS, SCALE)
+    step_yaw, lead = kappa * SPEED / TOKEN_FPS, kappa * SPEED * DT / 2  # the chord ahead leads by half a step
+    np.testing.assert_allclose(f[:4, 2], np.arange(4) * step_yaw, atol=2e-3)
+    np.testing.assert_allclose(f[4, 2], 4 * step_yaw - 2 * lead, atol=2e-3)  # the chord behind trails by half
+    assert f[4, 5] > 0.5 * step_yaw / STEP_YAW_RAD
+
+
 def test_straight_and_mirrored_waypoints():
     straight = frame_motion_features(_arc_waypoints(0.0), 5, DT, TOKEN_FPS, SCALE)
     np.testing.assert_allclose(straight[:, [1, 2, 4, 5]], 0.0, atol=1e-9)
