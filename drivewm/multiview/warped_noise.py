@@ -14,9 +14,9 @@ motion. The warp is :func:`drivewm.multiview.warp.warp_grid`'s (rig calibration 
 road plane and the plane at infinity; a left turn fetches from the front-left camera), sampled at the
 nearest latent pixel so values are copied, never averaged (an average of normals is not unit normal).
 A model learns what warped noise means in training (the clip's own trajectory warps its noise) and
-is sampled with noise warped along the trajectory asked for. Sampling a model trained on independent
-noise with warped noise does not move its samples (measured on the shipped model: the front camera's
-flow kept its sign), which is why it is a training setting, not a sampling trick.
+is sampled with noise warped along the trajectory asked for. Off by default: at the CPU budget
+measured so far (1,000 fine-tuning steps of the shipped model), warped noise does not yet steer the
+samples (``studies/noise_steering.py``, docs/quality-vs-compute.md, "Warped noise").
 """
 
 from __future__ import annotations
