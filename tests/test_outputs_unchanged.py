@@ -4,10 +4,12 @@
 environment (torch 2.13.0 CPU, the libx264 of the PyAV wheel, OpenCV's JPEG coder). A digest covers
 what a stage writes, not the container around it: the JPEG bytes, poses, calibration, scene and
 boxes of a drive log (not the MCAP header, which names library versions); every member of every
-clip shard (JSON with the source log's folder removed); the ``model.safetensors`` of a trained
-model; the metrics of an eval. A change that means to alter outputs re-records them with
-``python tests/test_outputs_unchanged.py --record`` and says so in its commit; a refactor leaves
-them as they are.
+clip shard (JSON with the source log's folder removed); the metrics of an eval. A trained model's
+``model.safetensors`` is compared within rounding (:data:`WEIGHTS_RTOL`: per-tensor sums), since a
+few training steps differ in the last bits between kinds of CPU. A change that means to alter
+outputs re-records them with ``python tests/test_outputs_unchanged.py --record`` (with the
+environment of tests/conftest.py's ``PINNED_ISA`` set in the shell: this module imports numpy and
+torch before conftest can set it) and says so in its commit; a refactor leaves them as they are.
 """
 
 from __future__ import annotations
@@ -131,10 +133,32 @@ def metrics_digest(eval_dir: Path) -> dict:
     return {**metrics, "clips": _sha(_json_bytes(metrics["clips"]))}
 
 
-def model_digest(model_dir: Path) -> str:
-    """The weights file as main wrote it: re-serialized without the header metadata (revision and weights
-    digest, issue 15) that this branch adds, so the recorded digests still pin the weights byte for byte."""
-    return _sha(safetensors.torch.save(safetensors.torch.load_file(model_dir / "model.safetensors")))
+#: Trained weights are compared within rounding, not byte for byte: a few training steps' weights
+#: differ in the last bits between kinds of x86 CPU even on the pinned AVX2 paths (tests/conftest.py;
+#: seen between the machines this suite runs on), while a change to the training math moves them by
+#: far more than this.
+WEIGHTS_RTOL, WEIGHTS_ATOL = 1e-4, 1e-6
+
+
+def model_fingerprint(model_dir: Path) -> dict[str, list[float]]:
+    """Per tensor of the weights file, by name: the sum, the sum of absolute values and the sum of
+    squares of its values (float64)."""
+    tensors = safetensors.torch.load_file(model_dir / "model.safetensors")
+    out = {}
+    for name, t in sorted(tensors.items()):
+        x = t.double()
+        out[name] = [float(x.sum()), float(x.abs().sum()), float((x * x).sum())]
+    return out
+
+
+def assert_same_weights(got: dict, want: dict) -> None:
+    """Every tensor's fingerprint within :data:`WEIGHTS_RTOL` of its scale (the sum against the sum of
+    absolute values, which keeps a tensor whose values cancel from passing on noise)."""
+    assert sorted(got) == sorted(want)
+    for name, (total, size, power) in want.items():
+        scale = np.array([size, size, power])
+        error = np.abs(np.array(got[name]) - np.array([total, size, power]))
+        assert np.all(error <= WEIGHTS_RTOL * scale + WEIGHTS_ATOL), (name, got[name], want[name])
 
 
 def _run(*argv) -> None:
@@ -152,15 +176,15 @@ def cli_chain(root: Path) -> dict:
         "logs": {p.name: log_digest(p) for p in sorted(logs.glob("*.mcap"))},
         "clips": clips_digest(clips),
         "eval": metrics_digest(ev),
-        "tokenizer": model_digest(tok),
+        "tokenizer": model_fingerprint(tok),
     }
 
 
-def pretrain_digest(root: Path) -> str:
+def pretrain_digest(root: Path) -> dict:
     """Text2World pretraining of a tiny DiT for 3 steps on the seeded synthetic latent cache."""
     cache = make_synthetic_latent_cache(root / "latents", clips_per_condition=2)
     _run("pretrain", "--data", cache, "--out", root / "t2w", *PRETRAIN)
-    return model_digest(root / "t2w")
+    return model_fingerprint(root / "t2w")
 
 
 def fixture_digests(sim_log_dir: Path, sim_clip_dir: Path) -> dict:
@@ -199,7 +223,7 @@ def test_cli_chain_outputs_unchanged(golden, tmp_path):
     assert got["logs"] == golden["cli"]["logs"]
     assert got["clips"] == golden["cli"]["clips"]
     assert got["eval"] == golden["cli"]["eval"]
-    assert got["tokenizer"] == golden["cli"]["tokenizer"]
+    assert_same_weights(got["tokenizer"], golden["cli"]["tokenizer"])
 
 
 @pytest.mark.slow
@@ -207,7 +231,7 @@ def test_pretrain_output_unchanged(golden, tmp_path):
     import torch
 
     torch.set_num_threads(1)
-    assert pretrain_digest(tmp_path) == golden["pretrain"]
+    assert_same_weights(pretrain_digest(tmp_path), golden["pretrain"])
 
 
 if __name__ == "__main__":
