@@ -7,9 +7,9 @@ boxes of a drive log (not the MCAP header, which names library versions); every 
 clip shard (JSON with the source log's folder removed); the metrics of an eval. A trained model's
 ``model.safetensors`` is compared within rounding (:data:`WEIGHTS_RTOL`: per-tensor sums), since a
 few training steps differ in the last bits between kinds of CPU. A change that means to alter
-outputs re-records them with ``python tests/test_outputs_unchanged.py --record`` (with the
-environment of tests/conftest.py's ``PINNED_ISA`` set in the shell: this module imports numpy and
-torch before conftest can set it) and says so in its commit; a refactor leaves them as they are.
+outputs re-records them with ``python tests/test_outputs_unchanged.py --record`` (which runs itself
+again with tests/conftest.py's ``PINNED_ISA``, as pytest runs) and says so in its commit; a refactor
+leaves them as they are.
 """
 
 from __future__ import annotations
@@ -237,10 +237,15 @@ def test_pretrain_output_unchanged(golden, tmp_path):
 if __name__ == "__main__":
     if sys.argv[1:] != ["--record"]:
         raise SystemExit(f"usage: python {sys.argv[0]} --record   (rewrites {GOLDEN.name} from this checkout)")
+    import os
     import tempfile
 
-    import conftest  # the shared fixtures' builders
+    unpinned = {k for k in ("ATEN_CPU_CAPABILITY", "NPY_DISABLE_CPU_FEATURES") if k not in os.environ}
+    import conftest  # the shared fixtures' builders; sets the pinned vector ISA in os.environ
     import torch
+
+    if unpinned & set(conftest.PINNED_ISA):  # numpy and torch loaded unpinned above: run again pinned, as pytest does
+        os.execv(sys.executable, [sys.executable, *sys.argv])
 
     torch.set_num_threads(1)  # as every test runs (conftest._one_torch_thread): reductions depend on it
 

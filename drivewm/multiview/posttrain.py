@@ -27,9 +27,8 @@ from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
-from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning, clip_warp_grids
+from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
 from drivewm.multiview.trajectory_probe import loss_gap, turning_clips
-from drivewm.multiview.warped_noise import warp_noise
 from drivewm.recipe import RecipeBook
 from drivewm.train.checkpoint import load_weights, read_model_type
 from drivewm.train.loop import TrainConfig, train
@@ -168,11 +167,8 @@ class MultiViewTask(BundleTask):
         """(V, c, t, h, w) standard normal noise of one clip, warped along its own trajectory with
         ``multiview.warped_noise`` (drivewm.multiview.warped_noise) where it has one."""
         noise = torch.randn(s.latents.shape, generator=generator)
-        a = self.bundle.cfg.multiview.warped_noise
-        if not a or not bool(s.trajectory_known):
-            return noise
-        grid, valid = clip_warp_grids(self.bundle, s.rig, s.trajectory[None], s.fps)
-        return warp_noise(noise, grid, valid, noise.shape[0], a)
+        warp = self.bundle.noise_warper(s.rig, s.trajectory[None], s.fps) if s.trajectory_known else None
+        return noise if warp is None else warp(noise[None])[0]  # sampling's own warp, on a batch of one
 
     def after_step(self, step: int) -> dict[str, float]:
         """The trajectory probe, in the first metrics row at or after each ``trajectory_probe_every``
