@@ -22,6 +22,7 @@ from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
+from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.geometry import load_rig
 from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
@@ -61,9 +62,17 @@ class PosttrainConfig:
     """Turning clips the probe scores: the first ones of the data whose waypoints turn by more than
     ``trajectory_probe_min_turn_deg``; none there, no probe."""
     trajectory_probe_min_turn_deg: float = 15.0
+    turn_repeat: int = 0
+    """Rebalance steering: every clip whose waypoints turn by more than ``turn_repeat_min_deg``
+    appears 1 + this many times per epoch (as GAIA-1 balances its data over steering). Simulated
+    and fleet driving is mostly straight, so a turn is a rare lesson; 0 = each clip once."""
+    turn_repeat_min_deg: float = 15.0
 
     def validate(self) -> None:
-        at_least(self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg")
+        at_least(
+            self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
+            "turn_repeat_min_deg",
+        )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
 
 
@@ -128,6 +137,22 @@ class MultiViewTask(BundleTask):
     dataset: MultiViewDataset
     bundle: MultiView
     _probe_clips: list[int] | None = None  # the trajectory probe's clips, chosen at its first run
+    _epoch: list[int] | None = None  # dataset index of every epoch position (turns repeated)
+
+    def epoch_order(self) -> list[int]:
+        """The dataset index behind each position of an epoch: every clip once, and turning clips
+        ``turn_repeat`` more times (a clip without ego motion counts as straight)."""
+        if self._epoch is None:
+            repeat, min_deg = self.cfg.turn_repeat, self.cfg.turn_repeat_min_deg
+            self._epoch = list(range(len(self.dataset)))
+            if repeat:
+                turning = [i for i in self._epoch if is_turning(self.dataset[i], min_deg)]
+                self._epoch += turning * repeat
+                print(f"turn_repeat: {len(turning)} of {len(self.dataset)} clips turn by more than {min_deg:g} deg")
+        return self._epoch
+
+    def num_samples(self) -> int:
+        return len(self.epoch_order())
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
@@ -139,7 +164,7 @@ class MultiViewTask(BundleTask):
         steps. The Video2World draw uses this rank's first sample seed, so with 0 < video2world_prob < 1
         a run is exactly reproducible (and resumable) at a given world size, but not identical across
         world sizes."""
-        samples = [self.dataset[i] for i in indices]
+        samples = [self.dataset[self.epoch_order()[i]] for i in indices]
         v = samples[0].latents.shape[0]
         x0 = torch.cat([s.latents for s in samples]).to(device)  # (B V, c, t, h, w)
         gens = [torch.Generator().manual_seed(s) for s in seeds]
@@ -197,6 +222,11 @@ class MultiViewTask(BundleTask):
             s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0
         )
         write_grid_png(decode_latents(z[0], bundle.latent.tokenizer, bundle.device), path, s.rig.names)
+
+
+def is_turning(s: MultiViewSample, min_turn_deg: float) -> bool:
+    """Whether a clip's waypoints turn by more than ``min_turn_deg`` (last chord against the first)."""
+    return s.trajectory_known and abs(waypoint_heading_deg(s.trajectory)) > min_turn_deg
 
 
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:
