@@ -37,6 +37,7 @@ from pathlib import Path
 
 from drivewm import resources
 from drivewm.choices import output_folder, whole_number
+from drivewm.config import finite_at_least
 from drivewm.errors import DrivewmError
 
 PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
@@ -173,18 +174,26 @@ def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]
 
 
 def benchmark_stages(
-    p: WorldModelProfile, model: str, run: Path, heldout: Path, samples: int | None = None
+    p: WorldModelProfile,
+    model: str,
+    run: Path,
+    heldout: Path,
+    samples: int | None = None,
+    trajectory_guidance: float | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
-    profile's; seeds are per sample, so more samples keep the first ones' bytes), the held-out clips
-    ``heldout`` and the generated ones scored into ``RUN/eval``, and the must-hold figures."""
+    profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
+    trajectory ``trajectory_guidance``, default none), the held-out clips ``heldout`` and the
+    generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
     stages = []
     for b in p.benchmarks:
         argv = ["generate", "--model", model, "--rig", p.rig, "--prompt", b.prompt, "--trajectory", b.trajectory]
         argv += ["--seed", str(b.seed), "--num-samples", str(samples), "--out", str(gen / b.name)]
+        if trajectory_guidance is not None:
+            argv += ["--trajectory-guidance", f"{trajectory_guidance:g}"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -198,7 +207,13 @@ def benchmark_stages(
 
 
 def benchmark_worldmodel(
-    model: str, heldout: Path, run: Path, profile_name: str, samples: int | None, tokenizer_eval: Path | None
+    model: str,
+    heldout: Path,
+    run: Path,
+    profile_name: str,
+    samples: int | None,
+    tokenizer_eval: Path | None,
+    trajectory_guidance: float | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -211,6 +226,8 @@ def benchmark_worldmodel(
     folder = resolve_model_folder(model)  # a missing folder fails here, not at the first of twelve stages
     if not (folder / "config.json").is_file():
         raise DrivewmError(f"worldmodel benchmark: --model {model} is not a model folder (no config.json)")
+    if trajectory_guidance is not None:
+        finite_at_least("worldmodel benchmark", 1, **{"--trajectory-guidance": trajectory_guidance})
     if not heldout.is_dir() and not heldout.is_file():
         raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder or an eval's metrics.json")
     profile = load_profile(profile_name)
@@ -222,7 +239,7 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "heldout" / "metrics.json", reference)
     if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
-    stages = benchmark_stages(profile, model, run, heldout, samples)
+    stages = benchmark_stages(profile, model, run, heldout, samples, trajectory_guidance)
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
@@ -305,9 +322,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="seeds per prompt (default the profile's, 2: 24 clips; 4 reads the turn sign on 32 left/right samples)",
     )
     b.add_argument("--tokenizer-eval", type=Path, help="a `tokenizer eval` metrics.json for the PSNR figure")
+    b.add_argument(
+        "--trajectory-guidance",
+        type=float,
+        help="guidance on the ego trajectory for every sample (drivewm generate --trajectory-guidance; "
+        "default none, as the shipped figures)",
+    )
     b.set_defaults(
         func=lambda args: benchmark_worldmodel(
-            args.model, args.heldout, args.out, args.profile, args.samples_per_prompt, args.tokenizer_eval
+            args.model,
+            args.heldout,
+            args.out,
+            args.profile,
+            args.samples_per_prompt,
+            args.tokenizer_eval,
+            args.trajectory_guidance,
         )
     )
     e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")

@@ -53,6 +53,10 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     assert all(a[a.index("--num-samples") + 1] == "4" for n, a in more.items() if n.startswith("generate-"))
     parser = build_parser()
     assert all(callable(parser.parse_args(argv).func) for _, argv in mine)
+    guided = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, trajectory_guidance=4) if n[:9] == "generate-"]
+    assert len(guided) == len(p.benchmarks)
+    assert all(parser.parse_args(a).trajectory_guidance == 4.0 for a in guided)
+    assert all(parser.parse_args(a).trajectory_guidance == 1.0 for n, a in mine if n.startswith("generate-"))
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
@@ -82,6 +86,8 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
         (["--tokenizer-eval", "{tmp}/heldout/bad.json"], "bad.json is not a `tokenizer eval` metrics.json"),
         (["--heldout", "{tmp}/heldout/bad.json"], "bad.json is not a `drivewm eval` metrics.json"),
         (["--samples-per-prompt", "0"], "must be in [1, 64], got 0"),
+        (["--trajectory-guidance", "nan"], "--trajectory-guidance must be a finite number >= 1, got nan"),
+        (["--trajectory-guidance", "0.5"], "--trajectory-guidance must be a finite number >= 1, got 0.5"),
     ],
 )
 def test_benchmark_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, args, message):
