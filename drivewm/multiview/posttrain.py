@@ -22,14 +22,13 @@ from drivewm.diffusion.denoiser import edm_loss, sample_sigma
 from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
-from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.geometry import load_rig
 from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
-from drivewm.multiview.trajectory_probe import loss_gap, turning_clips
+from drivewm.multiview.trajectory_probe import is_turning, loss_gap, turning_clips
 from drivewm.recipe import RecipeBook
 from drivewm.train.checkpoint import load_weights, read_model_type
 from drivewm.train.loop import TrainConfig, train
@@ -222,11 +221,6 @@ class MultiViewTask(BundleTask):
             s.rig, [s.view_captions], s.trajectory[None], [0], steps=self.cfg.sample_steps, guidance=3.0
         )
         write_grid_png(decode_latents(z[0], bundle.latent.tokenizer, bundle.device), path, s.rig.names)
-
-
-def is_turning(s: MultiViewSample, min_turn_deg: float) -> bool:
-    """Whether a clip's waypoints turn by more than ``min_turn_deg`` (last chord against the first)."""
-    return s.trajectory_known and abs(waypoint_heading_deg(s.trajectory)) > min_turn_deg
 
 
 def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditioning:

@@ -22,7 +22,7 @@ from drivewm.diffusion.denoiser import edm_loss
 from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.geometry import T_from_xyz_yaw
 from drivewm.multiview.camera import moving_token_rays
-from drivewm.multiview.data import MultiViewDataset
+from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.model import MultiView, build_conditioning
 
 #: Clips whose waypoints turn by more than this (degrees) are probed.
@@ -38,10 +38,16 @@ def turning_clips(ds: MultiViewDataset, count: int, min_turn_deg: float = MIN_TU
         if len(out) == count:
             break
         key = ds.cache.rows[i]["key"]  # from the index: reading the clip's file for its key would read it twice
-        if key not in seen and match in key and abs(waypoint_heading_deg(ds[i].trajectory)) > min_turn_deg:
+        if key not in seen and match in key and is_turning(ds[i], min_turn_deg):
             out.append(i)
         seen.add(key)
     return out
+
+
+def is_turning(s: MultiViewSample, min_turn_deg: float) -> bool:
+    """Whether a clip's waypoints turn by more than ``min_turn_deg`` (the heading of their last chord,
+    as the eval reads a conditioned turn); a clip without ego motion does not."""
+    return s.trajectory_known and abs(waypoint_heading_deg(s.trajectory)) > min_turn_deg
 
 
 @torch.no_grad()

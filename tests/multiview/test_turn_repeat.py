@@ -13,7 +13,8 @@ import torch
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.multiview.data import MultiViewSample
-from drivewm.multiview.posttrain import MultiViewTask, is_turning, posttrain, posttrain_config
+from drivewm.multiview.posttrain import MultiViewTask, posttrain, posttrain_config
+from drivewm.multiview.trajectory_probe import is_turning
 
 
 def _arc(turn_deg: float, n: int = 16, length_m: float = 30.0) -> np.ndarray:
