@@ -180,11 +180,13 @@ def benchmark_stages(
     heldout: Path,
     samples: int | None = None,
     trajectory_guidance: float | None = None,
+    reproject: float | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
     profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
-    trajectory ``trajectory_guidance``, default none), the held-out clips ``heldout`` and the
+    trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``, default
+    none), the held-out clips ``heldout`` and the
     generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -194,6 +196,8 @@ def benchmark_stages(
         argv += ["--seed", str(b.seed), "--num-samples", str(samples), "--out", str(gen / b.name)]
         if trajectory_guidance is not None:
             argv += ["--trajectory-guidance", f"{trajectory_guidance:g}"]
+        if reproject is not None:
+            argv += ["--reproject", f"{reproject:g}"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -214,6 +218,7 @@ def benchmark_worldmodel(
     samples: int | None,
     tokenizer_eval: Path | None,
     trajectory_guidance: float | None = None,
+    reproject: float | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -228,6 +233,8 @@ def benchmark_worldmodel(
         raise DrivewmError(f"worldmodel benchmark: --model {model} is not a model folder (no config.json)")
     if trajectory_guidance is not None:
         finite_at_least("worldmodel benchmark", 1, **{"--trajectory-guidance": trajectory_guidance})
+    if reproject is not None:
+        finite_at_least("worldmodel benchmark", 0, **{"--reproject": reproject})
     if not heldout.is_dir() and not heldout.is_file():
         raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder or an eval's metrics.json")
     profile = load_profile(profile_name)
@@ -239,7 +246,7 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "heldout" / "metrics.json", reference)
     if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
-    stages = benchmark_stages(profile, model, run, heldout, samples, trajectory_guidance)
+    stages = benchmark_stages(profile, model, run, heldout, samples, trajectory_guidance, reproject)
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
@@ -328,6 +335,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="guidance on the ego trajectory for every sample (drivewm generate --trajectory-guidance; "
         "default none, as the shipped figures)",
     )
+    b.add_argument(
+        "--reproject",
+        type=float,
+        metavar="SIGMA",
+        help="reprojected refinement of every sample from noise level SIGMA (drivewm generate --reproject; "
+        "default none, as the shipped figures)",
+    )
     b.set_defaults(
         func=lambda args: benchmark_worldmodel(
             args.model,
@@ -337,6 +351,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.samples_per_prompt,
             args.tokenizer_eval,
             args.trajectory_guidance,
+            args.reproject,
         )
     )
     e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")

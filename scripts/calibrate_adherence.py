@@ -29,7 +29,7 @@ from drivewm.choices import model_folder
 from drivewm.eval.adherence import classify_condition, condition_scores, fit_calibration
 from drivewm.logs.reader import read_log
 from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
-from drivewm.multiview.rollout import code_views
+from drivewm.multiview.coding import code_views
 from drivewm.sim import SimConfig, simulate
 from drivewm.tokenizer import Tokenizer
 

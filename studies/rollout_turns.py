@@ -8,7 +8,7 @@ seed, the clip's own captions and speed, and reads the front camera's yaw with t
 dense-flow reader (drivewm.eval.trajectory.flow_fallback, the planar vehicle model; left positive)
 over the whole rollout, the real first frame included.
 
-    python studies/rollout_turns.py MODEL_DIR CLIPDIR [--clips 6] [--steps 20] [--seed 700]
+    python studies/rollout_turns.py MODEL_DIR CLIPDIR [--clips 6] [--steps 20] [--seed 700] [--reproject 0.5]
 
 Prints a row per clip: the yaw under each trajectory and their difference (left minus right:
 positive where the model turns the way it is told); then the turn sign rate over all rollouts and
@@ -28,6 +28,7 @@ from drivewm.clips.shards import iter_clips
 from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.reproject import Reprojection
 from drivewm.multiview.rollout import RolloutOptions, rollout
 from drivewm.tokenizer import Tokenizer
 
@@ -62,6 +63,7 @@ def main() -> None:
     parser.add_argument("--clips", dest="count", type=int, default=6, help="how many straight clips")
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--seed", type=int, default=700)
+    parser.add_argument("--reproject", type=float, default=0.0, help="reprojected refinement sigma (0 = off)")
     args = parser.parse_args()
 
     model = MultiView.from_pretrained(resolve_model_folder(args.model))
@@ -70,7 +72,8 @@ def main() -> None:
     for j, clip in enumerate(straight_clips(args.clips, args.count)):
         row = {}
         for turn in ("left", "right"):
-            options = RolloutOptions(turn, windows=1, steps=args.steps, seed=args.seed + j)
+            reprojection = Reprojection(args.reproject)
+            options = RolloutOptions(turn, windows=1, steps=args.steps, seed=args.seed + j, reprojection=reprojection)
             row[turn] = front_yaw(rollout(model, clip, options, tokenizer))
             yaws[turn].append(row[turn])
         diffs.append(row["left"] - row["right"])

@@ -28,7 +28,7 @@ from drivewm.choices import resolve_model_folder
 from drivewm.clips import ShardWriter, iter_clips
 from drivewm.clips.format import clip_from_arrays
 from drivewm.eval.suite import spread
-from drivewm.multiview.rollout import code_views
+from drivewm.multiview.coding import code_views
 from drivewm.tokenizer import Tokenizer
 
 

@@ -138,7 +138,7 @@ def test_the_shipped_transfer_model_turns_an_unseen_clear_clip_to_snow_and_keeps
     fixture (a drive it never saw) comes out as snow by the eval's classifier, with every SIFT match
     within 2 px of its source position (issue 18's must-hold), labels kept."""
     from drivewm.diffusion.generate import video_to_uint8
-    from drivewm.multiview.rollout import frames_to_video
+    from drivewm.multiview.coding import frames_to_video
     from drivewm.transfer.metrics import adherent, sift_shift_px
     from drivewm.transfer.retarget import TargetCondition
 

@@ -57,6 +57,9 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     assert len(guided) == len(p.benchmarks)
     assert all(parser.parse_args(a).trajectory_guidance == 4.0 for a in guided)
     assert all(parser.parse_args(a).trajectory_guidance == 1.0 for n, a in mine if n.startswith("generate-"))
+    refined = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject=0.5) if n[:9] == "generate-"]
+    assert all(parser.parse_args(a).reproject == 0.5 for a in refined) and len(refined) == len(p.benchmarks)
+    assert all(parser.parse_args(a).reproject == 0.0 for n, a in mine if n.startswith("generate-"))
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):

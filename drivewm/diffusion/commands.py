@@ -14,6 +14,7 @@ from pathlib import Path
 
 from drivewm.choices import add_registry_argument, at_least_one, model_folder, output_folder, seed
 from drivewm.diffusion.dit_config import DIT_PRESETS
+from drivewm.multiview.commands import add_reproject_arguments
 from drivewm.recipe import add_recipe_arguments
 
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
@@ -74,6 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)",
     )
+    add_reproject_arguments(g)
     g.set_defaults(func=generate_command)
 
 
@@ -111,10 +113,10 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.generate import GenerateOptions, generate_text2world
     from drivewm.errors import DrivewmError
 
-    if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0:
+    if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0 or args.reproject:
         raise DrivewmError(
-            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance "
-            "(multi-view models do)"
+            f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
+            "/--reproject (multi-view models do)"
         )
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device

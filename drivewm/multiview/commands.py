@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument, model_folder, output_folder, seed
+from drivewm.choices import add_registry_argument, at_least_one, model_folder, output_folder, seed
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -68,6 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
+    add_reproject_arguments(r)
     r.add_argument("--seed", type=seed, default=0, help="window w uses seed + w")
     add_registry_argument(
         r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
@@ -76,6 +77,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
     r.set_defaults(func=rollout_command)
+
+
+def add_reproject_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--reproject SIGMA`` and ``--reproject-steps N`` of generate and rollout (drivewm.multiview.reproject)."""
+    parser.add_argument(
+        "--reproject",
+        type=float,
+        default=0.0,
+        metavar="SIGMA",
+        help="multi-view models: warp the first frame of every camera along the trajectory and refine it from "
+        "noise level SIGMA (0 = off; 0.5 follows turns, docs/quality-vs-compute.md)",
+    )
+    parser.add_argument(
+        "--reproject-steps", type=at_least_one, default=10, help="sampler steps of the refinement (default 10)"
+    )
 
 
 def posttrain_command(args: argparse.Namespace) -> int:
@@ -96,6 +112,7 @@ def posttrain_command(args: argparse.Namespace) -> int:
 def rollout_command(args: argparse.Namespace) -> int:
     from drivewm.errors import DrivewmError
     from drivewm.multiview.model import MultiView
+    from drivewm.multiview.reproject import Reprojection
     from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
     from drivewm.multiview.writer import write_samples
     from drivewm.tokenizer import Tokenizer
@@ -110,6 +127,7 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.seed,
         args.prompt,
         args.speed,
+        Reprojection(args.reproject, args.reproject_steps),
     )
     if args.model is None:
         from drivewm.release import shipped_model

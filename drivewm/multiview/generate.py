@@ -18,8 +18,10 @@ from drivewm.curate.captions import camera_direction
 from drivewm.diffusion.generate import GenerateOptions, decode_latents, warn_if_preview
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
+from drivewm.multiview.coding import decode_views, encode_views
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.rollout import clip_rig, encode_views, initial_speed_mps, load_clip
+from drivewm.multiview.reproject import Reprojection, refine_reprojected
+from drivewm.multiview.rollout import clip_rig, initial_speed_mps, load_clip
 from drivewm.multiview.trajectories import resolve_trajectory
 from drivewm.multiview.writer import GeneratedSample, write_samples
 from drivewm.text.conditions import named_values
@@ -71,11 +73,16 @@ def generate_multiview(
     condition_clip: str | Path | None,
     out_dir: str | Path,
     trajectory_guidance: float = 1.0,
+    reprojection: Reprojection | None = None,
 ) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
-    ``trajectory`` (default straight) and write them (drivewm.multiview.writer)."""
+    ``trajectory`` (default straight) and write them (drivewm.multiview.writer); with a
+    ``reprojection`` sigma, each first pass is reprojected along the trajectory and refined
+    (drivewm.multiview.reproject)."""
+    reprojection = reprojection or Reprojection()
     model = MultiView.from_pretrained(model_dir).to(options.device)
     warn_if_preview(model_dir, model.latent.tokenizer)
+    tokenizer = reprojection_tokenizer(model, reprojection)
     mv = model.cfg.multiview
     rig = load_rig(rig_spec) if rig_spec else None
     cond, speed = None, mv.speed_mps
@@ -88,18 +95,16 @@ def generate_multiview(
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
     for prompt, seed in tqdm(jobs, desc="generate"):
         caps = view_captions(prompt, rig)
-        z = model.sample_latents(
-            rig,
-            [caps],
-            waypoints[None],
-            [seed],
-            options.steps,
-            options.guidance,
-            options.sampler,
-            cond_latents=cond,
-            trajectory_guidance=trajectory_guidance,
-        )
+        sampling = {
+            "guidance": options.guidance,
+            "sampler": options.sampler,
+            "trajectory_guidance": trajectory_guidance,
+        }
+        z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, cond_latents=cond, **sampling)
         videos = decode_latents(z[0], model.latent.tokenizer, model.device)  # (V, T, H, W, 3)
+        if tokenizer is not None:
+            z = refine_reprojected(model, tokenizer, rig, caps, waypoints, seed, videos, reprojection, sampling)
+            videos = decode_views(tokenizer, z, model.device)
         extra = {
             "model": str(Path(model_dir).resolve()),
             "prompt": prompt,
@@ -110,9 +115,19 @@ def generate_multiview(
             "trajectory": trajectory or "straight",
             "speed_mps": float(speed),
             "condition_clip": str(condition_clip or ""),
+            **reprojection.record(),
         }
         samples.append(GeneratedSample(videos, rig, prompt, caps, waypoints, mv.trajectory_dt_s, extra))
     return write_samples(out_dir, samples, model.latent.fps)
+
+
+def reprojection_tokenizer(model: MultiView, reprojection: Reprojection) -> Tokenizer | None:
+    """The tokenizer that reprojection encodes the warped clips with (None when it is off)."""
+    if not reprojection.sigma:
+        return None
+    if not model.latent.tokenizer:
+        raise DrivewmError("--reproject needs the model's tokenizer (none recorded in the model folder)")
+    return Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
 
 
 def generate_command(args: argparse.Namespace) -> int:
@@ -120,8 +135,16 @@ def generate_command(args: argparse.Namespace) -> int:
     options = GenerateOptions(
         args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device
     )
+    reprojection = Reprojection(args.reproject, args.reproject_steps)
     files = generate_multiview(
-        args.model, options, args.rig, args.trajectory, args.condition_clip, args.out, args.trajectory_guidance
+        args.model,
+        options,
+        args.rig,
+        args.trajectory,
+        args.condition_clip,
+        args.out,
+        args.trajectory_guidance,
+        reprojection,
     )
     print(f"wrote {len(files)} files to {args.out}")
     return 0

@@ -201,26 +201,42 @@ class MultiView:
         cond_latents: torch.Tensor | None = None,
         fps: float | None = None,
         trajectory_guidance: float = 1.0,
+        start_latents: torch.Tensor | None = None,
+        start_sigma: float | None = None,
     ) -> torch.Tensor:
         """Raw (denormalised) latents (B, V, c, t, h, w) of B clips; clip b's noise from ``seeds[b]``.
 
         ``cond_latents`` (B, V, c, t, h, w) raw latents whose first ``edm.cond_frames`` latent frames
         are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
         trajectory's effect w times (drivewm.diffusion.sampling.guided; twice the network evaluations).
+        ``start_latents`` (B, V, c, t, h, w) raw: sample from them noised to ``start_sigma`` (SDEdit;
+        drivewm.multiview.reproject), not from pure noise.
         """
         v = len(rig.cameras)
         cond = self.conditioning(rig, view_captions, trajectories, fps)
         mean, std = self._stats()
         if cond_latents is not None:
-            z = normalize_latents(
-                rearrange(cond_latents.cpu(), "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data
-            )
+            z = self._normalized(cond_latents, mean, std)
             cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
+        start = (
+            None if start_latents is None else self._normalized(start_latents, mean, std).reshape(start_latents.shape)
+        )
         shape = (v, *self.latent.latent_shape)  # the views of a clip share its seed, folded as (B V)
         trajectory_guidance = trajectory_guidance if trajectories is not None else 1.0
         noise_fn = self.noise_warper(rig, trajectories, fps or self.latent.fps)
         x = sample(
-            self.net, cond, shape, seeds, steps, guidance, sampler, trajectory_guidance, self.device, noise_fn=noise_fn
+            self.net,
+            cond,
+            shape,
+            seeds,
+            steps,
+            guidance,
+            sampler,
+            trajectory_guidance,
+            self.device,
+            start=start,
+            start_sigma=start_sigma,
+            noise_fn=noise_fn,
         )
         return denormalize_latents(x, mean, std, self.cfg.edm.sigma_data)  # (B, V, c, t, h, w)
 
@@ -240,6 +256,12 @@ class MultiView:
             return rearrange(warp_noise(folded, grid, valid, v, a), "(b v) c t h w -> b v c t h w", v=v)
 
         return warp
+
+    def _normalized(self, latents: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+        """Raw (B, V, c, t, h, w) -> normalised (B V, c, t, h, w), as the network sees them."""
+        return normalize_latents(
+            rearrange(latents.cpu(), "b v c t h w -> (b v) c t h w"), mean, std, self.cfg.edm.sigma_data
+        )
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:
         return torch.tensor(self.latent.latent_mean), torch.tensor(self.latent.latent_std)

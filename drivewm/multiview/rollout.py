@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import cv2
 import numpy as np
 import torch
 from einops import rearrange
@@ -22,10 +21,11 @@ from tqdm import tqdm
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.config import finite_at_least
-from drivewm.diffusion.generate import video_to_uint8
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
+from drivewm.multiview.coding import decode_views, encode_views, frames_to_video
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.reproject import Reprojection, refine_reprojected
 from drivewm.multiview.trajectories import (
     NAMED,
     load_waypoints,
@@ -61,6 +61,8 @@ class RolloutOptions:
     """Caption for every view ('' = the clip's own per-view captions)."""
     speed_mps: float = 0.0
     """Speed of a named trajectory (0 = the clip's own initial speed)."""
+    reprojection: Reprojection = dataclasses.field(default_factory=Reprojection)
+    """Each window's first frame reprojected along the trajectory and refined (drivewm.multiview.reproject)."""
 
     def __post_init__(self) -> None:
         if self.windows < 1 or self.steps < 1:
@@ -81,43 +83,6 @@ def load_clip(path: str | Path, key: str | None = None) -> Clip:
         if key is None or clip.key == key:
             return clip
     raise DrivewmError(f"{path}: no clip with key {key!r}")
-
-
-def resize_views(frames: np.ndarray, size_hw: tuple[int, int], interpolation: int = cv2.INTER_AREA) -> np.ndarray:
-    """uint8 (V, T, H, W, 3) -> uint8 (V, T, h, w, 3) at ``size_hw`` (the input itself when already that size)."""
-    h, w = size_hw
-    if frames.shape[2:4] == (h, w):
-        return frames
-    return np.stack([[cv2.resize(f, (w, h), interpolation=interpolation) for f in view] for view in frames])
-
-
-def frames_to_video(frames: np.ndarray, size_hw: tuple[int, int]) -> torch.Tensor:
-    """uint8 (V, T, H, W, 3) -> float (V, 3, T, h, w) in [-1, 1] at the tokenizer's input size."""
-    frames = resize_views(frames, size_hw)
-    return rearrange(torch.from_numpy(frames).float() / 127.5 - 1, "v t h w c -> v c t h w")
-
-
-@torch.no_grad()
-def encode_views(
-    tokenizer, frames: np.ndarray, size_hw: tuple[int, int], device: torch.device | str = "cpu"
-) -> torch.Tensor:
-    """uint8 (V, T, H, W, 3) -> raw latents (V, c, t, h, w) on the CPU, coded on ``device`` (where the
-    tokenizer is) one view at a time (memory)."""
-    video = frames_to_video(frames, size_hw)
-    return torch.cat([tokenizer.encode(v[None].to(device)).cpu() for v in video])
-
-
-@torch.no_grad()
-def decode_views(tokenizer, latents: torch.Tensor, device: torch.device | str = "cpu") -> np.ndarray:
-    """Raw latents (V, c, t, h, w) -> uint8 (V, T, H, W, 3), decoded on ``device`` (where the tokenizer is)."""
-    return np.concatenate([video_to_uint8(tokenizer.decode(z[None].to(device))) for z in latents])
-
-
-def code_views(
-    tokenizer, frames: np.ndarray, size_hw: tuple[int, int], device: torch.device | str = "cpu"
-) -> np.ndarray:
-    """uint8 (V, T, H, W, 3) resized to ``size_hw``, encoded and decoded: what the tokenizer keeps of them."""
-    return decode_views(tokenizer, encode_views(tokenizer, frames, size_hw, device), device)
 
 
 def initial_speed_mps(clip: Clip) -> float:
@@ -196,6 +161,7 @@ def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) ->
         "steps": options.steps,
         "guidance": options.guidance,
         "cond_video_frames": win.n_cond,
+        **options.reprojection.record(),
     }
     return GeneratedSample(video, rig, captions[0], captions, traj, mv.trajectory_dt_s, extra)
 
@@ -222,16 +188,18 @@ def _next_window(
     waypoints = waypoints_from_poses(
         poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints
     )
+    sampling = {
+        "guidance": options.guidance,
+        "sampler": options.sampler,
+        "trajectory_guidance": options.trajectory_guidance,
+    }
+    seed = options.seed + window
     z = model.sample_latents(
-        rig,
-        [captions],
-        waypoints[None],
-        [options.seed + window],
-        options.steps,
-        options.guidance,
-        options.sampler,
-        cond_latents=cond[None],
-        fps=fps,
-        trajectory_guidance=options.trajectory_guidance,
-    )
-    return decode_views(tokenizer, z[0], model.device)[:, win.n_cond :]
+        rig, [captions], waypoints[None], [seed], options.steps, cond_latents=cond[None], fps=fps, **sampling
+    )[0]
+    if options.reprojection.sigma:
+        first = decode_views(tokenizer, z, model.device)
+        z = refine_reprojected(
+            model, tokenizer, rig, captions, waypoints, seed, first, options.reprojection, sampling, fps
+        )
+    return decode_views(tokenizer, z, model.device)[:, win.n_cond :]

@@ -32,7 +32,7 @@ from drivewm.diffusion.generate import write_grid_png
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import BatchError, DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
-from drivewm.multiview.rollout import decode_views, encode_views, resize_views
+from drivewm.multiview.coding import decode_views, encode_views, resize_views
 from drivewm.multiview.writer import grid_layout, tile_views
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions

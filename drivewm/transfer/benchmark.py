@@ -29,7 +29,7 @@ import torch
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.geometry import Rig
-from drivewm.multiview.rollout import code_views, decode_views, encode_views, resize_views
+from drivewm.multiview.coding import code_views, decode_views, encode_views, resize_views
 from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from drivewm.geometry import Rig
-from drivewm.multiview.rollout import resize_views
+from drivewm.multiview.coding import resize_views
 from drivewm.transfer.detail import WINDOW_PX, restore_detail
 
 UPSAMPLE = cv2.INTER_CUBIC  # Keys' bicubic: sharper than bilinear, no LANCZOS ringing on dark night skies

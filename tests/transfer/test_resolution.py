@@ -12,7 +12,7 @@ import pytest
 
 from drivewm.clips import iter_clips
 from drivewm.diffusion.text2world import LatentInfo
-from drivewm.multiview.rollout import code_views, resize_views
+from drivewm.multiview.coding import code_views, resize_views
 from drivewm.transfer.apply import Transferer, TransferOptions, transfer_clip
 from drivewm.transfer.metrics import image_scores, sift_shift_px
 from drivewm.transfer.resolution import UPSAMPLE, detail_window_px, output_size_hw, to_output_size
