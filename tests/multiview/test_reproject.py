@@ -79,3 +79,25 @@ def test_the_shipped_model_refined_from_a_reprojection_turns_as_told(tmp_path):
         yaws[name] = front_yaw_deg(np.stack([clip.video(n) for n in rig.names]), rig)
         assert clip.meta.extra["reproject_sigma"] == 0.5 and clip.meta.extra["reproject_steps"] == 4
     assert yaws["left"] > 10 and yaws["right"] < -10, yaws
+
+
+@pytest.mark.slow
+def test_a_rollout_of_a_real_clip_refined_from_its_reprojection_turns_as_told(sim_clip_dir):
+    """The shipped model continues one real simulated clip under left and right (Video2World, the
+    same seed): reprojected from sigma 0.5, the continuations turn the asked way by more than 10
+    degrees, and the clip records the setting."""
+    from drivewm.multiview.model import MultiView
+    from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
+    from drivewm.release import shipped_model
+    from drivewm.tokenizer import Tokenizer
+
+    model = MultiView.from_pretrained(shipped_model("multiview"))
+    tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer)
+    clip = load_clip(sim_clip_dir)
+    yaws = {}
+    for name in ("left", "right"):
+        options = RolloutOptions(name, windows=1, steps=6, guidance=3.0, seed=3, reprojection=Reprojection(0.5, 4))
+        sample = rollout(model, clip, options, tokenizer)
+        yaws[name] = front_yaw_deg(sample.videos, sample.rig)
+        assert sample.extra["reproject_sigma"] == 0.5
+    assert yaws["left"] > 10 and yaws["right"] < -10, yaws
