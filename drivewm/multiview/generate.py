@@ -93,16 +93,14 @@ def generate_multiview(
     waypoints = resolve_trajectory(trajectory or "straight", mv.trajectory_waypoints, mv.trajectory_dt_s, speed)
     samples = []
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
+    sampling = {"guidance": options.guidance, "sampler": options.sampler, "trajectory_guidance": trajectory_guidance}
     for prompt, seed in tqdm(jobs, desc="generate"):
         caps = view_captions(prompt, rig)
-        sampling = {
-            "guidance": options.guidance,
-            "sampler": options.sampler,
-            "trajectory_guidance": trajectory_guidance,
-        }
         z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, cond_latents=cond, **sampling)
-        videos = decode_latents(z[0], model.latent.tokenizer, model.device)  # (V, T, H, W, 3)
-        if tokenizer is not None:
+        if tokenizer is None:
+            videos = decode_latents(z[0], model.latent.tokenizer, model.device)  # (V, T, H, W, 3)
+        else:  # the tokenizer reprojection already loaded decodes the first pass too
+            videos = decode_views(tokenizer, z[0], model.device)
             z = refine_reprojected(model, tokenizer, rig, caps, waypoints, seed, videos, reprojection, sampling)
             videos = decode_views(tokenizer, z, model.device)
         extra = {
