@@ -62,12 +62,26 @@ def export_folder(src: Path, dst: Path) -> dict:
 
 
 def training_record(run_dir: Path) -> dict:
-    """``{"steps", "train_seconds"}`` of a training run folder ({} without a training state)."""
+    """``{"steps", "train_seconds"}`` of a training run folder: from its training state, else from the
+    last row of its ``metrics.jsonl`` (a run brought back from a GPU machine with its weights and
+    metrics only); {} with neither."""
     saved = load_train_state(run_dir)
     if saved is None:
-        return {}
+        return metrics_record(Path(run_dir) / "metrics.jsonl")
     seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock
     return {"steps": int(saved["step"]), "train_seconds": None if seconds is None else float(seconds)}
+
+
+def metrics_record(path: Path) -> dict:
+    """``{"steps", "train_seconds"}`` from the last row of a training loop's metrics file ({} without one)."""
+    if not path.is_file():
+        return {}
+    rows = [line for line in path.read_text().splitlines() if line.strip()]
+    try:
+        last = json.loads(rows[-1]) if rows else {}
+        return {"steps": int(last["step"]), "train_seconds": float(last["train_seconds"])} if last else {}
+    except (ValueError, KeyError, TypeError):
+        raise DrivewmError(f"{path}: the last row is not a training loop's metrics row (step, train_seconds)") from None
 
 
 def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
@@ -100,19 +114,24 @@ def manifest_files(root: Path, files: list[Path]) -> dict:
     return {str(p.relative_to(root)): {"sha256": sha256(p), "bytes": p.stat().st_size} for p in files}
 
 
-def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR) -> dict:
+def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device: str = "cpu") -> dict:
     """Replace the shipped folder ``kind`` by ``src``, a fine-tune of it (``drivewm posttrain --init
     shipped:multiview``), exported as :func:`export_run` exports a run's folders; rewrites
     ``MANIFEST.json``: every file's sha256 and bytes, and ``kind``'s training record with the fine-tune's
     steps and seconds added to the folder's own and listed under ``fine_tunes``. Returns the manifest;
     the model card's figures and sha256 are the caller's to update (tests/test_shipped_weights.py checks
-    the sha256)."""
+    the sha256). ``device``: what the fine-tune ran on; a GPU's seconds are listed as ``gpu_seconds``,
+    apart from the CPU seconds of ``train_seconds``."""
     if kind not in RUN_FOLDERS:
         raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
     manifest = check_manifest(root)  # never build on a manifest that no longer matches its files
     record = training_record(Path(src))
     if not record:
-        raise DrivewmError(f"{src}: no train_state.pt, so no record of the fine-tune's steps to ship with it")
+        raise DrivewmError(
+            f"{src}: no train_state.pt or metrics.jsonl, so no record of the fine-tune's steps to ship with it"
+        )
+    if device != "cpu":
+        record["device"] = device
     before = manifest["training"][kind]
     staged = root / f".{kind}.new"  # exported beside the shipped folder, which is replaced only once it fits
     shipped = {n: root / n for n in RUN_FOLDERS if (root / n).is_dir()}
@@ -125,11 +144,13 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR) -> dic
         raise
     shutil.rmtree(root / kind)
     staged.rename(root / kind)
-    seconds = [before.get("train_seconds"), record["train_seconds"]]
+    clock = "train_seconds" if device == "cpu" else "gpu_seconds"
+    seconds = [before.get(clock, 0.0 if clock == "gpu_seconds" else None), record["train_seconds"]]
     manifest["files"] = manifest_files(root, folder_files(root, shipped))
     manifest["training"][kind] = {
+        **before,
         "steps": before["steps"] + record["steps"],
-        "train_seconds": None if None in seconds else sum(seconds),
+        clock: None if None in seconds else sum(seconds),
         "fine_tunes": [*before.get("fine_tunes", []), record],
     }
     write_json(root / "MANIFEST.json", manifest)

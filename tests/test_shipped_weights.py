@@ -109,6 +109,27 @@ def test_a_fine_tune_replaces_one_folder_and_its_record_adds_up(tmp_path):
         replace_shipped("multiview", shipped_model("multiview"), root)
 
 
+def test_a_gpu_fine_tune_without_its_train_state_is_recorded_from_its_metrics_apart_from_cpu_time(tmp_path):
+    """A run brought back from a GPU machine with its weights and metrics only: its steps and seconds come
+    from the last metrics row, and its seconds count as GPU seconds, not CPU seconds."""
+    from drivewm.release import replace_shipped
+
+    root = tmp_path / "weights"
+    shutil.copytree(WEIGHTS_DIR, root)
+    before = json.loads((root / "MANIFEST.json").read_text())["training"]["multiview"]
+    shutil.copytree(shipped_model("multiview"), tmp_path / "ft")
+    rows = [{"step": 20, "loss": 0.5, "train_seconds": 4.0}, {"step": 40, "loss": 0.4, "train_seconds": 7.5}]
+    (tmp_path / "ft" / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    record = replace_shipped("multiview", tmp_path / "ft", root, device="cuda (NVIDIA H200)")["training"]["multiview"]
+    assert record["steps"] == before["steps"] + 40
+    assert record["train_seconds"] == before["train_seconds"]
+    assert record["gpu_seconds"] == pytest.approx(before.get("gpu_seconds", 0.0) + 7.5)
+    assert record["fine_tunes"][-1] == {"steps": 40, "train_seconds": 7.5, "device": "cuda (NVIDIA H200)"}
+    (tmp_path / "ft" / "metrics.jsonl").write_text("not json\n")
+    with pytest.raises(DrivewmError, match="not a training loop's metrics row"):
+        replace_shipped("multiview", tmp_path / "ft", root)
+
+
 def generation_stats(out: Path) -> dict[str, list[float]]:
     """Per camera of the generated clip: mean and std of the pixels, and the mean of the top and
     bottom thirds (sky and road, in a model that learned where they are)."""
