@@ -125,7 +125,7 @@ def test_mapper_options_carry_the_protocol_settings():
 
 @pytest.mark.slow
 def test_capped_global_bundle_adjustment_keeps_the_real_dashcam_poses(shared_data):
-    """The first 96 frames of the real dashcam video: the protocol's capped global bundle adjustments
+    """The first 64 frames of the real dashcam video: the protocol's capped global bundle adjustments
     (``ba_global_max_iterations``) register every frame, and the camera path after a similarity alignment
     lies within 0.5% of its length of the path with COLMAP's 50 iterations (same features and matches)."""
     from test_degenerate import dashcam_camera
@@ -137,7 +137,7 @@ def test_capped_global_bundle_adjustment_keeps_the_real_dashcam_poses(shared_dat
 
     path = shared_data / "video" / "dashcam_highway" / "solidWhiteRight.mp4"
     item = load_items(path, Rig("dashcam", [dashcam_camera()]))[0]
-    videos = {c: v[:96] for c, v in item.videos().items()}
+    videos = {c: v[:64] for c, v in item.videos().items()}
     matcher = FrameMatcher(MatchConfig(), threads=2)
     capped = run_sfm(videos, item.rig, PoseConfig(), matcher=matcher)
     full = run_sfm(videos, item.rig, PoseConfig(ba_global_max_iterations=50), matcher=matcher)
@@ -146,7 +146,7 @@ def test_capped_global_bundle_adjustment_keeps_the_real_dashcam_poses(shared_dat
     err, _ = ate(est, ref)
     length = np.sum(np.linalg.norm(np.diff(ref[:, :3, 3], axis=0), axis=1))
     print(
-        f"dashcam, 96 frames: capped vs full BA {err / length:.5f} of the path; "
+        f"dashcam, 64 frames: capped vs full BA {err / length:.5f} of the path; "
         f"seconds {capped.seconds} vs {full.seconds}"
     )
     assert err / length < 0.005
