@@ -17,7 +17,10 @@ import json
 import shutil
 from pathlib import Path
 
+import torch
+
 from drivewm.atomic import write_json
+from drivewm.choices import resolve_model_folder
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, load_train_state, save_model_folder
 
@@ -59,6 +62,41 @@ def export_folder(src: Path, dst: Path) -> dict:
         extra["parent"] = "../text2world"
     save_model_folder(dst, info["model_type"], info["config"], half, extra)
     return training_record(src)
+
+
+def interpolate_folders(
+    base: str | Path, tuned: str | Path, alpha: float, out: str | Path, config_from: str = "tuned"
+) -> Path:
+    """Write the model folder ``out`` whose weights are ``(1 - alpha) * base + alpha * tuned`` (in float32):
+    a fine-tune pulled back towards the model it started from, which keeps more of what the fine-tune's
+    data lacked (WiSE-FT, Wortsman et al. 2022). Both folders must be one model type with the same
+    tensors; ``config_from`` ("base" or "tuned") names the folder whose config and latent settings
+    (rig, tokenizer, speed) the result keeps. Returns ``out``."""
+    if not 0.0 <= alpha <= 1.0:
+        raise DrivewmError(f"interpolate: alpha must be in [0, 1] (0 = base, 1 = tuned), got {alpha}")
+    if config_from not in ("base", "tuned"):
+        raise DrivewmError(f"interpolate: config_from must be 'base' or 'tuned', got {config_from!r}")
+    kinds = ("drivewm-tokenizer", "text2world", "multiview", "transfer")
+    (info_a, a), (info_b, b) = load_model_folder(base, kinds), load_model_folder(tuned, kinds)
+    if info_a["model_type"] != info_b["model_type"]:
+        raise DrivewmError(f"interpolate: {base} is a {info_a['model_type']} model, {tuned} a {info_b['model_type']}")
+    differ = sorted(k for k in a.keys() | b.keys() if k not in a or k not in b or a[k].shape != b[k].shape)
+    if differ:
+        raise DrivewmError(
+            f"interpolate: {base} and {tuned} differ in structure ({len(differ)} tensors, e.g. {differ[0]})"
+        )
+    unequal = [k for k in a if not a[k].is_floating_point() and not torch.equal(a[k], b[k])]
+    if unequal:
+        raise DrivewmError(f"interpolate: non-float tensors differ ({unequal[0]}); these models do not mix")
+    state = {k: torch.lerp(a[k].float(), b[k].float(), alpha) if a[k].is_floating_point() else a[k] for k in a}
+    info = info_a if config_from == "base" else info_b
+    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    tok = (extra.get("latent") or {}).get("tokenizer")
+    if tok and not Path(tok).is_absolute():  # a shipped folder's ../tokenizer, wherever out is
+        folder = resolve_model_folder(base if config_from == "base" else tuned)
+        extra["latent"] = {**extra["latent"], "tokenizer": str((folder / tok).resolve())}
+    save_model_folder(out, info["model_type"], info["config"], state, extra)
+    return Path(out)
 
 
 def training_record(run_dir: Path) -> dict:

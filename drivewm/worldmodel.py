@@ -354,6 +354,18 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.reproject,
         )
     )
+    m = wsub.add_parser(
+        "interpolate",
+        help="mix a fine-tune with the model it started from: (1 - alpha) * BASE + alpha * TUNED (WiSE-FT)",
+    )
+    m.add_argument("base", help="the model the fine-tune started from (e.g. shipped:multiview)")
+    m.add_argument("tuned", help="the fine-tuned model folder (same model type and tensors)")
+    m.add_argument("--alpha", required=True, type=float, help="0 = BASE, 1 = TUNED")
+    m.add_argument(
+        "--config-from", choices=("base", "tuned"), default="tuned", help="whose config and latent settings to keep"
+    )
+    m.add_argument("--out", required=True, type=output_folder, help="model folder to write")
+    m.set_defaults(func=_interpolate)
     e = wsub.add_parser("export", help="fp16 model folders + model card from a finished run")
     e.add_argument("run", type=Path, help="run folder of `drivewm worldmodel train`")
     e.add_argument(
@@ -367,6 +379,13 @@ def _figures(args: argparse.Namespace) -> int:
     from drivewm.worldmodel_figures import write_figures
 
     write_figures(args.run)
+    return 0
+
+
+def _interpolate(args: argparse.Namespace) -> int:
+    from drivewm.release import interpolate_folders
+
+    print(interpolate_folders(args.base, args.tuned, args.alpha, args.out, args.config_from))
     return 0
 
 

@@ -130,6 +130,46 @@ def test_a_gpu_fine_tune_without_its_train_state_is_recorded_from_its_metrics_ap
         replace_shipped("multiview", tmp_path / "ft", root)
 
 
+def test_a_fine_tune_mixed_with_the_shipped_model_is_the_weighted_mean_and_keeps_the_chosen_settings(tmp_path):
+    """`drivewm worldmodel interpolate` (WiSE-FT): every float tensor is (1 - alpha) * base + alpha * tuned,
+    the config and latent settings are the folder named by --config-from, the shipped tokenizer stays
+    reachable from anywhere, and models that do not mix are refused with the reason."""
+    import torch
+
+    from drivewm.multiview.model import MultiView
+    from drivewm.release import interpolate_folders
+    from drivewm.train.checkpoint import load_model_folder, save_model_folder
+
+    info, base = load_model_folder("shipped:multiview", "multiview")
+    tuned = {k: v.float() + 0.5 if v.is_floating_point() else v for k, v in base.items()}
+    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    config = json.loads(json.dumps(info["config"]))
+    config["multiview"]["speed_mps"] = 7.0
+    save_model_folder(tmp_path / "ft", "multiview", config, tuned, extra)
+    shutil.copytree(shipped_model("tokenizer"), tmp_path / "tokenizer")  # the fine-tune's ../tokenizer
+    out = tmp_path / "mixed"
+    assert main(["worldmodel", "interpolate", "shipped:multiview", str(tmp_path / "ft"), "--alpha", "0.25",
+                 "--config-from", "base", "--out", str(out)]) == 0  # fmt: skip
+    got_info, got = load_model_folder(out, "multiview")
+    k = next(k for k in base if base[k].is_floating_point())
+    assert torch.allclose(got[k], base[k].float() + 0.125, atol=1e-6)
+    assert got_info["config"]["multiview"]["speed_mps"] == info["config"]["multiview"]["speed_mps"]
+    assert Path(got_info["latent"]["tokenizer"]).resolve() == shipped_model("tokenizer").resolve()
+    assert MultiView.from_pretrained(out).cfg.multiview.speed_mps == info["config"]["multiview"]["speed_mps"]
+    tuned_info, _ = load_model_folder(
+        interpolate_folders("shipped:multiview", tmp_path / "ft", 1.0, tmp_path / "t"), "multiview"
+    )
+    assert tuned_info["config"]["multiview"]["speed_mps"] == 7.0
+    with pytest.raises(DrivewmError, match=r"alpha must be in \[0, 1\]"):
+        interpolate_folders("shipped:multiview", tmp_path / "ft", 1.5, tmp_path / "bad")
+    with pytest.raises(DrivewmError, match="is a multiview model, .* a drivewm-tokenizer"):
+        interpolate_folders("shipped:multiview", "shipped:tokenizer", 0.5, tmp_path / "bad")
+    save_model_folder(tmp_path / "cut", "multiview", config, dict(list(tuned.items())[1:]), extra)
+    with pytest.raises(DrivewmError, match="differ in structure"):
+        interpolate_folders("shipped:multiview", tmp_path / "cut", 0.5, tmp_path / "bad")
+    assert not (tmp_path / "bad").exists()
+
+
 def generation_stats(out: Path) -> dict[str, list[float]]:
     """Per camera of the generated clip: mean and std of the pixels, and the mean of the top and
     bottom thirds (sky and road, in a model that learned where they are)."""
