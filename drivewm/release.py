@@ -152,14 +152,15 @@ def manifest_files(root: Path, files: list[Path]) -> dict:
     return {str(p.relative_to(root)): {"sha256": sha256(p), "bytes": p.stat().st_size} for p in files}
 
 
-def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device: str = "cpu") -> dict:
+def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device: str = "cpu", note: str = "") -> dict:
     """Replace the shipped folder ``kind`` by ``src``, a fine-tune of it (``drivewm posttrain --init
     shipped:multiview``), exported as :func:`export_run` exports a run's folders; rewrites
     ``MANIFEST.json``: every file's sha256 and bytes, and ``kind``'s training record with the fine-tune's
     steps and seconds added to the folder's own and listed under ``fine_tunes``. Returns the manifest;
     the model card's figures and sha256 are the caller's to update (tests/test_shipped_weights.py checks
     the sha256). ``device``: what the fine-tune ran on; a GPU's seconds are listed as ``gpu_seconds``,
-    apart from the CPU seconds of ``train_seconds``."""
+    apart from the CPU seconds of ``train_seconds``. ``note``: what the record alone does not say (e.g.
+    that the folder is a fine-tune mixed with the shipped one, drivewm.release.interpolate_folders)."""
     if kind not in RUN_FOLDERS:
         raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
     manifest = check_manifest(root)  # never build on a manifest that no longer matches its files
@@ -170,6 +171,8 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
         )
     if device != "cpu":
         record["device"] = device
+    if note:
+        record["note"] = note
     before = manifest["training"][kind]
     staged = root / f".{kind}.new"  # exported beside the shipped folder, which is replaced only once it fits
     shipped = {n: root / n for n in RUN_FOLDERS if (root / n).is_dir()}

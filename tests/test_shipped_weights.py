@@ -120,11 +120,17 @@ def test_a_gpu_fine_tune_without_its_train_state_is_recorded_from_its_metrics_ap
     shutil.copytree(shipped_model("multiview"), tmp_path / "ft")
     rows = [{"step": 20, "loss": 0.5, "train_seconds": 4.0}, {"step": 40, "loss": 0.4, "train_seconds": 7.5}]
     (tmp_path / "ft" / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    record = replace_shipped("multiview", tmp_path / "ft", root, device="cuda (NVIDIA H200)")["training"]["multiview"]
+    manifest = replace_shipped("multiview", tmp_path / "ft", root, device="cuda (NVIDIA H200)", note="mixed 1:1")
+    record = manifest["training"]["multiview"]
     assert record["steps"] == before["steps"] + 40
     assert record["train_seconds"] == before["train_seconds"]
     assert record["gpu_seconds"] == pytest.approx(before.get("gpu_seconds", 0.0) + 7.5)
-    assert record["fine_tunes"][-1] == {"steps": 40, "train_seconds": 7.5, "device": "cuda (NVIDIA H200)"}
+    assert record["fine_tunes"][-1] == {
+        "steps": 40,
+        "train_seconds": 7.5,
+        "device": "cuda (NVIDIA H200)",
+        "note": "mixed 1:1",
+    }
     (tmp_path / "ft" / "metrics.jsonl").write_text("not json\n")
     with pytest.raises(DrivewmError, match="not a training loop's metrics row"):
         replace_shipped("multiview", tmp_path / "ft", root)
