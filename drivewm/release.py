@@ -29,6 +29,8 @@ WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 RUN_FOLDERS = {"tokenizer": "tokenizer", "text2world": "text2world", "multiview": "multiview", "transfer": "transfer"}
 #: Run folders an export may lack (a run without paired drives trains no transfer model).
 OPTIONAL_FOLDERS = ("transfer",)
+#: The model types a shipped folder may hold.
+MODEL_TYPES = ("drivewm-tokenizer", "text2world", "multiview", "transfer")
 MAX_FILE_BYTES = 16 * 1000 * 1000
 MAX_TOTAL_BYTES = 40 * 1000 * 1000
 
@@ -53,15 +55,21 @@ def sha256(path: Path) -> str:
 
 def export_folder(src: Path, dst: Path) -> dict:
     """Copy a model folder with fp16 weights and a package-relative tokenizer path; returns its training record."""
-    info, state = load_model_folder(src, ("drivewm-tokenizer", "text2world", "multiview", "transfer"))
+    info, state = load_model_folder(src, MODEL_TYPES)
     half = {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
-    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    extra = folder_extra(info)
     if "latent" in extra and extra["latent"].get("tokenizer"):
         extra["latent"] = {**extra["latent"], "tokenizer": "../tokenizer"}
     if extra.get("parent"):  # a transfer model's Text2World parent ships beside it
         extra["parent"] = "../text2world"
     save_model_folder(dst, info["model_type"], info["config"], half, extra)
     return training_record(src)
+
+
+def folder_extra(info: dict) -> dict:
+    """What a model folder's config.json holds beside its type, version and config (latent settings,
+    parent, digests), to save again with new weights."""
+    return {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
 
 
 def interpolate_folders(
@@ -76,8 +84,7 @@ def interpolate_folders(
         raise DrivewmError(f"interpolate: alpha must be in [0, 1] (0 = base, 1 = tuned), got {alpha}")
     if config_from not in ("base", "tuned"):
         raise DrivewmError(f"interpolate: config_from must be 'base' or 'tuned', got {config_from!r}")
-    kinds = ("drivewm-tokenizer", "text2world", "multiview", "transfer")
-    (info_a, a), (info_b, b) = load_model_folder(base, kinds), load_model_folder(tuned, kinds)
+    (info_a, a), (info_b, b) = load_model_folder(base, MODEL_TYPES), load_model_folder(tuned, MODEL_TYPES)
     if info_a["model_type"] != info_b["model_type"]:
         raise DrivewmError(f"interpolate: {base} is a {info_a['model_type']} model, {tuned} a {info_b['model_type']}")
     differ = sorted(k for k in a.keys() | b.keys() if k not in a or k not in b or a[k].shape != b[k].shape)
@@ -90,7 +97,7 @@ def interpolate_folders(
         raise DrivewmError(f"interpolate: non-float tensors differ ({unequal[0]}); these models do not mix")
     state = {k: torch.lerp(a[k].float(), b[k].float(), alpha) if a[k].is_floating_point() else a[k] for k in a}
     info = info_a if config_from == "base" else info_b
-    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    extra = folder_extra(info)
     tok = (extra.get("latent") or {}).get("tokenizer")
     if tok and not Path(tok).is_absolute():  # a shipped folder's ../tokenizer, wherever out is
         folder = resolve_model_folder(base if config_from == "base" else tuned)

@@ -20,7 +20,15 @@ from safetensors import safe_open
 from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.errors import DrivewmError
-from drivewm.release import MAX_FILE_BYTES, MAX_TOTAL_BYTES, WEIGHTS_DIR, check_manifest, export_run, shipped_model
+from drivewm.release import (
+    MAX_FILE_BYTES,
+    MAX_TOTAL_BYTES,
+    WEIGHTS_DIR,
+    check_manifest,
+    export_run,
+    folder_extra,
+    shipped_model,
+)
 
 STATS = Path(__file__).with_name("shipped_generation.json")
 GENERATE = [
@@ -87,7 +95,7 @@ def test_a_fine_tune_replaces_one_folder_and_its_record_adds_up(tmp_path):
     before = json.loads((root / "MANIFEST.json").read_text())
     info, state = load_model_folder(shipped_model("multiview"), "multiview")
     tuned = {k: v.float() + 0.01 if v.is_floating_point() else v for k, v in state.items()}
-    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    extra = folder_extra(info)
     save_model_folder(tmp_path / "ft", "multiview", info["config"], tuned, extra)
     save_train_state(
         tmp_path / "ft", {"step": 120, "train_seconds": 30.0, "model": {}, "ema": {}, "optimizer": {}, "rng": {}}
@@ -148,7 +156,7 @@ def test_a_fine_tune_mixed_with_the_shipped_model_is_the_weighted_mean_and_keeps
 
     info, base = load_model_folder("shipped:multiview", "multiview")
     tuned = {k: v.float() + 0.5 if v.is_floating_point() else v for k, v in base.items()}
-    extra = {k: v for k, v in info.items() if k not in ("model_type", "drivewm_version", "config")}
+    extra = folder_extra(info)
     config = json.loads(json.dumps(info["config"]))
     config["multiview"]["speed_mps"] = 7.0
     save_model_folder(tmp_path / "ft", "multiview", config, tuned, extra)
