@@ -51,6 +51,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--no-detail", action="store_true", help="score decoded outputs as they are (default: source detail restored)"
     )
     p.add_argument(
+        "--detail-bands",
+        default=None,
+        help="detail bands (model px) to score, comma-separated (drivewm transfer --detail-band; default: the "
+        "default band only): each method is sampled once and scored at every band, rows METHOD~bandB beside "
+        "METHOD (the default band)",
+    )
+    p.add_argument(
         "--model-resolution",
         action="store_true",
         help="score at the model's image size (the clips resized to it) as `drivewm transfer --model-resolution` "
@@ -116,11 +123,16 @@ def print_cse_parts(summary: dict) -> None:
             print(f"  {target:<13}{name:<12}" + "   ".join(parts))
 
 
-def verdict(summary: dict) -> list[str]:
-    """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR."""
+def verdict(summary: dict, band_px: float | None = None) -> list[str]:
+    """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR, both at
+    detail band ``band_px`` (None: the default)."""
+    from drivewm.transfer.benchmark import BAND_PX, band_name
+
+    band = BAND_PX if band_px is None else band_px
     allm = summary["all"]
-    best = max((k for k in allm if k.startswith("sdedit@")), key=lambda k: allm[k]["psnr"])
-    t, b = allm["transfer"], allm[best]
+    sdedit = [k for k in allm if k.startswith("sdedit@") and k == band_name(k.split("~")[0], band)]
+    best = max(sdedit, key=lambda k: allm[k]["psnr"])
+    t, b = allm[band_name("transfer", band)], allm[best]
     checks = [
         ("PSNR gain over best SDEdit", t["psnr"] - b["psnr"], ">=", MUST["psnr_gain_db"], f"dB vs {best}"),
         ("SSIM gain over best SDEdit", t["ssim"] - b["ssim"], ">", 0.0, f"vs {best}"),
@@ -158,7 +170,7 @@ def main(argv=None) -> int:
     from drivewm.diffusion.dit import count_parameters
     from drivewm.sim.paired import parse_conditions
     from drivewm.tokenizer import Tokenizer
-    from drivewm.transfer.benchmark import paired_cases, run_cases, summarize
+    from drivewm.transfer.benchmark import BAND_PX, band_name, paired_cases, run_cases, summarize
     from drivewm.transfer.retarget import TargetCondition
     from drivewm.transfer.sampling import network_evaluations
 
@@ -181,7 +193,9 @@ def main(argv=None) -> int:
     at = model_hw if args.model_resolution else clip_hw
     print(f"model works at {model_hw[1]}x{model_hw[0]}; clips {clip_hw[1]}x{clip_hw[0]}, scored at {at[1]}x{at[0]}")
     t0 = time.perf_counter()
-    cse_for = {"transfer", "identity", "tokenizer"}  # CSE costs seconds per clip: the must-hold needs these only
+    bands = tuple(float(b) for b in args.detail_bands.split(",") if b) if args.detail_bands else (BAND_PX,)
+    # CSE costs seconds per clip: the must-hold needs these only
+    cse_for = {"identity", "tokenizer"} | {band_name("transfer", b) for b in bands}
 
     partial = args.out.with_suffix(".partial.jsonl") if args.out else None
     done: list[str] = []
@@ -203,13 +217,16 @@ def main(argv=None) -> int:
         detail=not args.no_detail,
         model_hw=model_hw,
         model_resolution=args.model_resolution,
+        detail_bands=bands,
     )
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
     print_table(summary, nfe)
     print_cse_parts(summary)
-    for line in verdict(summary):
-        print(line)
+    for band in bands:
+        print(f"must-holds at detail band {band:g} (model px):")
+        for line in verdict(summary, band):
+            print(line)
     if args.out:
         record = {"args": {k: str(v) for k, v in vars(args).items()}, "summary": summary, "rows": rows}
         write_text(args.out, json.dumps(record, indent=1, default=str))

@@ -130,6 +130,8 @@ def test_text_encoder_folder_with_pickled_weights_is_refused_before_loading(tmp_
         (["rollout", "--clip", "c", "--trajectory-guidance", "inf"], "rollout: trajectory guidance must be a finite"),
         (["transfer", "c", "--to", "snow", "--guidance", "nan"], "transfer: --guidance must be a finite number >= 0"),
         (["transfer", "c", "--to", "snow", "--start-sigma", "-1"], "transfer: --start-sigma must be a finite number"),
+        (["transfer", "c", "--to", "snow", "--detail-band", "nan"], "transfer: --detail-band must be a finite number"),
+        (["transfer", "c", "--to", "snow", "--detail-band", "-2"], "transfer: --detail-band must be a finite number"),
     ],
 )
 def test_sampling_settings_are_refused_before_any_work(argv, message, capsys, tmp_path):

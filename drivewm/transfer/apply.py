@@ -34,6 +34,7 @@ from drivewm.errors import BatchError, DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
 from drivewm.multiview.coding import decode_views, encode_views, resize_views
 from drivewm.multiview.writer import grid_layout, tile_views
+from drivewm.transfer.detail import BAND_PX
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
 
@@ -68,6 +69,9 @@ class TransferOptions:
     detail: bool = True
     """Add back the source detail the tokenizer drops, scaled by the contrast the target keeps
     (drivewm.transfer.detail); False writes the decoded transfer as it is (upsampled)."""
+    detail_band: float = BAND_PX
+    """Model pixels: the source's structure finer than a Gaussian of this sigma replaces the transfer's
+    (drivewm.transfer.detail; 0: only the detail the tokenizer dropped, as before the band)."""
     model_resolution: bool = False
     """Write clips at the model's image size, the rig scaled to it; False (default) keeps the source's
     size and rig when the source is larger (drivewm.transfer.resolution)."""
@@ -76,7 +80,7 @@ class TransferOptions:
         if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
             raise DrivewmError(f"transfer: --steps ({self.steps}) and --max-clips ({self.max_clips}) must be >= 1")
         # checked here, not per clip: a bad value would fail every clip of every shard, one after another
-        finite_at_least("transfer", 0, **{"--guidance": self.guidance})
+        finite_at_least("transfer", 0, **{"--guidance": self.guidance, "--detail-band": self.detail_band})
         if self.start_sigma is not None and not (math.isfinite(self.start_sigma) and self.start_sigma > 0):
             raise DrivewmError(f"transfer: --start-sigma must be a finite number > 0, got {self.start_sigma}")
 
@@ -111,7 +115,7 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
     model_type = json.loads(cfg_path.read_text()).get("model_type")
     o = options
     record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
-    record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail}
+    record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail, "detail_band": o.detail_band}
     record |= {"model_resolution": o.model_resolution}
     if model_type == "transfer":
         from drivewm.transfer.model import Transfer
@@ -168,7 +172,7 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
     out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
     shown = resize_views(full, out_hw)  # the source at the output size: the detail's reference and the sheet's
     coded = decode_views(tokenizer, source, transferer.device) if options.detail else None
-    out = to_output_size(out, shown, coded)
+    out = to_output_size(out, shown, coded, options.detail_band)
     rig, meta = rig_at_size(clip.meta.get_rig(), full.shape[2:4], out_hw), clip.meta
     if out_hw != full.shape[2:4]:
         meta = dataclasses.replace(meta, rig=rig.to_dict())

@@ -30,6 +30,7 @@ from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import code_views, decode_views, encode_views, resize_views
+from drivewm.transfer.detail import BAND_PX
 from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
@@ -66,6 +67,11 @@ def paired_cases(
             ids = [ids[int(k * len(ids) / max_per_target)] for k in range(max_per_target)]
         cases += [PairCase(i, by_id[i][source], by_id[i][target], target) for i in ids]
     return cases
+
+
+def band_name(method: str, band_px: float) -> str:
+    """A method's row name at a detail band (drivewm.transfer.detail): its own at the default, BAND_PX."""
+    return method if band_px == BAND_PX else f"{method}~band{band_px:g}"
 
 
 @dataclasses.dataclass
@@ -107,13 +113,17 @@ def run_cases(
     detail: bool = False,
     model_hw: tuple[int, int] | None = None,
     model_resolution: bool = False,
+    detail_bands: tuple[float, ...] = (BAND_PX,),
 ) -> list[dict]:
     """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
     ``cse_for`` (None: all). The tokenizer codes on ``device`` (where it is); methods take and return
     latents on the CPU. Methods work at ``model_hw`` (None: the clips' own size); outputs are scored at
     the size ``drivewm transfer`` writes (the source's when larger, unless ``model_resolution``),
     upsampled as it does (drivewm.transfer.resolution); ``detail``: every method's output gets the
-    source's lost detail back."""
+    source's lost detail back, once per ``detail_bands`` (rows named by :func:`band_name`: one network
+    run, several bands)."""
+    if not detail:
+        detail_bands = (BAND_PX,)
     rows = []
     for case in cases:
         full = case.source.videos()
@@ -130,7 +140,8 @@ def run_cases(
         coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
             out = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
-            outputs[name] = to_output_size(out, scored.source, coded_src)
+            for band in detail_bands:
+                outputs[band_name(name, band)] = to_output_size(out, scored.source, coded_src, band)
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()} | {f"truth_{k}": v for k, v in truth_cse.items()}

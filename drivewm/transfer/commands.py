@@ -48,6 +48,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write the decoded transfer as it is (default: add back the source detail the tokenizer drops)",
     )
     p.add_argument(
+        "--detail-band",
+        type=float,
+        default=None,
+        help="model pixels: the source's structure finer than a Gaussian of this sigma replaces the transfer's, "
+        "which keeps the colour, light and haze (default 4, half a tokenizer cell; 0: only the detail the "
+        "tokenizer drops)",
+    )
+    p.add_argument(
         "--model-resolution",
         action="store_true",
         help="write clips at the model's image size, the rig scaled to it (default: the source's size and rig "
@@ -93,6 +101,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.device,
         args.max_clips,
         detail=not args.no_detail,
+        **({} if args.detail_band is None else {"detail_band": args.detail_band}),
         model_resolution=args.model_resolution,
     )
     if args.model is None:

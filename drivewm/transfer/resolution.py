@@ -22,7 +22,7 @@ import numpy as np
 
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import resize_views
-from drivewm.transfer.detail import WINDOW_PX, restore_detail
+from drivewm.transfer.detail import BAND_PX, WINDOW_PX, restore_detail
 
 UPSAMPLE = cv2.INTER_CUBIC  # Keys' bicubic: sharper than bilinear, no LANCZOS ringing on dark night skies
 
@@ -41,20 +41,29 @@ def rig_at_size(rig: Rig, source_hw: tuple[int, int], size_hw: tuple[int, int]) 
     return rig if tuple(size_hw) == tuple(source_hw) else rig.scaled(size_hw[1], size_hw[0], fit="stretch")
 
 
+def upsampling(size_hw: tuple[int, int], model_hw: tuple[int, int]) -> float:
+    """How much larger ``size_hw`` is than ``model_hw`` (mean of both axes), at least 1."""
+    return max(0.5 * (size_hw[0] / model_hw[0] + size_hw[1] / model_hw[1]), 1.0)
+
+
 def detail_window_px(size_hw: tuple[int, int], model_hw: tuple[int, int]) -> int:
     """The contrast window at ``size_hw``: WINDOW_PX (about one tokenizer cell at the model's size) times
-    the upsampling factor (mean of both axes), odd so it centres on the pixel."""
-    scale = 0.5 * (size_hw[0] / model_hw[0] + size_hw[1] / model_hw[1])
-    return int(WINDOW_PX * max(scale, 1.0)) // 2 * 2 + 1
+    the upsampling factor, odd so it centres on the pixel."""
+    return int(WINDOW_PX * upsampling(size_hw, model_hw)) // 2 * 2 + 1
 
 
-def to_output_size(transferred: np.ndarray, source: np.ndarray, source_coded: np.ndarray | None) -> np.ndarray:
+def to_output_size(
+    transferred: np.ndarray, source: np.ndarray, source_coded: np.ndarray | None, band_px: float = BAND_PX
+) -> np.ndarray:
     """The decoded transfer (at the model's size) upsampled to ``source``'s size, plus the source detail
     the round trip lost, its gain computed at that size; ``source_coded`` is the source decoded from its
-    latents (model's size), None for no detail (upsampled only)."""
+    latents (model's size), None for no detail (upsampled only). ``band_px`` (in the model's pixels,
+    scaled like the window; 0: the tokenizer's residual only): the source's structure finer than it
+    replaces the transfer's (drivewm.transfer.detail)."""
     size_hw, model_hw = source.shape[2:4], transferred.shape[2:4]
     out = resize_views(transferred, size_hw, UPSAMPLE)
     if source_coded is None:
         return out
     coded = resize_views(source_coded, size_hw, UPSAMPLE)
-    return restore_detail(out, source, coded, window=detail_window_px(size_hw, model_hw))
+    band = band_px * upsampling(size_hw, model_hw)
+    return restore_detail(out, source, coded, window=detail_window_px(size_hw, model_hw), band_px=band)
