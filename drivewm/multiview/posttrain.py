@@ -8,8 +8,10 @@ the clips' latent cache with the shared loop (EMA, resume, activation checkpoint
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -66,11 +68,16 @@ class PosttrainConfig:
     appears 1 + this many times per epoch (as GAIA-1 balances its data over steering). Simulated
     and fleet driving is mostly straight, so a turn is a rare lesson; 0 = each clip once."""
     turn_repeat_min_deg: float = 15.0
+    cache_clips: int = 2048
+    """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
+    epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
+    0 = none). Building them is CPU work on the training thread: measured by
+    benchmarks/bench_posttrain_batch.py at batch 32 as long as a whole GPU step."""
 
     def validate(self) -> None:
         at_least(
             self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
-            "turn_repeat_min_deg",
+            "turn_repeat_min_deg", "cache_clips",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
 
@@ -129,6 +136,21 @@ def posttrain_config(preset: str, overrides: list[str] | None = None) -> Posttra
     return RECIPES.resolve(preset, None, overrides or [])
 
 
+@dataclasses.dataclass(frozen=True)
+class PreparedClip:
+    """One clip as the loss reads it: what :meth:`MultiViewTask.prepared` builds once and keeps."""
+
+    sample: MultiViewSample
+    cond: MultiViewConditioning | None
+    warp: Callable[[torch.Tensor], torch.Tensor] | None
+    """The clip's noise warp (drivewm.multiview.warped_noise); None: plain noise."""
+
+    def noise(self, generator: torch.Generator) -> torch.Tensor:
+        """(V, c, t, h, w) standard normal noise from ``generator``, warped along the clip's trajectory."""
+        noise = torch.randn(self.sample.latents.shape, generator=generator)
+        return noise if self.warp is None else self.warp(noise[None])[0]  # sampling's own warp, on a batch of one
+
+
 class MultiViewTask(BundleTask):
     """The training task of multi-view post-training: a :class:`MultiView` on a :class:`MultiViewDataset`."""
 
@@ -137,6 +159,7 @@ class MultiViewTask(BundleTask):
     bundle: MultiView
     _probe_clips: list[int] | None = None  # the trajectory probe's clips, chosen at its first run
     _epoch: list[int] | None = None  # dataset index of every epoch position (turns repeated)
+    _prepared: collections.OrderedDict | None = None  # dataset index -> (sample, conditioning), LRU order
 
     def epoch_order(self) -> list[int]:
         """The dataset index behind each position of an epoch: every clip once, and turning clips
@@ -163,12 +186,13 @@ class MultiViewTask(BundleTask):
         steps. The Video2World draw uses this rank's first sample seed, so with 0 < video2world_prob < 1
         a run is exactly reproducible (and resumable) at a given world size, but not identical across
         world sizes."""
-        samples = [self.dataset[self.epoch_order()[i]] for i in indices]
+        clips = [self.prepared(self.epoch_order()[i]) for i in indices]
+        samples = [c.sample for c in clips]
         v = samples[0].latents.shape[0]
         x0 = torch.cat([s.latents for s in samples]).to(device)  # (B V, c, t, h, w)
         gens = [torch.Generator().manual_seed(s) for s in seeds]
         sigma = torch.cat([sample_sigma(1, self.bundle.cfg.edm, g).expand(v) for g in gens])  # (B V,)
-        noise = torch.cat([self.clip_noise(s, g) for s, g in zip(samples, gens)]).to(device)
+        noise = torch.cat([c.noise(g) for c, g in zip(clips, gens)]).to(device)
         keep = torch.cat([torch.rand(v, generator=g) >= self.bundle.cfg.edm.text_dropout for g in gens])
         video2world = (
             float(torch.rand(1, generator=torch.Generator().manual_seed(seeds[0])))
@@ -181,18 +205,38 @@ class MultiViewTask(BundleTask):
             ]
         )
         edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
-        cond = cat_conditioning(
-            [build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps) for s in samples]
-        )
+        cond = cat_conditioning([c.cond for c in clips])
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
+
+    def prepared(self, index: int) -> PreparedClip:
+        """Dataset clip ``index`` with its conditioning and noise warp, from memory when an earlier step
+        built them (at most ``cache_clips`` kept). All are pure functions of the clip (the text encoder is
+        frozen), and the loss only reads them (cat_conditioning and torch.cat copy), so a cached run equals
+        an uncached one."""
+        if self._prepared is None:
+            self._prepared = collections.OrderedDict()
+        if index in self._prepared:
+            self._prepared.move_to_end(index)
+            return self._prepared[index]
+        s = self.dataset[index]
+        cond = build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps)
+        item = PreparedClip(s, cond, self.noise_warp(s))
+        if self.cfg.cache_clips:
+            self._prepared[index] = item
+            if len(self._prepared) > self.cfg.cache_clips:
+                self._prepared.popitem(last=False)
+        return item
 
     def clip_noise(self, s: MultiViewSample, generator: torch.Generator) -> torch.Tensor:
         """(V, c, t, h, w) standard normal noise of one clip, warped along its own trajectory with
         ``multiview.warped_noise`` (drivewm.multiview.warped_noise) where it has one."""
-        noise = torch.randn(s.latents.shape, generator=generator)
-        warp = self.bundle.noise_warper(s.rig, s.trajectory[None], s.fps) if s.trajectory_known else None
-        return noise if warp is None else warp(noise[None])[0]  # sampling's own warp, on a batch of one
+        return PreparedClip(s, None, self.noise_warp(s)).noise(generator)
+
+    def noise_warp(self, s: MultiViewSample) -> Callable[[torch.Tensor], torch.Tensor] | None:
+        """The warp of one clip's noise along its trajectory (sampling's own); None without warped noise or
+        a known trajectory."""
+        return self.bundle.noise_warper(s.rig, s.trajectory[None], s.fps) if s.trajectory_known else None
 
     def after_step(self, step: int) -> dict[str, float]:
         """The trajectory probe, in the first metrics row at or after each ``trajectory_probe_every``
@@ -252,6 +296,14 @@ def posttrain(
     (the multi-view parts start at zero effect), or a multi-view folder to fine-tune (e.g. the
     shipped model on a fleet's logs). Resumes when ``out_dir`` holds a train state. Returns the
     last metrics row."""
+    init_dir = Path(init_dir)
+    record = {**to_dict(cfg), "init": str(init_dir.resolve())}
+    task = posttrain_task(cfg, init_dir, data_dir)
+    return train(task, cfg.train, out_dir, config_record=record, stop_after=stop_after)
+
+
+def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | Path) -> MultiViewTask:
+    """The task :func:`posttrain` trains: the model from ``init_dir`` on the latent cache of ``data_dir``."""
     resolve_device(cfg.train.device)  # CUDA asked for where there is none: say so before any work
     init_dir = Path(init_dir)
     init = MultiView.from_pretrained(init_dir) if read_model_type(init_dir) == MV_MODEL_TYPE else None
@@ -278,8 +330,7 @@ def posttrain(
     model.latent = dataclasses.replace(
         model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict()
     )
-    record = {**to_dict(cfg), "init": str(init_dir.resolve())}
-    return train(MultiViewTask(cfg, dataset, model), cfg.train, out_dir, config_record=record, stop_after=stop_after)
+    return MultiViewTask(cfg, dataset, model)
 
 
 #: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
