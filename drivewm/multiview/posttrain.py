@@ -159,7 +159,7 @@ class MultiViewTask(BundleTask):
     bundle: MultiView
     _probe_clips: list[int] | None = None  # the trajectory probe's clips, chosen at its first run
     _epoch: list[int] | None = None  # dataset index of every epoch position (turns repeated)
-    _prepared: collections.OrderedDict | None = None  # dataset index -> (sample, conditioning), LRU order
+    _prepared: collections.OrderedDict | None = None  # dataset index -> PreparedClip, least recently used first
 
     def epoch_order(self) -> list[int]:
         """The dataset index behind each position of an epoch: every clip once, and turning clips
