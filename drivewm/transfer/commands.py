@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=None,
         help="model pixels: the source's structure finer than a Gaussian of this sigma replaces the transfer's, "
-        "which keeps the colour, light and haze (default 4, half a tokenizer cell; 0: only the detail the "
+        "which keeps the colour, light and haze (default 8, one tokenizer cell; 0: only the detail the "
         "tokenizer drops)",
     )
     p.add_argument(

@@ -22,6 +22,13 @@ Each view is transferred on its own, so the transfer's mid-scale content (what S
 the overlap of two cameras) differs between views; at ``band_px`` 0 only 48 % of camera pairs kept
 enough cross-view matches. The band keeps the source's there and leaves the condition's colour,
 light and haze to the transfer (docs/transfer.md, "Detail band").
+
+The gain is read over ``WINDOW_PX`` (17 px at the model's size, about two tokenizer cells). Over one
+cell (9 px, the first default) it followed the transfer's own per-view texture as much as the
+condition's contrast, so the same source structure came back at different strengths in two cameras'
+overlap and the pair lost verified matches; over two it follows the condition more (haze, night).
+Wider still (33 px) kept more pairs at 320x192 but gave back enough of the source's contrast in
+far haze for the adherence classifier to read fog as snow at 160x96 (docs/transfer.md, "Gain window").
 """
 
 from __future__ import annotations
@@ -31,8 +38,8 @@ import math
 import cv2
 import numpy as np
 
-WINDOW_PX = 9  # local-contrast window: about one tokenizer cell (8 px) at the model's size
-BAND_PX = 4.0  # default band at the model's size: half a tokenizer cell (measured: docs/transfer.md)
+WINDOW_PX = 17  # local-contrast window at the model's size: about two tokenizer cells (measured: docs/transfer.md)
+BAND_PX = 8.0  # default band at the model's size: one tokenizer cell (measured: docs/transfer.md)
 FLOOR = 2.0  # added to both local stds (uint8 levels) so flat regions neither explode nor vanish
 
 
