@@ -107,6 +107,7 @@ def test_recipes_are_valid() -> None:
         "smoke",
         "transfer",
         "transfer_heldout",
+        "transfer_validation",
         "turns",
         "weather_finetune",
         "worldmodel",
@@ -141,6 +142,12 @@ def test_worldmodel_heldout_drives_share_no_seed_with_training() -> None:
     assert not {d[-1] for d in finetune} & heldout_seeds  # the benchmark's held-out drives stay unseen
     # a fine-tune drive on a worldmodel seed is that recipe's drive, not another one on its seed
     assert {d for d in finetune if d[-1] in train_seeds} <= {drive(c) for c, _ in train}
+
+
+def test_transfer_validation_drives_are_neither_trained_on_nor_benchmarked() -> None:
+    used = {c.seed + i for name in ("transfer", "transfer_heldout") for c, n in load_recipe(name) for i in range(n)}
+    validation = load_recipe("transfer_validation")
+    assert len(validation) == 12 and not {c.seed + i for c, n in validation for i in range(n)} & used
 
 
 def test_turns_recipe_turns_in_every_weather_on_seeds_of_its_own() -> None:
