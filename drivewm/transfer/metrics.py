@@ -54,11 +54,12 @@ def cross_view_error(videos: np.ndarray, rig: Rig, cfg: EvalConfig | None = None
     F fitted to the matches (the benchmark's headline) and ``cse_calibrated`` under the F of the
     rig's calibration (which also catches views that moved against each other); and what makes up
     ``cse``: ``cse_counted`` the share of camera pairs with enough verified matches (the others count
-    at the failed-pair penalty, 4 px) and ``cse_counted_px`` the mean over those pairs only."""
+    at the failed-pair penalty, 4 px) and ``cse_counted_px`` the mean over those pairs only; beside
+    them ``cse_pair_matches``, the verified matches of each camera pair ("A~B"), to see which missed."""
     cfg = cfg or EvalConfig()
     pairs = overlapping_pairs(rig, cfg.consistency)
     if not pairs:
-        return dict.fromkeys(CSE_KEYS, float("nan"))
+        return dict.fromkeys(CSE_KEYS, float("nan")) | {"cse_pair_matches": {}}
     named = {name: videos[i] for i, name in enumerate(rig.names)}
     result = cross_sampson(named, rig, pairs, cfg.epipolar, FrameMatcher(cfg.match))
     fitted = result["fitted"]
@@ -67,6 +68,7 @@ def cross_view_error(videos: np.ndarray, rig: Rig, cfg: EvalConfig | None = None
         "cse_calibrated": float(result["calibrated"]["value_px"]),
         "cse_counted": float(fitted["counted_fraction"]),
         "cse_counted_px": float(fitted["counted_mean_px"]),
+        "cse_pair_matches": {f"{a}~{b}": int(n) for (a, b), n in zip(pairs, fitted["pair_matches"])},
     }
 
 

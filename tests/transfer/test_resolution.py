@@ -142,10 +142,8 @@ def test_a_wide_gain_window_keeps_the_matches_a_per_view_texture_would_modulate_
     in two cameras' overlap and the pair loses verified matches; over the default window (two cells) it
     reads the condition's contrast. Stand-in: the coded clip at 0.3 contrast (dusk), each view with its
     own pattern (noise blurred to 2 px at 160x96), detail at the default band."""
-    from drivewm.eval.config import EvalConfig
-    from drivewm.eval.consistency import cross_sampson, overlapping_pairs
-    from drivewm.eval.matching import FrameMatcher
     from drivewm.transfer.detail import BAND_PX, restore_detail
+    from drivewm.transfer.metrics import cross_view_error
     from drivewm.transfer.resolution import upsampling
 
     src, coded, dusk = _per_view_transfer(clip, 0.3)
@@ -153,17 +151,14 @@ def test_a_wide_gain_window_keeps_the_matches_a_per_view_texture_would_modulate_
     x, r = resize_views(dusk, size, UPSAMPLE), resize_views(coded, size, UPSAMPLE)
     band = BAND_PX * upsampling(size, MODEL_HW)
     one_cell = restore_detail(x, src, r, window=19, band_px=band)  # 9 px at 160x96, the first default
-    rig, cfg = clip.meta.get_rig(), EvalConfig()
-    pairs = overlapping_pairs(rig, cfg.consistency)
-
-    def verified(videos):
-        named = {name: videos[i] for i, name in enumerate(rig.names)}
-        return cross_sampson(named, rig, pairs, cfg.epipolar, FrameMatcher(cfg.match))["fitted"]
-
-    source, narrow, wide = (verified(v) for v in (src, one_cell, to_output_size(dusk, src, coded)))
-    print(
-        f"verified cross-view matches per camera pair: source {source['pair_matches']}, one-cell window "
-        f"{narrow['pair_matches']}, default {wide['pair_matches']}"
-    )  # measured 476 -> 649 of 1,040
-    assert wide["counted_fraction"] == 1.0 and wide["value_px"] < 1.5 * source["value_px"]
-    assert sum(wide["pair_matches"]) > 1.25 * sum(narrow["pair_matches"])
+    rig = clip.meta.get_rig()
+    source, narrow, wide = (cross_view_error(v, rig) for v in (src, one_cell, to_output_size(dusk, src, coded)))
+    matches = {
+        name: sum(c["cse_pair_matches"].values())
+        for name, c in (("source", source), ("narrow", narrow), ("wide", wide))
+    }
+    print(f"verified cross-view matches: {matches}; per pair, default window: {wide['cse_pair_matches']}")
+    # measured 476 -> 649 of 1,040
+    assert wide["cse_counted"] == 1.0 and wide["cse"] < 1.5 * source["cse"]
+    assert len(wide["cse_pair_matches"]) == len(source["cse_pair_matches"]) > 0
+    assert matches["wide"] > 1.25 * matches["narrow"]
