@@ -11,7 +11,7 @@ does), coded and transferred there; the decoded frames are upsampled back to the
 
 which holds both what the tokenizer drops at the model's size and everything above the model's
 resolution, scaled by the local contrast the transfer keeps (drivewm.transfer.detail, its window
-scaled to one tokenizer cell at the source's size). Cost: two bicubic resizes and one tokenizer
+of WINDOW_PX model pixels scaled to the source's size). Cost: two bicubic resizes and one tokenizer
 decode per clip, no network evaluations. Videos are uint8 (V, T, H, W, 3) in rig order throughout.
 """
 
@@ -46,24 +46,29 @@ def upsampling(size_hw: tuple[int, int], model_hw: tuple[int, int]) -> float:
     return max(0.5 * (size_hw[0] / model_hw[0] + size_hw[1] / model_hw[1]), 1.0)
 
 
-def detail_window_px(size_hw: tuple[int, int], model_hw: tuple[int, int]) -> int:
-    """The contrast window at ``size_hw``: WINDOW_PX (about one tokenizer cell at the model's size) times
-    the upsampling factor, odd so it centres on the pixel."""
-    return int(WINDOW_PX * upsampling(size_hw, model_hw)) // 2 * 2 + 1
+def detail_window_px(size_hw: tuple[int, int], model_hw: tuple[int, int], window_px: int = WINDOW_PX) -> int:
+    """The contrast window at ``size_hw``: ``window_px`` model pixels (default WINDOW_PX, about two
+    tokenizer cells) times the upsampling factor, odd so it centres on the pixel."""
+    return int(window_px * upsampling(size_hw, model_hw)) // 2 * 2 + 1
 
 
 def to_output_size(
-    transferred: np.ndarray, source: np.ndarray, source_coded: np.ndarray | None, band_px: float = BAND_PX
+    transferred: np.ndarray,
+    source: np.ndarray,
+    source_coded: np.ndarray | None,
+    band_px: float = BAND_PX,
+    window_px: int = WINDOW_PX,
 ) -> np.ndarray:
     """The decoded transfer (at the model's size) upsampled to ``source``'s size, plus the source detail
     the round trip lost, its gain computed at that size; ``source_coded`` is the source decoded from its
     latents (model's size), None for no detail (upsampled only). ``band_px`` (in the model's pixels,
     scaled like the window; 0: the tokenizer's residual only): the source's structure finer than it
-    replaces the transfer's (drivewm.transfer.detail)."""
+    replaces the transfer's (drivewm.transfer.detail); ``window_px`` (model pixels, scaled alike): the
+    window of the contrast gain."""
     size_hw, model_hw = source.shape[2:4], transferred.shape[2:4]
     out = resize_views(transferred, size_hw, UPSAMPLE)
     if source_coded is None:
         return out
     coded = resize_views(source_coded, size_hw, UPSAMPLE)
     band = band_px * upsampling(size_hw, model_hw)
-    return restore_detail(out, source, coded, window=detail_window_px(size_hw, model_hw), band_px=band)
+    return restore_detail(out, source, coded, window=detail_window_px(size_hw, model_hw, window_px), band_px=band)

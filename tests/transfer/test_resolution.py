@@ -41,6 +41,7 @@ def test_output_size_is_the_sources_when_larger():
     assert output_size_hw((192, 320), MODEL_HW, model_resolution=True) == MODEL_HW
     assert output_size_hw((48, 80), MODEL_HW, model_resolution=False) == MODEL_HW  # smaller: up to the model's
     assert detail_window_px(MODEL_HW, MODEL_HW) == 17 and detail_window_px((192, 320), MODEL_HW) == 35
+    assert detail_window_px((192, 320), MODEL_HW, 9) == 19
 
 
 def test_identity_transfer_at_full_resolution_gives_the_source_back(clip) -> None:
@@ -142,15 +143,10 @@ def test_a_wide_gain_window_keeps_the_matches_a_per_view_texture_would_modulate_
     in two cameras' overlap and the pair loses verified matches; over the default window (two cells) it
     reads the condition's contrast. Stand-in: the coded clip at 0.3 contrast (dusk), each view with its
     own pattern (noise blurred to 2 px at 160x96), detail at the default band."""
-    from drivewm.transfer.detail import BAND_PX, restore_detail
     from drivewm.transfer.metrics import cross_view_error
-    from drivewm.transfer.resolution import upsampling
 
     src, coded, dusk = _per_view_transfer(clip, 0.3)
-    size = src.shape[2:4]
-    x, r = resize_views(dusk, size, UPSAMPLE), resize_views(coded, size, UPSAMPLE)
-    band = BAND_PX * upsampling(size, MODEL_HW)
-    one_cell = restore_detail(x, src, r, window=19, band_px=band)  # 9 px at 160x96, the first default
+    one_cell = to_output_size(dusk, src, coded, window_px=9)  # the first default
     rig = clip.meta.get_rig()
     source, narrow, wide = (cross_view_error(v, rig) for v in (src, one_cell, to_output_size(dusk, src, coded)))
     matches = {
