@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
+import math
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -119,3 +120,29 @@ MAX_SEED = 2**31 - 1
 
 #: argparse ``type`` of ``--seed`` (a larger one had ended ``drivewm generate`` in PyTorch's overflow traceback).
 seed = whole_number(0, MAX_SEED)
+
+
+def sigma_interval(value: str) -> tuple[float, float] | None:
+    """argparse ``type`` of ``--guidance-interval``: ``LO,HI`` with finite 0 <= LO < HI, or ``all`` (None)."""
+    if value.strip().lower() == "all":
+        return None
+    parts = value.split(",")
+    try:
+        lo, hi = (float(p) for p in parts) if len(parts) == 2 else (None, None)
+    except ValueError:
+        lo = hi = None
+    if lo is None or not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+        raise argparse.ArgumentTypeError(f"expected LO,HI with 0 <= LO < HI (noise levels) or 'all', got {value!r}")
+    return lo, hi
+
+
+def add_guidance_interval_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--guidance-interval LO,HI|all`` of generate, rollout and the world-model benchmark."""
+    parser.add_argument(
+        "--guidance-interval",
+        type=sigma_interval,
+        default=None,
+        metavar="LO,HI",
+        help="guide only at noise levels sigma in (LO, HI], one network evaluation elsewhere "
+        "(Kynkaenniemi et al. 2024); 'all' (default) guides every step",
+    )

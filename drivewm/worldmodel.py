@@ -181,12 +181,13 @@ def benchmark_stages(
     samples: int | None = None,
     trajectory_guidance: float | None = None,
     reproject: float | None = None,
+    guidance_interval: str | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
     profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``, default
-    none), the held-out clips ``heldout`` and the
+    none; ``guidance_interval`` "LO,HI" or "all", default generate's), the held-out clips ``heldout`` and the
     generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -198,6 +199,8 @@ def benchmark_stages(
             argv += ["--trajectory-guidance", f"{trajectory_guidance:g}"]
         if reproject is not None:
             argv += ["--reproject", f"{reproject:g}"]
+        if guidance_interval is not None:
+            argv += ["--guidance-interval", guidance_interval]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -219,6 +222,7 @@ def benchmark_worldmodel(
     tokenizer_eval: Path | None,
     trajectory_guidance: float | None = None,
     reproject: float | None = None,
+    guidance_interval: str | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -246,12 +250,20 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "heldout" / "metrics.json", reference)
     if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
-    stages = benchmark_stages(profile, model, run, heldout, samples, trajectory_guidance, reproject)
+    stages = benchmark_stages(profile, model, run, heldout, samples, trajectory_guidance, reproject, guidance_interval)
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
     for name, argv in stages:
         run_stage(name, argv, run, "worldmodel")
+
+
+def _interval_text(value: str) -> str:
+    """argparse ``type`` of the benchmark's ``--guidance-interval``: checked as generate checks it, passed on."""
+    from drivewm.choices import sigma_interval
+
+    sigma_interval(value)
+    return value
 
 
 def _read_metrics(path: Path, flag: str, what: str, key: str) -> dict:
@@ -342,6 +354,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="reprojected refinement of every sample from noise level SIGMA (drivewm generate --reproject; "
         "default none, as the shipped figures)",
     )
+    b.add_argument(
+        "--guidance-interval",
+        type=_interval_text,
+        metavar="LO,HI",
+        help="guide every sample only at noise levels in (LO, HI], or 'all' (drivewm generate --guidance-interval; "
+        "default generate's)",
+    )
     b.set_defaults(
         func=lambda args: benchmark_worldmodel(
             args.model,
@@ -352,6 +371,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.tokenizer_eval,
             args.trajectory_guidance,
             args.reproject,
+            args.guidance_interval,
         )
     )
     m = wsub.add_parser(

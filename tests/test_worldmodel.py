@@ -60,6 +60,16 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     refined = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject=0.5) if n[:9] == "generate-"]
     assert all(parser.parse_args(a).reproject == 0.5 for a in refined) and len(refined) == len(p.benchmarks)
     assert all(parser.parse_args(a).reproject == 0.0 for n, a in mine if n.startswith("generate-"))
+    narrow = [
+        a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, guidance_interval="0.3,5") if n[:9] == "generate-"
+    ]
+    assert all(parser.parse_args(a).guidance_interval == (0.3, 5.0) for a in narrow) and len(narrow) == len(
+        p.benchmarks
+    )
+    everywhere = [
+        a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, guidance_interval="all") if n[:9] == "generate-"
+    ]
+    assert all(parser.parse_args(a).guidance_interval is None for a in everywhere)
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):

@@ -12,7 +12,14 @@ import importlib
 import json
 from pathlib import Path
 
-from drivewm.choices import add_registry_argument, at_least_one, model_folder, output_folder, seed
+from drivewm.choices import (
+    add_guidance_interval_argument,
+    add_registry_argument,
+    at_least_one,
+    model_folder,
+    output_folder,
+    seed,
+)
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.multiview.commands import add_reproject_arguments
 from drivewm.recipe import add_recipe_arguments
@@ -58,6 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     g.add_argument("--steps", type=int, default=35, help="sampler steps")
     g.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
+    add_guidance_interval_argument(g)
     g.add_argument("--seed", type=seed, default=0, help="sample i uses seed + i")
     g.add_argument("--num-samples", type=at_least_one, default=1, help="samples per prompt")
     add_registry_argument(
@@ -110,7 +118,7 @@ def generate_command(args: argparse.Namespace) -> int | None:
 
 
 def generate_text2world_command(args: argparse.Namespace) -> int:
-    from drivewm.diffusion.generate import GenerateOptions, generate_text2world
+    from drivewm.diffusion.generate import generate_text2world
     from drivewm.errors import DrivewmError
 
     if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0 or args.reproject:
@@ -118,9 +126,23 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
             "/--reproject (multi-view models do)"
         )
-    options = GenerateOptions(
-        args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device
-    )
+    options = generate_options(args)
     files = generate_text2world(args.model, options, args.out)
     print(f"wrote {len(files)} files to {args.out}")
     return 0
+
+
+def generate_options(args: argparse.Namespace):
+    """The GenerateOptions of a ``drivewm generate`` command line."""
+    from drivewm.diffusion.generate import GenerateOptions
+
+    return GenerateOptions(
+        args.prompt,
+        args.steps,
+        args.guidance,
+        args.seed,
+        args.num_samples,
+        args.sampler,
+        device=args.device,
+        guidance_interval=args.guidance_interval,
+    )

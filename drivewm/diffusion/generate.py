@@ -22,6 +22,7 @@ from drivewm.clips.format import ClipMeta, clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
 from drivewm.config import finite_at_least
+from drivewm.diffusion.sampling import check_guidance_interval
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer import Tokenizer
@@ -47,11 +48,19 @@ class GenerateOptions:
     """Samples denoised together."""
     device: str = "auto"
     """``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
+    guidance_interval: tuple[float, float] | None = None
+    """Guide only at sigma in (lo, hi] (drivewm.diffusion.sampling); None: at every sigma."""
 
     def __post_init__(self) -> None:
         if not self.prompts or self.steps < 1 or self.num_samples < 1 or self.batch_size < 1:
             raise DrivewmError("generate: needs at least one prompt, steps >= 1 and num_samples >= 1")
         finite_at_least("generate", 0, **{"--guidance": self.guidance})
+        self.guidance_interval = check_guidance_interval("generate", self.guidance_interval)
+
+    def record(self) -> dict:
+        """The sampling settings a generated clip's metadata keeps."""
+        interval = list(self.guidance_interval) if self.guidance_interval else None
+        return {"steps": self.steps, "guidance": self.guidance, "guidance_interval": interval}
 
 
 def latents_preview(latents: torch.Tensor, upscale: int = 8) -> np.ndarray:
@@ -156,7 +165,14 @@ def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir
     for start in tqdm(range(0, len(prompts), options.batch_size), desc="generate"):
         part = slice(start, start + options.batch_size)
         latents.append(
-            model.sample_latents(prompts[part], seeds[part], options.steps, options.guidance, options.sampler)
+            model.sample_latents(
+                prompts[part],
+                seeds[part],
+                options.steps,
+                options.guidance,
+                options.sampler,
+                guidance_interval=options.guidance_interval,
+            )
         )
     videos = decode_latents(torch.cat(latents), model.latent.tokenizer, model.device)
     extras = [
@@ -164,8 +180,7 @@ def generate_text2world(model_dir: str | Path, options: GenerateOptions, out_dir
             "model": str(Path(model_dir).resolve()),
             "prompt": p,
             "seed": s,
-            "steps": options.steps,
-            "guidance": options.guidance,
+            **options.record(),
         }
         for p, s in zip(prompts, seeds)
     ]

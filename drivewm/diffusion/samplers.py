@@ -90,18 +90,34 @@ class GuidedDenoiser(nn.Module):
     (``cond.unconditional()``), or e.g. the ego trajectory (as Vista and GEM guide on their actions).
 
     Wraps a denoiser ``denoiser(x, sigma, cond)``; ``guidance`` w = 1 is the plain conditional model
-    (one evaluation), 0 the model without that condition.
+    (one evaluation), 0 the model without that condition. ``interval`` (lo, hi): guide only where
+    lo < sigma <= hi and return the conditional prediction alone elsewhere, one evaluation instead of
+    two (Kynkaenniemi et al. 2024, "Applying Guidance in a Limited Interval Improves Sample and
+    Distribution Quality in Diffusion Models", arXiv 2404.07724); None guides at every sigma.
     """
 
-    def __init__(self, denoiser: nn.Module, guidance: float, drop: Callable | None = None):
+    def __init__(
+        self,
+        denoiser: nn.Module,
+        guidance: float,
+        drop: Callable | None = None,
+        interval: tuple[float, float] | None = None,
+    ):
         super().__init__()
         self.denoiser = denoiser  # D(x; sigma, cond), possibly guided on another condition already
         self.guidance = guidance  # w
         self.drop = drop or (lambda cond: cond.unconditional())  # cond -> cond without the guided condition
+        self.interval = interval  # (lo, hi] of sigma where guidance applies; None: everywhere
 
     def forward(self, x: torch.Tensor, sigma: torch.Tensor, cond) -> torch.Tensor:
         cond_out = self.denoiser(x, sigma, cond)
         if self.guidance == 1.0:
             return cond_out
+        inside = torch.ones_like(sigma, dtype=torch.bool)
+        if self.interval is not None:
+            inside = (sigma > self.interval[0]) & (sigma <= self.interval[1])
+            if not bool(inside.any()):
+                return cond_out
         uncond_out = self.denoiser(x, sigma, self.drop(cond))
-        return uncond_out + self.guidance * (cond_out - uncond_out)
+        guided = uncond_out + self.guidance * (cond_out - uncond_out)
+        return torch.where(inside.view(-1, *[1] * (x.ndim - 1)), guided, cond_out)

@@ -13,6 +13,7 @@ build the conditioning and (de)normalise latents; nothing here knows a tokenizer
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import torch
@@ -25,13 +26,36 @@ from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, 
 from drivewm.errors import DrivewmError
 
 
-def guided(denoiser: nn.Module, guidance: float, trajectory_guidance: float = 1.0) -> nn.Module:
+def guided(
+    denoiser: nn.Module,
+    guidance: float,
+    trajectory_guidance: float = 1.0,
+    interval: tuple[float, float] | None = None,
+) -> nn.Module:
     """``denoiser`` with caption guidance ``guidance`` and, when not 1, trajectory guidance on top
-    (D_free + w (D_traj - D_free), each branch caption-guided; ``cond.without_trajectory()`` drops it)."""
-    model = GuidedDenoiser(denoiser, guidance)
+    (D_free + w (D_traj - D_free), each branch caption-guided; ``cond.without_trajectory()`` drops it),
+    both only for sigma in ``interval`` (lo, hi] when one is given."""
+    model = GuidedDenoiser(denoiser, guidance, interval=interval)
     if trajectory_guidance != 1.0:
-        model = GuidedDenoiser(model, trajectory_guidance, drop=lambda cond: cond.without_trajectory())
+        model = GuidedDenoiser(model, trajectory_guidance, drop=_without_trajectory, interval=interval)
     return model
+
+
+def _without_trajectory(cond: Conditioning) -> Conditioning:
+    return cond.without_trajectory()
+
+
+def check_guidance_interval(where: str, interval: tuple[float, float] | None) -> tuple[float, float] | None:
+    """``interval`` as (lo, hi) floats with 0 <= lo < hi, or None; a clear error otherwise."""
+    if interval is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in interval)
+    except (TypeError, ValueError):
+        raise DrivewmError(f"{where}: the guidance interval must be two numbers LO,HI, got {interval!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+        raise DrivewmError(f"{where}: the guidance interval needs finite 0 <= LO < HI, got {lo:g},{hi:g}")
+    return lo, hi
 
 
 @torch.no_grad()
@@ -48,6 +72,7 @@ def sample(
     start: torch.Tensor | None = None,
     start_sigma: float | None = None,
     noise_fn: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    guidance_interval: tuple[float, float] | None = None,
 ) -> torch.Tensor:
     """Normalised latents (B, *shape) float32 on the CPU; sample b starts from noise seeded ``seeds[b]``.
 
@@ -58,7 +83,9 @@ def sample(
     guidance weights on the caption / the ego trajectory (1 = off). ``start`` (B, *shape) normalised
     latents (None: pure noise at sigma_max 80): sampling starts from them noised to ``start_sigma`` (SDEdit).
     ``noise_fn`` maps the seeded standard normal noise (B, *shape) to the noise sampling starts from
-    (e.g. drivewm.multiview.warped_noise), on the CPU.
+    (e.g. drivewm.multiview.warped_noise), on the CPU. ``guidance_interval`` (lo, hi): guide only at
+    sigma in (lo, hi], the conditional model alone elsewhere (one network evaluation; None: guide at
+    every sigma).
     """
     if sampler not in SAMPLERS:
         raise DrivewmError(f"unknown sampler {sampler!r}; known: {sorted(SAMPLERS)}")
@@ -68,6 +95,7 @@ def sample(
         )
     # NaN would decode to a black video, not an error
     finite_at_least("sampling", 0, guidance=guidance, **{"trajectory guidance": trajectory_guidance})
+    guidance_interval = check_guidance_interval("sampling", guidance_interval)
     device = resolve_device(device)
     sigmas = (karras_sigmas(steps, sigma_max=start_sigma) if start is not None else karras_sigmas(steps)).to(device)
     noise = seeded_noise((len(seeds), *shape), seeds)  # on the CPU: the same sample on every device
@@ -75,7 +103,7 @@ def sample(
         noise = noise_fn(noise)
     x = noise * sigmas[0].cpu() + (start.float().cpu() if start is not None else 0.0)
     x = x.reshape(-1, *shape[-4:]).to(device)  # (B [V], c, t, h, w)
-    model = guided(denoiser, guidance, trajectory_guidance)
+    model = guided(denoiser, guidance, trajectory_guidance, guidance_interval)
     with torch.autocast(device.type, dtype=torch.bfloat16, enabled=device.type == "cuda"):
         x = SAMPLERS[sampler](model, x, sigmas, extra_args={"cond": cond.to(device)})
     return x.float().cpu().reshape(len(seeds), *shape)

@@ -130,18 +130,29 @@ class Text2World:
         sampler: str = "heun",
         fps: float | None = None,
         cond_latents: torch.Tensor | None = None,
+        guidance_interval: tuple[float, float] | None = None,
     ) -> torch.Tensor:
         """Generate raw (denormalised) latents (B, c, t, h, w), one per prompt, sample i from ``seeds[i]``.
 
         ``cond_latents`` (B, c, t, h, w) raw latents whose first ``edm.cond_frames`` frames are kept
-        (Video2World models only).
+        (Video2World models only). ``guidance_interval`` (lo, hi): guide only at sigma in (lo, hi].
         """
         c, t, h, w = self.latent.latent_shape
         cond = self.conditioning(prompts, fps)
         if cond_latents is not None:
             given = normalize_latents(cond_latents.cpu(), *self._stats(), self.cfg.edm.sigma_data)
             cond = dataclasses.replace(cond, cond_latents=given, cond_frames=self.cfg.edm.cond_frames)
-        x = sample(self.denoiser, cond, (c, t, h, w), seeds, steps, guidance, sampler, device=self.device)
+        x = sample(
+            self.denoiser,
+            cond,
+            (c, t, h, w),
+            seeds,
+            steps,
+            guidance,
+            sampler,
+            device=self.device,
+            guidance_interval=guidance_interval,
+        )
         return denormalize_latents(x, *self._stats(), self.cfg.edm.sigma_data)
 
     def _stats(self) -> tuple[torch.Tensor, torch.Tensor]:

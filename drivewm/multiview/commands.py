@@ -9,7 +9,14 @@ import json
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import add_registry_argument, at_least_one, model_folder, output_folder, seed
+from drivewm.choices import (
+    add_guidance_interval_argument,
+    add_registry_argument,
+    at_least_one,
+    model_folder,
+    output_folder,
+    seed,
+)
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.recipe import add_recipe_arguments
 
@@ -62,6 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     r.add_argument("--steps", type=int, default=35, help="sampler steps per window")
     r.add_argument("--guidance", type=float, default=7.0, help="classifier-free guidance scale")
+    add_guidance_interval_argument(r)
     r.add_argument(
         "--trajectory-guidance",
         type=float,
@@ -128,6 +136,7 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.prompt,
         args.speed,
         Reprojection(args.reproject, args.reproject_steps),
+        args.guidance_interval,
     )
     if args.model is None:
         from drivewm.release import shipped_model

@@ -93,7 +93,12 @@ def generate_multiview(
     waypoints = resolve_trajectory(trajectory or "straight", mv.trajectory_waypoints, mv.trajectory_dt_s, speed)
     samples = []
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
-    sampling = {"guidance": options.guidance, "sampler": options.sampler, "trajectory_guidance": trajectory_guidance}
+    sampling = {
+        "guidance": options.guidance,
+        "sampler": options.sampler,
+        "trajectory_guidance": trajectory_guidance,
+        "guidance_interval": options.guidance_interval,
+    }
     for prompt, seed in tqdm(jobs, desc="generate"):
         caps = view_captions(prompt, rig)
         z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, cond_latents=cond, **sampling)
@@ -107,8 +112,7 @@ def generate_multiview(
             "model": str(Path(model_dir).resolve()),
             "prompt": prompt,
             "seed": seed,
-            "steps": options.steps,
-            "guidance": options.guidance,
+            **options.record(),
             "trajectory_guidance": trajectory_guidance,
             "trajectory": trajectory or "straight",
             "speed_mps": float(speed),
@@ -130,9 +134,9 @@ def reprojection_tokenizer(model: MultiView, reprojection: Reprojection) -> Toke
 
 def generate_command(args: argparse.Namespace) -> int:
     """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
-    options = GenerateOptions(
-        args.prompt, args.steps, args.guidance, args.seed, args.num_samples, args.sampler, device=args.device
-    )
+    from drivewm.diffusion.commands import generate_options
+
+    options = generate_options(args)
     reprojection = Reprojection(args.reproject, args.reproject_steps)
     files = generate_multiview(
         args.model,

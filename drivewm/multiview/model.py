@@ -203,6 +203,7 @@ class MultiView:
         trajectory_guidance: float = 1.0,
         start_latents: torch.Tensor | None = None,
         start_sigma: float | None = None,
+        guidance_interval: tuple[float, float] | None = None,
     ) -> torch.Tensor:
         """Raw (denormalised) latents (B, V, c, t, h, w) of B clips; clip b's noise from ``seeds[b]``.
 
@@ -210,7 +211,8 @@ class MultiView:
         are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
         trajectory's effect w times (drivewm.diffusion.sampling.guided; twice the network evaluations).
         ``start_latents`` (B, V, c, t, h, w) raw: sample from them noised to ``start_sigma`` (SDEdit;
-        drivewm.multiview.reproject), not from pure noise.
+        drivewm.multiview.reproject), not from pure noise. ``guidance_interval`` (lo, hi): both guidances
+        only at sigma in (lo, hi] (drivewm.diffusion.sampling; None: at every sigma).
         """
         v = len(rig.cameras)
         cond = self.conditioning(rig, view_captions, trajectories, fps)
@@ -237,6 +239,7 @@ class MultiView:
             start=start,
             start_sigma=start_sigma,
             noise_fn=noise_fn,
+            guidance_interval=guidance_interval,
         )
         return denormalize_latents(x, mean, std, self.cfg.edm.sigma_data)  # (B, V, c, t, h, w)
 

@@ -21,6 +21,7 @@ from tqdm import tqdm
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.config import finite_at_least
+from drivewm.diffusion.sampling import check_guidance_interval
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import decode_views, encode_views, frames_to_video
@@ -63,6 +64,8 @@ class RolloutOptions:
     """Speed of a named trajectory (0 = the clip's own initial speed)."""
     reprojection: Reprojection = dataclasses.field(default_factory=Reprojection)
     """Each window's first frame reprojected along the trajectory and refined (drivewm.multiview.reproject)."""
+    guidance_interval: tuple[float, float] | None = None
+    """Guide only at sigma in (lo, hi] (drivewm.diffusion.sampling); None: at every sigma."""
 
     def __post_init__(self) -> None:
         if self.windows < 1 or self.steps < 1:
@@ -72,6 +75,7 @@ class RolloutOptions:
         finite_at_least("rollout", 0, **weights, **{"--speed": self.speed_mps})
         if self.speed_mps > MAX_SPEED_MPS:  # 1e30 m/s had written waypoints of 1e29 m into the clip
             raise DrivewmError(f"rollout: --speed must be at most {MAX_SPEED_MPS:g} m/s, got {self.speed_mps:g}")
+        self.guidance_interval = check_guidance_interval("rollout", self.guidance_interval)
 
 
 def load_clip(path: str | Path, key: str | None = None) -> Clip:
@@ -160,6 +164,7 @@ def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) ->
         "seed": options.seed,
         "steps": options.steps,
         "guidance": options.guidance,
+        "guidance_interval": list(options.guidance_interval) if options.guidance_interval else None,
         "cond_video_frames": win.n_cond,
         **options.reprojection.record(),
     }
@@ -192,6 +197,7 @@ def _next_window(
         "guidance": options.guidance,
         "sampler": options.sampler,
         "trajectory_guidance": options.trajectory_guidance,
+        "guidance_interval": options.guidance_interval,
     }
     seed = options.seed + window
     z = model.sample_latents(

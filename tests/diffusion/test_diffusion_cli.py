@@ -106,17 +106,28 @@ def test_pretrain_then_generate_writes_clips_mp4_and_contact_sheet(clipdir, tmp_
         "2",
         "--num-samples",
         "2",
+        "--guidance-interval",
+        "0.5,3",
         "--out",
         tmp_path / "gen",
     )
     assert code == 0, err
     clips = list(iter_clips(tmp_path / "gen"))
     assert [c.meta.caption for c in clips] == ["heavy snow", "heavy snow"] and clips[0].meta.extra["seed"] == 0
+    assert clips[0].meta.extra["guidance_interval"] == [0.5, 3.0]
     video = clips[1].video(clips[1].meta.cameras[0])
     assert video.shape == (5, 16, 32, 3) and clips[1].meta.get_rig().cameras[0].width == 32
     assert (tmp_path / "gen" / "sample_001.mp4").stat().st_size > 0 and (
         tmp_path / "gen" / "contact_sheet.png"
     ).is_file()
+
+
+@pytest.mark.parametrize("value", ["5,1", "-1,2", "nan,2", "1", "a,b"])
+def test_a_bad_guidance_interval_is_one_line_before_any_model_loads(tmp_path, capsys, value):
+    out = tmp_path / "gen"
+    code, _, err = _run(capsys, "generate", "--prompt", "fog", "--out", out, f"--guidance-interval={value}")
+    assert code == 2 and "0 <= LO < HI" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
 
 
 def test_dry_run_prints_resolved_config_with_overrides(clipdir, tmp_path, capsys):

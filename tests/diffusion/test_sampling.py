@@ -196,3 +196,50 @@ def test_a_hand_edited_config_json_is_refused_naming_the_value(tmp_path, edit, m
     with pytest.raises(DrivewmError) as error:
         Text2World.from_pretrained(tmp_path / "m")
     assert str(tmp_path / "m") in str(error.value) and message in str(error.value)
+
+
+def test_guidance_in_an_interval_guides_only_the_steps_inside_it_with_one_evaluation_elsewhere():
+    """Kynkaenniemi et al. 2024: guidance only for sigma in (lo, hi]. A toy denoiser whose caption adds
+    1 records every call: inside the interval the step sees base + w, outside base + 1 from one call."""
+    cond = tiny(0).conditioning(["snow"])
+    calls = []
+
+    def toy(x, sigma, c):
+        calls.append((float(sigma[0]), bool(c.text_mask.any())))
+        return torch.zeros_like(x) + c.text_mask.float().any(1).view(-1, *[1] * (x.ndim - 1))
+
+    def run(interval):
+        calls.clear()
+        sample(toy, cond, (1, 1, 2, 2), [3], steps=8, guidance=5.0, sampler="euler", guidance_interval=interval)
+        return list(calls)
+
+    everywhere = run(None)
+    assert len(everywhere) == 16 and sum(c for _, c in everywhere) == 8  # two calls a step
+    inside = run((0.28, 5.42))
+    sigmas = [s for s, c in inside if c]
+    guided_steps = [s for s in sigmas if 0.28 < s <= 5.42]
+    assert len(inside) == 8 + len(guided_steps)  # the uncaptioned call only where guided
+    assert 0 < len(guided_steps) < 8
+    assert len(run((100.0, 200.0))) == 8  # nothing inside: the conditional model alone
+
+    guided_model = guided(lambda x, s, c: toy(x, s, c), 5.0, interval=(1.0, 2.0))
+    x = torch.zeros(1, 1, 1, 2, 2)
+    assert guided_model(x, torch.full((1,), 1.5), cond).flatten()[0].item() == pytest.approx(5.0)
+    assert guided_model(x, torch.full((1,), 2.5), cond).flatten()[0].item() == pytest.approx(1.0)
+    assert guided_model(x, torch.full((1,), 1.0), cond).flatten()[0].item() == pytest.approx(1.0)  # (lo, hi]
+
+
+def test_a_sample_guided_everywhere_by_interval_equals_plain_guidance_and_a_narrow_one_differs():
+    model = tiny(0)
+    plain = model.sample_latents(["heavy snow at night"], [4], 4, 3.0)
+    wide = model.sample_latents(["heavy snow at night"], [4], 4, 3.0, guidance_interval=(0.0, 1e3))
+    torch.testing.assert_close(wide, plain)
+    narrow = model.sample_latents(["heavy snow at night"], [4], 4, 3.0, guidance_interval=(0.28, 5.42))
+    unguided = model.sample_latents(["heavy snow at night"], [4], 4, 1.0)
+    assert (narrow - plain).abs().max() > 1e-3 and (narrow - unguided).abs().max() > 1e-3
+
+
+@pytest.mark.parametrize("interval", [(5.0, 1.0), (-1.0, 2.0), (float("nan"), 2.0), (1.0, float("inf")), ("a", 1)])
+def test_a_bad_guidance_interval_is_refused_by_name(interval):
+    with pytest.raises(DrivewmError, match="guidance interval"):
+        sample(lambda x, s, c: x, tiny(0).conditioning(["fog"]), (1, 1, 2, 2), [0], 2, guidance_interval=interval)
