@@ -74,22 +74,36 @@ def adherence_figures(clips: list[dict]) -> dict:
 
 
 def trajectory_figures(clips: list[dict], real: dict) -> dict:
+    """Turn sign, straight against turning yaw, and TFE. A sample whose turn the eval cannot read (no
+    ``yaw_change_deg``: flow found nothing to follow, or no motion where the trajectory moves) counts
+    as a failure of the turn sign and of the straight figure, never as left out: a generator whose
+    hard samples are blank must not score better than one that tries them."""
     by_turn: dict[str, list[float]] = {"left": [], "right": [], "straight": []}
+    unread = {"left": 0, "right": 0, "straight": 0}
     for c in clips:
         turn, yaw = _turn(c), c.get("yaw_change_deg")
         if turn and yaw is not None and math.isfinite(yaw):
             by_turn[turn].append(yaw)
+        elif turn:
+            unread[turn] += 1
     signed = [y > 0 for y in by_turn["left"]] + [y < 0 for y in by_turn["right"]]
-    sign_rate = sum(signed) / len(signed) if signed else math.nan
+    turning_clips = len(signed) + unread["left"] + unread["right"]
+    sign_rate = sum(signed) / turning_clips if turning_clips else math.nan
     straight = _mean([abs(y) for y in by_turn["straight"]])
     turning = [_mean([abs(y) for y in by_turn[t]]) for t in ("left", "right")]
     tfe_ratio = _mean([c.get("tfe") for c in clips]) / real.get("tfe", math.nan)
+    straight_holds = all(straight < t for t in turning) and not unread["straight"]
     return {
-        "turn_sign_rate": {**_figure(sign_rate, ">= 0.9", sign_rate >= 0.9), "clips": len(signed)},
+        "turn_sign_rate": {
+            **_figure(sign_rate, ">= 0.9", sign_rate >= 0.9),
+            "clips": turning_clips,
+            "unreadable": unread["left"] + unread["right"],
+        },
         "straight_abs_yaw_deg": {
-            **_figure(straight, "< left and right", all(straight < t for t in turning)),
+            **_figure(straight, "< left and right", straight_holds),
             "left_abs_yaw_deg": turning[0],
             "right_abs_yaw_deg": turning[1],
+            "unreadable": unread["straight"],
         },
         "tfe_ratio_to_real": _figure(tfe_ratio, "<= 3", tfe_ratio <= 3),
     }
@@ -149,6 +163,8 @@ def figures_markdown(figs: dict) -> str:
     for name, f in figs.items():
         if isinstance(f, dict):
             value = "n/a (no measurable clip)" if f["value"] is None else f"{f['value']:g}"
+            if f.get("unreadable"):  # samples whose turn the eval could not read, counted as failures
+                value += f" ({f['unreadable']} unreadable)"
             lines.append(f"| {name} | {value} | {f['goal']} | {'yes' if f['holds'] else 'no'} |")
     return "\n".join(lines) + "\n"
 

@@ -149,6 +149,7 @@ def test_figures_hold_on_a_run_that_meets_them(tmp_path):
     failing = [k for k, f in figs.items() if isinstance(f, dict) and not f["holds"]]
     assert failing == [] and figs["generated_clips"] == 5
     assert figs["turn_sign_rate"]["value"] == 1.0 and figs["turn_sign_rate"]["clips"] == 3
+    assert figs["turn_sign_rate"]["unreadable"] == 0 and figs["straight_abs_yaw_deg"]["unreadable"] == 0
     assert figs["adherence_night"]["clips"] == 1
 
 
@@ -157,6 +158,8 @@ def test_figures_hold_on_a_run_that_meets_them(tmp_path):
     [
         (lambda c, g, r: c[0].update(yaw_change_deg=-3.0), "turn_sign_rate"),  # a left sample turning right
         (lambda c, g, r: c[2].update(yaw_change_deg=40.0), "straight_abs_yaw_deg"),  # straight turns most
+        (lambda c, g, r: c[0].pop("yaw_change_deg"), "turn_sign_rate"),  # an unreadable turn fails, not left out
+        (lambda c, g, r: c[2].pop("yaw_change_deg"), "straight_abs_yaw_deg"),  # a blank straight sample fails
         (lambda c, g, r: c[0]["adherence"].update(weather_match=0.0), "adherence_snow"),
         (lambda c, g, r: c[3]["adherence"].update(time_of_day_match=0.0), "adherence_night"),
         (lambda c, g, r: [x.update(tfe=3.5) for x in c], "tfe_ratio_to_real"),
@@ -195,3 +198,17 @@ def test_tokenizer_psnr_below_goal_does_not_hold(tmp_path):
     figs = figures(tmp_path)
     assert figs["tokenizer_psnr_db"] == {"value": 28.4, "goal": ">= 32", "holds": False}
     assert "| tokenizer_psnr_db | 28.4 | >= 32 | no |" in figures_markdown(figs)
+
+
+def test_an_unreadable_turn_counts_against_the_turn_sign_and_the_table_says_so(tmp_path):
+    import copy
+
+    from drivewm.worldmodel_figures import figures, figures_markdown
+
+    clips = copy.deepcopy(GOOD_CLIPS)
+    clips[1].pop("yaw_change_deg")  # the right turn: no motion read where the trajectory moves
+    _write_run(tmp_path, clips, GOOD, REAL, 33.0)
+    figs = figures(tmp_path)
+    sign = figs["turn_sign_rate"]
+    assert (sign["value"], sign["clips"], sign["unreadable"]) == (round(2 / 3, 4), 3, 1)
+    assert "| turn_sign_rate | 0.6667 (1 unreadable) | >= 0.9 | no |" in figures_markdown(figs)

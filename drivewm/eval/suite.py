@@ -278,17 +278,32 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     metrics["status"]["traj"] = "ok" if item.T_world_from_ego is not None else "no_reference"
 
 
+#: Travel (m) of a clip's conditioned trajectory above which frames that show no motion at all cannot
+#: be read as driving straight: a frozen or black clip asked to move has not followed its trajectory.
+MOVING_TRAJECTORY_M = 1.0
+
+
 def _yaw_from_flow(item, videos, camera: str, metrics) -> None:
     """The turn a clip shows, from dense optical flow of the trajectory camera, where structure from
-    motion registered too few frames (trajectory.yaw_from_flow); frames flow cannot read are left out."""
+    motion registered too few frames (trajectory.yaw_from_flow); frames flow cannot read are left out.
+    Frames in which flow finds no motion at all give no yaw when the clip's conditioned trajectory
+    moves (``status["yaw"]`` says so): a frozen or black clip would otherwise read as 0 degrees, a
+    perfect straight drive."""
     try:
         ego = flow_fallback(videos, item.rig, camera)
     except DrivewmError as exc:  # e.g. frames too small or flat for flow
         metrics["status"]["yaw"] = str(exc)
         return
-    if ego.registered.sum() >= 2:
-        metrics["yaw_change_deg"] = heading_change_deg(ego.T_world_from_ego[ego.registered])
-        metrics["yaw_source"] = "flow"
+    if ego.registered.sum() < 2:
+        return
+    positions = ego.T_world_from_ego[ego.registered][:, :3, 3]
+    waypoints = np.asarray(item.trajectory_ego, dtype=np.float64).reshape(-1, 3)
+    asked_m = float(np.linalg.norm(waypoints[-1, :2])) if len(waypoints) else 0.0
+    if np.ptp(positions, axis=0).max() == 0 and asked_m > MOVING_TRAJECTORY_M:
+        metrics["status"]["yaw"] = f"no motion in the frames, where the conditioned trajectory moves {asked_m:.0f} m"
+        return
+    metrics["yaw_change_deg"] = heading_change_deg(ego.T_world_from_ego[ego.registered])
+    metrics["yaw_source"] = "flow"
 
 
 def _image_poses(item, cfg, metrics, sfm) -> None:

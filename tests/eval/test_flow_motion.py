@@ -148,3 +148,31 @@ def test_eval_reads_the_turn_from_flow_where_sfm_registers_too_few_frames(sim_cl
     assert abs(m["yaw_change_deg"] - np.degrees(yaw_ref)) < 15
     off = dataclasses.replace(cfg, trajectory=TrajectoryConfig(yaw_from_flow=False))
     assert "yaw_change_deg" not in evaluate_item(item, off).metrics
+
+
+@pytest.mark.parametrize("blank", ["frozen", "black"])
+def test_a_frozen_or_black_clip_asked_to_move_has_no_yaw_and_a_moving_one_keeps_its_turn(sim_clip_dir, blank):
+    """A generated clip whose frames never move (its first frame repeated, or all black) while its
+    conditioned trajectory drives on would read 0 degrees from flow, a perfect straight drive. The
+    suite gives it no yaw instead and says why; the same clip's own moving frames keep their turn,
+    and a trajectory that stays put (a stopped car) keeps the 0 degrees of its frozen frames."""
+    import types
+
+    from drivewm.eval.suite import _yaw_from_flow
+
+    clip = next(c for c in iter_clips(sim_clip_dir) if c.key.startswith("roundabout"))
+    rig, video = clip.meta.get_rig(), clip.video("CAM_FRONT")
+    still = np.repeat(video[:1], len(video), axis=0) if blank == "frozen" else np.zeros_like(video)
+    moving = [[2.0 * (i + 1), 0.0, 0.0] for i in range(8)]  # 16 m ahead
+
+    def read(frames, waypoints):
+        metrics = {"status": {}}
+        item = types.SimpleNamespace(rig=rig, trajectory_ego=waypoints)
+        _yaw_from_flow(item, {"CAM_FRONT": frames}, "CAM_FRONT", metrics)
+        return metrics
+
+    m = read(still, moving)
+    assert "yaw_change_deg" not in m and "no motion" in m["status"].get("yaw", ""), m
+    assert abs(read(video, moving)["yaw_change_deg"]) > 5  # the roundabout's own turn
+    if blank == "frozen":
+        assert read(still, [[0.0, 0.0, 0.0]] * 8)["yaw_change_deg"] == 0.0
