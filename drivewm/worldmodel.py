@@ -182,12 +182,14 @@ def benchmark_stages(
     trajectory_guidance: float | None = None,
     reproject: float | None = None,
     guidance_interval: str | None = None,
+    prompt_template: bool = False,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
     profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``, default
-    none; ``guidance_interval`` "LO,HI" or "all", default generate's), the held-out clips ``heldout`` and the
+    none; ``guidance_interval`` "LO,HI" or "all", default generate's; ``prompt_template``: prompts rewritten
+    into the training captions' template), the held-out clips ``heldout`` and the
     generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -201,6 +203,8 @@ def benchmark_stages(
             argv += ["--reproject", f"{reproject:g}"]
         if guidance_interval is not None:
             argv += ["--guidance-interval", guidance_interval]
+        if prompt_template:
+            argv += ["--prompt-template"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -223,6 +227,7 @@ def benchmark_worldmodel(
     trajectory_guidance: float | None = None,
     reproject: float | None = None,
     guidance_interval: str | None = None,
+    prompt_template: bool = False,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -250,7 +255,9 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "heldout" / "metrics.json", reference)
     if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
-    stages = benchmark_stages(profile, model, run, heldout, samples, trajectory_guidance, reproject, guidance_interval)
+    stages = benchmark_stages(
+        profile, model, run, heldout, samples, trajectory_guidance, reproject, guidance_interval, prompt_template
+    )
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
@@ -361,6 +368,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="guide every sample only at noise levels in (LO, HI], or 'all' (drivewm generate --guidance-interval; "
         "default generate's)",
     )
+    b.add_argument(
+        "--prompt-template",
+        action="store_true",
+        help="rewrite every prompt into the training captions' template (drivewm generate --prompt-template)",
+    )
     b.set_defaults(
         func=lambda args: benchmark_worldmodel(
             args.model,
@@ -372,6 +384,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.trajectory_guidance,
             args.reproject,
             args.guidance_interval,
+            args.prompt_template,
         )
     )
     m = wsub.add_parser(

@@ -70,6 +70,11 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
         a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, guidance_interval="all") if n[:9] == "generate-"
     ]
     assert all(parser.parse_args(a).guidance_interval is None for a in everywhere)
+    templated = [
+        a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, prompt_template=True) if n[:9] == "generate-"
+    ]
+    assert all(parser.parse_args(a).prompt_template for a in templated) and len(templated) == len(p.benchmarks)
+    assert not any(parser.parse_args(a).prompt_template for n, a in mine if n.startswith("generate-"))
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import importlib
+import re
 
 import numpy as np
 
@@ -105,6 +106,42 @@ def _motion_phrase(manoeuvre: str, speed_mps: float | None) -> str:
     if manoeuvre == "standing":
         return ", the ego vehicle standing still"
     return f", the ego vehicle {MANOEUVRE_PHRASES[manoeuvre]} at {speed_mps * 3.6:.0f} km/h"
+
+
+#: Scene tag -> value -> words of a free prompt that name it (whole words, lower case), in the
+#: template's vocabulary (the simulator's road types and traffic densities); first match wins.
+PROMPT_SCENE_WORDS: dict[str, dict[str, tuple[str, ...]]] = {
+    "road_type": {
+        "roundabout": ("roundabout", "traffic circle"),
+        "merge": ("merge", "merging", "on-ramp", "slip road"),
+        "intersection": ("intersection", "junction", "crossroads"),
+        "urban_grid": ("city", "town", "urban", "street", "downtown"),
+        "highway": ("highway", "motorway", "freeway", "expressway"),
+    },
+    "traffic_density": {
+        "low": ("light traffic", "low traffic", "empty", "quiet"),
+        "high": ("heavy traffic", "dense traffic", "congested", "busy", "rush hour"),
+    },
+}
+
+
+def prompt_view_captions(prompt: str, cameras: list[Camera], manoeuvre: str, speed_mps: float) -> list[str]:
+    """A free prompt rewritten into the template's per-view captions, the only words the shipped
+    models were trained on (what a prompt upsampler does for Cosmos; here by keywords, no model):
+    the weather and time of day it names (drivewm.text.conditions; default clear, by day), the road
+    and traffic it names (:data:`PROMPT_SCENE_WORDS`; default a highway in medium traffic), and the
+    ``manoeuvre`` (a :data:`MANOEUVRE_PHRASES` key) and speed of the trajectory it is generated under.
+    Words the template has no place for are dropped."""
+    from drivewm.text.conditions import caption_conditions
+
+    text = prompt.lower()
+    asked = caption_conditions(prompt)
+    tags = {"weather": asked.get("weather", "clear"), "time_of_day": asked.get("time_of_day", "day")}
+    for tag, values in PROMPT_SCENE_WORDS.items():
+        named = [v for v, words in values.items() if any(re.search(rf"\b{re.escape(w)}\b", text) for w in words)]
+        tags[tag] = named[0] if named else {"road_type": "highway", "traffic_density": "medium"}[tag]
+    scene, motion = _scene_phrase(tags), _motion_phrase(manoeuvre, speed_mps)
+    return [f"The {camera_direction(c)} camera view of {scene[0].lower()}{scene[1:]}{motion}." for c in cameras]
 
 
 def load_captioner(spec: str) -> Captioner:

@@ -84,6 +84,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)",
     )
     add_reproject_arguments(g)
+    g.add_argument(
+        "--prompt-template",
+        action="store_true",
+        help="multi-view models: rewrite each prompt into the training captions' template (weather, time of day, "
+        "road, traffic, the trajectory's manoeuvre and speed; other words dropped)",
+    )
     g.set_defaults(func=generate_command)
 
 
@@ -121,10 +127,11 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.generate import generate_text2world
     from drivewm.errors import DrivewmError
 
-    if args.rig or args.trajectory or args.condition_clip or args.trajectory_guidance != 1.0 or args.reproject:
+    multiview_only = args.rig or args.trajectory or args.condition_clip or args.reproject or args.prompt_template
+    if multiview_only or args.trajectory_guidance != 1.0:
         raise DrivewmError(
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
-            "/--reproject (multi-view models do)"
+            "/--reproject/--prompt-template (multi-view models do)"
         )
     options = generate_options(args)
     files = generate_text2world(args.model, options, args.out)

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from drivewm.curate.captions import camera_direction
+from drivewm.curate.captions import camera_direction, classify_manoeuvre, prompt_view_captions
 from drivewm.diffusion.generate import GenerateOptions, decode_latents, warn_if_preview
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
@@ -49,6 +49,18 @@ def view_captions(prompt: str, rig: Rig) -> list[str]:
     return [f"The {camera_direction(c)} camera view of {scene}." for c in rig.cameras]
 
 
+def template_view_captions(prompt: str, rig: Rig, waypoints: np.ndarray, dt_s: float) -> list[str]:
+    """``prompt`` rewritten into the curated clips' own template (``--prompt-template``;
+    drivewm.curate.captions.prompt_view_captions), its manoeuvre and speed those of ``waypoints``
+    (W, 3) m, spaced ``dt_s`` from the ego's first position, as the captioner reads a logged clip's."""
+    xyz = np.vstack([np.zeros((1, 3)), np.asarray(waypoints, dtype=np.float64)])
+    step = np.diff(xyz[:, :2], axis=0)
+    speed = np.linalg.norm(step, axis=1) / dt_s
+    yaw = np.unwrap(np.arctan2(step[:, 1], step[:, 0]))
+    manoeuvre = classify_manoeuvre(xyz, np.concatenate([yaw[:1], yaw]), np.concatenate([speed[:1], speed]))
+    return prompt_view_captions(prompt, rig.cameras, manoeuvre, float(speed.mean()))
+
+
 def condition_latents(model: MultiView, clip_path: Path, rig: Rig | None) -> tuple[torch.Tensor, Rig, float]:
     """Raw latents (1, V, c, t, h, w) of a real clip's first frames (Video2World), its rig, its speed."""
     if not model.latent.tokenizer:
@@ -74,11 +86,13 @@ def generate_multiview(
     out_dir: str | Path,
     trajectory_guidance: float = 1.0,
     reprojection: Reprojection | None = None,
+    prompt_template: bool = False,
 ) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer); with a
     ``reprojection`` sigma, each first pass is reprojected along the trajectory and refined
-    (drivewm.multiview.reproject)."""
+    (drivewm.multiview.reproject); with ``prompt_template`` each prompt is rewritten into the training
+    captions' template (:func:`template_view_captions`)."""
     reprojection = reprojection or Reprojection()
     model = MultiView.from_pretrained(model_dir).to(options.device)
     warn_if_preview(model_dir, model.latent.tokenizer)
@@ -100,7 +114,10 @@ def generate_multiview(
         "guidance_interval": options.guidance_interval,
     }
     for prompt, seed in tqdm(jobs, desc="generate"):
-        caps = view_captions(prompt, rig)
+        if prompt_template:
+            caps = template_view_captions(prompt, rig, waypoints, mv.trajectory_dt_s)
+        else:
+            caps = view_captions(prompt, rig)
         z = model.sample_latents(rig, [caps], waypoints[None], [seed], options.steps, cond_latents=cond, **sampling)
         if tokenizer is None:
             videos = decode_latents(z[0], model.latent.tokenizer, model.device)  # (V, T, H, W, 3)
@@ -117,6 +134,7 @@ def generate_multiview(
             "trajectory": trajectory or "straight",
             "speed_mps": float(speed),
             "condition_clip": str(condition_clip or ""),
+            "prompt_template": prompt_template,
             **reprojection.record(),
         }
         samples.append(GeneratedSample(videos, rig, prompt, caps, waypoints, mv.trajectory_dt_s, extra))
@@ -147,6 +165,7 @@ def generate_command(args: argparse.Namespace) -> int:
         args.out,
         args.trajectory_guidance,
         reprojection,
+        args.prompt_template,
     )
     print(f"wrote {len(files)} files to {args.out}")
     return 0

@@ -81,3 +81,17 @@ def test_a_prompt_naming_no_time_of_day_asks_for_daylight(prompt, caption):
     caps = view_captions(prompt, load_rig("nuscenes6"))  # CAM_FRONT, CAM_FRONT_RIGHT, ...
     verbatim = "camera view" in prompt
     assert caps[0] == caption and caps[1] == (caption if verbatim else caption.replace("front", "front-right", 1))
+
+
+@pytest.mark.parametrize(
+    "turn, phrase", [("left", "turning left"), ("right", "turning right"), ("straight", "driving straight")]
+)
+def test_template_captions_take_the_manoeuvre_and_speed_of_the_trajectory(turn, phrase):
+    from drivewm.geometry import load_rig
+    from drivewm.multiview.generate import template_view_captions
+    from drivewm.multiview.trajectories import resolve_trajectory
+
+    rig = load_rig("nuscenes6")
+    caps = template_view_captions("snow at night", rig, resolve_trajectory(turn, 16, 0.1, 20.0), 0.1)
+    assert len(caps) == 6 and caps[0].startswith("The front camera view of a snow night drive on a highway")
+    assert caps[0].endswith(f"the ego vehicle {phrase} at 72 km/h.")
