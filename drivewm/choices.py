@@ -14,10 +14,10 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
-import math
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from drivewm.config import check_guidance_interval
 from drivewm.errors import DrivewmError
 
 
@@ -123,17 +123,16 @@ seed = whole_number(0, MAX_SEED)
 
 
 def sigma_interval(value: str) -> tuple[float, float] | None:
-    """argparse ``type`` of ``--guidance-interval``: ``LO,HI`` with finite 0 <= LO < HI, or ``all`` (None)."""
+    """argparse ``type`` of ``--guidance-interval``: ``LO,HI`` with finite 0 <= LO < HI, or ``all`` (None);
+    checked by the library's own check (drivewm.config.check_guidance_interval)."""
     if value.strip().lower() == "all":
         return None
-    parts = value.split(",")
     try:
-        lo, hi = (float(p) for p in parts) if len(parts) == 2 else (None, None)
-    except ValueError:
-        lo = hi = None
-    if lo is None or not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-        raise argparse.ArgumentTypeError(f"expected LO,HI with 0 <= LO < HI (noise levels) or 'all', got {value!r}")
-    return lo, hi
+        return check_guidance_interval("--guidance-interval", value.split(","))
+    except DrivewmError:
+        raise argparse.ArgumentTypeError(
+            f"expected LO,HI with 0 <= LO < HI (noise levels) or 'all', got {value!r}"
+        ) from None
 
 
 def add_guidance_interval_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:

@@ -143,6 +143,21 @@ def require(ok: bool, field: str, value: Any, rule: str) -> None:
         raise DrivewmError(f"{field} must be {rule}, got {value!r}")
 
 
+def check_guidance_interval(where: str, interval: tuple[float, float] | None) -> tuple[float, float] | None:
+    """``interval`` as (lo, hi) floats with 0 <= lo < hi, or None; a clear error otherwise."""
+    if interval is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in interval)
+    except (TypeError, ValueError):
+        raise DrivewmError(
+            f"{where}: the guidance interval must be two numbers LO,HI with 0 <= LO < HI, got {interval!r}"
+        ) from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+        raise DrivewmError(f"{where}: the guidance interval needs finite 0 <= LO < HI, got {lo:g},{hi:g}")
+    return lo, hi
+
+
 def finite_at_least(where: str, low: float, **values: float) -> None:
     """Every value is a finite number >= ``low``, else ``DrivewmError("WHERE: NAME must be a finite number
     >= LOW, got VALUE")``: for run settings that no config loader checked (guidance weights, speeds)."""

@@ -140,8 +140,8 @@ def prompt_view_captions(prompt: str, cameras: list[Camera], manoeuvre: str, spe
     for tag, values in PROMPT_SCENE_WORDS.items():
         named = [v for v, words in values.items() if any(re.search(rf"\b{re.escape(w)}\b", text) for w in words)]
         tags[tag] = named[0] if named else {"road_type": "highway", "traffic_density": "medium"}[tag]
-    scene, motion = _scene_phrase(tags), _motion_phrase(manoeuvre, speed_mps)
-    return [f"The {camera_direction(c)} camera view of {scene[0].lower()}{scene[1:]}{motion}." for c in cameras]
+    _, views = TemplateCaptioner().caption(ClipInfo(tags, "", cameras, manoeuvre, speed_mps))
+    return [views[c.name] for c in cameras]
 
 
 def load_captioner(spec: str) -> Captioner:

@@ -21,8 +21,7 @@ from drivewm.atomic import atomic_path, write_bytes
 from drivewm.clips.format import ClipMeta, clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
-from drivewm.config import finite_at_least
-from drivewm.diffusion.sampling import check_guidance_interval
+from drivewm.config import check_guidance_interval, finite_at_least
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer import Tokenizer

@@ -13,13 +13,12 @@ build the conditioning and (de)normalise latents; nothing here knows a tokenizer
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 
 import torch
 from torch import nn
 
-from drivewm.config import finite_at_least
+from drivewm.config import check_guidance_interval, finite_at_least
 from drivewm.device import resolve_device
 from drivewm.diffusion.denoiser import Conditioning
 from drivewm.diffusion.samplers import SAMPLERS, GuidedDenoiser, karras_sigmas, seeded_noise
@@ -43,19 +42,6 @@ def guided(
 
 def _without_trajectory(cond: Conditioning) -> Conditioning:
     return cond.without_trajectory()
-
-
-def check_guidance_interval(where: str, interval: tuple[float, float] | None) -> tuple[float, float] | None:
-    """``interval`` as (lo, hi) floats with 0 <= lo < hi, or None; a clear error otherwise."""
-    if interval is None:
-        return None
-    try:
-        lo, hi = (float(v) for v in interval)
-    except (TypeError, ValueError):
-        raise DrivewmError(f"{where}: the guidance interval must be two numbers LO,HI, got {interval!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-        raise DrivewmError(f"{where}: the guidance interval needs finite 0 <= LO < HI, got {lo:g},{hi:g}")
-    return lo, hi
 
 
 @torch.no_grad()

@@ -20,8 +20,7 @@ from tqdm import tqdm
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
-from drivewm.config import finite_at_least
-from drivewm.diffusion.sampling import check_guidance_interval
+from drivewm.config import check_guidance_interval, finite_at_least
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import decode_views, encode_views, frames_to_video

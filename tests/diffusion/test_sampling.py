@@ -222,7 +222,7 @@ def test_guidance_in_an_interval_guides_only_the_steps_inside_it_with_one_evalua
     assert 0 < len(guided_steps) < 8
     assert len(run((100.0, 200.0))) == 8  # nothing inside: the conditional model alone
 
-    guided_model = guided(lambda x, s, c: toy(x, s, c), 5.0, interval=(1.0, 2.0))
+    guided_model = guided(toy, 5.0, interval=(1.0, 2.0))
     x = torch.zeros(1, 1, 1, 2, 2)
     assert guided_model(x, torch.full((1,), 1.5), cond).flatten()[0].item() == pytest.approx(5.0)
     assert guided_model(x, torch.full((1,), 2.5), cond).flatten()[0].item() == pytest.approx(1.0)
