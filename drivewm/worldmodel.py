@@ -182,14 +182,14 @@ def benchmark_stages(
     trajectory_guidance: float | None = None,
     reproject: float | None = None,
     guidance_interval: str | None = None,
-    prompt_template: bool = False,
+    prompt_template: bool | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
     profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
-    trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``, default
-    none; ``guidance_interval`` "LO,HI" or "all", default generate's; ``prompt_template``: prompts rewritten
-    into the training captions' template), the held-out clips ``heldout`` and the
+    trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
+    ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
+    captions' template), each None for generate's default), the held-out clips ``heldout`` and the
     generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -203,8 +203,8 @@ def benchmark_stages(
             argv += ["--reproject", f"{reproject:g}"]
         if guidance_interval is not None:
             argv += ["--guidance-interval", guidance_interval]
-        if prompt_template:
-            argv += ["--prompt-template"]
+        if prompt_template is not None:
+            argv += ["--prompt-template" if prompt_template else "--no-prompt-template"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -227,7 +227,7 @@ def benchmark_worldmodel(
     trajectory_guidance: float | None = None,
     reproject: float | None = None,
     guidance_interval: str | None = None,
-    prompt_template: bool = False,
+    prompt_template: bool | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -359,7 +359,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         metavar="SIGMA",
         help="reprojected refinement of every sample from noise level SIGMA (drivewm generate --reproject; "
-        "default none, as the shipped figures)",
+        "default generate's, 0.5, as the model card's figures; 0 = off)",
     )
     b.add_argument(
         "--guidance-interval",
@@ -370,8 +370,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument(
         "--prompt-template",
-        action="store_true",
-        help="rewrite every prompt into the training captions' template (drivewm generate --prompt-template)",
+        action=argparse.BooleanOptionalAction,
+        help="rewrite every prompt into the training captions' template (drivewm generate --prompt-template; "
+        "default generate's, on, as the model card's figures)",
     )
     b.set_defaults(
         func=lambda args: benchmark_worldmodel(

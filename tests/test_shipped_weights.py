@@ -2,8 +2,8 @@
 generating what they generated when they were exported (fixed seed, stored statistics).
 
 ``tests/shipped_generation.json`` holds per-camera pixel statistics of a small fixed-seed generation
-with the shipped multi-view model. Replacing the shipped weights re-records it with
-``python tests/test_shipped_weights.py --record`` in the same commit.
+with the shipped multi-view model, at generate's defaults. Replacing the shipped weights or changing
+those defaults re-records it with ``python tests/test_shipped_weights.py --record`` in the same commit.
 """
 
 from __future__ import annotations
@@ -31,9 +31,11 @@ from drivewm.release import (
 )
 
 STATS = Path(__file__).with_name("shipped_generation.json")
+# generate's defaults otherwise: the prompt template, reprojection from 0.5
 GENERATE = [
     "generate", "--prompt", "a snowy highway at dusk, the car ahead brakes", "--rig", "nuscenes6",
     "--trajectory", "left", "--steps", "3", "--guidance", "3", "--seed", "7", "--num-samples", "1", "--device", "cpu",
+    "--reproject-steps", "3",
 ]  # fmt: skip
 KINDS = ("tokenizer", "text2world", "multiview", "transfer")
 

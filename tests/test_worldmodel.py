@@ -59,7 +59,7 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     assert all(parser.parse_args(a).trajectory_guidance == 1.0 for n, a in mine if n.startswith("generate-"))
     refined = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject=0.5) if n[:9] == "generate-"]
     assert all(parser.parse_args(a).reproject == 0.5 for a in refined) and len(refined) == len(p.benchmarks)
-    assert all(parser.parse_args(a).reproject == 0.0 for n, a in mine if n.startswith("generate-"))
+    assert all(parser.parse_args(a).reproject is None for n, a in mine if n.startswith("generate-"))  # generate's
     narrow = [
         a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, guidance_interval="0.3,5") if n[:9] == "generate-"
     ]
@@ -74,7 +74,9 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
         a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, prompt_template=True) if n[:9] == "generate-"
     ]
     assert all(parser.parse_args(a).prompt_template for a in templated) and len(templated) == len(p.benchmarks)
-    assert not any(parser.parse_args(a).prompt_template for n, a in mine if n.startswith("generate-"))
+    assert all(parser.parse_args(a).prompt_template is None for n, a in mine if n.startswith("generate-"))
+    given = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, prompt_template=False) if n[:9] == "generate-"]
+    assert all(parser.parse_args(a).prompt_template is False for a in given) and len(given) == len(p.benchmarks)
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):

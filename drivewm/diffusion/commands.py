@@ -83,12 +83,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)",
     )
-    add_reproject_arguments(g)
+    add_reproject_arguments(g, None, "0.5, off for Text2World models")
     g.add_argument(
         "--prompt-template",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
         help="multi-view models: rewrite each prompt into the training captions' template (weather, time of day, "
-        "road, traffic, the trajectory's manoeuvre and speed; other words dropped)",
+        "road, traffic, the trajectory's manoeuvre and speed; other words dropped); on by default, "
+        "--no-prompt-template samples the prompt as given",
     )
     g.set_defaults(func=generate_command)
 
@@ -128,7 +129,7 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.errors import DrivewmError
 
     multiview_only = args.rig or args.trajectory or args.condition_clip or args.reproject or args.prompt_template
-    if multiview_only or args.trajectory_guidance != 1.0:
+    if multiview_only or args.trajectory_guidance != 1.0:  # None (not given) and off pass alike
         raise DrivewmError(
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
             "/--reproject/--prompt-template (multi-view models do)"

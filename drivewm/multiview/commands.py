@@ -76,7 +76,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
-    add_reproject_arguments(r)
+    add_reproject_arguments(r, 0.0, "0, off")
     r.add_argument("--seed", type=seed, default=0, help="window w uses seed + w")
     add_registry_argument(
         r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
@@ -87,15 +87,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=rollout_command)
 
 
-def add_reproject_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
-    """``--reproject SIGMA`` and ``--reproject-steps N`` of generate and rollout (drivewm.multiview.reproject)."""
+def add_reproject_arguments(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, default: float | None, default_text: str
+) -> None:
+    """``--reproject SIGMA`` and ``--reproject-steps N`` of generate and rollout (drivewm.multiview.reproject);
+    ``default`` None leaves the choice to the command (``default_text`` says what it chooses)."""
     parser.add_argument(
         "--reproject",
         type=float,
-        default=0.0,
+        default=default,
         metavar="SIGMA",
         help="multi-view models: warp the first frame of every camera along the trajectory and refine it from "
-        "noise level SIGMA (0 = off; 0.5 follows turns, docs/quality-vs-compute.md)",
+        f"noise level SIGMA (0 = off; default {default_text}; docs/quality-vs-compute.md)",
     )
     parser.add_argument(
         "--reproject-steps", type=at_least_one, default=10, help="sampler steps of the refinement (default 10)"

@@ -86,15 +86,17 @@ def generate_multiview(
     out_dir: str | Path,
     trajectory_guidance: float = 1.0,
     reprojection: Reprojection | None = None,
-    prompt_template: bool = False,
+    prompt_template: bool = True,
 ) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer); with a
-    ``reprojection`` sigma, each first pass is reprojected along the trajectory and refined
-    (drivewm.multiview.reproject); with ``prompt_template`` each prompt is rewritten into the training
-    captions' template (:func:`template_view_captions`)."""
-    reprojection = reprojection or Reprojection()
+    ``reprojection`` sigma (default ``GENERATE_SIGMA`` where the model has a tokenizer:
+    ``Reprojection.for_generate``; ``Reprojection()`` is off), each first pass is reprojected along the
+    trajectory and refined (drivewm.multiview.reproject); with ``prompt_template`` (the default) each
+    prompt is rewritten into the training captions' template (:func:`template_view_captions`), without
+    it sampled as given (:func:`view_captions`)."""
     model = MultiView.from_pretrained(model_dir).to(options.device)
+    reprojection = (reprojection or Reprojection(None)).for_generate(bool(model.latent.tokenizer))
     warn_if_preview(model_dir, model.latent.tokenizer)
     tokenizer = reprojection_tokenizer(model, reprojection)
     mv = model.cfg.multiview
@@ -155,7 +157,7 @@ def generate_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.commands import generate_options
 
     options = generate_options(args)
-    reprojection = Reprojection(args.reproject, args.reproject_steps)
+    reprojection = Reprojection(args.reproject, args.reproject_steps)  # None: generate's default
     files = generate_multiview(
         args.model,
         options,
@@ -165,7 +167,7 @@ def generate_command(args: argparse.Namespace) -> int:
         args.out,
         args.trajectory_guidance,
         reprojection,
-        args.prompt_template,
+        args.prompt_template is not False,
     )
     print(f"wrote {len(files)} files to {args.out}")
     return 0

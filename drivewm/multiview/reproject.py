@@ -54,20 +54,35 @@ def reproject_first_frame(
     return rearrange(out, "v c t h w -> v t h w c").round().clamp(0, 255).byte().numpy(), float(valid.float().mean())
 
 
+GENERATE_SIGMA = 0.5
+"""``drivewm generate``'s ``--reproject`` for multi-view models when none is given. Chosen on validation
+prompts (never the benchmark's); with the prompt template it turns every benchmark sample the asked way
+(docs/quality-vs-compute.md, "Two sampling options measured"). ``drivewm rollout`` keeps 0."""
+
+
 @dataclasses.dataclass
 class Reprojection:
     """Settings of reprojected refinement (``--reproject SIGMA``)."""
 
-    sigma: float = 0.0
-    """Noise level the warped clip is refined from (0 = off). Chosen on validation prompts (never the
-    benchmark's): docs/quality-vs-compute.md, "Reprojected refinement"."""
+    sigma: float | None = 0.0
+    """Noise level the warped clip is refined from (0 = off; None = generate's default,
+    :meth:`for_generate`). Chosen on validation prompts (never the benchmark's):
+    docs/quality-vs-compute.md, "Reprojected refinement"."""
     steps: int = 10
     """Sampler steps of the refinement (the Karras schedule from ``sigma`` down to 0)."""
 
     def __post_init__(self) -> None:
-        finite_at_least("reprojection", 0, **{"--reproject": self.sigma})
+        if self.sigma is not None:
+            finite_at_least("reprojection", 0, **{"--reproject": self.sigma})
         if self.steps < 1:
             raise DrivewmError(f"reprojection: --reproject-steps must be >= 1, got {self.steps}")
+
+    def for_generate(self, decodes_pixels: bool) -> Reprojection:
+        """These settings with generate's default sigma filled in: :data:`GENERATE_SIGMA` for a model that
+        decodes through its tokenizer, off for a preview model (no pixels to warp)."""
+        if self.sigma is not None:
+            return self
+        return dataclasses.replace(self, sigma=GENERATE_SIGMA if decodes_pixels else 0.0)
 
     def record(self) -> dict:
         """What a generated clip's metadata says of it."""

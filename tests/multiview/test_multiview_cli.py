@@ -105,6 +105,7 @@ def test_generate_writes_clips_for_any_rig(trained_mv, rig, views):
                 "left",
                 "--steps",
                 "2",
+                "--no-prompt-template",
                 "--out",
                 str(out),
             ]

@@ -14,7 +14,7 @@ from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.geometry import Rig, yaw_of
 from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.reproject import Reprojection, reproject_first_frame
+from drivewm.multiview.reproject import GENERATE_SIGMA, Reprojection, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
 
 FPS = 10.0
@@ -60,24 +60,44 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
         assert main(["generate", "--prompt", "snow", "--out", str(tmp_path / "o"), *flags]) == 2
         assert flags[0] in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+    assert Reprojection(None).for_generate(True) == Reprojection(GENERATE_SIGMA)  # generate's default
+    assert Reprojection(None, 3).for_generate(False) == Reprojection(0.0, 3)  # a preview model: no pixels to warp
+    assert Reprojection(0.0).for_generate(True) == Reprojection(0.0)  # off when asked for
+
+
+def test_a_text2world_model_refuses_the_multiview_options_only_when_they_are_asked_for(tmp_path, capsys):
+    """generate's multi-view defaults (reprojection, the prompt template) do not stop a Text2World model;
+    asking for them does, before any sampling."""
+    for flags in (["--prompt-template"], ["--reproject", "0.5"]):
+        argv = ["generate", "--model", "shipped:text2world", "--prompt", "snow", "--out", str(tmp_path / "o")]
+        assert main([*argv, *flags]) == 2
+        assert "--reproject/--prompt-template (multi-view models do)" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.slow
 def test_the_shipped_model_refined_from_a_reprojection_turns_as_told(tmp_path):
-    """The shipped multi-view model, the same prompt and seed under the left and right turns: with
-    reprojection from sigma 0.5 the samples' front cameras turn the asked way by more than 10 degrees
-    (from noise alone they turn by a few degrees at most, mostly the other way: docs/quality-vs-compute.md),
-    and the clip records how it was made."""
+    """The shipped multi-view model, the same prompt and seed under the left and right turns, with
+    generate's defaults (reprojection from sigma 0.5, the prompt in the training captions' template):
+    the samples' front cameras turn the asked way by more than 10 degrees (from noise alone they turn
+    by a few degrees at most, mostly the other way: docs/quality-vs-compute.md), and the clip records
+    how it was made."""
+    from drivewm.multiview.generate import template_view_captions
+
     yaws = {}
     for name in ("left", "right"):
         out = tmp_path / name
         argv = ["generate", "--prompt", "a clear day on a suburban road", "--trajectory", name, "--seed", "5"]
         argv += ["--steps", "3", "--guidance", "1", "--device", "cpu", "--out", str(out)]
-        assert main([*argv, "--reproject", "0.5", "--reproject-steps", "3"]) == 0
+        assert main([*argv, "--reproject-steps", "3"]) == 0
         clip = next(iter_clips(sorted(out.glob("*.tar"))[0]))
         rig = clip.meta.get_rig()
         yaws[name] = front_yaw_deg(np.stack([clip.video(n) for n in rig.names]), rig)
-        assert clip.meta.extra["reproject_sigma"] == 0.5 and clip.meta.extra["reproject_steps"] == 3
+        extra = clip.meta.extra
+        assert extra["reproject_sigma"] == 0.5 and extra["reproject_steps"] == 3 and extra["prompt_template"]
+        want = template_view_captions(extra["prompt"], rig, np.asarray(clip.meta.trajectory_ego), 0.1)
+        assert [clip.meta.view_captions[n] for n in rig.names] == want
+        assert ("turning left" if name == "left" else "turning right") in want[0]
     assert yaws["left"] > 10 and yaws["right"] < -10, yaws
 
 
