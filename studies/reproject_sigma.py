@@ -6,9 +6,12 @@ shows, before and after the tokenizer), then refined from each SIGMA with the li
 (drivewm.multiview.reproject.refine_reprojected, as ``drivewm generate --reproject`` runs it). The
 front camera's yaw is read by the eval's dense-flow reader (left positive). The rule, fixed before
 the benchmark was run: the SIGMA whose samples come closest to the asked turn (median absolute
-error against the trajectory's own heading change) is the one documented.
+error against the trajectory's own heading change) is the one documented. With ``--out DIR`` each
+SIGMA's samples are written to ``DIR/sigma_S`` for ``drivewm eval`` (adherence and geometry on the
+same validation prompts); a SIGMA whose samples stop reading the asked weather or time of day there
+is not taken, however close its turns.
 
-    python studies/reproject_sigma.py MODEL_DIR [--sigmas 0.5,0.75,1,1.5] [--steps 20]
+    python studies/reproject_sigma.py MODEL_DIR [--sigmas 0.5,0.75,1,1.5] [--steps 20] [--prompt-template] [--out DIR]
 
 About 90 s per prompt with four SIGMAs on 2 CPU cores. Numbers: docs/quality-vs-compute.md
 ("Reprojected refinement").
@@ -17,6 +20,7 @@ About 90 s per prompt with four SIGMAs on 2 CPU cores. Numbers: docs/quality-vs-
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 from rollout_turns import front_yaw
@@ -24,11 +28,11 @@ from rollout_turns import front_yaw
 from drivewm.choices import resolve_model_folder
 from drivewm.geometry import yaw_of
 from drivewm.multiview.coding import decode_views, encode_views
-from drivewm.multiview.generate import view_captions
+from drivewm.multiview.generate import template_view_captions, view_captions
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.reproject import Reprojection, refine_reprojected, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
-from drivewm.multiview.writer import GeneratedSample
+from drivewm.multiview.writer import GeneratedSample, write_samples
 from drivewm.tokenizer import Tokenizer
 
 VALIDATION = [
@@ -47,6 +51,10 @@ def main() -> None:
     parser.add_argument("--sigmas", default="0.5,0.75,1,1.5")
     parser.add_argument("--steps", type=int, default=20, help="first-pass sampler steps (the benchmark's)")
     parser.add_argument("--guidance", type=float, default=7.0, help="caption guidance (the benchmark's)")
+    parser.add_argument(
+        "--prompt-template", action="store_true", help="prompts in the training captions' template (generate's default)"
+    )
+    parser.add_argument("--out", type=Path, help="write each SIGMA's samples to OUT/sigma_S for `drivewm eval`")
     args = parser.parse_args()
     sigmas = [float(s) for s in args.sigmas.split(",")]
 
@@ -55,13 +63,17 @@ def main() -> None:
     mv, rig, fps = model.cfg.multiview, model.training_rig, model.latent.fps
     sampling = {"guidance": args.guidance, "sampler": "heun", "trajectory_guidance": 1.0}
     errors = {s: [] for s in sigmas}
+    written = {s: [] for s in sigmas}
 
     def yaw(videos: np.ndarray, wp: np.ndarray) -> float:
         return front_yaw(GeneratedSample(videos, rig, "", [], wp, mv.trajectory_dt_s, {}))
 
     for prompt, turn, seed in VALIDATION:
         wp = resolve_trajectory(turn, mv.trajectory_waypoints, mv.trajectory_dt_s, mv.speed_mps)
-        caps = view_captions(prompt, rig)
+        if args.prompt_template:
+            caps = template_view_captions(prompt, rig, wp, mv.trajectory_dt_s)
+        else:
+            caps = view_captions(prompt, rig)
         z = model.sample_latents(rig, [caps], wp[None], [seed], args.steps, **sampling)[0]
         first = decode_views(tokenizer, z)
         asked = np.degrees(yaw_of(poses_from_waypoints(wp, first.shape[1], mv.trajectory_dt_s, fps)[-1]))
@@ -71,13 +83,20 @@ def main() -> None:
         row += f", coded {yaw(coded, wp):+.1f}"
         for s in sigmas:
             refined = refine_reprojected(model, tokenizer, rig, caps, wp, seed, first, Reprojection(s), sampling)
-            read = yaw(decode_views(tokenizer, refined), wp)
+            videos = decode_views(tokenizer, refined)
+            read = yaw(videos, wp)
             errors[s].append(abs(read - asked))
+            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, **Reprojection(s).record()}
+            written[s].append(GeneratedSample(videos, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
             row += f"; sigma {s:g} {read:+.1f}"
         print(row, flush=True)
     for s in sigmas:
         print(f"sigma {s:g}: median |yaw - asked| {np.median(errors[s]):.1f} deg")
     print(f"closest to the asked turns: sigma {min(sigmas, key=lambda s: np.median(errors[s])):g}")
+    if args.out:
+        for s in sigmas:
+            write_samples(args.out / f"sigma_{s:g}", written[s], fps)
+        print(f"samples in {args.out}/sigma_*: score each with `drivewm eval {args.out}/sigma_S --out EVAL`")
 
 
 if __name__ == "__main__":
