@@ -14,10 +14,9 @@ in the same run, so a busy machine slows both alike (say so when quoting it).
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import torch
+from interleaved import add_sampling_arguments, alternate, print_medians
 
 from drivewm.choices import resolve_model_folder, sigma_interval
 from drivewm.multiview.generate import view_captions
@@ -39,12 +38,8 @@ class Counted(torch.nn.Module):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--model", default="shipped:multiview")
+    add_sampling_arguments(parser)
     parser.add_argument("--interval", type=sigma_interval, default=(0.28, 5.42), help="LO,HI (default 0.28,5.42)")
-    parser.add_argument("--steps", type=int, default=20)
-    parser.add_argument("--guidance", type=float, default=7.0)
-    parser.add_argument("--repeats", type=int, default=3, help="samples per setting, alternating")
-    parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     model = MultiView.from_pretrained(resolve_model_folder(args.model))
@@ -58,21 +53,18 @@ def main() -> None:
     print(f"{args.model}: {params / 1e6:.2f}M parameters, {len(rig.cameras)} views, latents {shape}")
     print(f"{args.steps} Heun steps, guidance {args.guidance:g}, {torch.get_num_threads()} threads")
     settings = {"every step": None, f"({args.interval[0]:g}, {args.interval[1]:g}]": args.interval}
-    times: dict[str, list[float]] = {name: [] for name in settings}
     evals: dict[str, int] = {}
-    for r in range(args.repeats + 1):  # the first round warms up and is not counted
-        for name, interval in settings.items():
+
+    def run(name: str, interval):
+        def sample(r: int) -> None:
             counted.calls = 0
-            tic = time.perf_counter()
             model.sample_latents(rig, captions, waypoints, [r], args.steps, args.guidance, guidance_interval=interval)
-            if r:
-                times[name].append(time.perf_counter() - tic)
             evals[name] = counted.calls
-    base = statistics.median(times["every step"])
-    print(f"{'guidance':>14s} {'evals':>6s} {'median s/clip':>14s} {'ratio':>6s}")
-    for name in settings:
-        median = statistics.median(times[name])
-        print(f"{name:>14s} {evals[name]:6d} {median:14.2f} {median / base:6.2f}")
+
+        return sample
+
+    times = alternate({name: run(name, interval) for name, interval in settings.items()}, args.repeats)
+    print_medians(times, "every step", "guidance", {"evals": evals})
 
 
 if __name__ == "__main__":

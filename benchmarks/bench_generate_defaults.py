@@ -1,0 +1,56 @@
+"""Time of one multi-view ``drivewm generate`` clip at its defaults (the prompt template, reprojected
+refinement from ``GENERATE_SIGMA``) against plain sampling from noise (``--no-prompt-template
+--reproject 0``), end to end as the command runs it: model and tokenizer loaded, first pass, decode,
+warp, encode, refinement, decode, clip written.
+
+The shipped multi-view model (or ``--model``), the world-model benchmark's sampler settings (20 Heun
+steps, guidance 7, nuscenes6, a left turn). The two settings alternate, ``--repeats`` times each
+after one warm-up round, and the medians are compared: the printed ratio is the default's time over
+plain sampling's. Both are measured in the same run, so a busy machine slows both alike (say so when
+quoting it).
+
+    python benchmarks/bench_generate_defaults.py
+    python benchmarks/bench_generate_defaults.py --steps 35 --repeats 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+
+import torch
+from interleaved import add_sampling_arguments, alternate, print_medians
+
+from drivewm.choices import resolve_model_folder
+from drivewm.diffusion.generate import GenerateOptions
+from drivewm.multiview.generate import generate_multiview
+from drivewm.multiview.reproject import GENERATE_SIGMA, Reprojection
+from drivewm.train.checkpoint import load_model_folder
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_sampling_arguments(parser)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    folder = resolve_model_folder(args.model)
+    _, state = load_model_folder(folder, "multiview")
+    params = sum(v.numel() for v in state.values() if v.is_floating_point())
+    print(f"{args.model}: {params / 1e6:.2f}M parameters; {args.steps} Heun steps, guidance {args.guidance:g}")
+    print(f"{torch.get_num_threads()} threads; default: template + reprojection from {GENERATE_SIGMA:g}, 10 steps")
+    prompt = "light snow on a country lane, turning left"
+
+    def run(reprojection: Reprojection | None, template: bool):
+        def clip(r: int) -> None:
+            options = GenerateOptions([prompt], args.steps, args.guidance, seed=r, device="cpu")
+            with tempfile.TemporaryDirectory() as out:
+                generate_multiview(folder, options, "nuscenes6", "left", None, out, 1.0, reprojection, template)
+
+        return clip
+
+    times = alternate({"plain": run(Reprojection(0.0), False), "default": run(None, True)}, args.repeats)
+    print_medians(times, "plain", "setting")
+
+
+if __name__ == "__main__":
+    main()
