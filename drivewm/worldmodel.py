@@ -359,7 +359,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         metavar="SIGMA",
         help="reprojected refinement of every sample from noise level SIGMA (drivewm generate --reproject; "
-        "default generate's, 0.5, as the model card's figures; 0 = off)",
+        "default generate's, 0.3, as the model card's figures; 0 = off)",
     )
     b.add_argument(
         "--guidance-interval",

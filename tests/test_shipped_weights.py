@@ -31,7 +31,7 @@ from drivewm.release import (
 )
 
 STATS = Path(__file__).with_name("shipped_generation.json")
-# generate's defaults otherwise: the prompt template, reprojection from 0.5
+# generate's defaults otherwise: the prompt template, reprojection from GENERATE_SIGMA
 GENERATE = [
     "generate", "--prompt", "a snowy highway at dusk, the car ahead brakes", "--rig", "nuscenes6",
     "--trajectory", "left", "--steps", "3", "--guidance", "3", "--seed", "7", "--num-samples", "1", "--device", "cpu",
@@ -184,6 +184,21 @@ def test_a_fine_tune_mixed_with_the_shipped_model_is_the_weighted_mean_and_keeps
     with pytest.raises(DrivewmError, match="differ in structure"):
         interpolate_folders("shipped:multiview", tmp_path / "cut", 0.5, tmp_path / "bad")
     assert not (tmp_path / "bad").exists()
+
+
+def test_the_model_cards_figures_at_the_defaults_are_the_committed_benchmark_outputs():
+    """The card's "at generate's defaults" column is ``docs/benchmark/shipped/figures.json`` (what
+    ``drivewm worldmodel benchmark`` wrote), figure for figure, value and verdict."""
+    figures = json.loads((Path(__file__).parents[1] / "docs/benchmark/shipped/figures.json").read_text())
+    card = (WEIGHTS_DIR / "MODEL_CARD.md").read_text()
+    rows = {cells[1].strip(): cells for cells in (line.split("|") for line in card.splitlines()) if len(cells) > 5}
+    measured = {name: f for name, f in figures.items() if isinstance(f, dict)}
+    assert len(measured) == 12 and figures["generated_clips"] >= 24
+    for name, figure in measured.items():
+        value, holds = (rows[name][i].replace("*", "").split()[0] for i in (2, 4))
+        if figure["value"] is not None:
+            assert value == f"{figure['value']:g}", (name, value)
+        assert holds == ("yes" if figure["holds"] else "no"), name
 
 
 def generation_stats(out: Path) -> dict[str, list[float]]:

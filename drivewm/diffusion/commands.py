@@ -83,7 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)",
     )
-    add_reproject_arguments(g, None, "0.5, off for Text2World models")
+    add_reproject_arguments(g, None, "0.3, off for Text2World models")
     g.add_argument(
         "--prompt-template",
         action=argparse.BooleanOptionalAction,
