@@ -39,6 +39,7 @@ EVAL_ROWS = {
     "rpe_trans": "relative pose error, translation (m)",
     "rpe_rot": "relative pose error, rotation (deg)",
     "tfe": "trajectory-following error (m)",
+    "turn_sign": "turning clips whose yaw, read from the frames, has the asked (or logged) sign (fraction)",
     "adherence_weather": "weather asked for, recognised (fraction)",
     "adherence_time_of_day": "time of day asked for, recognised (fraction)",
 }
@@ -102,18 +103,30 @@ def gather(out: Path, rig: str, generations: list[str], models: list[str]) -> di
     if transferred.get("written"):
         what = f"Transferred: {transferred['written'][0]} (source above, transferred below, all views)"
         figures[what] = out / "transfer" / "contact_sheet.png"
+    sets = {
+        "real": _read_json(out / "eval" / "real" / "metrics.json"),
+        **{m: pooled_metrics([out / "eval" / m / g / "metrics.json" for g in generations]) for m in models},
+    }
     return {
         "rig": rig,
         "curate": _read_json(out / "clips" / "report.json"),
         "tokenizer": _read_json(out / "tokenizer_eval" / "metrics.json"),
-        "eval": {
-            "real": _read_json(out / "eval" / "real" / "metrics.json"),
-            **{m: pooled_metrics([out / "eval" / m / g / "metrics.json" for g in generations]) for m in models},
-        },
+        "eval": {name: with_turn_sign(metrics) for name, metrics in sets.items()},
         "figures": {k: v for k, v in figures.items() if v.is_file()},
         "sheets": {g: {m: p for m, p in row.items() if p.is_file()} for g, row in sheets.items()},
         "recording": out / "drive.rrd",
     }
+
+
+def with_turn_sign(metrics: dict) -> dict:
+    """``metrics`` with ``turn_sign``: the world-model benchmark's turn-sign figure
+    (drivewm.worldmodel_figures.trajectory_figures) over its clips, None where none turns."""
+    from drivewm.worldmodel_figures import trajectory_figures
+
+    if not metrics:
+        return metrics
+    figure = trajectory_figures(list((metrics.get("clips") or {}).values()), {})["turn_sign_rate"]
+    return {**metrics, "turn_sign": figure["value"]}
 
 
 #: The per-clip status entry that says why a metric has no value (eval's metrics.json); other keys
@@ -129,6 +142,10 @@ def _missing_reason(metrics: dict, key: str) -> str:
     field = key.removeprefix("adherence_")
     if field != key and not any(f"{field}_match" in (c.get("adherence") or {}) for c in clips):
         return f"no prompt or clip tag names a {field.replace('_', ' ')}"
+    if key == "turn_sign":
+        from drivewm.worldmodel_figures import TURN_DEG
+
+        return f"no clip's trajectory turns by more than the benchmark's {TURN_DEG:g} degrees"
     for clip in clips:
         statuses = clip.get("status") or {}
         status = statuses.get(STATUS_OF.get(key, key)) or statuses.get(key.split("_")[0])

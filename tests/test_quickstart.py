@@ -150,6 +150,23 @@ def quickstart_dir(tmp_path_factory, shipped_manifest) -> tuple[Path, str]:
     return out, run_quickstart(out)
 
 
+def test_the_reports_turn_sign_is_the_benchmarks_figure_and_says_why_it_is_missing():
+    """The report's ``turn_sign`` row: turning clips whose yaw has the asked sign, an unreadable turn
+    a failure (as in the world-model benchmark); a set where nothing turns gets a dash saying so."""
+    from drivewm.report import _missing_reason, with_turn_sign
+
+    def clip(asked, read):
+        return {"conditioned_yaw_change_deg": asked, "yaw_change_deg": read}
+
+    clips = [clip(30.0, 12.0), clip(30.0, 2.0), clip(-30.0, 4.0), clip(-30.0, None), clip(0.0, 9.0)]
+    got = with_turn_sign({"num_clips": 5, "clips": {str(i): c for i, c in enumerate(clips)}})
+    assert got["turn_sign"] == 0.5 and got["num_clips"] == 5  # 2 of 4 turning clips; straight ones do not count
+    straight = with_turn_sign({"clips": {"a": clip(1.0, 3.0)}})
+    assert straight["turn_sign"] is None
+    assert "turns by more than the benchmark's 5 degrees" in _missing_reason(straight, "turn_sign")
+    assert with_turn_sign({}) == {}  # a set whose eval did not run stays empty
+
+
 @pytest.mark.slow
 def test_every_stage_ran_and_both_models_are_scored(quickstart_dir):
     out, stdout = quickstart_dir
