@@ -1,5 +1,5 @@
 """Time of one multi-view ``drivewm generate`` clip at its defaults (the prompt template, reprojected
-refinement from ``GENERATE_SIGMA``) against plain sampling from noise (``--no-prompt-template
+refinement from ``DEFAULT_SIGMA``) against plain sampling from noise (``--no-prompt-template
 --reproject 0``), end to end as the command runs it: model and tokenizer loaded, first pass, decode,
 warp, encode, refinement, decode, clip written.
 
@@ -24,7 +24,7 @@ from interleaved import add_sampling_arguments, alternate, print_medians
 from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import GenerateOptions
 from drivewm.multiview.generate import generate_multiview
-from drivewm.multiview.reproject import GENERATE_SIGMA, Reprojection
+from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection
 from drivewm.train.checkpoint import load_model_folder
 
 
@@ -37,7 +37,7 @@ def main() -> None:
     _, state = load_model_folder(folder, "multiview")
     params = sum(v.numel() for v in state.values() if v.is_floating_point())
     print(f"{args.model}: {params / 1e6:.2f}M parameters; {args.steps} Heun steps, guidance {args.guidance:g}")
-    print(f"{torch.get_num_threads()} threads; default: template + reprojection from {GENERATE_SIGMA:g}, 10 steps")
+    print(f"{torch.get_num_threads()} threads; default: template + reprojection from {DEFAULT_SIGMA:g}, 10 steps")
     prompt = "light snow on a country lane, turning left"
 
     def run(reprojection: Reprojection | None, template: bool):

@@ -31,7 +31,7 @@ from drivewm.release import (
 )
 
 STATS = Path(__file__).with_name("shipped_generation.json")
-# generate's defaults otherwise: the prompt template, reprojection from GENERATE_SIGMA
+# generate's defaults otherwise: the prompt template, reprojection from DEFAULT_SIGMA
 GENERATE = [
     "generate", "--prompt", "a snowy highway at dusk, the car ahead brakes", "--rig", "nuscenes6",
     "--trajectory", "left", "--steps", "3", "--guidance", "3", "--seed", "7", "--num-samples", "1", "--device", "cpu",

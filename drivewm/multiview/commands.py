@@ -76,7 +76,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
-    add_reproject_arguments(r, 0.0, "0, off")
+    add_reproject_arguments(r, None, "0.3")
     r.add_argument("--seed", type=seed, default=0, help="window w uses seed + w")
     add_registry_argument(
         r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
@@ -138,7 +138,7 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.seed,
         args.prompt,
         args.speed,
-        Reprojection(args.reproject, args.reproject_steps),
+        Reprojection(args.reproject, args.reproject_steps).resolved(True),  # a rollout always decodes pixels
         args.guidance_interval,
     )
     if args.model is None:

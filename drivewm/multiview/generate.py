@@ -90,13 +90,13 @@ def generate_multiview(
 ) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer); with a
-    ``reprojection`` sigma (default ``GENERATE_SIGMA`` where the model has a tokenizer:
-    ``Reprojection.for_generate``; ``Reprojection()`` is off), each first pass is reprojected along the
+    ``reprojection`` sigma (default ``DEFAULT_SIGMA`` where the model has a tokenizer:
+    ``Reprojection.resolved``; ``Reprojection()`` is off), each first pass is reprojected along the
     trajectory and refined (drivewm.multiview.reproject); with ``prompt_template`` (the default) each
     prompt is rewritten into the training captions' template (:func:`template_view_captions`), without
     it sampled as given (:func:`view_captions`)."""
     model = MultiView.from_pretrained(model_dir).to(options.device)
-    reprojection = (reprojection or Reprojection(None)).for_generate(bool(model.latent.tokenizer))
+    reprojection = (reprojection or Reprojection(None)).resolved(bool(model.latent.tokenizer))
     warn_if_preview(model_dir, model.latent.tokenizer)
     tokenizer = reprojection_tokenizer(model, reprojection)
     mv = model.cfg.multiview

@@ -25,7 +25,7 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import decode_views, encode_views, frames_to_video
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import Reprojection, refine_reprojected
+from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection, refine_reprojected
 from drivewm.multiview.trajectories import (
     NAMED,
     load_waypoints,
@@ -61,14 +61,16 @@ class RolloutOptions:
     """Caption for every view ('' = the clip's own per-view captions)."""
     speed_mps: float = 0.0
     """Speed of a named trajectory (0 = the clip's own initial speed)."""
-    reprojection: Reprojection = dataclasses.field(default_factory=Reprojection)
-    """Each window's first frame reprojected along the trajectory and refined (drivewm.multiview.reproject)."""
+    reprojection: Reprojection = dataclasses.field(default_factory=lambda: Reprojection(DEFAULT_SIGMA))
+    """Each window's first frame reprojected along the trajectory and refined (drivewm.multiview.reproject;
+    ``Reprojection()`` is off)."""
     guidance_interval: tuple[float, float] | None = None
     """Guide only at sigma in (lo, hi] (drivewm.diffusion.sampling); None: at every sigma."""
 
     def __post_init__(self) -> None:
         if self.windows < 1 or self.steps < 1:
             raise DrivewmError("rollout: windows and steps must be >= 1")
+        self.reprojection = self.reprojection.resolved(True)  # a rollout decodes pixels: sigma None is the default
         weights = {"guidance": self.guidance, "trajectory guidance": self.trajectory_guidance}
         # a NaN speed had made NaN waypoints, a blank clip
         finite_at_least("rollout", 0, **weights, **{"--speed": self.speed_mps})

@@ -14,12 +14,14 @@ from mv_standin import PoolTokenizer
 from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
 
 pytestmark = pytest.mark.slow  # post-trains a multi-view model
 
 FRONT3 = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
+OFF = Reprojection()  # the pooling stand-in tokenizer's rollouts: no reprojected refinement
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +139,8 @@ def test_rollout_continues_a_real_clip_and_keeps_its_frames(trained_mv, sim_clip
     root, _ = trained_mv
     model = MultiView.from_pretrained(root / "mv")
     clip = load_clip(sim_clip_dir)
-    sample = rollout(model, clip, RolloutOptions("stop", windows=2, steps=2, guidance=1.0), PoolTokenizer(32))
+    options = RolloutOptions("stop", windows=2, steps=2, guidance=1.0, reprojection=OFF)
+    sample = rollout(model, clip, options, PoolTokenizer(32))
     assert sample.videos.shape[:2] == (3, 1 + 2 * 16)  # 1 conditioning frame + 2 windows of 16
     real = torch.from_numpy(clip.video("CAM_FRONT")[:1]).float()
     kept = torch.from_numpy(sample.videos[1, :1]).float()  # the first frame: the real one, at the tokenizer's size
@@ -156,7 +159,8 @@ def test_rollout_of_a_one_camera_dashcam_clip_on_a_three_camera_model(trained_mv
     root, _ = trained_mv
     model = MultiView.from_pretrained(root / "mv")
     clip = load_clip(dashcam_clips)
-    sample = rollout(model, clip, RolloutOptions("straight", windows=1, steps=2, guidance=1.0), PoolTokenizer(32))
+    options = RolloutOptions("straight", windows=1, steps=2, guidance=1.0, reprojection=OFF)
+    sample = rollout(model, clip, options, PoolTokenizer(32))
     assert sample.rig.names == ["CAM_FRONT"] and sample.videos.shape[:2] == (1, 17)
     np.testing.assert_allclose(sample.rig.cameras[0].K, clip.meta.get_rig().cameras[0].K)  # the clip's calibration
     assert sample.extra["speed_mps"] == model.cfg.multiview.speed_mps > 1.0
@@ -254,6 +258,7 @@ def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_token
     real, kept = first.video("CAM_FRONT")[0].astype(float), clip.video("CAM_FRONT")[0].astype(float)
     assert np.abs(real - kept).mean() < 4.0  # the conditioning frame is the real one (through H.264 at crf 18)
     assert clip.meta.trajectory_ego[-1][1] < -0.05  # turning right: the ego ends to the right (y < 0)
+    assert clip.meta.extra["reproject_sigma"] == DEFAULT_SIGMA  # rollout's default: reprojected refinement
 
     assert (
         main(

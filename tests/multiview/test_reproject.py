@@ -14,7 +14,7 @@ from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.geometry import Rig, yaw_of
 from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.reproject import GENERATE_SIGMA, Reprojection, reproject_first_frame
+from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
 
 FPS = 10.0
@@ -60,14 +60,18 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
         assert main(["generate", "--prompt", "snow", "--out", str(tmp_path / "o"), *flags]) == 2
         assert flags[0] in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
-    assert Reprojection(None).for_generate(True) == Reprojection(GENERATE_SIGMA)  # generate's default
-    assert Reprojection(None, 3).for_generate(False) == Reprojection(0.0, 3)  # a preview model: no pixels to warp
-    assert Reprojection(0.0).for_generate(True) == Reprojection(0.0)  # off when asked for
-    helps = ((["generate"], "default {:g}, off for Text2World"), (["worldmodel", "benchmark"], "{:g}, as"))
+    assert Reprojection(None).resolved(True) == Reprojection(DEFAULT_SIGMA)  # generate's default
+    assert Reprojection(None, 3).resolved(False) == Reprojection(0.0, 3)  # a preview model: no pixels to warp
+    assert Reprojection(0.0).resolved(True) == Reprojection(0.0)  # off when asked for
+    helps = (
+        (["generate"], "default {:g}, off for Text2World"),
+        (["rollout"], "default {:g}; docs"),
+        (["worldmodel", "benchmark"], "{:g}, as"),
+    )
     for command, says in helps:
         with pytest.raises(SystemExit):
             build_parser().parse_args([*command, "--help"])
-        assert says.format(GENERATE_SIGMA) in " ".join(capsys.readouterr().out.split())  # the help tells the default
+        assert says.format(DEFAULT_SIGMA) in " ".join(capsys.readouterr().out.split())  # the help tells the default
 
 
 def test_a_text2world_model_refuses_the_multiview_options_only_when_they_are_asked_for(tmp_path, capsys):
@@ -83,7 +87,7 @@ def test_a_text2world_model_refuses_the_multiview_options_only_when_they_are_ask
 @pytest.mark.slow
 def test_the_shipped_model_refined_from_a_reprojection_turns_as_told(tmp_path):
     """The shipped multi-view model, the same prompt and seed under the left and right turns, with
-    generate's defaults (reprojection from GENERATE_SIGMA, the prompt in the training captions' template):
+    generate's defaults (reprojection from DEFAULT_SIGMA, the prompt in the training captions' template):
     the samples' front cameras turn the asked way by more than 10 degrees (from noise alone they turn
     by a few degrees at most, mostly the other way: docs/quality-vs-compute.md), and the clip records
     how it was made."""
@@ -99,7 +103,7 @@ def test_the_shipped_model_refined_from_a_reprojection_turns_as_told(tmp_path):
         rig = clip.meta.get_rig()
         yaws[name] = front_yaw_deg(np.stack([clip.video(n) for n in rig.names]), rig)
         extra = clip.meta.extra
-        assert extra["reproject_sigma"] == GENERATE_SIGMA and extra["reproject_steps"] == 3 and extra["prompt_template"]
+        assert extra["reproject_sigma"] == DEFAULT_SIGMA and extra["reproject_steps"] == 3 and extra["prompt_template"]
         want = template_view_captions(extra["prompt"], rig, np.asarray(clip.meta.trajectory_ego), 0.1)
         assert [clip.meta.view_captions[n] for n in rig.names] == want
         assert ("turning left" if name == "left" else "turning right") in want[0]
