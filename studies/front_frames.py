@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image, ImageDraw
+from quality_vs_compute import stack_images
 
 from drivewm.clips.shards import iter_clips
 
@@ -47,14 +48,7 @@ def main() -> None:
             canvas.paste(strip, (0, LABEL_PX))
             ImageDraw.Draw(canvas).text((2, 1), f"{name}, {label}", fill="black")
             rows.append(canvas)
-    sheet = Image.new("RGB", (max(r.width for r in rows), sum(r.height for r in rows)), "white")
-    y = 0
-    for r in rows:
-        sheet.paste(r, (0, y))
-        y += r.height
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(args.out, quality=85)
-    print(f"wrote {args.out} ({sheet.width}x{sheet.height})")
+    stack_images(rows, args.out)
 
 
 if __name__ == "__main__":

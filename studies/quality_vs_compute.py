@@ -95,14 +95,21 @@ def stack_sheets(generated: Path, names: tuple[str, ...], out: Path) -> None:
     from PIL import Image
 
     sheets = [Image.open(generated / n / "contact_sheet.png").convert("RGB") for n in names]
-    sheets = [s.resize((s.width // 2, s.height // 2)) for s in sheets]
-    canvas = Image.new("RGB", (max(s.width for s in sheets), sum(s.height for s in sheets)))
+    stack_images([s.resize((s.width // 2, s.height // 2)) for s in sheets], out)
+
+
+def stack_images(images: list, out: Path) -> None:
+    """PIL ``images`` one above the other, left-aligned on white, written to ``out``."""
+    from PIL import Image
+
+    canvas = Image.new("RGB", (max(i.width for i in images), sum(i.height for i in images)), "white")
     y = 0
-    for s in sheets:
-        canvas.paste(s, (0, y))
-        y += s.height
+    for image in images:
+        canvas.paste(image, (0, y))
+        y += image.height
+    out.parent.mkdir(parents=True, exist_ok=True)
     canvas.save(out, quality=85)  # a JPEG: samples are photographs, a PNG of them is megabytes
-    print(f"wrote {out}")
+    print(f"wrote {out} ({canvas.width}x{canvas.height})")
 
 
 if __name__ == "__main__":

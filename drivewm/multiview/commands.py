@@ -138,7 +138,7 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.seed,
         args.prompt,
         args.speed,
-        Reprojection(args.reproject, args.reproject_steps).resolved(True),  # a rollout always decodes pixels
+        Reprojection(args.reproject, args.reproject_steps),  # None: the default, filled in by RolloutOptions
         args.guidance_interval,
     )
     if args.model is None:
