@@ -51,6 +51,10 @@ class TokenizerConfig:
     """``continuous`` latents or finite scalar quantization (Mentzer et al. 2023, arXiv 2309.15505)."""
     fsq_levels: list[int] = dataclasses.field(default_factory=lambda: [8, 8, 8, 5, 5, 5])
     """FSQ levels per latent channel; the codebook has ``prod(fsq_levels)`` codes."""
+    linear_code: Literal["none", "pca"] = "none"
+    """``pca``: a linear code path beside the networks, fitted to the principal components of the
+    training blocks before step 0, with the networks learning only the rest (drivewm.tokenizer.linear_code);
+    continuous latents only."""
 
     @property
     def code_channels(self) -> int:
@@ -97,6 +101,10 @@ class TokenizerConfig:
             )
         if self.temporal_downs > self.spatial_downs:
             raise DrivewmError("tokenizer config: more temporal than spatial downsampling steps is not supported")
+        if self.linear_code not in ("none", "pca"):
+            raise DrivewmError(f"tokenizer config: linear_code must be none or pca, got {self.linear_code!r}")
+        if self.linear_code == "pca" and self.quantizer != "continuous":
+            raise DrivewmError("tokenizer config: linear_code=pca needs continuous latents (FSQ would clip the code)")
         if self.quantizer == "fsq" and (not self.fsq_levels or min(self.fsq_levels) < 2):
             raise DrivewmError(f"tokenizer config: fsq_levels must be integers >= 2, got {self.fsq_levels}")
         at_least(self, 1, "base_channels", "temporal_kernel", "latent_channels")

@@ -116,6 +116,10 @@ class OutputHead(nn.Module):
         _zero_init(self.conv if pointwise else self.conv.temporal.conv)
         _identity_init(self.skip, tap=(0, 0, 0))
 
+    def silence(self) -> None:
+        """Output zero (skip included) until trained: for a head that adds to another path."""
+        _zero_init(self.skip, self.conv if isinstance(self.conv, nn.Conv3d) else self.conv.temporal.conv)
+
     def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         h = F.silu(self.norm(x))
         h = conv_pointwise(self.conv, h) if isinstance(self.conv, nn.Conv3d) else self.conv(h, ctx)

@@ -17,6 +17,7 @@ from drivewm.errors import DrivewmError
 from drivewm.tokenizer.causal import CausalContext, is_first
 from drivewm.tokenizer.config import TokenizerConfig
 from drivewm.tokenizer.fsq import FSQ
+from drivewm.tokenizer.linear_code import LinearCode
 from drivewm.tokenizer.networks import Decoder, Encoder
 from drivewm.tokenizer.wavelet import patchify, unpatchify
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
@@ -35,6 +36,10 @@ class Tokenizer(nn.Module):
         self.encoder = Encoder(config)
         self.decoder = Decoder(config)
         self.quantizer = FSQ(config.fsq_levels) if config.quantizer == "fsq" else None
+        self.linear = LinearCode(config) if config.linear_code == "pca" else None
+        if self.linear is not None:  # the networks start silent: the untrained tokenizer is the linear code
+            self.encoder.head.silence()
+            self.decoder.head.silence()
         self.register_buffer("latent_mean", torch.zeros(config.code_channels))
         self.register_buffer("latent_std", torch.ones(config.code_channels))
 
@@ -49,12 +54,16 @@ class Tokenizer(nn.Module):
             video, self.config.patch_size, self.config.patch_time, is_first(ctx)
         )  # (B, patch_channels, T', H/p, W/p)
         z = self.encoder(x, ctx)  # (B, c, t, h, w)
+        if self.linear is not None:
+            z = z + self.linear.encode(x, is_first(ctx))
         return self.quantizer(z) if self.quantizer is not None else z
 
     def decode(self, latents: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         """Latents (B, c, t, h, w) -> video (B, 3, T, h*s, w*s), T = 1 + (t-1)*f (t*f for a later chunk)."""
         self.check_latents(latents)
         x = self.decoder(latents, ctx)  # (B, patch_channels, T', H/p, W/p)
+        if self.linear is not None:
+            x = x + self.linear.decode(latents, is_first(ctx))
         return unpatchify(x, self.config.patch_size, self.config.patch_time, is_first(ctx))  # (B, 3, T, H, W)
 
     def forward(self, video: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

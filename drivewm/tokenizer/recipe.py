@@ -24,12 +24,16 @@ class TokenizerDataConfig:
     """Clips held out from training by key hash (``drivewm tokenizer eval --split holdout`` scores them)."""
     stats_batches: int = 4
     """Batches of ``train.batch_size`` crops encoded at each checkpoint to measure the latent mean and std."""
+    linear_fit_batches: int = 32
+    """Batches of ``train.batch_size`` crops whose blocks the linear code (``model.linear_code=pca``) is fitted to."""
 
     def validate(self) -> None:
         if self.frames < 1 or len(self.crop) != 2 or min(self.crop) < 1:
             raise DrivewmError(f"tokenizer data: frames must be >= 1 and crop [height, width] > 0, got {self.crop}")
-        if not 0 <= self.holdout_percent < 100 or self.stats_batches < 1:
-            raise DrivewmError("tokenizer data: holdout_percent must be in [0, 100) and stats_batches >= 1")
+        if not 0 <= self.holdout_percent < 100 or self.stats_batches < 1 or self.linear_fit_batches < 1:
+            raise DrivewmError(
+                "tokenizer data: holdout_percent must be in [0, 100), stats_batches and linear_fit_batches >= 1"
+            )
 
 
 @dataclasses.dataclass
