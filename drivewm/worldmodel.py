@@ -255,6 +255,8 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "heldout" / "metrics.json", reference)
     if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
+        # a rerun that brings the tokenizer's eval must read it: the figures stage's command is unchanged
+        (run / ".stages" / "figures.json").unlink(missing_ok=True)
     stages = benchmark_stages(
         profile, model, run, heldout, samples, trajectory_guidance, reproject, guidance_interval, prompt_template
     )

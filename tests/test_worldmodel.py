@@ -98,6 +98,26 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
     assert reference[reference.index("--reference") + 1] == str(run / "eval" / "heldout" / "metrics.json")
 
 
+def test_a_rerun_given_the_tokenizer_eval_computes_the_figures_again(tmp_path, monkeypatch):
+    """Generation and eval resume; the figures must not, or the tokenizer's PSNR given on a rerun never
+    reaches figures.json (it stayed n/a until 2026-11-29): the figures stage's marker goes."""
+    import drivewm.quickstart
+
+    run = tmp_path / "run"
+    marker = run / ".stages" / "figures.json"
+    marker.parent.mkdir(parents=True)
+    marker.write_text(json.dumps({"argv": ["worldmodel", "figures", str(run)], "seconds": 0.1}))
+    (tmp_path / "earlier.json").write_text(json.dumps({"num_clips": 1, "clips": {"a": {}}}))
+    (tmp_path / "tok.json").write_text(json.dumps({"psnr": 29.93, "clips": {}}))
+    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label: None)
+    argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
+    assert main([*argv]) == 0
+    assert marker.is_file()  # no tokenizer eval: the figures stay as they were
+    assert main([*argv, "--tokenizer-eval", str(tmp_path / "tok.json")]) == 0
+    assert not marker.exists()
+    assert json.loads((run / "eval" / "tokenizer" / "metrics.json").read_text())["psnr"] == 29.93
+
+
 @pytest.mark.parametrize(
     "args, message",
     [

@@ -133,7 +133,8 @@ class TokenizerTask(TrainTask):
         model = copy.deepcopy(self.model)  # frozen parameters and buffers are the live model's
         model.load_state_dict(ema_state, strict=False)  # the EMA holds the trained parameters
         model.requires_grad_(False).eval()
-        set_latent_stats(model, self._stats_batches())
+        if not self.cfg.freeze_encoder:  # a frozen encoder keeps the statistics every latent cache was normalised by
+            set_latent_stats(model, self._stats_batches())
         return model
 
     def _stats_batches(self) -> list[torch.Tensor]:

@@ -266,12 +266,14 @@ def test_perceptual_term_needs_local_weights(tmp_path):
 def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_path):
     """init + freeze_encoder: only the decoder trains, so latents (and latent caches made with the
     parent) stay valid while reconstructions improve."""
-    cfg = run_config("debug-4x8x8", 20, f"init={trained}", "freeze_encoder=true", "train.checkpoint_every=20")
+    # other crops than the parent's: statistics measured again on them would differ (they did, until 2026-11-29)
+    overrides = [f"init={trained}", "freeze_encoder=true", "train.checkpoint_every=20", "data.crop=[48,80]"]
+    cfg = run_config("debug-4x8x8", 20, *overrides, "data.frames=17", "train.seed=5")
     tokenizer_train(cfg, sim_clip_dir, tmp_path / "dec")
     parent, tuned = Tokenizer.from_pretrained(trained), Tokenizer.from_pretrained(tmp_path / "dec")
     for (name, a), (_, b) in zip(parent.encoder.state_dict().items(), tuned.encoder.state_dict().items()):
         assert torch.equal(a, b), name
-    assert torch.allclose(parent.latent_std, tuned.latent_std) and torch.allclose(parent.latent_mean, tuned.latent_mean)
+    assert torch.equal(parent.latent_std, tuned.latent_std) and torch.equal(parent.latent_mean, tuned.latent_mean)
     assert any(not torch.equal(a, b) for a, b in zip(parent.decoder.parameters(), tuned.decoder.parameters()))
     with pytest.raises(DrivewmError, match="freeze_encoder needs init"):
         run_config("debug-4x8x8", 1, "freeze_encoder=true")
