@@ -55,6 +55,20 @@ def test_every_shipped_file_is_in_the_manifest_with_its_sha256_and_within_the_li
         assert manifest["training"][kind]["steps"] > 0
 
 
+def test_the_shipped_diffusion_models_share_the_shipped_tokenizers_latent_space():
+    """Every shipped diffusion model was trained on latents normalised by the shipped tokenizer's
+    statistics; a tokenizer replaced by a decoder fine-tune (the shipped one since 2026-11-29) must keep
+    them, and the encoder that made them, or every shipped model would read its latents wrongly."""
+    tokenizer = json.loads((shipped_model("tokenizer") / "config.json").read_text())
+    for kind in ("text2world", "multiview", "transfer"):
+        latent = json.loads((shipped_model(kind) / "config.json").read_text())["latent"]
+        assert latent["tokenizer"] == "../tokenizer", kind
+        for stat in ("latent_mean", "latent_std"):
+            assert latent[stat] == tokenizer[stat], (kind, stat)
+    record = json.loads((WEIGHTS_DIR / "MANIFEST.json").read_text())["training"]["tokenizer"]
+    assert all("freeze_encoder" in tune["note"] for tune in record.get("fine_tunes", []))
+
+
 def test_a_changed_byte_is_refused(tmp_path):
     copy = tmp_path / "weights"
     shutil.copytree(WEIGHTS_DIR, copy)
