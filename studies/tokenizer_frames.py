@@ -53,7 +53,7 @@ def plot(rows: dict[str, list[float]], path: str) -> None:
     ax.set_xticks(np.arange(n) + 0.4 - width / 2, ["frame 0"] + [f"latent frame {k}" for k in range(1, n)])
     ax.set_ylabel("held-out PSNR (dB)")
     ax.set_ylim(min(min(v) for v in rows.values()) - 2, max(max(v) for v in rows.values()) + 1)
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
