@@ -187,10 +187,15 @@ def fill_first_log(argv: list[str], out: Path) -> list[str]:
     return [str(logs[0]) if a == FIRST_LOG and logs else a for a in argv]
 
 
+def stage_marker(out: Path, name: str) -> Path:
+    """Where :func:`run_stage` records that stage ``name`` of the run in ``out`` finished (and how)."""
+    return out / ".stages" / f"{name}.json"
+
+
 def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") -> float:
     """Run one stage unless its marker says the same command finished; returns seconds spent."""
     argv = fill_first_log(argv, out)
-    marker = out / ".stages" / f"{name}.json"
+    marker = stage_marker(out, name)
     if marker.is_file() and json.loads(marker.read_text()).get("argv") == argv:
         print(f"[{label}] {name}: done before, skipped")
         return 0.0

@@ -235,7 +235,7 @@ def benchmark_worldmodel(
     ``RUN/eval/heldout/`` and not evaluated again, so fine-tunes compared on it share one reference)."""
     from drivewm.atomic import write_json
     from drivewm.choices import resolve_model_folder
-    from drivewm.quickstart import run_stage
+    from drivewm.quickstart import run_stage, stage_marker
 
     folder = resolve_model_folder(model)  # a missing folder fails here, not at the first of twelve stages
     if not (folder / "config.json").is_file():
@@ -256,7 +256,7 @@ def benchmark_worldmodel(
     if tokenizer is not None:  # the tokenizer's held-out PSNR figure, from its own eval
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
         # a rerun that brings the tokenizer's eval must read it: the figures stage's command is unchanged
-        (run / ".stages" / "figures.json").unlink(missing_ok=True)
+        stage_marker(run, "figures").unlink(missing_ok=True)
     stages = benchmark_stages(
         profile, model, run, heldout, samples, trajectory_guidance, reproject, guidance_interval, prompt_template
     )

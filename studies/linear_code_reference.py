@@ -10,8 +10,8 @@ PSNR from ``drivewm tokenizer eval``'s metrics.json when given.
     python studies/linear_code_reference.py CLIPDIR [--channels 16,32] [--tokenizer-metrics EVAL/metrics.json ...]
 
 Blocks start at frame 1 (frame 0 is coded alone by the tokenizer and scores higher), so the
-reference is slightly harsh on itself. Numbers: docs/quality-vs-compute.md ("A linear code the
-tokenizer did not beat").
+reference is slightly harsh on itself. Numbers: docs/quality-vs-compute.md ("The tokenizer never
+trained on the frames it codes most", part 2).
 """
 
 from __future__ import annotations

@@ -104,7 +104,7 @@ def test_a_rerun_given_the_tokenizer_eval_computes_the_figures_again(tmp_path, m
     import drivewm.quickstart
 
     run = tmp_path / "run"
-    marker = run / ".stages" / "figures.json"
+    marker = drivewm.quickstart.stage_marker(run, "figures")
     marker.parent.mkdir(parents=True)
     marker.write_text(json.dumps({"argv": ["worldmodel", "figures", str(run)], "seconds": 0.1}))
     (tmp_path / "earlier.json").write_text(json.dumps({"num_clips": 1, "clips": {"a": {}}}))

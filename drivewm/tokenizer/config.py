@@ -101,8 +101,6 @@ class TokenizerConfig:
             )
         if self.temporal_downs > self.spatial_downs:
             raise DrivewmError("tokenizer config: more temporal than spatial downsampling steps is not supported")
-        if self.linear_code not in ("none", "pca"):
-            raise DrivewmError(f"tokenizer config: linear_code must be none or pca, got {self.linear_code!r}")
         if self.linear_code == "pca" and self.quantizer != "continuous":
             raise DrivewmError("tokenizer config: linear_code=pca needs continuous latents (FSQ would clip the code)")
         if self.quantizer == "fsq" and (not self.fsq_levels or min(self.fsq_levels) < 2):

@@ -50,13 +50,15 @@ class Tokenizer(nn.Module):
         has T = 1 + k*f frames, later chunks k*f frames (they give k latent frames).
         """
         self.check_video(video, is_first(ctx))
-        x = patchify(
-            video, self.config.patch_size, self.config.patch_time, is_first(ctx)
-        )  # (B, patch_channels, T', H/p, W/p)
+        x = self.patch(video, is_first(ctx))  # (B, patch_channels, T', H/p, W/p)
         z = self.encoder(x, ctx)  # (B, c, t, h, w)
         if self.linear is not None:
             z = z + self.linear.encode(x, is_first(ctx))
         return self.quantizer(z) if self.quantizer is not None else z
+
+    def patch(self, video: torch.Tensor, first_chunk: bool = True) -> torch.Tensor:
+        """The Haar patch (B, patch_channels, T', H/p, W/p) the networks (and the linear code) see."""
+        return patchify(video, self.config.patch_size, self.config.patch_time, first_chunk)
 
     def decode(self, latents: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         """Latents (B, c, t, h, w) -> video (B, 3, T, h*s, w*s), T = 1 + (t-1)*f (t*f for a later chunk)."""

@@ -30,7 +30,6 @@ from drivewm.tokenizer.losses import TokenizerLoss
 from drivewm.tokenizer.metrics import psnr
 from drivewm.tokenizer.model import Tokenizer
 from drivewm.tokenizer.recipe import TokenizerTrainConfig
-from drivewm.tokenizer.wavelet import patchify
 from drivewm.train.checkpoint import load_weights
 from drivewm.train.loop import TrainTask, train
 
@@ -74,7 +73,7 @@ class TokenizerTask(TrainTask):
         if cfg.init:
             load_weights(self.model, Tokenizer.from_pretrained(cfg.init).state_dict(), cfg.init)
         elif self.model.linear is not None:  # a resumed run then loads its trained code over this fit
-            self.model.linear.fit([patch_of(self.model, b) for b in self._crop_batches(cfg.data.linear_fit_batches, 2)])
+            self.model.linear.fit([self.model.patch(b) for b in self._crop_batches(cfg.data.linear_fit_batches, 2)])
         if cfg.freeze_encoder:
             self.model.encoder.requires_grad_(False)
         self.loss_fn = TokenizerLoss(cfg.loss)
@@ -162,11 +161,6 @@ class TokenizerTask(TrainTask):
             recon = model.eval()(video)[0].clamp(-1, 1)
         rows = np.stack([to_uint8(torch.cat([v, r], dim=-1)) for v, r in zip(video, recon)])  # input | output
         write_grid_png(rows, path, ["input | reconstruction"] * len(rows))
-
-
-def patch_of(model: Tokenizer, video: torch.Tensor) -> torch.Tensor:
-    """The Haar patch (B, patch_channels, T', H', W') the networks of ``model`` see for ``video``."""
-    return patchify(video, model.config.patch_size, model.config.patch_time)
 
 
 @torch.no_grad()

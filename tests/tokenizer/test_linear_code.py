@@ -18,7 +18,7 @@ from drivewm.tokenizer import Tokenizer, preset
 from drivewm.tokenizer.causal import CausalContext
 from drivewm.tokenizer.data import to_model_range
 from drivewm.tokenizer.recipe import RECIPES
-from drivewm.tokenizer.train import patch_of, tokenizer_train
+from drivewm.tokenizer.train import tokenizer_train
 
 
 def pca_tokenizer(name: str, *videos: torch.Tensor) -> Tokenizer:
@@ -26,7 +26,7 @@ def pca_tokenizer(name: str, *videos: torch.Tensor) -> Tokenizer:
     cfg.linear_code = "pca"
     torch.manual_seed(0)
     tok = Tokenizer(cfg).eval()
-    tok.linear.fit([patch_of(tok, v) for v in videos])
+    tok.linear.fit([tok.patch(v) for v in videos])
     return tok
 
 
@@ -108,10 +108,8 @@ def test_bad_linear_code_settings_are_refused():
     cfg.linear_code = "pca"
     with pytest.raises(DrivewmError, match="continuous latents"):
         Tokenizer(cfg)
-    cfg = preset("debug-4x8x8")
-    cfg.linear_code = "svd"
-    with pytest.raises(DrivewmError, match="none or pca"):
-        Tokenizer(cfg)
+    with pytest.raises(DrivewmError, match="'svd' is not one of \\['none', 'pca'\\]"):
+        RECIPES.resolve("debug-4x8x8", None, ["model.linear_code=svd"])
 
 
 def test_training_fits_the_code_then_resumes_exactly(tmp_path):
