@@ -46,6 +46,18 @@ def _pid_namespace() -> str:
 _PIDNS = _pid_namespace()
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+#: The mode a file made with a plain ``open()`` gets; a writer that makes its file private (safetensors'
+#: ``save_file`` writes 0600) would otherwise leave weights that no other user, nor a wheel built from the
+#: folder, can read.
+_FILE_MODE = 0o666 & ~_umask()
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, durable: bool = True) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success move it onto ``path`` atomically.
@@ -60,6 +72,7 @@ def atomic_path(path: str | Path, durable: bool = True) -> Iterator[Path]:
     target = tmp / path.name
     try:
         yield target
+        _open_modes(target)
         if durable:
             _fsync_tree(target)
         if target.is_dir() and path.is_dir():
@@ -177,6 +190,14 @@ def _read_rows(path: Path) -> tuple[list[dict], bool]:
             raise DrivewmError(f"{path}: line {i + 1} is not a JSON object")
         rows.append(row)
     return rows, bool(tail)
+
+
+def _open_modes(path: Path) -> None:
+    """Give every file at or under ``path`` the mode of a plain ``open()`` (executables keep their bits)."""
+    files = [Path(r) / n for r, _, names in os.walk(path) for n in names] if path.is_dir() else [path]
+    for f in files:
+        if f.is_file() and not f.is_symlink() and not os.stat(f).st_mode & 0o111:
+            os.chmod(f, _FILE_MODE)
 
 
 def _fsync_tree(path: Path) -> None:

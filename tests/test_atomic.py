@@ -121,6 +121,20 @@ def test_equal_saves_give_equal_bytes(tmp_path):
     assert len(json.loads((tmp_path / "a" / "config.json").read_text())["revision"]) == 32
 
 
+def test_saved_weights_are_readable_by_others_as_any_file_is(tmp_path):
+    """safetensors writes its file 0600; a model folder (a run's, or the shipped weights a wheel is
+    built from) must be as readable as the config beside it, under the umask, and executables keep theirs."""
+    _save(tmp_path / "m", 3)
+    umask = os.umask(0)
+    os.umask(umask)
+    for name in ("model.safetensors", "config.json"):
+        assert os.stat(tmp_path / "m" / name).st_mode & 0o777 == 0o666 & ~umask, name
+    with atomic_path(tmp_path / "tool") as tmp:
+        tmp.write_text("#!/bin/sh\n")
+        tmp.chmod(0o755)
+    assert os.stat(tmp_path / "tool").st_mode & 0o777 == 0o755
+
+
 _WRITER = """
 import sys, time
 from drivewm.atomic import atomic_path

@@ -17,6 +17,7 @@ import shutil
 import site
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
@@ -58,7 +59,10 @@ def _venv(tmp: Path, wheel: Path) -> tuple[Path, dict]:
 
 
 def test_wheel_runs_simulate_curate_eval_from_an_empty_folder(tmp_path):
-    venv, env = _venv(tmp_path, _wheel(tmp_path))
+    wheel = _wheel(tmp_path)
+    private = [i.filename for i in zipfile.ZipFile(wheel).infolist() if (i.external_attr >> 16) & 0o444 != 0o444]
+    assert not private, f"files only their owner can read once installed: {private}"  # e.g. shipped weights
+    venv, env = _venv(tmp_path, wheel)
     work = tmp_path / "empty"
     work.mkdir()
     where = _run([venv / "bin" / "python", "-c", "import drivewm; print(drivewm.__file__)"], work, env)
