@@ -74,8 +74,10 @@ class TokenizerTask(TrainTask):
             load_weights(self.model, Tokenizer.from_pretrained(cfg.init).state_dict(), cfg.init)
         elif self.model.linear is not None:  # a resumed run then loads its trained code over this fit
             self.model.linear.fit([self.model.patch(b) for b in self._crop_batches(cfg.data.linear_fit_batches, 2)])
-        if cfg.freeze_encoder:
-            self.model.encoder.requires_grad_(False)
+        if cfg.freeze_encoder:  # the linear code's basis codes as well as decodes: it is part of the encoder
+            for part in (self.model.encoder, self.model.linear):
+                if part is not None:
+                    part.requires_grad_(False)
         self.loss_fn = TokenizerLoss(cfg.loss)
         self.adversary = Adversary(cfg.train.lr, cfg.loss.discriminator_weights) if cfg.loss.adversarial > 0 else None
         self._last: tuple[torch.Tensor, torch.Tensor] | None = None  # (recon, video) of the last step, for the GAN

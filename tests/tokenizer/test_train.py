@@ -277,3 +277,17 @@ def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_p
     assert any(not torch.equal(a, b) for a, b in zip(parent.decoder.parameters(), tuned.decoder.parameters()))
     with pytest.raises(DrivewmError, match="freeze_encoder needs init"):
         run_config("debug-4x8x8", 1, "freeze_encoder=true")
+
+
+def test_decoder_fine_tuning_of_a_linear_code_tokenizer_keeps_its_latents(sim_clip_dir, tmp_path):
+    """The PCA code is half of the encoder (its basis codes and decodes): freeze_encoder must freeze it,
+    or a decoder fine-tune (the worldmodel recipe's tokenizer-decoder stage) moves every latent."""
+    pca = ["model.linear_code=pca", "data.linear_fit_batches=2", "data.stats_batches=2"]
+    tokenizer_train(run_config("debug-4x8x8", 10, *pca), sim_clip_dir, tmp_path / "parent")
+    tune = [f"init={tmp_path / 'parent'}", "freeze_encoder=true", "train.lr=1e-2"]
+    tokenizer_train(run_config("debug-4x8x8", 10, *pca, *tune), sim_clip_dir, tmp_path / "dec")
+    parent, tuned = Tokenizer.from_pretrained(tmp_path / "parent"), Tokenizer.from_pretrained(tmp_path / "dec")
+    video = torch.rand(1, 3, 9, 64, 96, generator=torch.Generator().manual_seed(0)) * 2 - 1
+    with torch.no_grad():
+        assert torch.equal(parent.encode(video), tuned.encode(video))
+        assert not torch.equal(parent.decode(parent.encode(video)), tuned.decode(tuned.encode(video)))
