@@ -23,12 +23,12 @@ import cv2
 import numpy as np
 import torch
 
-from drivewm.choices import resolve_model_folder
 from drivewm.clips.shards import iter_clips
 from drivewm.multiview.coding import code_views
 from drivewm.tokenizer import Tokenizer
+from drivewm.transfer.retarget import TargetCondition
 
-FIGURE_CONDITIONS = ("clear_day", "snow_day", "fog_day")
+FIGURE_CONDITIONS = ("clear:day", "snow:day", "fog:day")
 
 
 def sharpness(video: np.ndarray, sift: cv2.SIFT) -> tuple[float, float]:
@@ -39,8 +39,10 @@ def sharpness(video: np.ndarray, sift: cv2.SIFT) -> tuple[float, float]:
     return float(edges), float(np.mean([len(sift.detect(g, None)) for g in grays]))
 
 
-def condition(clip) -> str:
-    return f"{clip.meta.tags.get('weather')}_{clip.meta.tags.get('time_of_day')}"
+def condition(clip) -> str | None:
+    """WEATHER:TIME of a clip's tags (None when they name none)."""
+    cond = TargetCondition.of(clip.meta)
+    return cond.name if cond is not None else None
 
 
 def main() -> None:
@@ -54,7 +56,7 @@ def main() -> None:
     toks = {}
     for arg in args.tokenizers:
         label, folder = arg.split("=", 1)
-        toks[label] = Tokenizer.from_pretrained(resolve_model_folder(folder)).eval()
+        toks[label] = Tokenizer.from_pretrained(folder)  # shipped:tokenizer resolves there
     sift = cv2.SIFT_create()
     stats: dict[str, list] = {k: [] for k in ["raw", *toks]}
     for clip in itertools.islice(iter_clips(args.clips), 0, None, args.every):

@@ -281,7 +281,7 @@ def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_p
 
 def test_decoder_fine_tuning_of_a_linear_code_tokenizer_keeps_its_latents(sim_clip_dir, tmp_path):
     """The PCA code is half of the encoder (its basis codes and decodes): freeze_encoder must freeze it,
-    or a decoder fine-tune (the worldmodel recipe's tokenizer-decoder stage) moves every latent."""
+    or a decoder fine-tune of the recipe's tokenizer (`linear_code: pca`) moves every latent."""
     pca = ["model.linear_code=pca", "data.linear_fit_batches=2", "data.stats_batches=2"]
     tokenizer_train(run_config("debug-4x8x8", 10, *pca), sim_clip_dir, tmp_path / "parent")
     tune = [f"init={tmp_path / 'parent'}", "freeze_encoder=true", "train.lr=1e-2"]
