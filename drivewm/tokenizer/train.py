@@ -14,6 +14,7 @@ and the per-channel latent statistics), ``train_state.pt``, ``metrics.jsonl`` an
 from __future__ import annotations
 
 import copy
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +72,7 @@ class TokenizerTask(TrainTask):
         self.dataset = dataset
         self.model = Tokenizer(cfg.model).train()
         if cfg.init:
-            load_weights(self.model, Tokenizer.from_pretrained(cfg.init).state_dict(), cfg.init)
+            load_parent(self.model, cfg.init)
         elif self.model.linear is not None:  # a resumed run then loads its trained code over this fit
             self.model.linear.fit([self.model.patch(b) for b in self._crop_batches(cfg.data.linear_fit_batches, 2)])
         if cfg.freeze_encoder:  # the linear code's basis codes as well as decodes: it is part of the encoder
@@ -163,6 +164,25 @@ class TokenizerTask(TrainTask):
             recon = model.eval()(video)[0].clamp(-1, 1)
         rows = np.stack([to_uint8(torch.cat([v, r], dim=-1)) for v, r in zip(video, recon)])  # input | output
         write_grid_png(rows, path, ["input | reconstruction"] * len(rows))
+
+
+@torch.no_grad()
+def load_parent(model: Tokenizer, path: str | Path) -> None:
+    """``init``: the parent tokenizer at ``path`` into ``model``. The model may have more decoder mid
+    blocks than the parent (``--set model.decoder_mid_blocks=N``: a deeper decoder on the parent's
+    latent space, with ``freeze_encoder``). The parent's blocks come first and each added one starts
+    as the identity (the last convolution of its residual branch zero, bias included), so the
+    step-0 model decodes exactly as the parent. Any other difference raises, as a strict load does."""
+    parent = Tokenizer.from_pretrained(path)
+    state = parent.state_dict()
+    have, want = parent.config.decoder_mid_blocks, model.config.decoder_mid_blocks
+    if want > have and dataclasses.replace(model.config, decoder_mid_blocks=have) == parent.config:
+        for i in range(have, want):
+            last = model.decoder.mid[i].conv2.temporal.conv
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
+            state.update({f"decoder.mid.{i}.{k}": v for k, v in model.decoder.mid[i].state_dict().items()})
+    load_weights(model, state, path)
 
 
 @torch.no_grad()

@@ -9,6 +9,7 @@ beyond its starting codec, which a broken loss, causal mask or data path would n
 tokenizer's quality is measured by benchmarks/bench_tokenizer.py and its model card.
 """
 
+import dataclasses
 import json
 
 import pytest
@@ -26,7 +27,7 @@ from drivewm.tokenizer.losses import LossConfig, TokenizerLoss
 from drivewm.tokenizer.metrics import psnr
 from drivewm.tokenizer.recipe import RECIPES, TokenizerTrainConfig
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
-from drivewm.tokenizer.train import tokenizer_train
+from drivewm.tokenizer.train import load_parent, tokenizer_train
 
 pytestmark = pytest.mark.slow  # trains tokenizers
 
@@ -277,6 +278,32 @@ def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_p
     assert any(not torch.equal(a, b) for a, b in zip(parent.decoder.parameters(), tuned.decoder.parameters()))
     with pytest.raises(DrivewmError, match="freeze_encoder needs init"):
         run_config("debug-4x8x8", 1, "freeze_encoder=true")
+
+
+def test_a_deeper_decoder_grows_from_its_parent(trained, sim_clip_dir, tmp_path):
+    """decoder_mid_blocks above the parent's: the added blocks start as the identity, so the grown
+    tokenizer decodes exactly as its parent at step 0; a decoder fine-tune then trains them on the
+    parent's latents. Any other change of shape still fails to load."""
+    parent = Tokenizer.from_pretrained(trained)
+    have = parent.config.decoder_mid_blocks
+    grown = Tokenizer(dataclasses.replace(parent.config, decoder_mid_blocks=have + 2))
+    load_parent(grown, trained)
+    video = torch.rand(1, 3, 9, 64, 96, generator=torch.Generator().manual_seed(0)) * 2 - 1
+    with torch.no_grad():
+        z = parent.encode(video)
+        assert torch.equal(grown.encode(video), z)
+        assert torch.equal(grown.decode(z), parent.decode(z))
+    for changed in ({"base_channels": parent.config.base_channels * 2}, {"encoder_mid_blocks": 2}):
+        with pytest.raises(DrivewmError, match="does not match"):
+            load_parent(Tokenizer(dataclasses.replace(parent.config, **changed)), trained)
+
+    tune = [f"init={trained}", "freeze_encoder=true", f"model.decoder_mid_blocks={have + 2}", "train.lr=1e-2"]
+    tokenizer_train(run_config("debug-4x8x8", 10, *tune), sim_clip_dir, tmp_path / "deeper")
+    tuned = Tokenizer.from_pretrained(tmp_path / "deeper")
+    assert len(tuned.decoder.mid) == have + 2
+    assert tuned.decoder.mid[have + 1].conv2.temporal.conv.weight.abs().sum() > 0  # the added blocks trained
+    with torch.no_grad():
+        assert torch.equal(tuned.encode(video), z)
 
 
 def test_decoder_fine_tuning_of_a_linear_code_tokenizer_keeps_its_latents(sim_clip_dir, tmp_path):
