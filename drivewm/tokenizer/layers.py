@@ -94,6 +94,11 @@ class ResBlock(nn.Module):
             _identity_init(self.skip, tap=(0, 0, 0))
         nn.init.zeros_(self.conv2.temporal.conv.weight)  # start as identity: stable training from step 0
 
+    def start_as_identity(self) -> None:
+        """Zero the residual branch's last convolution, bias included, so a block with cin == cout
+        returns its input exactly: a block added to a trained network leaves its output unchanged."""
+        _zero_init(self.conv2.temporal.conv)
+
     def forward(self, x: torch.Tensor, ctx: CausalContext | None = None) -> torch.Tensor:
         h = self.conv1(F.silu(self.norm1(x)), ctx)  # (B, Cout, T, H, W)
         h = self.conv2(F.silu(self.norm2(h)), ctx)

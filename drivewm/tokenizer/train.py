@@ -175,13 +175,14 @@ def load_parent(model: Tokenizer, path: str | Path) -> None:
     step-0 model decodes exactly as the parent. Any other difference raises, as a strict load does."""
     parent = Tokenizer.from_pretrained(path)
     state = parent.state_dict()
-    have, want = parent.config.decoder_mid_blocks, model.config.decoder_mid_blocks
-    if want > have and dataclasses.replace(model.config, decoder_mid_blocks=have) == parent.config:
-        for i in range(have, want):
-            last = model.decoder.mid[i].conv2.temporal.conv
-            nn.init.zeros_(last.weight)
-            nn.init.zeros_(last.bias)
-            state.update({f"decoder.mid.{i}.{k}": v for k, v in model.decoder.mid[i].state_dict().items()})
+    have = parent.config.decoder_mid_blocks
+    if (
+        model.config.decoder_mid_blocks > have
+        and dataclasses.replace(model.config, decoder_mid_blocks=have) == parent.config
+    ):
+        for block in model.decoder.mid[have:]:
+            block.start_as_identity()
+        state = {**model.state_dict(), **state}  # the parent's weights, and the added blocks' own
     load_weights(model, state, path)
 
 
