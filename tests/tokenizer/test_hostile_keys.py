@@ -3,6 +3,8 @@ outside their folders; a hostile clip is reported and the good clips beside it a
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import sys
 from pathlib import Path
@@ -30,18 +32,27 @@ def hostile(tmp_path_factory):
     return root
 
 
-def test_encode_skips_hostile_keys_and_writes_only_inside_the_cache(hostile, capsys):
-    before = files_under(hostile)
-    assert main(["tokenizer", "encode", "--model", str(hostile / "tok"), "--data", str(hostile / "clips")]) == 0
-    out = capsys.readouterr().out
-    new = files_under(hostile) - before
+@pytest.fixture(scope="module")
+def encoded(hostile):
+    """The hostile folder after one `tokenizer encode` of it: (exit code, files it added, its stdout).
+    The decode and cache tests read that cache, so each depends on this, not on test order (a
+    worker of pytest -n may run them without the encode test)."""
+    before, out = files_under(hostile), io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["tokenizer", "encode", "--model", str(hostile / "tok"), "--data", str(hostile / "clips")])
+    return code, files_under(hostile) - before, out.getvalue()
+
+
+def test_encode_skips_hostile_keys_and_writes_only_inside_the_cache(hostile, encoded):
+    code, new, out = encoded
+    assert code == 0
     cache = hostile / "clips" / "latents" / "tok"
     assert new == {cache / "good.safetensors", cache / "index.json"}
     assert "skipped evil:" in out and "'../../../escaped'" in out and "skipped abs:" in out
     assert [r["key"] for r in json.loads((cache / "index.json").read_text())["clips"]] == ["good"]
 
 
-def test_decode_reconstructs_only_the_good_clip(hostile, capsys):
+def test_decode_reconstructs_only_the_good_clip(hostile, encoded, capsys):
     out_dir = hostile / "decoded"
     argv = ["tokenizer", "decode", "--model", str(hostile / "tok"), "--data", str(hostile / "clips")]
     before = files_under(hostile)
@@ -50,7 +61,7 @@ def test_decode_reconstructs_only_the_good_clip(hostile, capsys):
     assert capsys.readouterr().err.count("skipped:") == 2
 
 
-def test_hostile_cache_name_and_index_rows_are_refused(hostile, capsys):
+def test_hostile_cache_name_and_index_rows_are_refused(hostile, encoded, capsys):
     argv = ["tokenizer", "encode", "--model", str(hostile / "tok"), "--data", str(hostile / "clips")]
     assert main([*argv, "--name", "../../outside"]) == 2
     assert "latent cache name '../../outside'" in capsys.readouterr().err
