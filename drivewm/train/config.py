@@ -10,6 +10,10 @@ from drivewm.config import above, at_least, in_range, require
 
 Parallel = Literal["auto", "ddp", "fsdp"]
 
+#: Steps a budgeted run (``budget_minutes``) times before it sets its step count; the first two of them
+#: (CUDA's kernel selection, compilation) count for nothing, the median of the rest is the step time.
+BUDGET_PROBE_STEPS = 10
+
 
 @dataclasses.dataclass
 class TrainConfig:
@@ -17,6 +21,12 @@ class TrainConfig:
 
     steps: int = 1000
     """Total optimizer steps of the run (a resumed run continues up to this)."""
+    budget_minutes: float = 0.0
+    """Wall-clock minutes for the run's training steps (0 = no budget). The loop times its first
+    ``BUDGET_PROBE_STEPS`` steps, then lowers ``steps`` to what fits the budget (never raises it), so
+    one recipe ends its schedule on time on any machine. The count it settles on is saved with every
+    checkpoint and a resumed run keeps it. Checkpoints and sample grids are not counted: leave them
+    a margin."""
     batch_size: int = 8
     """Global batch: samples per step summed over all ranks (must divide by the world size)."""
     lr: float = 3e-4
@@ -58,7 +68,15 @@ class TrainConfig:
 
     def validate(self) -> None:
         at_least(self, 1, "steps", "batch_size", "log_every", "checkpoint_every")
-        at_least(self, 0, "warmup_steps", "weight_decay", "grad_clip", "sample_every")
+        at_least(self, 0, "warmup_steps", "weight_decay", "grad_clip", "sample_every", "budget_minutes")
+        # the steps timed before the count is set must not depend on it: inside the warm-up, or constant
+        require(
+            not (self.budget_minutes and self.lr_schedule == "cosine" and self.warmup_steps <= BUDGET_PROBE_STEPS),
+            "warmup_steps",
+            self.warmup_steps,
+            f"more than {BUDGET_PROBE_STEPS} with budget_minutes and a cosine schedule (the timed steps' learning "
+            "rate must not depend on the step count they set)",
+        )
         above(self, 0, "lr")
         in_range(self, "ema_decay", 0, 1, high_open=True)
         in_range(self, "min_lr_ratio", 0, 1)

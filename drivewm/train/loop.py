@@ -18,6 +18,7 @@ import dataclasses
 import functools
 import hashlib
 import math
+import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -30,7 +31,7 @@ from tqdm import tqdm
 from drivewm.atomic import JsonlAppender, remove_dead_temporaries
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import load_train_state, save_train_state
-from drivewm.train.config import TrainConfig
+from drivewm.train.config import BUDGET_PROBE_STEPS, TrainConfig
 from drivewm.train.distributed import DistInfo, barrier, init_distributed, shutdown_distributed
 from drivewm.train.ema import EMA
 from drivewm.train.parallelize import parallelize
@@ -110,6 +111,18 @@ def learning_rate(cfg: TrainConfig, step: int) -> float:
     return cfg.lr * (cfg.min_lr_ratio + (1 - cfg.min_lr_ratio) * 0.5 * (1 + math.cos(math.pi * progress)))
 
 
+def budget_steps(cfg: TrainConfig, done: int, spent_s: float, step_seconds: list[float]) -> int:
+    """The step count a run with ``cfg.budget_minutes`` settles on after ``done`` steps and ``spent_s``
+    seconds of training: what the rest of the budget holds at the median of ``step_seconds`` (the first
+    two, warm-up of kernels and compilation, left out when there are more), at least ``done`` and at
+    most ``cfg.steps``."""
+    timed = step_seconds[2:] if len(step_seconds) > 2 else step_seconds
+    per_step = max(statistics.median(timed), 1e-9)
+    left = max(0.0, cfg.budget_minutes * 60 - spent_s)
+    fits = done + int(left / per_step) if math.isfinite(left) else cfg.steps
+    return max(done, min(cfg.steps, fits))
+
+
 def adamw_impl(params: list[torch.Tensor]) -> str:
     """``fused`` (one kernel over all tensors) for plain CPU/CUDA parameters, ``foreach`` for FSDP2's DTensors.
 
@@ -133,6 +146,8 @@ class _Run:
     step: int = 0
     train_seconds: float = 0.0
     """Wall seconds spent in training steps over the whole run, resumes included (compute spent)."""
+    budget_steps: int | None = None
+    """The step count a budgeted run settled on (``TrainConfig.budget_minutes``), once it has."""
 
 
 def _setup(task: TrainTask, cfg: TrainConfig) -> _Run:
@@ -146,6 +161,15 @@ def _setup(task: TrainTask, cfg: TrainConfig) -> _Run:
         params, lr=cfg.lr, betas=tuple(cfg.betas), weight_decay=cfg.weight_decay, **{adamw_impl(params): True}
     )
     return _Run(info, model, forward, optimizer, EMA(model, cfg.ema_decay))
+
+
+def _rank0(info: DistInfo, value: int) -> int:
+    """Rank 0's ``value`` on every rank (ranks time their own steps; the step count must agree)."""
+    if not info.distributed:
+        return value
+    shared = torch.tensor([value], dtype=torch.int64, device=info.device)
+    dist.broadcast(shared, src=0)
+    return int(shared)
 
 
 def _state_dicts(run: _Run) -> tuple[dict, dict]:
@@ -184,6 +208,7 @@ def _resume(run: _Run, task: TrainTask, out_dir: Path) -> None:
     run.ema.load_state_dict(state["ema"])
     run.step = int(state["step"])
     run.train_seconds = float(state.get("train_seconds", 0.0))
+    run.budget_steps = state.get("budget_steps")
     torch.set_rng_state(state["rng"]["torch"])
     task.load_extra_state(state.get("task", {}))
 
@@ -202,6 +227,7 @@ def _checkpoint(run: _Run, task: TrainTask, out_dir: Path, config_record: dict) 
                 "optimizer": optim_sd,
                 "step": run.step,
                 "train_seconds": run.train_seconds,
+                "budget_steps": run.budget_steps,
                 "data_position": run.step,
                 "rng": {"torch": torch.get_rng_state()},
                 "config": config_record,
@@ -270,16 +296,34 @@ def train(
     for folder in (out_dir, out_dir / "samples"):  # a killed run's unfinished checkpoint or sample grid
         remove_dead_temporaries(folder)
     _resume(run, task, out_dir)
+    if run.budget_steps is not None:
+        cfg = dataclasses.replace(cfg, steps=run.budget_steps)
     start, last = run.step, {}
-    end = cfg.steps if stop_after is None else min(cfg.steps, start + stop_after)
+    stop = cfg.steps if stop_after is None else start + stop_after
     metrics = _metrics_file(out_dir, start) if run.info.is_main else None
-    bar = tqdm(range(start, end), desc="train", disable=not run.info.is_main, initial=start, total=cfg.steps)
+    bar = tqdm(desc="train", disable=not run.info.is_main, initial=start, total=cfg.steps)
     busy_s, busy_steps = 0.0, 0  # training time since the last row (checkpoints and samples excluded)
-    for _ in bar:
+    probe: list[float] = []  # this call's step times while a budgeted run sets its step count
+    while run.step < min(cfg.steps, stop):
         tic = time.perf_counter()
         loss, grad_norm, terms = _train_step(run, task, cfg)
-        busy_s, busy_steps = busy_s + time.perf_counter() - tic, busy_steps + 1
-        run.train_seconds += time.perf_counter() - tic
+        seconds = time.perf_counter() - tic
+        busy_s, busy_steps = busy_s + seconds, busy_steps + 1
+        run.train_seconds += seconds
+        bar.update(1)
+        if cfg.budget_minutes and run.budget_steps is None:
+            probe.append(seconds)
+            if run.step >= min(BUDGET_PROBE_STEPS, cfg.steps):
+                run.budget_steps = _rank0(run.info, budget_steps(cfg, run.step, run.train_seconds, probe))
+                if run.info.is_main:
+                    bar.write(
+                        f"train: budget {cfg.budget_minutes:g} min after {run.step} steps in "
+                        f"{run.train_seconds:.1f} s -> {run.budget_steps} steps (at most {cfg.steps})"
+                    )
+                cfg = dataclasses.replace(cfg, steps=run.budget_steps)
+                bar.total = cfg.steps
+                bar.refresh()
+        end = min(cfg.steps, stop)
         if run.step % cfg.log_every == 0 or run.step == end:
             last = {
                 "step": run.step,
@@ -300,6 +344,7 @@ def train(
             ema_sd = run.ema.state_dict()  # a gather under FSDP: every rank joins
             if run.info.is_main:
                 task.sample_grid(ema_sd, out_dir / "samples" / f"step_{run.step:07d}.png")
+    bar.close()
     if metrics:
         metrics.close()
     shutdown_distributed()
