@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # One GPU, about 25 minutes: the shipped-model recipe at GPU sizes (drivewm/recipes/worldmodel.yaml,
-# profile gpu), its fp16 export (files of at most 16 MB, a MANIFEST with sha256 and compute spent),
+# profile gpu: 22 minutes of training budgets, train.budget_minutes per stage), its fp16 export (files of at most 16 MB, a MANIFEST with sha256 and compute spent),
 # and the GPU throughput benchmarks of issue 13, all into one output folder:
 #
 #   scripts/gpu-recipe.sh RUN        # rerun to resume: every stage and every training run resumes
