@@ -110,7 +110,8 @@ class DiT(nn.Module):
 
     def _compute_rope(self, grid: tuple[int, int, int], rates: list[float], device: torch.device) -> torch.Tensor:
         cfg = self.cfg
-        pos = grid_positions(*grid, fps=torch.tensor(rates, device=device), base_fps=cfg.rope_base_fps)
+        rates_t = torch.tensor(rates, device=device)
+        pos = grid_positions(*grid, fps=rates_t, base_fps=cfg.rope_base_fps, spatial_scale=cfg.rope_spatial_scale)
         pos[..., 0] *= cfg.patch_t  # (B|1, N, 3), time in units of latent frames
         return rope_rotation(rope_angles(pos, cfg.head_dim, cfg.rope_theta)).unsqueeze(2)  # (B|1, N, 1, hd/2)
 

@@ -47,6 +47,11 @@ class DiTConfig:
     """RoPE base wavelength."""
     rope_base_fps: float = 10.0
     """Video frame rate at which the temporal RoPE position of latent frame i is exactly i."""
+    rope_spatial_scale: float = 1.0
+    """Row and column RoPE positions are ``index * rope_spatial_scale``. A model fine-tuned at twice
+    its training size in each direction may take 0.5, so its larger token grid spans the positions it
+    was trained on, at finer steps (position interpolation, Chen et al. 2023, arXiv 2306.15595), instead
+    of positions it never saw."""
     cond_mask_channel: bool = False
     """Video2World: one extra input channel marks clean conditioning latent frames."""
     full_attn_every: int = 1
@@ -69,7 +74,7 @@ class DiTConfig:
     def validate(self) -> None:
         at_least(self, 1, "in_channels", "patch_size", "patch_t", "hidden_dim", "depth", "num_heads", "text_dim")
         at_least(self, 1, "adaln_lora_dim", "full_attn_every")
-        above(self, 0, "mlp_ratio", "rope_theta", "rope_base_fps")
+        above(self, 0, "mlp_ratio", "rope_theta", "rope_base_fps", "rope_spatial_scale")
         if self.hidden_dim % self.num_heads or self.head_dim % 2:
             raise DrivewmError(
                 f"dit: hidden_dim {self.hidden_dim} must split into {self.num_heads} heads of even width"

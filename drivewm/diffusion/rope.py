@@ -25,14 +25,17 @@ def split_head_dim(head_dim: int) -> tuple[int, int, int]:
     return head_dim - 2 * dim_hw, dim_hw, dim_hw
 
 
-def grid_positions(t: int, h: int, w: int, fps: torch.Tensor, base_fps: float) -> torch.Tensor:
+def grid_positions(
+    t: int, h: int, w: int, fps: torch.Tensor, base_fps: float, spatial_scale: float = 1.0
+) -> torch.Tensor:
     """Token positions (B, t*h*w, 3) as (time, row, column), row-major over (t, h, w).
 
-    ``fps`` (B,) is the clip's video frame rate; the time coordinate is scaled by ``base_fps / fps``.
+    ``fps`` (B,) is the clip's video frame rate; the time coordinate is scaled by ``base_fps / fps``,
+    row and column by ``spatial_scale``.
     """
     tt, hh, ww = torch.meshgrid(torch.arange(t), torch.arange(h), torch.arange(w), indexing="ij")
     pos = torch.stack([tt, hh, ww], dim=-1).reshape(1, -1, 3).to(torch.float32)  # (1, N, 3)
-    scale = torch.ones(fps.shape[0], 1, 3, dtype=torch.float32, device=fps.device)
+    scale = torch.full((fps.shape[0], 1, 3), float(spatial_scale), dtype=torch.float32, device=fps.device)
     scale[:, 0, 0] = base_fps / fps.to(torch.float32)
     return pos.to(fps.device) * scale  # (B, N, 3)
 

@@ -95,6 +95,23 @@ def test_rope_is_relative_and_fps_scaled():
     assert torch.equal(slow[..., 1:], pos[..., 1:])
 
 
+def _every_other(rotations: torch.Tensor) -> torch.Tensor:
+    """Rows and columns 0, 2, 4, ... of a (1, 2*4*6, 1, k) rotation grid: (1, 12, 1, k)."""
+    return rotations.reshape(2, 4, 6, -1)[:, ::2, ::2].reshape(1, 12, 1, -1)
+
+
+def test_a_spatial_scale_puts_a_larger_grid_on_the_positions_of_the_smaller():
+    """rope_spatial_scale 0.5 (position interpolation): token (2i, 2j) of a 4x6 grid turns by what
+    token (i, j) of the 2x3 grid turns by, so a model trained on the 2x3 grid meets no new position."""
+    small = DiT(CFG).rope((2, 2, 3), torch.full((1,), 10.0))  # (1, 12, 1, hd/2)
+    large = DiT(dataclasses.replace(CFG, rope_spatial_scale=0.5)).rope((2, 4, 6), torch.full((1,), 10.0))
+    assert torch.allclose(_every_other(large), small, atol=1e-6)
+    unscaled = DiT(CFG).rope((2, 4, 6), torch.full((1,), 10.0))  # extrapolates: positions up to (3, 5)
+    assert not torch.allclose(_every_other(unscaled), small, atol=1e-3)
+    with pytest.raises(DrivewmError, match="rope_spatial_scale"):
+        dataclasses.replace(CFG, rope_spatial_scale=0.0).validate()
+
+
 #: The two ways text enters a block: joint attention (default) and the older self- + cross-attention.
 LAYOUTS = [["joint_attn", "mlp"], ["self_attn", "cross_attn", "mlp"]]
 
