@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 
 from drivewm.clips.latents import find_latent_cache
-from drivewm.config import at_least, to_dict
+from drivewm.config import above, at_least, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.bundle_task import BundleTask
 from drivewm.diffusion.denoiser import edm_loss, sample_sigma
@@ -68,6 +68,10 @@ class PosttrainConfig:
     appears 1 + this many times per epoch (as GAIA-1 balances its data over steering). Simulated
     and fleet driving is mostly straight, so a turn is a rare lesson; 0 = each clip once."""
     turn_repeat_min_deg: float = 15.0
+    rope_spatial_scale: float | None = None
+    """The model's ``dit.rope_spatial_scale`` from this run on (None: the init's). 0.5 takes a model
+    trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated
+    (docs/quality-vs-compute.md, "The shipped multi-view model at 320x192")."""
     cache_clips: int = 2048
     """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
@@ -80,6 +84,8 @@ class PosttrainConfig:
             "turn_repeat_min_deg", "cache_clips",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
+        if self.rope_spatial_scale is not None:
+            above(self, 0, "rope_spatial_scale")
 
 
 #: Per-preset training defaults. Batches are clips of V views, so they are V times the tokens of
@@ -330,6 +336,8 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
     model.latent = dataclasses.replace(
         model.latent, latent_shape=list(dataset.latent_shape), fps=dataset.fps, rig=dataset.rig.to_dict()
     )
+    if cfg.rope_spatial_scale is not None:  # the DiT reads its config (this same object) when it builds rotations
+        model.cfg.dit.rope_spatial_scale = cfg.rope_spatial_scale
     return MultiViewTask(cfg, dataset, model)
 
 

@@ -80,3 +80,23 @@ def test_posttrain_with_turn_repeat_reads_the_repeated_clip_and_resumes_exactly(
         at_repeat = task.loss(model.net, [repeated], [11], torch.device("cpu"))
         at_clip = task.loss(model.net, [turning[0]], [11], torch.device("cpu"))
     assert torch.equal(at_repeat, at_clip)
+
+
+def test_a_fine_tune_can_interpolate_the_positions_of_a_larger_grid(mv_latents, mv_parent_dir, tmp_path):
+    """posttrain --set rope_spatial_scale=0.5: the run trains and saves a model whose DiT builds its
+    rotations at half the row and column positions; without it, the init's (1) is kept."""
+    from drivewm.multiview.model import MultiView
+
+    base = ["rig=front3", "train.steps=3", "train.lr=1e-2", "sample_steps=1"]  # step 1 opens the zero gates
+    losses = {}
+    for scale in (None, 0.5):
+        extra = [] if scale is None else [f"rope_spatial_scale={scale}"]
+        torch.manual_seed(0)
+        out = tmp_path / str(scale)
+        losses[scale] = posttrain(posttrain_config("debug", base + extra), mv_parent_dir, mv_latents, out)["loss"]
+        model = MultiView.from_pretrained(out)
+        assert model.cfg.dit.rope_spatial_scale == (scale or 1.0)
+        assert model.net.denoiser.backbone.cfg is model.cfg.dit  # the DiT reads the saved value
+    assert losses[0.5] != losses[None]  # the positions changed what the later steps saw
+    with pytest.raises(DrivewmError, match="rope_spatial_scale"):
+        posttrain_config("debug", ["rope_spatial_scale=0"])
