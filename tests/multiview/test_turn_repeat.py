@@ -4,6 +4,8 @@ ran through."""
 
 from __future__ import annotations
 
+import json
+import shutil
 import types
 
 import numpy as np
@@ -100,3 +102,16 @@ def test_a_fine_tune_can_interpolate_the_positions_of_a_larger_grid(mv_latents, 
     assert losses[0.5] != losses[None]  # the positions changed what the later steps saw
     with pytest.raises(DrivewmError, match="rope_spatial_scale"):
         posttrain_config("debug", ["rope_spatial_scale=0"])
+
+
+def test_a_fine_tune_whose_tokenizer_is_gone_stops_before_training(mv_with_tokenizer, mv_latents, tmp_path):
+    """A copied model folder whose relative tokenizer path resolves to nothing: posttrain says so at
+    once, instead of after the last step, when the sample grid needs the tokenizer."""
+    copy = tmp_path / "copied"
+    shutil.copytree(mv_with_tokenizer, copy)
+    config = json.loads((copy / "config.json").read_text())
+    config["latent"]["tokenizer"] = "../tokenizer"  # as the shipped folders record theirs
+    (copy / "config.json").write_text(json.dumps(config))
+    with pytest.raises(DrivewmError, match="tokenizer .*copied model folder"):
+        posttrain(posttrain_config("debug", ["train.steps=1"]), copy, mv_latents, tmp_path / "run")
+    assert not (tmp_path / "run").exists()
