@@ -16,6 +16,7 @@ from pathlib import Path
 
 import torch
 
+from drivewm.choices import resolve_model_folder
 from drivewm.clips.latents import find_latent_cache
 from drivewm.config import above, at_least, to_dict
 from drivewm.device import resolve_device
@@ -32,7 +33,7 @@ from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
 from drivewm.multiview.trajectory_probe import is_turning, loss_gap, turning_clips
 from drivewm.recipe import RecipeBook
-from drivewm.train.checkpoint import CONFIG_NAME, load_weights, read_model_type
+from drivewm.train.checkpoint import load_weights, read_model_config, read_model_type
 from drivewm.train.loop import TrainConfig, train
 
 
@@ -316,11 +317,14 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
     parent = Text2World.from_pretrained(init_dir) if init is None else None
     start = init or parent
     tokenizer = Path(start.latent.tokenizer) if start.latent.tokenizer else None
-    if tokenizer is not None and not (tokenizer / CONFIG_NAME).is_file():  # said now, not at the last step's samples
-        raise DrivewmError(
-            f"{init_dir}: its tokenizer {tokenizer} is not a model folder (a copied model folder whose relative "
-            "tokenizer path no longer resolves?); put the tokenizer there or set latent.tokenizer in its config.json"
-        )
+    if tokenizer is not None:  # said now, not at the last step's samples, which decode with it
+        try:
+            read_model_config(resolve_model_folder(start.latent.tokenizer))
+        except DrivewmError as exc:
+            raise DrivewmError(
+                f"{init_dir}: its tokenizer {exc} (a copied model folder whose relative tokenizer path no longer "
+                "resolves?); put the tokenizer there or set latent.tokenizer in its config.json"
+            ) from None
     cameras = load_rig(cfg.rig).names if cfg.rig else None
     cache = find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents)
     dataset = MultiViewDataset(cache, cameras, cfg.multiview.trajectory_waypoints, start.cfg.edm.sigma_data)
