@@ -27,7 +27,7 @@ from tqdm import tqdm
 from drivewm.choices import resolve_model_folder
 from drivewm.clips import ShardWriter, iter_clips
 from drivewm.clips.format import clip_from_arrays
-from drivewm.eval.suite import spread
+from drivewm.clips.shards import spread
 from drivewm.multiview.coding import code_views
 from drivewm.tokenizer import Tokenizer
 

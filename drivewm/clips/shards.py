@@ -211,6 +211,17 @@ def iter_clips(location: str | Path | Iterable[str | Path]) -> Iterator[Clip]:
         yield from iter_shard(shard)
 
 
+def spread(items: list, n: int | None) -> list:
+    """``n`` items evenly spaced over ``items`` (all of them when n is None or not smaller): the
+    clips ``--max-clips N`` takes (``drivewm eval``, ``drivewm tokenizer eval``), so a subset spans
+    every drive of a sorted input rather than its first."""
+    if n is None or n >= len(items):
+        return items
+    if n < 1:
+        raise DrivewmError(f"max_clips must be >= 1, got {n}")
+    return [items[i * len(items) // n] for i in range(n)]
+
+
 def write_manifest(out_dir: str | Path, rows: list[dict]) -> Path:
     """Write ``manifest.jsonl`` (one JSON row per clip; atomic)."""
     path = Path(out_dir) / MANIFEST_NAME

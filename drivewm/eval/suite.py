@@ -23,6 +23,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
+from drivewm.clips.shards import spread
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
 from drivewm.eval.adherence import adherence, condition_scores
@@ -380,15 +381,6 @@ def run_items(
                 bar.update()
     bar.close()
     return [results[i] for i in range(len(items))]
-
-
-def spread(items: list, n: int | None) -> list:
-    """``n`` items evenly spaced over ``items`` (all of them when n is None or not smaller)."""
-    if n is None or n >= len(items):
-        return items
-    if n < 1:
-        raise DrivewmError(f"max_clips must be >= 1, got {n}")
-    return [items[i * len(items) // n] for i in range(n)]
 
 
 def evaluate(

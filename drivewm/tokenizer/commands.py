@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     v.add_argument(
         "--holdout-percent", type=whole_number(0, 99), default=10, help="the training run's holdout_percent (0-99)"
     )
-    v.add_argument("--max-clips", type=at_least_one, default=None, help="score only the first N clips")
+    v.add_argument("--max-clips", type=at_least_one, default=None, help="score N clips spread evenly over the input")
     v.add_argument("--max-views", type=at_least_one, default=None, help="score only the first N cameras of each clip")
     _threads(v)
     v.set_defaults(func=_eval)

@@ -18,6 +18,7 @@ from PIL import Image
 from tqdm import tqdm
 
 from drivewm.atomic import atomic_path, write_json
+from drivewm.clips.shards import spread
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer.data import load_clips, to_uint8
 from drivewm.tokenizer.latent_cache import clip_video
@@ -61,13 +62,14 @@ def evaluate_tokenizer(
     max_views: int | None = None,
     progress: bool = True,
 ) -> dict:
-    """Score the tokenizer in ``model_dir`` on the clips of ``clip_dir`` (the first ``max_clips``
-    clips, the first ``max_views`` cameras of each); writes metrics.json and side_by_side.png."""
+    """Score the tokenizer in ``model_dir`` on the clips of ``clip_dir`` (``max_clips`` of them spread
+    evenly over the sorted clips, as ``drivewm eval --max-clips`` takes them; the first ``max_views``
+    cameras of each); writes metrics.json and side_by_side.png."""
     for name, limit in (("max_clips", max_clips), ("max_views", max_views)):
         if limit is not None and limit < 1:  # a slice [:-1] would quietly leave out the last one
             raise DrivewmError(f"tokenizer eval: {name} must be >= 1, got {limit}")
     tok = Tokenizer.from_pretrained(model_dir)
-    clips = load_clips(clip_dir, split, holdout_percent)[:max_clips]
+    clips = spread(load_clips(clip_dir, split, holdout_percent), max_clips)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     per_clip, codes, first, skipped = {}, [], None, {}

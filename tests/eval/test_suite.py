@@ -169,7 +169,7 @@ def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
 
 
 def test_max_clips_spreads_the_subset_over_the_input():
-    from drivewm.eval.suite import spread
+    from drivewm.clips.shards import spread
 
     items = list(range(10))
     assert spread(items, 3) == [0, 3, 6] and spread(items, 5) == [0, 2, 4, 6, 8]

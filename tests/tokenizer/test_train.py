@@ -178,6 +178,12 @@ def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
     )
     scored = json.loads((tmp_path / "ev" / "metrics.json").read_text())
     assert scored["psnr"] > 18.0 and list(scored["skipped"]) == ["syn000"] and scored["clips_scored"] == 3
+    # --max-clips spreads over the clips as drivewm eval's does (it had taken the first N: one drive)
+    argv = ["tokenizer", "eval", "--model", str(trained), "--data", str(clips), "--max-views", "1", "--max-clips", "2"]
+    assert main([*argv, "--out", str(tmp_path / "ev2")]) == 0
+    keys = [c.key for c in load_clips(clips)]
+    spread_keys = json.loads((tmp_path / "ev2" / "metrics.json").read_text())["clips"]
+    assert sorted(spread_keys) == sorted(k for k in (keys[0], keys[2]) if k != "syn000")
 
     assert main(["tokenizer", "encode", "--model", str(tmp_path / "nope"), "--data", str(clips)]) == 2
     assert "not a drivewm model folder" in capsys.readouterr().err
