@@ -11,7 +11,8 @@ tokenizer encode``::
     python -m drivewm.clips.latent_pack pack CLIPDIR/latents/tokenizer PACK [--max-mb 18]
     python -m drivewm.clips.latent_pack unpack PACK CACHE
 
-``--max-mb`` keeps the clips that fit, spread over the cache, and says how many it kept.
+``--max-mb`` keeps the clips that fit, spread over the cache, and says how many it kept; the limit
+holds for the whole pack folder, its index included (about 12 KB a six-camera clip).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import json
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file, save
 
 from drivewm.atomic import atomic_path, write_json
 from drivewm.clips.format import ClipMeta
@@ -56,25 +57,38 @@ def pack(cache_dir: str | Path, out_dir: str | Path, max_mb: float | None = None
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     std = cache.latent_std
-    rows, total, worst = [], 0, 0.0
+    rows, worst = [], 0.0
+    total = _index_bytes(cache.tokenizer, [])  # the pack counts whole: clip files and the index that lists them
     budget = None if max_mb is None else max_mb * 1e6
     for i in _spread_order(len(cache)):
         clip = cache[i]
         packed = quantise(clip.latents)
-        size = sum(t.numel() * t.element_size() for t in packed.values()) + clip.T_world_from_ego.nbytes
-        if budget is not None and total + size > budget:
+        data = save({**packed, "T_world_from_ego": torch.as_tensor(clip.T_world_from_ego)})
+        size = len(data) + _index_bytes(cache.tokenizer, [cache.rows[i]]) - _index_bytes(cache.tokenizer, []) + 2
+        if budget is not None and total + size > budget:  # + 2: the separator between two index rows
             continue
         path = child_path(out, clip.meta.key, ext="safetensors", what="clip key")
         with atomic_path(path) as tmp:
-            save_file({**packed, "T_world_from_ego": torch.as_tensor(clip.T_world_from_ego)}, str(tmp))
+            tmp.write_bytes(data)
         worst = max(worst, float(((packed["scale"] / 2) / std[None, :]).max()))
         rows.append((i, cache.rows[i]))
-        total += path.stat().st_size
+        total += size
     if not rows:
         raise DrivewmError(f"{cache_dir}: no clip fits in {max_mb} MB")
     rows = [row for _, row in sorted(rows, key=lambda pair: pair[0])]  # the cache's own order
-    write_json(out / PACK_INDEX, {"format_version": PACK_VERSION, "tokenizer": cache.tokenizer, "clips": rows})
+    write_json(out / PACK_INDEX, _index(cache.tokenizer, rows))
+    total = sum(child_path(out, r["key"], ext="safetensors").stat().st_size for r in rows)
+    total += (out / PACK_INDEX).stat().st_size
     return {"clips": len(rows), "of": len(cache), "bytes": total, "max_error_in_std": worst}
+
+
+def _index(tokenizer: dict, rows: list[dict]) -> dict:
+    return {"format_version": PACK_VERSION, "tokenizer": tokenizer, "clips": rows}
+
+
+def _index_bytes(tokenizer: dict, rows: list[dict]) -> int:
+    """Size of ``pack.json`` listing ``rows``, as write_json writes it."""
+    return len((json.dumps(_index(tokenizer, rows), indent=2) + "\n").encode())
 
 
 def _spread_order(n: int) -> list[int]:
@@ -119,7 +133,12 @@ def main(argv: list[str] | None = None) -> None:
     p = sub.add_parser("pack", help="latent cache -> 8-bit pack")
     p.add_argument("cache")
     p.add_argument("out")
-    p.add_argument("--max-mb", type=float, default=None, help="keep the clips that fit in this many MB (1e6 bytes)")
+    p.add_argument(
+        "--max-mb",
+        type=float,
+        default=None,
+        help="keep the clips that fit in this many MB (1e6 bytes), the index included",
+    )
     u = sub.add_parser("unpack", help="8-bit pack -> latent cache")
     u.add_argument("pack")
     u.add_argument("cache")

@@ -38,18 +38,23 @@ def test_values_come_back_within_half_a_step_and_the_rest_exact(mv_latents, pack
         worst = max(worst, float((err / theirs.latent_std[None]).max()))
     assert 0 < worst <= report["max_error_in_std"] * 1.001
     float32_bytes = sum(p.stat().st_size for p in mv_latents.glob("*.safetensors"))
-    assert report["bytes"] < 0.4 * float32_bytes  # a quarter, and headers
+    packed_bytes = sum(p.stat().st_size for p in (root / "pack").glob("*.safetensors"))
+    assert packed_bytes < 0.4 * float32_bytes  # a quarter, and headers
+    assert report["bytes"] == packed_bytes + (root / "pack" / "pack.json").stat().st_size  # all of the pack
 
 
 def test_a_size_limit_keeps_clips_from_the_whole_cache(mv_latents, tmp_path, capsys):
     full = pack(mv_latents, tmp_path / "all")
     per_clip = full["bytes"] / full["clips"]
     main(["pack", str(mv_latents), str(tmp_path / "some"), "--max-mb", str(per_clip * 3.5 / 1e6)])
+    written = sum(p.stat().st_size for p in (tmp_path / "some").iterdir())  # the index counts (it had not)
+    written_line = capsys.readouterr().out
+    assert written <= per_clip * 3.5 and f"{written / 1e6:.1f} MB" in written_line
     kept = [r["key"] for r in json.loads((tmp_path / "some" / "pack.json").read_text())["clips"]]
     keys = [r["key"] for r in LatentCache(mv_latents).rows]
     assert len(kept) == 3 and kept[0] == keys[0] and keys.index(kept[2]) >= len(keys) // 2  # not the first three
     assert kept == sorted(kept, key=keys.index)  # in the cache's order
-    assert f"packed 3 of {len(keys)} clips" in capsys.readouterr().out
+    assert f"packed 3 of {len(keys)} clips" in written_line
     with pytest.raises(SystemExit, match="no clip fits"):
         main(["pack", str(mv_latents), str(tmp_path / "none"), "--max-mb", "0.000001"])
 
