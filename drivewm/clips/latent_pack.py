@@ -8,11 +8,13 @@ tokenizer and its latent statistics) travel exact. ``unpack`` writes an ordinary
 (drivewm.clips.latents) that every diffusion stage reads as it reads one written by ``drivewm
 tokenizer encode``::
 
-    python -m drivewm.clips.latent_pack pack CLIPDIR/latents/tokenizer PACK [--max-mb 18]
-    python -m drivewm.clips.latent_pack unpack PACK CACHE
+    python -m drivewm.clips.latent_pack pack CLIPDIR/latents/tokenizer PACK [--max-mb 18] [--part K/N]
+    python -m drivewm.clips.latent_pack unpack PACK [PACK ...] CACHE
 
 ``--max-mb`` keeps the clips that fit, spread over the cache, and says how many it kept; the limit
-holds for the whole pack folder, its index included (about 12 KB a six-camera clip).
+holds for the whole pack folder, its index included (about 12 KB a six-camera clip). ``--part K/N``
+packs every N-th clip of that spread order from the K-th, so parts travel one at a time (a copy
+limit per transfer) and ``unpack`` takes them all back into one cache.
 """
 
 from __future__ import annotations
@@ -50,9 +52,16 @@ def dequantise(packed: dict[str, torch.Tensor]) -> torch.Tensor:
     return q * packed["scale"][..., None, None, None] + packed["lo"][..., None, None, None]
 
 
-def pack(cache_dir: str | Path, out_dir: str | Path, max_mb: float | None = None) -> dict:
-    """Pack the cache at ``cache_dir`` into ``out_dir``; returns ``{"clips", "bytes", "max_error_in_std"}``
-    (the largest packing error over the clips, in units of each channel's latent std)."""
+def pack(
+    cache_dir: str | Path, out_dir: str | Path, max_mb: float | None = None, part: tuple[int, int] = (1, 1)
+) -> dict:
+    """Pack the cache at ``cache_dir`` into ``out_dir``; returns ``{"clips", "of", "bytes",
+    "max_error_in_std"}`` (the largest packing error over the clips, in units of each channel's latent
+    std). ``part`` (K, N): only every N-th clip of the spread order from the K-th, so N packs made with
+    K = 1..N hold disjoint clips, each spread over the whole cache, and together all of it."""
+    k, n = part
+    if not 1 <= k <= n:
+        raise DrivewmError(f"--part must be K/N with 1 <= K <= N, got {k}/{n}")
     cache = LatentCache(cache_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -60,7 +69,7 @@ def pack(cache_dir: str | Path, out_dir: str | Path, max_mb: float | None = None
     rows, worst = [], 0.0
     total = _index_bytes(cache.tokenizer, [])  # the pack counts whole: clip files and the index that lists them
     budget = None if max_mb is None else max_mb * 1e6
-    for i in _spread_order(len(cache)):
+    for i in _spread_order(len(cache))[k - 1 :: n]:
         clip = cache[i]
         packed = quantise(clip.latents)
         data = save({**packed, "T_world_from_ego": torch.as_tensor(clip.T_world_from_ego)})
@@ -104,27 +113,56 @@ def _spread_order(n: int) -> list[int]:
     return out
 
 
-def unpack(pack_dir: str | Path, cache_dir: str | Path) -> int:
-    """Write the packed clips of ``pack_dir`` as a latent cache at ``cache_dir``; returns the clip count."""
-    pack_dir, cache_dir = Path(pack_dir), Path(cache_dir)
+def unpack(pack_dirs: str | Path | list[str | Path], cache_dir: str | Path) -> int:
+    """Write the packed clips of one pack folder, or of several packed from one cache (``--part``), as a
+    latent cache at ``cache_dir``; returns the clip count. Packs of different tokenizers, or holding one
+    clip twice, are refused before anything is written."""
+    pack_dirs = [Path(p) for p in (pack_dirs if isinstance(pack_dirs, list) else [pack_dirs])]
+    cache_dir = Path(cache_dir)
+    indexes = [_read_index(p) for p in pack_dirs]
+    for p, index in zip(pack_dirs[1:], indexes[1:]):
+        if index["tokenizer"] != indexes[0]["tokenizer"]:
+            raise DrivewmError(f"{p}: packed from latents of another tokenizer than {pack_dirs[0]}")
+    seen: dict[str, Path] = {}
+    for p, index in zip(pack_dirs, indexes):
+        for row in index["clips"]:
+            if row["key"] in seen:
+                raise DrivewmError(f"{p}: clip {row['key']} is in {seen[row['key']]} too (pack parts with --part K/N)")
+            seen[row["key"]] = p
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for pack_dir, index in zip(pack_dirs, indexes):
+        for row in index["clips"]:
+            path = child_path(pack_dir, row["key"], ext="safetensors", what="clip key")
+            try:
+                tensors = load_file(str(path))
+            except Exception as exc:  # safetensors raises several types for bad files
+                raise DrivewmError(f"{path}: cannot read the packed clip ({exc.__class__.__name__})") from None
+            meta = ClipMeta.from_json(row["meta"], str(path))
+            rows.append(write_latent_clip(cache_dir, meta, dequantise(tensors), tensors["T_world_from_ego"].numpy()))
+    write_latent_index(cache_dir, indexes[0]["tokenizer"], rows)
+    return len(rows)
+
+
+def _read_index(pack_dir: Path) -> dict:
     try:
         index = json.loads((pack_dir / PACK_INDEX).read_text())
     except (OSError, ValueError) as exc:
         raise DrivewmError(f"{pack_dir}: not a latent pack ({exc.__class__.__name__}: {PACK_INDEX})") from None
-    if index.get("format_version") != PACK_VERSION:
+    if not isinstance(index, dict) or index.get("format_version") != PACK_VERSION:
         raise DrivewmError(f"{pack_dir / PACK_INDEX}: not a latent pack of version {PACK_VERSION}")
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for row in index["clips"]:
-        path = child_path(pack_dir, row["key"], ext="safetensors", what="clip key")
-        try:
-            tensors = load_file(str(path))
-        except Exception as exc:  # safetensors raises several types for bad files
-            raise DrivewmError(f"{path}: cannot read the packed clip ({exc.__class__.__name__})") from None
-        meta = ClipMeta.from_json(row["meta"], str(path))
-        rows.append(write_latent_clip(cache_dir, meta, dequantise(tensors), tensors["T_world_from_ego"].numpy()))
-    write_latent_index(cache_dir, index["tokenizer"], rows)
-    return len(rows)
+    return index
+
+
+def _part(text: str) -> tuple[int, int]:
+    """argparse type of ``--part K/N``."""
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected K/N (e.g. 2/3), got {text!r}") from None
+    if not 1 <= k <= n:
+        raise argparse.ArgumentTypeError(f"expected K/N with 1 <= K <= N, got {text!r}")
+    return k, n
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -139,13 +177,16 @@ def main(argv: list[str] | None = None) -> None:
         default=None,
         help="keep the clips that fit in this many MB (1e6 bytes), the index included",
     )
-    u = sub.add_parser("unpack", help="8-bit pack -> latent cache")
-    u.add_argument("pack")
+    p.add_argument(
+        "--part", type=_part, default=(1, 1), metavar="K/N", help="every N-th clip from the K-th: N disjoint packs"
+    )
+    u = sub.add_parser("unpack", help="8-bit packs -> one latent cache")
+    u.add_argument("pack", nargs="+", help="pack folders (parts of one cache: --part)")
     u.add_argument("cache")
     args = parser.parse_args(argv)
     try:
         if args.command == "pack":
-            r = pack(args.cache, args.out, args.max_mb)
+            r = pack(args.cache, args.out, args.max_mb, args.part)
             print(
                 f"packed {r['clips']} of {r['of']} clips, {r['bytes'] / 1e6:.1f} MB, largest error "
                 f"{r['max_error_in_std']:.4f} latent std"

@@ -67,3 +67,26 @@ def test_post_training_reads_the_unpacked_cache(mv_latents, mv_parent_dir, packe
     torch.manual_seed(0)
     restored = posttrain(posttrain_config("debug", base), mv_parent_dir, root / "cache", tmp_path / "restored")
     assert restored["loss"] == pytest.approx(original["loss"], rel=0.02) and restored["loss"] != original["loss"]
+
+
+def test_parts_are_disjoint_and_unpack_together_to_the_whole_cache(mv_latents, packed, tmp_path, capsys):
+    root, _ = packed
+    keys = [r["key"] for r in LatentCache(mv_latents).rows]
+    parts = [tmp_path / f"part{k}" for k in (1, 2, 3)]
+    for k, part in enumerate(parts, 1):
+        main(["pack", str(mv_latents), str(part), "--part", f"{k}/3"])
+    held = [[r["key"] for r in json.loads((p / "pack.json").read_text())["clips"]] for p in parts]
+    assert sorted(sum(held, [])) == sorted(keys) and all(held)  # disjoint (no key twice), all of the cache
+    assert held[0][0] == keys[0] and keys.index(held[0][-1]) >= len(keys) // 2  # each part spreads
+    main(["unpack", *map(str, parts), str(tmp_path / "cache")])
+    merged, whole = LatentCache(tmp_path / "cache"), LatentCache(root / "cache")
+    assert merged.tokenizer == whole.tokenizer and len(merged) == len(whole)
+    by_key = {whole.rows[i]["key"]: whole[i] for i in range(len(whole))}
+    for i in range(len(merged)):
+        assert torch.equal(merged[i].latents, by_key[merged.rows[i]["key"]].latents)  # the same quantisation
+    with pytest.raises(SystemExit, match="is in .*part1 too"):
+        main(["unpack", str(parts[0]), str(root / "pack"), str(tmp_path / "twice")])
+    assert not (tmp_path / "twice").exists()  # refused before anything is written
+    with pytest.raises(SystemExit):
+        main(["pack", str(mv_latents), str(tmp_path / "bad"), "--part", "4/3"])
+    assert "1 <= K <= N" in capsys.readouterr().err
