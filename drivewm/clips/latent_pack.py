@@ -67,13 +67,14 @@ def pack(
     out.mkdir(parents=True, exist_ok=True)
     std = cache.latent_std
     rows, worst = [], 0.0
-    total = _index_bytes(cache.tokenizer, [])  # the pack counts whole: clip files and the index that lists them
+    empty = _index_bytes(cache.tokenizer, [])
+    total = empty  # the pack counts whole: clip files and the index that lists them
     budget = None if max_mb is None else max_mb * 1e6
     for i in _spread_order(len(cache))[k - 1 :: n]:
         clip = cache[i]
         packed = quantise(clip.latents)
         data = save({**packed, "T_world_from_ego": torch.as_tensor(clip.T_world_from_ego)})
-        size = len(data) + _index_bytes(cache.tokenizer, [cache.rows[i]]) - _index_bytes(cache.tokenizer, []) + 2
+        size = len(data) + _index_bytes(cache.tokenizer, [cache.rows[i]]) - empty + 2
         if budget is not None and total + size > budget:  # + 2: the separator between two index rows
             continue
         path = child_path(out, clip.meta.key, ext="safetensors", what="clip key")
