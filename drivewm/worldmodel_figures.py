@@ -110,11 +110,18 @@ def trajectory_figures(clips: list[dict], real: dict) -> dict:
 
 
 def geometry_figures(gen: dict, real: dict) -> dict:
-    """Pose success, and the calibrated TSE / CSE ratios to the held-out clips. A ratio holds only
+    """Pose success (and ``pose_success_path``: the same where the reconstruction also travels the
+    conditioned path, which static reconstructions of frozen-looking clips do not), and the calibrated
+    TSE / CSE ratios to the held-out clips. A ratio holds only
     where the generated clips' pairs meet the protocol's minimum of verified matches at least as often
     as the held-out clips' do (``*_counted_fraction``): a pair under it enters both values at the
     protocol's failure penalty, so two sets of failed pairs would otherwise "hold" at a ratio near 1."""
     out = {"pose_success": _figure(gen.get("pose_success", math.nan), ">= 0.5", gen.get("pose_success", 0) >= 0.5)}
+    on_path = gen.get("pose_success_path", math.nan)
+    out["pose_success_path"] = {
+        **_figure(on_path, ">= 0.5, the recovered ego path within 2x of the conditioned one", on_path >= 0.5),
+        "real": real.get("pose_success_path"),
+    }
     for key in ("tse_calibrated", "cse_calibrated"):
         ratio = gen.get(key, math.nan) / real.get(key, math.nan)
         counted, real_counted = gen.get(f"{key}_counted_fraction", math.nan), real.get(f"{key}_counted_fraction", 1.0)

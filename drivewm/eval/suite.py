@@ -39,6 +39,7 @@ from drivewm.eval.trajectory_errors import (
     ate,
     heading_change_deg,
     image_pose_errors,
+    path_ratio,
     relative_pose_errors,
     tfe,
     waypoint_heading_deg,
@@ -55,6 +56,7 @@ AGGREGATE_KEYS = (
     "cse_calibrated",
     *(f"{m}{suffix}" for m in ("tse", "tse_calibrated", "cse", "cse_calibrated") for suffix in SAMPSON_SUFFIXES),
     "pose_success",
+    "pose_success_path",
     "registered_fraction",
     "pose_auc",
     "pose_error_m",
@@ -251,6 +253,8 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     reg = ego.registered
     if item.trajectory_ego:
         metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
+    if item.T_world_from_ego is not None:
+        metrics["pose_success_path"] = 0.0  # 1 below where the reconstruction also travels the clip's path
     if reg.sum() < 3:
         metrics["status"]["traj"] = "not_registered"
         if tc.yaw_from_flow:
@@ -261,6 +265,9 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     metrics["yaw_source"] = "sfm"
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
+        metrics["path_ratio"] = ratio = path_ratio(est, ref)
+        on_path = 1 / PATH_RATIO_TOLERANCE <= ratio <= PATH_RATIO_TOLERANCE
+        metrics["pose_success_path"] = float(artifacts["sfm"].all_registered and on_path)
         metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
         r = relative_pose_errors(
             est, ref, tc.rpe_delta, tc.rpe_delta_unit, tc.rpe_all_pairs, sim.scale, tc.rpe_pairs_from
@@ -278,6 +285,12 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         )
     metrics["status"]["traj"] = "ok" if item.T_world_from_ego is not None else "no_reference"
 
+
+#: ``pose_success_path``: a clip whose frames all register succeeds only where its recovered ego path
+#: (metres: the rig fixes the scale) is within this factor of the clip's own (logged, or conditioned
+#: for a generated clip; drivewm.eval.trajectory_errors.path_ratio). Static reconstructions, which
+#: register every image of a frozen clip through the rig's baselines, read 0.03 on a 34 m drive.
+PATH_RATIO_TOLERANCE = 2.0
 
 #: Travel (m) of a clip's conditioned trajectory above which frames that show no motion at all cannot
 #: be read as driving straight: a frozen or black clip asked to move has not followed its trajectory.

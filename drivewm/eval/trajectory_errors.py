@@ -236,6 +236,21 @@ def tfe(est_T_world_from_ego: np.ndarray, fps: float, waypoints_ego: np.ndarray,
     return float(np.mean(np.linalg.norm(s * q - w, axis=1)))
 
 
+def path_length_m(T_world_from_ego: np.ndarray) -> float:
+    """Length of the path through the poses' positions, frame to frame (in the poses' own units)."""
+    p = np.asarray(T_world_from_ego, dtype=np.float64)[:, :3, 3]
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def path_ratio(est: np.ndarray, ref: np.ndarray, floor_m: float = 1.0) -> float:
+    """How far the recovered ego path travels against the reference over the same frames, both
+    floored at ``floor_m`` metres: ``max(len(est), floor) / max(len(ref), floor)``. No alignment: a
+    rig-aware reconstruction is in metres already (the rig's baselines fix its scale). A standing
+    ego and a reconstruction that stands read 1; a reconstruction that stands while the ego drove
+    34 m reads 0.03, one spread over 450 m for a 37 m drive 12."""
+    return max(path_length_m(est), floor_m) / max(path_length_m(ref), floor_m)
+
+
 def heading_change_deg(T_world_from_ego: np.ndarray) -> float:
     """Yaw of the last ego pose in the first one's ego frame (degrees; ego is x forward, y left, z up,
     so a left turn is positive). Invariant to the world frame's gauge, so it reads a recovered

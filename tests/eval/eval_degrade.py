@@ -13,7 +13,7 @@ ALSO_LOWER_IS_BETTER = ("tse_native",)
 HIGHER_IS_BETTER = ("pose_auc",)
 #: Pass rates (docs/eval-protocol.md): every image registers, or the share that does. A degraded copy
 #: whose poses still come out may tie with the real clip here, never beat it; ``pose_auc`` ranks.
-GATES = ("pose_success", "registered_fraction")
+GATES = ("pose_success", "pose_success_path", "registered_fraction")
 
 
 def blurred(videos: dict[str, np.ndarray], sigma_px: float = 2.5) -> dict[str, np.ndarray]:

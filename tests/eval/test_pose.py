@@ -151,3 +151,31 @@ def test_capped_global_bundle_adjustment_keeps_the_real_dashcam_poses(shared_dat
     )
     assert err / length < 0.005
     assert set(capped.seconds) == {"database", "mapping"} and min(capped.seconds.values()) > 0
+
+
+@pytest.mark.slow
+def test_a_frozen_clip_registers_through_the_rig_but_does_not_travel_its_path(sim_clip_dir):
+    """Every camera of a simulated clear-weather clip, and the same clip frozen on its first frame.
+    The rig's baselines let COLMAP register every image of the frozen copy, so ``pose_success``
+    passes it (docs/eval-protocol.md); ``pose_success_path`` does not: the reconstruction stands
+    while the logged ego drove, as the generated 320x192 samples' reconstructions did."""
+    import dataclasses
+
+    from eval_degrade import frozen
+
+    from drivewm.eval.config import EvalConfig
+    from drivewm.eval.inputs import load_items
+    from drivewm.eval.suite import evaluate_item
+
+    item = next(i for i in load_items(sim_clip_dir) if i.key == "highway_clear-000000")
+    cfg = EvalConfig(metrics=["pose", "traj"])
+    real = evaluate_item(item, cfg, threads=2).metrics
+    still = dataclasses.replace(item)
+    still_videos = frozen(item.videos())
+    still.videos = lambda: still_videos
+    frozen_metrics = evaluate_item(still, cfg, threads=2).metrics
+    print({k: (real.get(k), frozen_metrics.get(k)) for k in ("pose_success", "pose_success_path", "path_ratio")})
+    assert real["pose_success"] == 1.0 and real["pose_success_path"] == 1.0
+    assert real["path_ratio"] == pytest.approx(1.0, abs=0.02)  # rig-aware: metric without alignment
+    assert frozen_metrics["pose_success"] == 1.0  # the pass rate a frozen clip wins
+    assert frozen_metrics["pose_success_path"] == 0.0 and frozen_metrics["path_ratio"] < 0.2

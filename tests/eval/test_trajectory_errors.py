@@ -3,7 +3,16 @@
 import numpy as np
 import pytest
 
-from drivewm.eval.trajectory_errors import ate, heading_change_deg, rpe, tfe, umeyama, waypoint_heading_deg
+from drivewm.eval.trajectory_errors import (
+    ate,
+    heading_change_deg,
+    path_length_m,
+    path_ratio,
+    rpe,
+    tfe,
+    umeyama,
+    waypoint_heading_deg,
+)
 from drivewm.geometry import euler_to_R, make_T, rot_z
 
 
@@ -86,6 +95,21 @@ def test_tfe_scale_only_alignment():
     straight = np.stack([make_T(np.eye(3), [2.0 * i, 0, 0]) for i in range(11)])
     way_left = np.array([[2.0 * i, 1.0, 0.0] for i in range(1, 11)])
     assert tfe(straight, fps, way_left, 1 / fps) == pytest.approx(1.0, rel=1e-12)
+
+
+def test_path_ratio_reads_a_standing_reconstruction_and_an_exploded_one():
+    # 17 frames at 21.6 m/s and 10 fps: 16 steps of 2.16 m = 34.56 m
+    drive = np.stack([make_T(np.eye(3), [2.16 * i, 0, 0]) for i in range(17)])
+    standing = np.repeat(drive[:1], 17, axis=0)
+    assert path_length_m(drive) == pytest.approx(34.56, rel=1e-12)
+    assert path_ratio(drive, drive) == pytest.approx(1.0, rel=1e-12)
+    assert path_ratio(standing, drive) == pytest.approx(1 / 34.56, rel=1e-12)  # floored at 1 m
+    exploded = drive.copy()
+    exploded[:, :3, 3] *= 12.0
+    assert path_ratio(exploded, drive) == pytest.approx(12.0, rel=1e-12)
+    # a circle's path is its arc, not its chord: 1.5 pi r in 15 chords of 2 r sin(0.05 pi)
+    assert path_length_m(circle()) == pytest.approx(15 * 2 * 10 * np.sin(0.05 * np.pi), rel=1e-12)
+    assert path_ratio(standing, standing) == 1.0  # a standing ego, a standing reconstruction
 
 
 @pytest.mark.parametrize("turn_deg", [-40.0, -5.0, 0.0, 12.0, 60.0])
