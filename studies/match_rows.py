@@ -5,9 +5,9 @@ fixes the rotation, and the rig's baselines carry the registration (docs/eval-pr
 ``pose_success_path``). What gives it translation is parallax, and in a driving camera most of that
 is the road below the horizon. This prints, for clip folders (curated clips, ``drivewm generate``
 output or anything ``drivewm eval`` reads), the front camera's SIFT matches between consecutive frames
-(every other pair) that a fundamental matrix verifies (RANSAC, 1 px): how many a pair keeps, the
-share that lies below the image's middle row (the rig's cameras look level, so that is the horizon)
-and the median image motion of those below and above it.
+(every other pair) that the eval's robust fundamental matrix verifies (its MAGSAC settings): how many
+a pair keeps, the share that lies below the image's middle row (the rig's cameras look level, so that
+is the horizon) and the median image motion of those below and above it.
 
     python studies/match_rows.py CLIPS_OR_SAMPLES [...] [--max-clips 6] [--camera CAM_FRONT]
 
@@ -19,28 +19,24 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from drivewm.clips.shards import spread
 from drivewm.eval.config import EvalConfig
+from drivewm.eval.epipolar import fit_fundamental
 from drivewm.eval.inputs import load_items
 from drivewm.eval.matching import FrameMatcher
 
 
-def verified_matches(a: np.ndarray, b: np.ndarray, matcher: FrameMatcher, ids: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """(N, 2) float32 pixel positions in frames ``a`` and ``b`` of the matches a fundamental matrix
-    verifies (RANSAC, 1 px); empty where fewer than 8 match."""
+def verified_matches(a: np.ndarray, b: np.ndarray, matcher: FrameMatcher, ids: tuple, cfg: EvalConfig):
+    """(N, 2) pixel positions in frames ``a`` and ``b`` of the matches the eval's robust fundamental
+    matrix verifies (drivewm.eval.epipolar.fit_fundamental, the protocol's settings); empty where it
+    finds none."""
     m = matcher.match(ids[0], a, ids[1], b)
-    empty = np.zeros((0, 2), np.float32)
-    if len(m) < 8:
-        return empty, empty
-    pa, pb = m.uv_a.astype(np.float32), m.uv_b.astype(np.float32)
-    _, mask = cv2.findFundamentalMat(pa, pb, cv2.FM_RANSAC, 1.0, 0.999)
-    if mask is None:
-        return empty, empty
-    keep = mask.ravel() > 0
-    return pa[keep], pb[keep]
+    F, inliers = fit_fundamental(m, cfg.epipolar)
+    if F is None:
+        return m.uv_a[:0], m.uv_b[:0]
+    return m.uv_a[inliers], m.uv_b[inliers]
 
 
 def match_rows(location: str, camera: str, max_clips: int | None) -> dict[str, float]:
@@ -52,7 +48,7 @@ def match_rows(location: str, camera: str, max_clips: int | None) -> dict[str, f
         frames = item.videos()[camera]
         matcher = FrameMatcher(cfg.match)
         for t in range(0, len(frames) - 1, 2):
-            a, b = verified_matches(frames[t], frames[t + 1], matcher, (t, t + 1))
+            a, b = verified_matches(frames[t], frames[t + 1], matcher, (t, t + 1), cfg)
             if not len(a):
                 continue
             below = a[:, 1] > frames.shape[1] / 2
