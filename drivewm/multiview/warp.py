@@ -32,13 +32,21 @@ from drivewm.multiview.camera import patch_centres_px
 
 
 def warp_grid(
-    rig: Rig, latent_hw: tuple[int, int], T_ego0_from_ego: np.ndarray, max_ground_m: float = 100.0
+    rig: Rig,
+    latent_hw: tuple[int, int],
+    T_ego0_from_ego: np.ndarray,
+    max_ground_m: float = 100.0,
+    walls_m: float = 0.0,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Sampling positions of every view's latent pixels in the first frame of the rig.
 
     ``T_ego0_from_ego`` (T, 4, 4): the ego pose of every latent frame in the first frame's ego frame.
     A ray that meets the ground (z = 0 of the ego frame, which sits on the road) within
     ``max_ground_m`` is followed to that point; any other ray is a direction at infinity.
+    ``walls_m`` > 0 adds a corridor: two vertical planes at y = +-walls_m of the first ego frame,
+    up to :data:`WALL_HEIGHT_M`; a ray that meets one within ``max_ground_m`` before the ground
+    stops there (:func:`ray_depths`), so what stands beside the road passes by with parallax
+    instead of staying at infinity.
     Returns ``grid`` (V, T, h, w, 2) in :func:`torch.nn.functional.grid_sample` coordinates
     (align_corners=False) over the views' first latent frames laid side by side (V*w wide, rig
     order) and ``valid`` (V, T, h, w) bool.
@@ -53,9 +61,8 @@ def warp_grid(
             T_cam = T @ cam.T_ego_from_cam  # this camera at frame t, in the first ego frame
             d = d_cam @ T_cam[:3, :3].T
             o = T_cam[:3, 3]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                depth = np.where(d[:, 2] < 0, -o[2] / d[:, 2], np.inf)  # along d to the road
-            ground = depth < max_ground_m
+            depth = ray_depths(o, d, walls_m)
+            ground = depth < max_ground_m  # a point on the road or a wall; the rest at infinity
             point = o + np.where(ground, depth, 0.0)[:, None] * d  # ground points; other rows unused
             found = np.zeros(len(d), dtype=bool)
             for s in [v, *[k for k in range(v_count) if k != v]]:  # own view first
@@ -73,6 +80,25 @@ def warp_grid(
                 found |= ok
             valid[v, t] = found.reshape(h, w)
     return torch.from_numpy(grid).float(), torch.from_numpy(valid)
+
+
+WALL_HEIGHT_M = 30.0
+"""Top of the corridor's walls (``walls_m``): rays above it go to infinity (sky, far scenery)."""
+
+
+def ray_depths(o: np.ndarray, d: np.ndarray, walls_m: float = 0.0) -> np.ndarray:
+    """Distance along each ray ``o + s d`` (d (N, 3), first ego frame: x forward, y left, z up) to
+    the first surface it meets: the road (z = 0) and, with ``walls_m`` > 0, the corridor's walls
+    (y = +-walls_m, 0 <= z <= :data:`WALL_HEIGHT_M`); inf where it meets none."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = np.where(d[:, 2] < 0, -o[2] / d[:, 2], np.inf)  # along d to the road
+        if walls_m > 0:
+            side = np.where(d[:, 1] >= 0, walls_m, -walls_m)  # the wall the ray heads for
+            wall = np.where(d[:, 1] != 0, (side - o[1]) / d[:, 1], np.inf)
+            z = o[2] + wall * d[:, 2]
+            wall = np.where((wall > 0) & (z >= 0) & (z <= WALL_HEIGHT_M), wall, np.inf)
+            depth = np.minimum(depth, wall)
+    return depth
 
 
 def warp_first_frame(
