@@ -183,13 +183,15 @@ def benchmark_stages(
     reproject: float | None = None,
     guidance_interval: str | None = None,
     prompt_template: bool | None = None,
+    reproject_walls: float | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
     profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
     ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
-    captions' template), each None for generate's default), the held-out clips ``heldout`` and the
+    captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
+    default), the held-out clips ``heldout`` and the
     generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -205,6 +207,8 @@ def benchmark_stages(
             argv += ["--guidance-interval", guidance_interval]
         if prompt_template is not None:
             argv += ["--prompt-template" if prompt_template else "--no-prompt-template"]
+        if reproject_walls is not None:
+            argv += ["--reproject-walls", f"{reproject_walls:g}"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -228,6 +232,7 @@ def benchmark_worldmodel(
     reproject: float | None = None,
     guidance_interval: str | None = None,
     prompt_template: bool | None = None,
+    reproject_walls: float | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -244,6 +249,8 @@ def benchmark_worldmodel(
         finite_at_least("worldmodel benchmark", 1, **{"--trajectory-guidance": trajectory_guidance})
     if reproject is not None:
         finite_at_least("worldmodel benchmark", 0, **{"--reproject": reproject})
+    if reproject_walls is not None:
+        finite_at_least("worldmodel benchmark", 0, **{"--reproject-walls": reproject_walls})
     if not heldout.is_dir() and not heldout.is_file():
         raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder or an eval's metrics.json")
     profile = load_profile(profile_name)
@@ -258,7 +265,16 @@ def benchmark_worldmodel(
         # a rerun that brings the tokenizer's eval must read it: the figures stage's command is unchanged
         stage_marker(run, "figures").unlink(missing_ok=True)
     stages = benchmark_stages(
-        profile, model, run, heldout, samples, trajectory_guidance, reproject, guidance_interval, prompt_template
+        profile,
+        model,
+        run,
+        heldout,
+        samples,
+        trajectory_guidance,
+        reproject,
+        guidance_interval,
+        prompt_template,
+        reproject_walls,
     )
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
@@ -364,6 +380,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "default generate's, 0.3, as the model card's figures; 0 = off)",
     )
     b.add_argument(
+        "--reproject-walls",
+        type=float,
+        metavar="M",
+        help="the reprojection's corridor for every sample, m (drivewm generate --reproject-walls; default generate's)",
+    )
+    b.add_argument(
         "--guidance-interval",
         type=_interval_text,
         metavar="LO,HI",
@@ -388,6 +410,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.reproject,
             args.guidance_interval,
             args.prompt_template,
+            args.reproject_walls,
         )
     )
     m = wsub.add_parser(

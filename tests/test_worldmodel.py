@@ -77,6 +77,9 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     assert all(parser.parse_args(a).prompt_template is None for n, a in mine if n.startswith("generate-"))
     given = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, prompt_template=False) if n[:9] == "generate-"]
     assert all(parser.parse_args(a).prompt_template is False for a in given) and len(given) == len(p.benchmarks)
+    walled = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject_walls=25) if n[:9] == "generate-"]
+    assert all(parser.parse_args(a).reproject_walls == 25.0 for a in walled) and len(walled) == len(p.benchmarks)
+    assert all(parser.parse_args(a).reproject_walls == 0.0 for n, a in mine if n.startswith("generate-"))  # generate's
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):

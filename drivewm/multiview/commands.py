@@ -103,6 +103,15 @@ def add_reproject_arguments(
     parser.add_argument(
         "--reproject-steps", type=at_least_one, default=10, help="sampler steps of the refinement (default 10)"
     )
+    parser.add_argument(
+        "--reproject-walls",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="warp what stands beside the road as vertical walls M metres left and right of the first frame's "
+        "ego instead of at infinity, so it passes by with parallax (default 0: road and infinity only; "
+        "docs/quality-vs-compute.md, 'The flat-world warp stands still')",
+    )
 
 
 def posttrain_command(args: argparse.Namespace) -> int:
@@ -138,7 +147,7 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.seed,
         args.prompt,
         args.speed,
-        Reprojection(args.reproject, args.reproject_steps),  # None: the default, filled in by RolloutOptions
+        Reprojection(args.reproject, args.reproject_steps, args.reproject_walls),  # None: filled in by RolloutOptions
         args.guidance_interval,
     )
     if args.model is None:

@@ -157,7 +157,7 @@ def generate_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.commands import generate_options
 
     options = generate_options(args)
-    reprojection = Reprojection(args.reproject, args.reproject_steps)  # None: generate's default
+    reprojection = Reprojection(args.reproject, args.reproject_steps, args.reproject_walls)  # None: generate's default
     files = generate_multiview(
         args.model,
         options,

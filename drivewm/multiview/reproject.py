@@ -39,14 +39,22 @@ from drivewm.multiview.warp import warp_first_frame, warp_grid
 
 
 def reproject_first_frame(
-    videos: np.ndarray, rig: Rig, waypoints: np.ndarray, dt_s: float, fps: float, max_ground_m: float = 100.0
+    videos: np.ndarray,
+    rig: Rig,
+    waypoints: np.ndarray,
+    dt_s: float,
+    fps: float,
+    max_ground_m: float = 100.0,
+    walls_m: float = 0.0,
 ) -> tuple[np.ndarray, float]:
     """uint8 (V, T, H, W, 3) views of ``rig`` -> the same shape: frame 0 of every view rendered at
     every frame's ego pose along ``waypoints`` (W, 3) m spaced ``dt_s`` (first at ``dt_s``), frames
-    at ``fps``; pixels no view's first frame sees keep the input's own. Also the fraction rendered."""
+    at ``fps``; pixels no view's first frame sees keep the input's own. Also the fraction rendered.
+    ``walls_m``: the corridor of :func:`drivewm.multiview.warp.warp_grid` (0: road and infinity only)."""
     v, t, h, w, _ = videos.shape
     poses = poses_from_waypoints(np.asarray(waypoints, dtype=np.float64), t, dt_s, fps)  # (T, 4, 4)
-    grid, valid = warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), max_ground_m)
+    rel = np.einsum("ij,tjk->tik", invert_T(poses[0]), poses)
+    grid, valid = warp_grid(rig, (h, w), rel, max_ground_m, walls_m)
     frames = rearrange(torch.from_numpy(videos).float(), "v t h w c -> v c t h w")
     warped = warp_first_frame(frames, grid, valid, v)[:, :3]  # (V, 3, T, H, W), zero where not valid
     keep = valid[:, None].float()
@@ -73,10 +81,16 @@ class Reprojection:
     docs/quality-vs-compute.md, "Reprojected refinement"."""
     steps: int = 10
     """Sampler steps of the refinement (the Karras schedule from ``sigma`` down to 0)."""
+    walls_m: float = 0.0
+    """Corridor of the warp (``--reproject-walls``; drivewm.multiview.warp.warp_grid ``walls_m``):
+    what stands beside the road is placed on vertical planes this far (m) left and right of the
+    first ego frame instead of at infinity, so it passes by with parallax. 0 = road and infinity
+    only. Measured: docs/quality-vs-compute.md, "The flat-world warp stands still"."""
 
     def __post_init__(self) -> None:
         if self.sigma is not None:
             finite_at_least("reprojection", 0, **{"--reproject": self.sigma})
+        finite_at_least("reprojection", 0, **{"--reproject-walls": self.walls_m})
         if self.steps < 1:
             raise DrivewmError(f"reprojection: --reproject-steps must be >= 1, got {self.steps}")
 
@@ -89,7 +103,8 @@ class Reprojection:
 
     def record(self) -> dict:
         """What a generated clip's metadata says of it."""
-        return {"reproject_sigma": self.sigma, "reproject_steps": self.steps if self.sigma else 0}
+        record = {"reproject_sigma": self.sigma, "reproject_steps": self.steps if self.sigma else 0}
+        return record | ({"reproject_walls_m": self.walls_m} if self.sigma and self.walls_m else {})
 
 
 def refine_reprojected(
@@ -110,7 +125,9 @@ def refine_reprojected(
     sampler and trajectory_guidance, as the first pass used them; clips at ``fps`` (default the model's)."""
     fps = fps or model.latent.fps
     mv = model.cfg.multiview
-    warped, _ = reproject_first_frame(videos, rig, waypoints, mv.trajectory_dt_s, fps, mv.warp_ground_m)
+    warped, _ = reproject_first_frame(
+        videos, rig, waypoints, mv.trajectory_dt_s, fps, mv.warp_ground_m, reprojection.walls_m
+    )
     z = encode_views(tokenizer, warped, videos.shape[2:4], model.device)[None]  # (1, V, c, t, h, w)
     return model.sample_latents(
         rig,
