@@ -8,7 +8,8 @@ front camera's yaw is read by the eval's dense-flow reader (left positive). The 
 the benchmark was run: the SIGMA whose samples come closest to the asked turn (median absolute
 error against the trajectory's own heading change) is the one documented. With ``--out DIR`` each
 SIGMA's samples are written to ``DIR/sigma_S`` for ``drivewm eval`` (adherence and geometry on the
-same validation prompts); a SIGMA whose samples stop reading the asked weather or time of day there
+same validation prompts), with the first pass (``DIR/first``) and the warp through the tokenizer
+alone (``DIR/warp_coded``); a SIGMA whose samples stop reading the asked weather or time of day there
 is not taken, however close its turns.
 
     python studies/reproject_sigma.py MODEL_DIR [--sigmas 0.5,0.75,1,1.5] [--steps 20] [--prompt-template] [--out DIR]
@@ -54,6 +55,7 @@ def main() -> None:
     parser.add_argument(
         "--prompt-template", action="store_true", help="prompts in the training captions' template (generate's default)"
     )
+    parser.add_argument("--walls", type=float, default=0.0, help="corridor of the warp, m (--reproject-walls)")
     parser.add_argument("--out", type=Path, help="write each SIGMA's samples to OUT/sigma_S for `drivewm eval`")
     args = parser.parse_args()
     sigmas = [float(s) for s in args.sigmas.split(",")]
@@ -63,7 +65,7 @@ def main() -> None:
     mv, rig, fps = model.cfg.multiview, model.training_rig, model.latent.fps
     sampling = {"guidance": args.guidance, "sampler": "heun", "trajectory_guidance": 1.0}
     errors = {s: [] for s in sigmas}
-    written = {s: [] for s in sigmas}
+    written = {s: [] for s in [*sigmas, "first", "warp_coded"]}
 
     def yaw(videos: np.ndarray, wp: np.ndarray) -> float:
         return front_yaw(GeneratedSample(videos, rig, "", [], wp, mv.trajectory_dt_s, {}))
@@ -77,16 +79,21 @@ def main() -> None:
         z = model.sample_latents(rig, [caps], wp[None], [seed], args.steps, **sampling)[0]
         first = decode_views(tokenizer, z)
         asked = np.degrees(yaw_of(poses_from_waypoints(wp, first.shape[1], mv.trajectory_dt_s, fps)[-1]))
-        warped, _ = reproject_first_frame(first, rig, wp, mv.trajectory_dt_s, fps, mv.warp_ground_m)
+        warped, _ = reproject_first_frame(first, rig, wp, mv.trajectory_dt_s, fps, mv.warp_ground_m, args.walls)
         coded = decode_views(tokenizer, encode_views(tokenizer, warped, first.shape[2:4]))
         row = f"{turn:5s} {seed}: asked {asked:+.1f}, first pass {yaw(first, wp):+.1f}, warp {yaw(warped, wp):+.1f}"
         row += f", coded {yaw(coded, wp):+.1f}"
+        extra = {"prompt": prompt, "seed": seed, "trajectory": turn}
+        written["first"].append(GeneratedSample(first, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
+        written["warp_coded"].append(GeneratedSample(coded, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         for s in sigmas:
-            refined = refine_reprojected(model, tokenizer, rig, caps, wp, seed, first, Reprojection(s), sampling)
+            refined = refine_reprojected(
+                model, tokenizer, rig, caps, wp, seed, first, Reprojection(s, walls_m=args.walls), sampling
+            )
             videos = decode_views(tokenizer, refined)
             read = yaw(videos, wp)
             errors[s].append(abs(read - asked))
-            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, **Reprojection(s).record()}
+            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, **Reprojection(s, walls_m=args.walls).record()}
             written[s].append(GeneratedSample(videos, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
             row += f"; sigma {s:g} {read:+.1f}"
         print(row, flush=True)
@@ -96,7 +103,9 @@ def main() -> None:
     if args.out:
         for s in sigmas:
             write_samples(args.out / f"sigma_{s:g}", written[s], fps)
-        print(f"samples in {args.out}/sigma_*: score each with `drivewm eval {args.out}/sigma_S --out EVAL`")
+        for name in ("first", "warp_coded"):  # the first pass, and the warp through the tokenizer alone
+            write_samples(args.out / name, written[name], fps)
+        print(f"samples in {args.out}/sigma_*, first, warp_coded: score each with `drivewm eval DIR --out EVAL`")
 
 
 if __name__ == "__main__":
