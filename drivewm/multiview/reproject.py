@@ -8,7 +8,8 @@ moves the trajectory out of the network and into the sample's starting point:
 1. the first frame of every camera (generated, or a real clip's in Video2World) is warped into
    every later frame's cameras along the trajectory (drivewm.multiview.warp: the road plane and
    the plane at infinity, content fetched from whichever camera saw it, so a left turn pulls the
-   front-left camera's pixels into the front camera); pixels no camera saw keep the first pass's;
+   front-left camera's pixels into the front camera; with ``walls_m``, ``--reproject-walls``, a
+   corridor of vertical planes beside the road too); pixels no camera saw keep the first pass's;
 2. the warped clip is encoded by the tokenizer (a pixel warp keeps the latents in the tokenizer's
    distribution, where a bilinear warp of the 20 x 12 latents decoded to stripes);
 3. its later latent frames are noised to ``sigma`` and denoised by the model under the same prompt
