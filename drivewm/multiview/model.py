@@ -336,7 +336,9 @@ def clip_warp_grids(
     for wp in np.asarray(trajectories):
         poses = poses_from_waypoints(wp, t, mv.trajectory_dt_s, fps / mv.temporal_compression)
         grids.append(
-            warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m)
+            warp_grid(
+                rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m, mv.warp_walls_m
+            )
         )  # frame 0 is the ego frame itself
     return torch.cat([g for g, _ in grids]), torch.cat([m for _, m in grids])
 

@@ -146,6 +146,30 @@ def test_warp_with_walls_moves_the_roadside_by_its_parallax():
         assert errors[0.0, t].mean() > 2.0 * errors[12.0, t].mean(), (t, errors[0.0, t].mean(), errors[12.0, t].mean())
 
 
+def test_a_warp_conditioned_model_renders_with_its_corridor(mv_parent_dir):
+    """``multiview.warp_walls_m`` reaches the training warp (``clip_warp_grids``, behind
+    ``warp_condition`` and ``warped_noise``): the first latent frame maps onto itself either way, and
+    later frames fetch the roadside from elsewhere than with the flat world."""
+    from drivewm.diffusion.text2world import Text2World
+    from drivewm.multiview.init import from_text2world
+    from drivewm.multiview.model import clip_warp_grids
+    from drivewm.multiview.posttrain import posttrain_config
+    from drivewm.multiview.trajectories import resolve_trajectory
+
+    grids = {}
+    for walls in (0.0, 25.0):
+        cfg = posttrain_config("debug", [f"multiview.warp_walls_m={walls}"])
+        model = from_text2world(Text2World.from_pretrained(mv_parent_dir), cfg.multiview, cfg.cond_frames)
+        mv = model.cfg.multiview
+        assert mv.warp_walls_m == walls
+        wp = resolve_trajectory("straight", mv.trajectory_waypoints, mv.trajectory_dt_s, 15.0)
+        grids[walls] = clip_warp_grids(model, load_rig("front3"), wp[None], 10.0)
+    flat, walled = grids[0.0][0], grids[25.0][0]
+    torch.testing.assert_close(walled[:, 0], flat[:, 0])  # frame 0 is the identity warp either way
+    moved = (walled[:, 1:] - flat[:, 1:]).abs().amax(-1) > 1e-3
+    assert moved.any() and not moved.all()  # the roadside moves, the road and sky do not
+
+
 def test_warp_reaches_the_model_only_with_its_trajectory():
     """The warp feeds the tokens through a zero-initialised projection; a dropped trajectory drops it."""
     import dataclasses
