@@ -191,8 +191,8 @@ def benchmark_stages(
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
     ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
     captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
-    default), the held-out clips ``heldout`` and the
-    generated ones scored into ``RUN/eval``, and the must-hold figures."""
+    default), the held-out clips ``heldout`` and the generated ones scored into ``RUN/eval``, and the
+    must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
     stages = []

@@ -87,13 +87,12 @@ def main() -> None:
         written["first"].append(GeneratedSample(first, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         written["warp_coded"].append(GeneratedSample(coded, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         for s in sigmas:
-            refined = refine_reprojected(
-                model, tokenizer, rig, caps, wp, seed, first, Reprojection(s, walls_m=args.walls), sampling
-            )
+            reprojection = Reprojection(s, walls_m=args.walls)
+            refined = refine_reprojected(model, tokenizer, rig, caps, wp, seed, first, reprojection, sampling)
             videos = decode_views(tokenizer, refined)
             read = yaw(videos, wp)
             errors[s].append(abs(read - asked))
-            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, **Reprojection(s, walls_m=args.walls).record()}
+            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, **reprojection.record()}
             written[s].append(GeneratedSample(videos, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
             row += f"; sigma {s:g} {read:+.1f}"
         print(row, flush=True)

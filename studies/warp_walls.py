@@ -21,27 +21,11 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-import torch
-from einops import rearrange
 
 from drivewm.clips.shards import spread
 from drivewm.eval.inputs import load_items
-from drivewm.geometry import invert_T
-from drivewm.multiview.trajectories import poses_from_waypoints
-from drivewm.multiview.warp import warp_first_frame, warp_grid
+from drivewm.multiview.reproject import reproject_first_frame_mask
 from drivewm.multiview.writer import GeneratedSample, write_samples
-
-
-def warped_clip(videos: np.ndarray, rig, waypoints: np.ndarray, dt_s: float, fps: float, walls_m: float):
-    """uint8 (V, T, H, W, 3) -> the first frames warped along ``waypoints`` (uint8, unrendered pixels
-    the clip's own) and the rendered mask (V, T, H, W)."""
-    v, t, h, w, _ = videos.shape
-    poses = poses_from_waypoints(waypoints, t, dt_s, fps)
-    grid, valid = warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), 100.0, walls_m)
-    frames = rearrange(torch.from_numpy(videos).float(), "v t h w c -> v c t h w")
-    warped = warp_first_frame(frames, grid, valid, v)[:, :3]
-    out = torch.where(valid[:, None], warped, frames)
-    return rearrange(out, "v c t h w -> v t h w c").round().clamp(0, 255).byte().numpy(), valid.numpy()
 
 
 def main() -> None:
@@ -71,7 +55,7 @@ def main() -> None:
         written["real"].append(sample(videos))
         row = f"{item.key[-44:]:44s}"
         for wm in widths:
-            out, valid = warped_clip(videos, item.rig, wp, item.trajectory_dt_s, item.fps, wm)
+            out, valid = reproject_first_frame_mask(videos, item.rig, wp, item.trajectory_dt_s, item.fps, walls_m=wm)
             m = valid[:, 1:]
             mse = ((out[:, 1:].astype(np.float64) - videos[:, 1:])[m] ** 2).mean()
             psnr[wm].append(10 * np.log10(255**2 / mse))

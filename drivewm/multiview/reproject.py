@@ -52,6 +52,20 @@ def reproject_first_frame(
     every frame's ego pose along ``waypoints`` (W, 3) m spaced ``dt_s`` (first at ``dt_s``), frames
     at ``fps``; pixels no view's first frame sees keep the input's own. Also the fraction rendered.
     ``walls_m``: the corridor of :func:`drivewm.multiview.warp.warp_grid` (0: road and infinity only)."""
+    out, valid = reproject_first_frame_mask(videos, rig, waypoints, dt_s, fps, max_ground_m, walls_m)
+    return out, float(valid.mean())
+
+
+def reproject_first_frame_mask(
+    videos: np.ndarray,
+    rig: Rig,
+    waypoints: np.ndarray,
+    dt_s: float,
+    fps: float,
+    max_ground_m: float = 100.0,
+    walls_m: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reproject_first_frame` with the pixels it rendered: bool (V, T, H, W)."""
     v, t, h, w, _ = videos.shape
     poses = poses_from_waypoints(np.asarray(waypoints, dtype=np.float64), t, dt_s, fps)  # (T, 4, 4)
     rel = np.einsum("ij,tjk->tik", invert_T(poses[0]), poses)
@@ -60,7 +74,7 @@ def reproject_first_frame(
     warped = warp_first_frame(frames, grid, valid, v)[:, :3]  # (V, 3, T, H, W), zero where not valid
     keep = valid[:, None].float()
     out = warped * keep + frames * (1 - keep)
-    return rearrange(out, "v c t h w -> v t h w c").round().clamp(0, 255).byte().numpy(), float(valid.float().mean())
+    return rearrange(out, "v c t h w -> v t h w c").round().clamp(0, 255).byte().numpy(), valid.numpy()
 
 
 DEFAULT_SIGMA = 0.3
