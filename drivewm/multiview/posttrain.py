@@ -351,7 +351,7 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
 
 
 #: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
-ADDABLE = ("motion_encoder.",)
+ADDABLE = ("motion_encoder.", "warp_encoder.")
 
 
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
@@ -359,12 +359,16 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
     fresh (zero effect, so the model starts as ``init``); any other structural difference is a
     DrivewmError. A model trained with per-frame motion keeps it, with the rays it was trained with
-    (its trained motion encoder is not dropped because this run's config left the default), and one
-    trained with warped noise keeps its correlation unless this run sets another."""
+    (its trained motion encoder is not dropped because this run's config left the default), one
+    trained with warped noise keeps its correlation unless this run sets another, and one trained
+    on the reprojected first frame keeps it, with its corridor unless this run sets one."""
     if init.cfg.multiview.frame_motion:
         mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
     if init.cfg.multiview.warped_noise and not mv.warped_noise:  # what its samples' noise means
         mv = dataclasses.replace(mv, warped_noise=init.cfg.multiview.warped_noise)
+    if init.cfg.multiview.warp_condition:
+        walls = mv.warp_walls_m or init.cfg.multiview.warp_walls_m
+        mv = dataclasses.replace(mv, warp_condition=True, warp_walls_m=walls)
     model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}

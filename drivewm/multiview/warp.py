@@ -27,6 +27,7 @@ from einops import rearrange
 from torch import nn
 
 from drivewm.diffusion.dit import patchify
+from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, pixel_rays, project
 from drivewm.multiview.camera import patch_centres_px
 
@@ -49,8 +50,10 @@ def warp_grid(
     instead of staying at infinity.
     Returns ``grid`` (V, T, h, w, 2) in :func:`torch.nn.functional.grid_sample` coordinates
     (align_corners=False) over the views' first latent frames laid side by side (V*w wide, rig
-    order) and ``valid`` (V, T, h, w) bool.
+    order) and ``valid`` (V, T, h, w) bool. A corridor that some camera of the rig stands outside of
+    (at the first frame) is a DrivewmError: its walls would hide the road from that camera.
     """
+    check_corridor(rig, walls_m)
     h, w = latent_hw
     v_count = len(rig.cameras)
     grid = np.zeros((v_count, len(T_ego0_from_ego), h, w, 2))
@@ -80,6 +83,21 @@ def warp_grid(
                 found |= ok
             valid[v, t] = found.reshape(h, w)
     return torch.from_numpy(grid).float(), torch.from_numpy(valid)
+
+
+def check_corridor(rig: Rig, walls_m: float) -> None:
+    """DrivewmError unless every camera of ``rig`` stands inside the corridor of ``walls_m`` (or there
+    is none, ``walls_m`` 0)."""
+    if walls_m <= 0:
+        return
+    side = {cam.name: float(cam.T_ego_from_cam[1, 3]) for cam in rig.cameras}
+    outside = {name: y for name, y in side.items() if abs(y) >= walls_m}
+    if outside:
+        name, y = max(outside.items(), key=lambda kv: abs(kv[1]))
+        raise DrivewmError(
+            f"warp: a corridor of walls {walls_m:g} m left and right leaves camera {name} outside it "
+            f"({y:+.2f} m to the side); give a wider corridor than the rig (measured widths: 6-40 m) or 0"
+        )
 
 
 WALL_HEIGHT_M = 30.0

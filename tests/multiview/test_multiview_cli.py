@@ -63,8 +63,8 @@ def test_posttrain_writes_a_multiview_folder(trained_mv):
 def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     """--init a multi-view folder (the fleet fine-tuning path): its weights start the run, none
     re-initialised; a structurally different config is refused in one line; per-frame motion
-    conditioning and warped noise can be added (the encoder starts at zero), and a model with them
-    keeps them."""
+    conditioning, warped noise and the reprojected first frame can be added (each encoder starts at
+    zero), and a model with them keeps them."""
     root, cache = trained_mv
     args = ["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--rig", "front3"]
     assert main([*args, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
@@ -77,16 +77,20 @@ def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     bad = [*args, "--out", str(tmp_path / "bad"), "--set", "multiview.camera_width=64"]
     assert main(bad) == 2
     motion = ["--set", "multiview.frame_motion=true", "--set", "multiview.moving_camera_rays=false"]
-    motion += ["--set", "multiview.warped_noise=0.8"]
+    motion += ["--set", "multiview.warped_noise=0.8", "--set", "multiview.warp_condition=true"]
+    motion += ["--set", "multiview.warp_walls_m=25"]
     two_steps = ["--set", "train.steps=2", "--set", "sample_steps=2"]
     assert main([*args, "--out", str(tmp_path / "motion"), *two_steps, *motion]) == 0
     added = MultiView.from_pretrained(tmp_path / "motion").net.state_dict()  # a fine-tune may add per-frame motion
-    assert sorted(set(added) - set(start)) == sorted(k for k in added if k.startswith("motion_encoder."))
+    fresh = ("motion_encoder.", "warp_encoder.")
+    assert sorted(set(added) - set(start)) == sorted(k for k in added if k.startswith(fresh))
     assert float(added["motion_encoder.net.2.weight"].abs().max()) < 0.01  # fresh: zero, two steps ago
+    assert 0 < float(added["warp_encoder.proj.weight"].abs().max()) < 0.01  # fresh, and it trains
     again = ["posttrain", "--init", str(tmp_path / "motion"), "--data", str(cache), "--rig", "front3"]
     assert main([*again, "--out", str(tmp_path / "again"), *two_steps]) == 0  # no settings repeated: it keeps them
     kept = MultiView.from_pretrained(tmp_path / "again").cfg.multiview
     assert kept.frame_motion and not kept.moving_camera_rays and kept.warped_noise == 0.8
+    assert kept.warp_condition and kept.warp_walls_m == 25
 
 
 @pytest.mark.parametrize("rig,views", [("front3", 3), ("nuscenes6", 6)])

@@ -5,8 +5,10 @@ fetched across cameras."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
+from drivewm.errors import DrivewmError
 from drivewm.geometry import T_from_xyz_yaw, load_rig, pixel_rays
 from drivewm.multiview.camera import patch_centres_px
 from drivewm.multiview.warp import WALL_HEIGHT_M, ray_depths, warp_first_frame, warp_grid
@@ -124,6 +126,20 @@ def test_ray_depths_meet_the_road_or_the_nearer_wall():
     # (at x = 55 m, 11 m left) before the road (150 m).
     np.testing.assert_allclose(walled[[0, 1, 2, 5]], [11.0, 13.0, 15.0, 55.0])
     assert np.isinf(walled[[3, 4]]).all()
+
+
+def test_a_corridor_narrower_than_the_rig_is_refused():
+    """Walls between the cameras would hide the road from the outer ones: refused by name, before any
+    warping; a corridor just wider than the rig, and none at all, are fine."""
+    rig = load_rig("nuscenes6")
+    widest = max(abs(cam.T_ego_from_cam[1, 3]) for cam in rig.cameras)
+    assert widest == 0.5  # the side cameras sit half a metre off the centre line
+    poses = np.stack([np.eye(4), T_from_xyz_yaw(4.0, 0.0, 0.0, 0.0)])
+    with pytest.raises(DrivewmError, match="outside it"):
+        warp_grid(rig, HW, poses, walls_m=0.5 * widest)
+    for walls in (0.0, 1.01 * widest):
+        _, valid = warp_grid(rig, HW, poses, walls_m=walls)
+        assert valid[:, 1].float().mean() > 0.5
 
 
 def test_warp_with_walls_moves_the_roadside_by_its_parallax():
