@@ -73,6 +73,12 @@ class PosttrainConfig:
     """The model's ``dit.rope_spatial_scale`` from this run on (None: the init's). 0.5 takes a model
     trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated
     (docs/quality-vs-compute.md, "The shipped multi-view model at 320x192")."""
+    warp_lr_scale: float = 1.0
+    """Learning-rate multiplier of the reprojected first frame's projection (``multiview.warp_condition``,
+    drivewm.multiview.warp.WarpEncoder). It starts at zero, and AdamW moves a weight by about the
+    learning rate a step, so at the whole model's rate it stays near zero for hundreds of steps
+    (docs/quality-vs-compute.md, "A warp-conditioned fine-tune on the CPU"); ControlNet-style
+    branches are trained faster for the same reason."""
     cache_clips: int = 2048
     """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
@@ -82,7 +88,7 @@ class PosttrainConfig:
     def validate(self) -> None:
         at_least(
             self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
-            "turn_repeat_min_deg", "cache_clips",
+            "turn_repeat_min_deg", "cache_clips", "warp_lr_scale",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
         if self.rope_spatial_scale is not None:
@@ -182,6 +188,9 @@ class MultiViewTask(BundleTask):
 
     def num_samples(self) -> int:
         return len(self.epoch_order())
+
+    def lr_scales(self) -> dict[str, float]:
+        return {"warp_encoder.": self.cfg.warp_lr_scale} if self.bundle.net.warp_encoder is not None else {}
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()

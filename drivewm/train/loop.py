@@ -73,6 +73,11 @@ class TrainTask:
         """Write a PNG of samples from the EMA weights."""
         raise NotImplementedError
 
+    def lr_scales(self) -> dict[str, float]:
+        """Learning-rate multipliers by parameter-name prefix (names in :attr:`model`, the first
+        matching prefix wins); every other parameter trains at the schedule's rate."""
+        return {}
+
     def after_step(self, step: int) -> dict[str, float]:
         """Called after every optimizer step of the model (``step`` = steps done); returns terms to log."""
         return {}
@@ -158,9 +163,24 @@ def _setup(task: TrainTask, cfg: TrainConfig) -> _Run:
     forward = parallelize(model, task.blocks(), info, cfg.activation_checkpointing, cfg.compile, cfg.parallel)
     params = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(
-        params, lr=cfg.lr, betas=tuple(cfg.betas), weight_decay=cfg.weight_decay, **{adamw_impl(params): True}
+        param_groups(model, task.lr_scales()),
+        lr=cfg.lr,
+        betas=tuple(cfg.betas),
+        weight_decay=cfg.weight_decay,
+        **{adamw_impl(params): True},
     )
     return _Run(info, model, forward, optimizer, EMA(model, cfg.ema_decay))
+
+
+def param_groups(model: nn.Module, scales: dict[str, float]) -> list[dict]:
+    """AdamW parameter groups of ``model``'s trainable parameters, one per learning-rate multiplier
+    (``lr_scale``, applied to the schedule's rate every step; :meth:`TrainTask.lr_scales`)."""
+    groups: dict[float, list] = {}
+    for name, p in model.named_parameters():
+        if p.requires_grad:
+            scale = next((v for prefix, v in scales.items() if name.startswith(prefix)), 1.0)
+            groups.setdefault(float(scale), []).append(p)
+    return [{"params": params, "lr_scale": scale} for scale, params in groups.items()]
 
 
 def _rank0(info: DistInfo, value: int) -> int:
@@ -256,7 +276,7 @@ def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, fl
     seeds = [mix_seed(cfg.seed, step, j) for j in range(cfg.batch_size)]
     local = slice(info.rank * cfg.batch_size // info.world_size, (info.rank + 1) * cfg.batch_size // info.world_size)
     for group in run.optimizer.param_groups:
-        group["lr"] = learning_rate(cfg, step)
+        group["lr"] = learning_rate(cfg, step) * group.get("lr_scale", 1.0)  # a run saved before scales: 1
     use_bf16 = cfg.precision == "bf16" or (cfg.precision == "auto" and info.device.type == "cuda")
     with torch.autocast(info.device.type, dtype=torch.bfloat16, enabled=use_bf16):
         loss = task.loss(run.forward, indices[local], seeds[local], info.device)
