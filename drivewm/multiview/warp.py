@@ -90,12 +90,11 @@ def check_corridor(rig: Rig, walls_m: float) -> None:
     is none, ``walls_m`` 0)."""
     if walls_m <= 0:
         return
-    side = {cam.name: float(cam.T_ego_from_cam[1, 3]) for cam in rig.cameras}
-    outside = {name: y for name, y in side.items() if abs(y) >= walls_m}
-    if outside:
-        name, y = max(outside.items(), key=lambda kv: abs(kv[1]))
+    widest = max(rig.cameras, key=lambda cam: abs(cam.T_ego_from_cam[1, 3]))
+    y = float(widest.T_ego_from_cam[1, 3])
+    if abs(y) >= walls_m:
         raise DrivewmError(
-            f"warp: a corridor of walls {walls_m:g} m left and right leaves camera {name} outside it "
+            f"warp: a corridor of walls {walls_m:g} m left and right leaves camera {widest.name} outside it "
             f"({y:+.2f} m to the side); give a wider corridor than the rig (measured widths: 6-40 m) or 0"
         )
 
