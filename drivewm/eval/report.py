@@ -37,6 +37,7 @@ TABLE_ROWS = (
     ("cse_matches", "count", "distinct verified matches per CSE camera pair (all frames)"),
     ("pose_success", "rate", "clips whose frames all register in COLMAP (higher is better)"),
     ("pose_success_path", "rate", "clips that register and travel their own ego path (m, within 2x; higher is better)"),
+    ("path_ratio_median", "ratio", "median over clips: recovered ego path length over the clip's own (1: on it)"),
     ("registered_fraction", "rate", "frames registered by COLMAP"),
     ("pose_auc", "rate", "per-image pose accuracy against the reference, area up to 0.25 m / 2 deg (higher is better)"),
     ("pose_error_m", "m", "median per-image position error after aligning all camera centres"),

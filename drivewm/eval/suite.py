@@ -70,6 +70,9 @@ AGGREGATE_KEYS = (
     "adherence_weather",
     "adherence_time_of_day",
 )
+#: Per-clip fields aggregated as a median (``KEY_median``): a ratio where one clip's exploded path (a
+#: reconstruction 5,000x its drive) would carry a mean.
+MEDIAN_KEYS = ("path_ratio",)
 
 
 @dataclasses.dataclass
@@ -343,15 +346,17 @@ def _adherence(item, videos, cfg, matcher, metrics, artifacts) -> None:
 
 
 def aggregate(results: list[ClipResult]) -> dict:
-    """Top-level means over clips of finite values; ``nan_clips`` counts clips left out per key."""
+    """Top-level means over clips of finite values (medians for MEDIAN_KEYS, as ``KEY_median``);
+    ``nan_clips`` counts clips left out per key."""
     out: dict = {"num_clips": len(results), "num_failed_clips": sum("error" in r.metrics for r in results)}
     nan_clips = {}
-    for key in AGGREGATE_KEYS:
+    reduced = [(k, k, np.mean) for k in AGGREGATE_KEYS] + [(k, f"{k}_median", np.median) for k in MEDIAN_KEYS]
+    for key, name, reduce in reduced:
         values = [r.metrics[key] for r in results if key in r.metrics]
         finite = [v for v in values if v is not None and np.isfinite(v)]
         if values:
-            out[key] = float(np.mean(finite)) if finite else math.nan
-            nan_clips[key] = len(values) - len(finite)
+            out[name] = float(reduce(finite)) if finite else math.nan
+            nan_clips[name] = len(values) - len(finite)
     out["nan_clips"] = nan_clips
     out["seconds_per_clip"] = _mean_seconds(results)
     return out

@@ -50,6 +50,16 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
     assert agg["tse"] == 4.0 and math.isnan(agg["tse_counted"]) and agg["nan_clips"]["tse_counted"] == 1
 
 
+def test_path_ratio_is_aggregated_as_a_median_so_one_exploded_path_does_not_carry_it():
+    from drivewm.eval.suite import ClipResult
+
+    ratios = [1.0, 0.9, 5010.0, math.nan]  # on the path, on it, exploded, not registered
+    agg = aggregate([ClipResult(str(i), {"path_ratio": r}, {}) for i, r in enumerate(ratios)])
+    assert agg["path_ratio_median"] == 1.0 and agg["nan_clips"]["path_ratio_median"] == 1
+    assert "path_ratio" not in agg  # no mean: 1,670 here
+    assert "path_ratio_median" not in aggregate([ClipResult("a", {"tse": 1.0}, {})])  # no clip has one
+
+
 @pytest.mark.slow
 def test_cli_on_shards_writes_json_table_plots_and_recording(shard_dir, tmp_path, capsys):
     out = tmp_path / "eval"
