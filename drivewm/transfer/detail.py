@@ -56,22 +56,26 @@ def restore_detail(
     max_gain: float = 1.5,
     window: int = WINDOW_PX,
     band_px: float = 0.0,
+    min_gain: float = 0.0,
 ) -> np.ndarray:
     """``transferred`` plus the detail the tokenizer dropped from ``source``, scaled by the contrast
     ratio over a ``window`` px box; all uint8 (V, T, H, W, 3) of one size, ``source_coded`` the source
     decoded from its latents (at a larger size than the model's: upsampled, drivewm.transfer.resolution).
     ``band_px`` > 0: the source's structure finer than a Gaussian of that sigma (px) replaces the
-    transfer's (the gain still from the unblurred contrast)."""
+    transfer's (the gain still from the unblurred contrast). ``min_gain``: a floor on the gain (0, the
+    default: none; floors up to 0.4 kept no more camera pairs, docs/transfer.md "Detail band")."""
     if not transferred.shape == source.shape == source_coded.shape:
         raise ValueError(f"shapes differ: {transferred.shape}, {source.shape}, {source_coded.shape}")
     if not (math.isfinite(band_px) and band_px >= 0):
         raise ValueError(f"band_px must be a finite number >= 0, got {band_px}")
+    if not 0 <= min_gain <= max_gain:
+        raise ValueError(f"min_gain must lie in [0, max_gain={max_gain}], got {min_gain}")
     out = np.empty_like(transferred)
     for v, t in np.ndindex(*transferred.shape[:2]):
         x, s, r = (a[v, t].astype(np.float32) for a in (transferred, source, source_coded))
         gain = (local_std(x.mean(-1), window) + FLOOR) / (local_std(r.mean(-1), window) + FLOOR)
         if band_px > 0:
             x, r = (cv2.GaussianBlur(a, (0, 0), band_px) for a in (x, r))
-        y = x + np.clip(gain, 0.0, max_gain)[..., None] * (s - r)
+        y = x + np.clip(gain, min_gain, max_gain)[..., None] * (s - r)
         out[v, t] = np.clip(np.rint(y), 0, 255).astype(np.uint8)
     return out

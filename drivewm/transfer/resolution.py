@@ -58,6 +58,7 @@ def to_output_size(
     source_coded: np.ndarray | None,
     band_px: float = BAND_PX,
     window_px: int = WINDOW_PX,
+    min_gain: float = 0.0,
 ) -> np.ndarray:
     """The decoded transfer (at the model's size) upsampled to ``source``'s size, plus the source detail
     the round trip lost, its gain computed at that size; ``source_coded`` is the source decoded from its
@@ -71,4 +72,6 @@ def to_output_size(
         return out
     coded = resize_views(source_coded, size_hw, UPSAMPLE)
     band = band_px * upsampling(size_hw, model_hw)
-    return restore_detail(out, source, coded, window=detail_window_px(size_hw, model_hw, window_px), band_px=band)
+    return restore_detail(
+        out, source, coded, window=detail_window_px(size_hw, model_hw, window_px), band_px=band, min_gain=min_gain
+    )

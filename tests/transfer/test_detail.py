@@ -57,6 +57,9 @@ def test_detail_follows_the_contrast_the_target_keeps():
     flat = np.full_like(coded, 200)  # dense fog: no contrast left, so (almost) no detail comes back
     fogged = restore_detail(flat, src, coded).astype(np.float32)
     assert np.abs(fogged - 200).mean() < 0.2 * np.abs(detail_src).mean()
+    # a floor on the gain gives at least that share of the source's detail back, even in dense fog
+    floored = restore_detail(flat, src, coded, min_gain=0.4).astype(np.float32) - 200
+    assert 0.3 < floored.std() / detail_src.std() < 0.5
 
 
 def test_restored_detail_puts_sift_matches_back_where_they_were():
@@ -81,3 +84,5 @@ def test_shapes_must_agree():
         restore_detail(src[:, :1], src, src)
     with pytest.raises(ValueError, match="band_px must be a finite number >= 0"):
         restore_detail(src, src, src, band_px=float("nan"))
+    with pytest.raises(ValueError, match="min_gain must lie in"):
+        restore_detail(src, src, src, min_gain=2.0)
