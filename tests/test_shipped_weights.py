@@ -286,3 +286,20 @@ def test_a_config_field_naming_a_shipped_model_loads_it():
     assert all(np.array_equal(state[k].numpy(), direct[k].numpy()) for k in state)
     with pytest.raises(DrivewmError, match="no shipped model 'tokeniser'"):
         load_model_folder("shipped:tokeniser", "drivewm-tokenizer")
+
+
+def test_the_bundles_named_shipped_find_their_tokenizer_and_parent_from_any_directory(tmp_path, monkeypatch):
+    """``Transfer.from_pretrained("shipped:transfer")`` (the Python API, not only the CLI, which resolves
+    the name first): the shipped configs point at ``../tokenizer`` and ``../text2world``, relative to the
+    installed folder, not to the working directory (they were resolved against "shipped:transfer")."""
+    from drivewm.diffusion.text2world import Text2World
+    from drivewm.multiview.model import MultiView
+    from drivewm.transfer.model import Transfer
+
+    monkeypatch.chdir(tmp_path)
+    tokenizer = shipped_model("tokenizer").resolve()
+    transfer = Transfer.from_pretrained("shipped:transfer")
+    assert Path(transfer.latent.tokenizer) == tokenizer
+    assert Path(transfer.parent) == shipped_model("text2world").resolve()
+    for bundle, kind in ((Text2World, "text2world"), (MultiView, "multiview")):
+        assert Path(bundle.from_pretrained(f"shipped:{kind}").latent.tokenizer) == tokenizer, kind

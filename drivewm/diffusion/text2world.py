@@ -12,6 +12,7 @@ from pathlib import Path
 
 import torch
 
+from drivewm.choices import resolve_model_folder
 from drivewm.config import frame_rate, from_dict, require, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
@@ -66,7 +67,9 @@ class LatentInfo:
 
 def read_latent_info(info: dict, folder: str | Path, dit: DiTConfig) -> LatentInfo:
     """The ``latent`` entry of a model folder's config.json, checked to fit the folder's ``dit``; a relative
-    tokenizer path (shipped weights point at ``../tokenizer``) is resolved against the model folder."""
+    tokenizer path (shipped weights point at ``../tokenizer``) is resolved against the model folder
+    (``shipped:KIND`` names the installed folder, drivewm.choices)."""
+    folder = resolve_model_folder(folder)
     where = f"{Path(folder) / 'config.json'} latent"
     latent = from_dict(LatentInfo, info.get("latent", {}), where)
     c, t, h, w = latent.latent_shape

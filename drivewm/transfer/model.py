@@ -17,6 +17,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from drivewm.choices import resolve_model_folder
 from drivewm.config import from_dict, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
@@ -115,12 +116,13 @@ class Transfer:
 
     @classmethod
     def from_pretrained(cls, path: str | Path) -> Transfer:
+        path = resolve_model_folder(path)  # shipped:transfer: its parent is relative to the installed folder
         info, state = load_model_folder(path, MODEL_TYPE)
-        where = f"{Path(path) / 'config.json'}"
+        where = f"{path / 'config.json'}"
         config = from_dict(TransferModelConfig, upgrade_saved_config(info["config"]), where)
         parent = str(info.get("parent", ""))
         if parent and not Path(parent).is_absolute():  # shipped weights point at ../text2world
-            parent = str((Path(path) / parent).resolve())
+            parent = str((path / parent).resolve())
         model = cls(config, read_latent_info(info, path, config.dit), parent)
         load_weights(model.net, state, path)
         return model
