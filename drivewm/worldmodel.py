@@ -184,6 +184,7 @@ def benchmark_stages(
     guidance_interval: str | None = None,
     prompt_template: bool | None = None,
     reproject_walls: float | None = None,
+    reproject_reshade: bool = False,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
@@ -191,8 +192,8 @@ def benchmark_stages(
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
     ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
     captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
-    default), the held-out clips ``heldout`` and the generated ones scored into ``RUN/eval``, and the
-    must-hold figures."""
+    default; ``reproject_reshade`` generate's --reproject-reshade), the held-out clips ``heldout`` and
+    the generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
     stages = []
@@ -209,6 +210,8 @@ def benchmark_stages(
             argv += ["--prompt-template" if prompt_template else "--no-prompt-template"]
         if reproject_walls is not None:
             argv += ["--reproject-walls", f"{reproject_walls:g}"]
+        if reproject_reshade:
+            argv += ["--reproject-reshade"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -233,6 +236,7 @@ def benchmark_worldmodel(
     guidance_interval: str | None = None,
     prompt_template: bool | None = None,
     reproject_walls: float | None = None,
+    reproject_reshade: bool = False,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -275,6 +279,7 @@ def benchmark_worldmodel(
         guidance_interval,
         prompt_template,
         reproject_walls,
+        reproject_reshade,
     )
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
@@ -386,6 +391,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the reprojection's corridor for every sample, m (drivewm generate --reproject-walls; default generate's)",
     )
     b.add_argument(
+        "--reproject-reshade",
+        action="store_true",
+        help="every sample's warped road reshaded to the first frame's look at its own distance "
+        "(drivewm generate --reproject-reshade)",
+    )
+    b.add_argument(
         "--guidance-interval",
         type=_interval_text,
         metavar="LO,HI",
@@ -411,6 +422,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.guidance_interval,
             args.prompt_template,
             args.reproject_walls,
+            args.reproject_reshade,
         )
     )
     m = wsub.add_parser(

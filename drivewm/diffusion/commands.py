@@ -129,7 +129,7 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.errors import DrivewmError
 
     multiview_only = args.rig or args.trajectory or args.condition_clip or args.reproject or args.reproject_walls
-    multiview_only = multiview_only or args.prompt_template
+    multiview_only = multiview_only or args.prompt_template or args.reproject_reshade
     if multiview_only or args.trajectory_guidance != 1.0:  # None (not given) and off pass alike
         raise DrivewmError(
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"

@@ -112,6 +112,12 @@ def add_reproject_arguments(
         "ego instead of at infinity, so it passes by with parallax (default 0: road and infinity only; "
         "docs/quality-vs-compute.md, 'The flat-world warp stands still')",
     )
+    parser.add_argument(
+        "--reproject-reshade",
+        action="store_true",
+        help="give the warped road of every frame the first frame's road colour at its own distance, so fog's "
+        "airlight is not pulled toward the camera (docs/quality-vs-compute.md, 'Fog reads snow at --reproject 0.1')",
+    )
 
 
 def posttrain_command(args: argparse.Namespace) -> int:
@@ -147,7 +153,8 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.seed,
         args.prompt,
         args.speed,
-        Reprojection(args.reproject, args.reproject_steps, args.reproject_walls),  # None: filled in by RolloutOptions
+        # sigma None: filled in by RolloutOptions
+        Reprojection(args.reproject, args.reproject_steps, args.reproject_walls, args.reproject_reshade),
         args.guidance_interval,
     )
     if args.model is None:

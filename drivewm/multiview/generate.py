@@ -157,7 +157,8 @@ def generate_command(args: argparse.Namespace) -> int:
     from drivewm.diffusion.commands import generate_options
 
     options = generate_options(args)
-    reprojection = Reprojection(args.reproject, args.reproject_steps, args.reproject_walls)  # None: generate's default
+    # sigma None: generate's default
+    reprojection = Reprojection(args.reproject, args.reproject_steps, args.reproject_walls, args.reproject_reshade)
     files = generate_multiview(
         args.model,
         options,

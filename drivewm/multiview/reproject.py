@@ -35,6 +35,7 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, invert_T
 from drivewm.multiview.coding import encode_views
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.reshade import reshade as reshade_road
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.warp import warp_first_frame, warp_grid
 
@@ -47,12 +48,14 @@ def reproject_first_frame(
     fps: float,
     max_ground_m: float = 100.0,
     walls_m: float = 0.0,
+    reshade: bool = False,
 ) -> tuple[np.ndarray, float]:
     """uint8 (V, T, H, W, 3) views of ``rig`` -> the same shape: frame 0 of every view rendered at
     every frame's ego pose along ``waypoints`` (W, 3) m spaced ``dt_s`` (first at ``dt_s``), frames
     at ``fps``; pixels no view's first frame sees keep the input's own. Also the fraction rendered.
-    ``walls_m``: the corridor of :func:`drivewm.multiview.warp.warp_grid` (0: road and infinity only)."""
-    out, valid = reproject_first_frame_mask(videos, rig, waypoints, dt_s, fps, max_ground_m, walls_m)
+    ``walls_m``: the corridor of :func:`drivewm.multiview.warp.warp_grid` (0: road and infinity only);
+    ``reshade``: the road given the first frame's look at its own distance (drivewm.multiview.reshade)."""
+    out, valid = reproject_first_frame_mask(videos, rig, waypoints, dt_s, fps, max_ground_m, walls_m, reshade)
     return out, float(valid.mean())
 
 
@@ -64,6 +67,7 @@ def reproject_first_frame_mask(
     fps: float,
     max_ground_m: float = 100.0,
     walls_m: float = 0.0,
+    reshade: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`reproject_first_frame` with the pixels it rendered: bool (V, T, H, W)."""
     v, t, h, w, _ = videos.shape
@@ -74,7 +78,10 @@ def reproject_first_frame_mask(
     warped = warp_first_frame(frames, grid, valid, v)[:, :3]  # (V, 3, T, H, W), zero where not valid
     keep = valid[:, None].float()
     out = warped * keep + frames * (1 - keep)
-    return rearrange(out, "v c t h w -> v t h w c").round().clamp(0, 255).byte().numpy(), valid.numpy()
+    out = rearrange(out, "v c t h w -> v t h w c").round().clamp(0, 255).byte().numpy()
+    if reshade:
+        out = reshade_road(out, valid.numpy(), rig, rel, walls_m)
+    return out, valid.numpy()
 
 
 DEFAULT_SIGMA = 0.3
@@ -101,6 +108,11 @@ class Reprojection:
     what stands beside the road is placed on vertical planes this far (m) left and right of the
     first ego frame instead of at infinity, so it passes by with parallax. 0 = road and infinity
     only. Measured: docs/quality-vs-compute.md, "The flat-world warp stands still"."""
+    reshade: bool = False
+    """``--reproject-reshade``: the warped road of every frame given the first frame's road colour at its
+    own distance (drivewm.multiview.reshade), so fog's airlight and a wet road's sheen stay where they
+    were instead of being pulled toward the camera. Off by default until the benchmark has scored it:
+    docs/quality-vs-compute.md, "Fog reads snow at --reproject 0.1"."""
 
     def __post_init__(self) -> None:
         if self.sigma is not None:
@@ -119,7 +131,8 @@ class Reprojection:
     def record(self) -> dict:
         """What a generated clip's metadata says of it."""
         record = {"reproject_sigma": self.sigma, "reproject_steps": self.steps if self.sigma else 0}
-        return record | ({"reproject_walls_m": self.walls_m} if self.sigma and self.walls_m else {})
+        record |= {"reproject_walls_m": self.walls_m} if self.sigma and self.walls_m else {}
+        return record | ({"reproject_reshade": True} if self.sigma and self.reshade else {})
 
 
 def refine_reprojected(
@@ -141,7 +154,7 @@ def refine_reprojected(
     fps = fps or model.latent.fps
     mv = model.cfg.multiview
     warped, _ = reproject_first_frame(
-        videos, rig, waypoints, mv.trajectory_dt_s, fps, mv.warp_ground_m, reprojection.walls_m
+        videos, rig, waypoints, mv.trajectory_dt_s, fps, mv.warp_ground_m, reprojection.walls_m, reprojection.reshade
     )
     z = encode_views(tokenizer, warped, videos.shape[2:4], model.device)[None]  # (1, V, c, t, h, w)
     return model.sample_latents(
