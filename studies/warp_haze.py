@@ -9,11 +9,11 @@ levels, and a generated fog sample refined from 0.1 reads snow (docs/quality-vs-
 Two corrections, both from the first frame alone (as a generated sample gives it) and both using
 the distances the warp knows (the road plane, the corridor's walls; points at infinity are left):
 
-- ``profile`` (default; drivewm.multiview.reshade, ``--reproject-reshade``): each view's first
-  frame gives its median road colour against distance, mu(d); a road pixel of frame t at
-  distance d_t, fetched from d_0, gets ``I + mu(d_t) - mu(d_0)``.
-  Model-free: haze, a wet road's grazing-angle sheen, whatever makes the far road look unlike the
-  near one, and the identity where the road looks alike at every distance.
+- ``profile`` (default; drivewm.multiview.reshade, ``--reproject-reshade``): the first frames give
+  the median colour of the road within 3 m of the ego's line against distance, mu(d); a road pixel
+  of frame t at distance d_t, fetched from d_0, gets ``I + mu(d_t) - mu(d_0)``. Model-free: haze, a
+  wet road's grazing-angle sheen, whatever makes the far road look unlike the near one, and the
+  identity where the road looks alike at every distance.
 - ``koschmieder``: ``I = A + (J - A) exp(-beta d)`` (Koschmieder's law), so seen from d_t instead of
   d_0 a point shows ``A + (I_0 - A) exp(beta (d_0 - d_t))``; the airlight A is read near the
   horizon and beta from a line fitted to log |A - road luma| against distance.
@@ -121,7 +121,7 @@ def main(argv=None) -> int:
         )
         poses = poses_from_waypoints(wp, videos.shape[1], item.trajectory_dt_s, item.fps)
         rel = np.einsum("ij,tjk->tik", invert_T(poses[0]), poses)
-        d_t, d_0, _ = surface_distances(item.rig, videos.shape[2:4], rel, args.walls)
+        d_t, d_0, _, _ = surface_distances(item.rig, videos.shape[2:4], rel, args.walls)
         airlight, beta = fit_haze(videos[:, 0], item.rig, d_0[:, 0])
         if args.method == "koschmieder":
             fixed = rehaze(warped, valid, d_t, d_0, airlight, beta)
