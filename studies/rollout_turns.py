@@ -9,6 +9,7 @@ dense-flow reader (drivewm.eval.trajectory.flow_fallback, the planar vehicle mod
 over the whole rollout, the real first frame included.
 
     python studies/rollout_turns.py MODEL_DIR CLIPDIR [--clips 6] [--steps 20] [--seed 700] [--reproject 0.5]
+        [--reproject-reshade]
 
 Prints a row per clip: the yaw under each trajectory and their difference (left minus right:
 positive where the model turns the way it is told); then the turn sign rate over all rollouts and
@@ -64,6 +65,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--seed", type=int, default=700)
     parser.add_argument("--reproject", type=float, default=0.0, help="reprojected refinement sigma (0 = off)")
+    parser.add_argument("--reproject-reshade", action="store_true", help="reshade the warp (drivewm.multiview.reshade)")
     args = parser.parse_args()
 
     model = MultiView.from_pretrained(resolve_model_folder(args.model))
@@ -72,7 +74,7 @@ def main() -> None:
     for j, clip in enumerate(straight_clips(args.clips, args.count)):
         row = {}
         for turn in ("left", "right"):
-            reprojection = Reprojection(args.reproject)
+            reprojection = Reprojection(args.reproject, reshade=args.reproject_reshade)
             options = RolloutOptions(turn, windows=1, steps=args.steps, seed=args.seed + j, reprojection=reprojection)
             row[turn] = front_yaw(rollout(model, clip, options, tokenizer))
             yaws[turn].append(row[turn])
