@@ -1,4 +1,4 @@
-"""Does the reprojection carry fog's airlight toward the camera, and does Koschmieder's law take it back out?
+"""Does the reprojection carry fog's airlight toward the camera, and what takes it back out?
 
 `--reproject` warps the first frame of every camera along the trajectory (drivewm.multiview.warp):
 the road at frame t is looked up where the first frame saw it, further away. In fog that far road
@@ -38,12 +38,11 @@ import numpy as np
 from drivewm.eval.inputs import load_items
 from drivewm.geometry import invert_T, pixel_rays
 from drivewm.multiview.reproject import reproject_first_frame_mask
-from drivewm.multiview.reshade import reshade, surface_distances
+from drivewm.multiview.reshade import PROFILE_M, reshade, surface_distances
 from drivewm.multiview.trajectories import poses_from_waypoints
 
 LUMA = np.array([0.299, 0.587, 0.114])
 HORIZON_DEG = (0.0, 3.0)  # rays this far above the horizon, at infinity, give the airlight
-FIT_M = (3.0, 150.0)  # road distances the extinction is fitted over (drivewm.multiview.reshade.PROFILE_M)
 
 
 def fit_haze(first: np.ndarray, rig, d0_first: np.ndarray) -> tuple[np.ndarray, float]:
@@ -60,7 +59,7 @@ def fit_haze(first: np.ndarray, rig, d0_first: np.ndarray) -> tuple[np.ndarray, 
     sky = np.concatenate(sky).astype(np.float64)
     airlight = np.median(sky, axis=0) if len(sky) else np.full(3, 255.0)
     a_luma = float(airlight @ LUMA)
-    road = np.isfinite(d0_first) & (d0_first >= FIT_M[0]) & (d0_first <= FIT_M[1])
+    road = np.isfinite(d0_first) & (d0_first >= PROFILE_M[0]) & (d0_first <= PROFILE_M[1])
     dist, luma = d0_first[road], first[road].astype(np.float64) @ LUMA
     if len(dist) < 50:
         return airlight, 0.0
@@ -138,7 +137,7 @@ def main(argv=None) -> int:
         )
     for weather, rows in summary.items():
         a, b = np.mean(rows, axis=0)
-        print(f"{weather}: PSNR of the warped later frames {a:.2f} dB, rehazed {b:.2f} dB ({len(rows)} clips)")
+        print(f"{weather}: PSNR of the warped later frames {a:.2f} dB, corrected {b:.2f} dB ({len(rows)} clips)")
     return 0
 
 

@@ -37,7 +37,7 @@ LANE_M = 3.0  # the profile's strip: road this far (m) left and right of the fir
 
 def surface_distances(
     rig: Rig, hw: tuple[int, int], T_ego0_from_ego: np.ndarray, walls_m: float = 0.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per view, frame and pixel of images ``hw`` (H, W) of ``rig``: the distance (m) from the camera
     at frame t to the surface its ray meets (road or wall; inf at infinity), from the same camera at
     frame 0 to that point, whether the surface is the road, and the point's lateral position (m, y of
