@@ -1,7 +1,7 @@
 """Time of one multi-view ``drivewm generate`` clip at its defaults (the prompt template, reprojected
-refinement from ``DEFAULT_SIGMA``) against plain sampling from noise (``--no-prompt-template
---reproject 0``), end to end as the command runs it: model and tokenizer loaded, first pass, decode,
-warp, encode, refinement, decode, clip written.
+refinement from ``DEFAULT_SIGMA``, the warp reshaded by ``DEFAULT_RESHADE``) against plain sampling
+from noise (``--no-prompt-template --reproject 0``), end to end as the command runs it: model and
+tokenizer loaded, first pass, decode, warp, reshade, encode, refinement, decode, clip written.
 
 The shipped multi-view model (or ``--model``), the world-model benchmark's sampler settings (20 Heun
 steps, guidance 7, nuscenes6, a left turn). The two settings alternate, ``--repeats`` times each
@@ -23,6 +23,7 @@ from interleaved import add_sampling_arguments, alternate, print_medians
 
 from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import GenerateOptions
+from drivewm.multiview.defaults import DEFAULT_RESHADE
 from drivewm.multiview.generate import generate_multiview
 from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection
 from drivewm.train.checkpoint import load_model_folder
@@ -37,7 +38,8 @@ def main() -> None:
     _, state = load_model_folder(folder, "multiview")
     params = sum(v.numel() for v in state.values() if v.is_floating_point())
     print(f"{args.model}: {params / 1e6:.2f}M parameters; {args.steps} Heun steps, guidance {args.guidance:g}")
-    print(f"{torch.get_num_threads()} threads; default: template + reprojection from {DEFAULT_SIGMA:g}, 10 steps")
+    default = f"template + reprojection from {DEFAULT_SIGMA:g}{', reshaded' if DEFAULT_RESHADE else ''}, 10 steps"
+    print(f"{torch.get_num_threads()} threads; default: {default}")
     prompt = "light snow on a country lane, turning left"
 
     def run(reprojection: Reprojection | None, template: bool):

@@ -39,6 +39,7 @@ from drivewm import resources
 from drivewm.choices import output_folder, whole_number
 from drivewm.config import finite_at_least
 from drivewm.errors import DrivewmError
+from drivewm.multiview.defaults import DEFAULT_SIGMA
 
 PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
 
@@ -184,7 +185,7 @@ def benchmark_stages(
     guidance_interval: str | None = None,
     prompt_template: bool | None = None,
     reproject_walls: float | None = None,
-    reproject_reshade: bool = False,
+    reproject_reshade: bool | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
@@ -192,7 +193,7 @@ def benchmark_stages(
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
     ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
     captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
-    default; ``reproject_reshade`` generate's --reproject-reshade), the held-out clips ``heldout`` and
+    default, as is ``reproject_reshade``, generate's --[no-]reproject-reshade), the held-out clips ``heldout`` and
     the generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -210,8 +211,8 @@ def benchmark_stages(
             argv += ["--prompt-template" if prompt_template else "--no-prompt-template"]
         if reproject_walls is not None:
             argv += ["--reproject-walls", f"{reproject_walls:g}"]
-        if reproject_reshade:
-            argv += ["--reproject-reshade"]
+        if reproject_reshade is not None:
+            argv += ["--reproject-reshade" if reproject_reshade else "--no-reproject-reshade"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -236,7 +237,7 @@ def benchmark_worldmodel(
     guidance_interval: str | None = None,
     prompt_template: bool | None = None,
     reproject_walls: float | None = None,
-    reproject_reshade: bool = False,
+    reproject_reshade: bool | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -382,7 +383,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         metavar="SIGMA",
         help="reprojected refinement of every sample from noise level SIGMA (drivewm generate --reproject; "
-        "default generate's, 0.3, as the model card's figures; 0 = off)",
+        f"default generate's, {DEFAULT_SIGMA:g}, as the model card's figures; 0 = off)",
     )
     b.add_argument(
         "--reproject-walls",
@@ -392,9 +393,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument(
         "--reproject-reshade",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
         help="every sample's warped road reshaded to the first frame's look at its own distance "
-        "(drivewm generate --reproject-reshade)",
+        "(drivewm generate --reproject-reshade; default generate's, on, as the model card's figures)",
     )
     b.add_argument(
         "--guidance-interval",

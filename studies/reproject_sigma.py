@@ -13,6 +13,10 @@ alone (``DIR/warp_coded``); a SIGMA whose samples stop reading the asked weather
 is not taken, however close its turns.
 
     python studies/reproject_sigma.py MODEL_DIR [--sigmas 0.5,0.75,1,1.5] [--steps 20] [--prompt-template] [--out DIR]
+        [--[no-]reproject-reshade]
+
+The warp is reshaded (drivewm.multiview.reshade) unless ``--no-reproject-reshade`` is given: the
+library's default since 2026-11-30; the runs documented before then ran without it unless they say so.
 
 About 90 s per prompt with four SIGMAs on 2 CPU cores. Numbers: docs/quality-vs-compute.md
 ("Reprojected refinement").
@@ -56,6 +60,11 @@ def main() -> None:
         "--prompt-template", action="store_true", help="prompts in the training captions' template (generate's default)"
     )
     parser.add_argument("--walls", type=float, default=0.0, help="corridor of the warp, m (--reproject-walls)")
+    parser.add_argument(
+        "--reproject-reshade",
+        action=argparse.BooleanOptionalAction,
+        help="reshade the warp (drivewm.multiview.reshade; default on, as drivewm generate)",
+    )
     parser.add_argument("--out", type=Path, help="write each SIGMA's samples to OUT/sigma_S for `drivewm eval`")
     args = parser.parse_args()
     sigmas = [float(s) for s in args.sigmas.split(",")]
@@ -87,7 +96,7 @@ def main() -> None:
         written["first"].append(GeneratedSample(first, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         written["warp_coded"].append(GeneratedSample(coded, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         for s in sigmas:
-            reprojection = Reprojection(s, walls_m=args.walls)
+            reprojection = Reprojection(s, walls_m=args.walls, reshade=args.reproject_reshade)
             refined = refine_reprojected(model, tokenizer, rig, caps, wp, seed, first, reprojection, sampling)
             videos = decode_views(tokenizer, refined)
             read = yaw(videos, wp)

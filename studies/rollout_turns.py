@@ -9,12 +9,13 @@ dense-flow reader (drivewm.eval.trajectory.flow_fallback, the planar vehicle mod
 over the whole rollout, the real first frame included.
 
     python studies/rollout_turns.py MODEL_DIR CLIPDIR [--clips 6] [--steps 20] [--seed 700] [--reproject 0.5]
-        [--reproject-reshade]
+        [--[no-]reproject-reshade]
 
 Prints a row per clip: the yaw under each trajectory and their difference (left minus right:
 positive where the model turns the way it is told); then the turn sign rate over all rollouts and
-the mean difference. About 40 s per rollout on 2 CPU cores. Numbers: docs/quality-vs-compute.md
-("Turns repeated").
+the mean difference. The warp is reshaded unless ``--no-reproject-reshade`` is given (the library's
+default since 2026-11-30; the runs documented before then ran without it unless they say so). About
+40 s per rollout on 2 CPU cores. Numbers: docs/quality-vs-compute.md ("Turns repeated").
 """
 
 from __future__ import annotations
@@ -65,7 +66,11 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--seed", type=int, default=700)
     parser.add_argument("--reproject", type=float, default=0.0, help="reprojected refinement sigma (0 = off)")
-    parser.add_argument("--reproject-reshade", action="store_true", help="reshade the warp (drivewm.multiview.reshade)")
+    parser.add_argument(
+        "--reproject-reshade",
+        action=argparse.BooleanOptionalAction,
+        help="reshade the warp (drivewm.multiview.reshade; default on, as drivewm rollout)",
+    )
     args = parser.parse_args()
 
     model = MultiView.from_pretrained(resolve_model_folder(args.model))

@@ -22,6 +22,7 @@ from drivewm.choices import (
 )
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.multiview.commands import add_reproject_arguments
+from drivewm.multiview.defaults import DEFAULT_SIGMA
 from drivewm.recipe import add_recipe_arguments
 
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
@@ -83,7 +84,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="multi-view models: weigh the trajectory's effect this many times (1 = plain conditioning; costs 2x)",
     )
-    add_reproject_arguments(g, None, "0.3, off for Text2World models")
+    add_reproject_arguments(g, None, f"{DEFAULT_SIGMA:g}, off for Text2World models")
     g.add_argument(
         "--prompt-template",
         action=argparse.BooleanOptionalAction,
@@ -133,7 +134,7 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     if multiview_only or args.trajectory_guidance != 1.0:  # None (not given) and off pass alike
         raise DrivewmError(
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
-            "/--reproject/--reproject-walls/--prompt-template (multi-view models do)"
+            "/--reproject/--reproject-walls/--reproject-reshade/--prompt-template (multi-view models do)"
         )
     options = generate_options(args)
     files = generate_text2world(args.model, options, args.out)

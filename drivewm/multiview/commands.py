@@ -18,6 +18,7 @@ from drivewm.choices import (
     seed,
 )
 from drivewm.diffusion.dit_config import DIT_PRESETS
+from drivewm.multiview.defaults import DEFAULT_RESHADE, DEFAULT_SIGMA
 from drivewm.recipe import add_recipe_arguments
 
 
@@ -76,7 +77,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=1.0,
         help="weigh the trajectory's effect this many times (1 = plain)",
     )
-    add_reproject_arguments(r, None, "0.3")
+    add_reproject_arguments(r, None, f"{DEFAULT_SIGMA:g}")
     r.add_argument("--seed", type=seed, default=0, help="window w uses seed + w")
     add_registry_argument(
         r, "--sampler", "drivewm.diffusion.samplers:SAMPLERS", "EDM sampler (default heun)", default="heun"
@@ -114,9 +115,10 @@ def add_reproject_arguments(
     )
     parser.add_argument(
         "--reproject-reshade",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
         help="give the warped road of every frame the first frame's road colour at its own distance, so fog's "
-        "airlight is not pulled toward the camera (docs/quality-vs-compute.md, 'Fog reads snow at --reproject 0.1')",
+        f"airlight is not pulled toward the camera (default {'on' if DEFAULT_RESHADE else 'off'}; "
+        "docs/quality-vs-compute.md, 'Fog reads snow at --reproject 0.1')",
     )
 
 

@@ -34,6 +34,7 @@ from drivewm.config import finite_at_least
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, invert_T
 from drivewm.multiview.coding import encode_views
+from drivewm.multiview.defaults import DEFAULT_RESHADE, DEFAULT_SIGMA
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.reshade import reshade as reshade_road
 from drivewm.multiview.trajectories import poses_from_waypoints
@@ -84,15 +85,6 @@ def reproject_first_frame_mask(
     return out, valid.numpy()
 
 
-DEFAULT_SIGMA = 0.3
-"""``--reproject`` of ``drivewm generate`` (multi-view models) and ``drivewm rollout`` when none is given
-(their help texts and the benchmark's say it too; a test holds them to it). Chosen on validation
-prompts (never the benchmark's) with the prompt template, generate's other default: closest to the
-asked turns (studies/reproject_sigma.py); on the benchmark every sample turns the asked way, and
-rollouts of held-out clips turn the asked way in 12 of 12 (7 of 12 without) (docs/quality-vs-compute.md,
-"The template and reprojection by default")."""
-
-
 @dataclasses.dataclass
 class Reprojection:
     """Settings of reprojected refinement (``--reproject SIGMA``)."""
@@ -108,13 +100,15 @@ class Reprojection:
     what stands beside the road is placed on vertical planes this far (m) left and right of the
     first ego frame instead of at infinity, so it passes by with parallax. 0 = road and infinity
     only. Measured: docs/quality-vs-compute.md, "The flat-world warp stands still"."""
-    reshade: bool = False
+    reshade: bool | None = DEFAULT_RESHADE
     """``--reproject-reshade``: the warped road of every frame given the first frame's road colour at its
     own distance (drivewm.multiview.reshade), so fog's airlight and a wet road's sheen stay where they
-    were instead of being pulled toward the camera. Off by default until the benchmark has scored it:
+    were instead of being pulled toward the camera (None = :data:`DEFAULT_RESHADE`):
     docs/quality-vs-compute.md, "Fog reads snow at --reproject 0.1"."""
 
     def __post_init__(self) -> None:
+        if self.reshade is None:
+            self.reshade = DEFAULT_RESHADE
         if self.sigma is not None:
             finite_at_least("reprojection", 0, **{"--reproject": self.sigma})
         finite_at_least("reprojection", 0, **{"--reproject-walls": self.walls_m})

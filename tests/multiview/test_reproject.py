@@ -14,6 +14,7 @@ from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.geometry import Rig, yaw_of
 from drivewm.multiview.config import MultiViewConfig
+from drivewm.multiview.defaults import DEFAULT_RESHADE
 from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
 
@@ -121,13 +122,18 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
         assert main(["generate", "--prompt", "snow", "--out", str(tmp_path / "o"), *flags]) == 2
         assert flags[0] in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
-    assert Reprojection(None).resolved(True) == Reprojection(DEFAULT_SIGMA)  # generate's default
+    assert Reprojection(None).resolved(True) == Reprojection(DEFAULT_SIGMA, reshade=True)  # generate's default
+    assert Reprojection(0.3, reshade=None) == Reprojection(0.3, reshade=DEFAULT_RESHADE)  # not given: the default
+    assert Reprojection(0.3, reshade=False).record() == {"reproject_sigma": 0.3, "reproject_steps": 10}
+    assert Reprojection(0.3).record()["reproject_reshade"] is True
+    assert "reproject_reshade" not in Reprojection(0).record()  # off: nothing to reshade
     assert Reprojection(None, 3).resolved(False) == Reprojection(0.0, 3)  # a preview model: no pixels to warp
     assert Reprojection(0.0).resolved(True) == Reprojection(0.0)  # off when asked for
     helps = (
         (["generate"], "default {:g}, off for Text2World"),
         (["rollout"], "default {:g}; docs"),
         (["worldmodel", "benchmark"], "{:g}, as"),
+        (["generate"], "(default on;" if DEFAULT_RESHADE else "(default off;"),
     )
     for command, says in helps:
         with pytest.raises(SystemExit):
@@ -138,10 +144,10 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
 def test_a_text2world_model_refuses_the_multiview_options_only_when_they_are_asked_for(tmp_path, capsys):
     """generate's multi-view defaults (reprojection, the prompt template) do not stop a Text2World model;
     asking for them does, before any sampling."""
-    for flags in (["--prompt-template"], ["--reproject", "0.5"], ["--reproject-walls", "25"]):
+    for flags in (["--prompt-template"], ["--reproject", "0.5"], ["--reproject-walls", "25"], ["--reproject-reshade"]):
         argv = ["generate", "--model", "shipped:text2world", "--prompt", "snow", "--out", str(tmp_path / "o")]
         assert main([*argv, *flags]) == 2
-        assert "--reproject/--reproject-walls/--prompt-template (multi-view models do)" in capsys.readouterr().err
+        assert "--reproject-reshade/--prompt-template (multi-view models do)" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
