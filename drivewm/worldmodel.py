@@ -186,6 +186,7 @@ def benchmark_stages(
     prompt_template: bool | None = None,
     reproject_walls: float | None = None,
     reproject_reshade: bool | None = None,
+    reproject_blend: bool | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
@@ -193,7 +194,8 @@ def benchmark_stages(
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
     ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
     captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
-    default, as is ``reproject_reshade``, generate's --[no-]reproject-reshade), the held-out clips ``heldout`` and
+    default, as are ``reproject_reshade`` and ``reproject_blend``, generate's --[no-]reproject-reshade and
+    --[no-]reproject-blend), the held-out clips ``heldout`` and
     the generated ones scored into ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
@@ -213,6 +215,8 @@ def benchmark_stages(
             argv += ["--reproject-walls", f"{reproject_walls:g}"]
         if reproject_reshade is not None:
             argv += ["--reproject-reshade" if reproject_reshade else "--no-reproject-reshade"]
+        if reproject_blend is not None:
+            argv += ["--reproject-blend" if reproject_blend else "--no-reproject-blend"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
@@ -238,6 +242,7 @@ def benchmark_worldmodel(
     prompt_template: bool | None = None,
     reproject_walls: float | None = None,
     reproject_reshade: bool | None = None,
+    reproject_blend: bool | None = None,
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -281,6 +286,7 @@ def benchmark_worldmodel(
         prompt_template,
         reproject_walls,
         reproject_reshade,
+        reproject_blend,
     )
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
@@ -398,6 +404,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "(drivewm generate --reproject-reshade; default generate's, on, as the model card's figures)",
     )
     b.add_argument(
+        "--reproject-blend",
+        action=argparse.BooleanOptionalAction,
+        help="every sample's first frame blended where the cameras overlap before the reprojection "
+        "(drivewm generate --reproject-blend; default generate's, on, as the model card's figures)",
+    )
+    b.add_argument(
         "--guidance-interval",
         type=_interval_text,
         metavar="LO,HI",
@@ -424,6 +436,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.prompt_template,
             args.reproject_walls,
             args.reproject_reshade,
+            args.reproject_blend,
         )
     )
     m = wsub.add_parser(

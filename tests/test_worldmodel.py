@@ -80,12 +80,12 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     walled = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject_walls=25) if n[:9] == "generate-"]
     assert all(parser.parse_args(a).reproject_walls == 25.0 for a in walled) and len(walled) == len(p.benchmarks)
     assert all(parser.parse_args(a).reproject_walls == 0.0 for n, a in mine if n.startswith("generate-"))  # generate's
-    for asked in (True, False):
-        shaded = [
-            a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject_reshade=asked) if n[:9] == "generate-"
-        ]
-        assert all(parser.parse_args(a).reproject_reshade is asked for a in shaded) and len(shaded) == len(p.benchmarks)
-    assert all(parser.parse_args(a).reproject_reshade is None for n, a in mine if n[:9] == "generate-")  # generate's
+    for flag in ("reproject_reshade", "reproject_blend"):
+        for asked in (True, False):
+            stages = benchmark_stages(p, "m", tmp_path, tmp_path, **{flag: asked})
+            given = [a for n, a in stages if n[:9] == "generate-"]
+            assert all(getattr(parser.parse_args(a), flag) is asked for a in given) and len(given) == len(p.benchmarks)
+        assert all(getattr(parser.parse_args(a), flag) is None for n, a in mine if n[:9] == "generate-")  # generate's
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):

@@ -22,7 +22,7 @@ from drivewm.choices import (
 )
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.multiview.commands import add_reproject_arguments
-from drivewm.multiview.defaults import DEFAULT_SIGMA
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_SIGMA
 from drivewm.recipe import add_recipe_arguments
 
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
@@ -86,6 +86,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     add_reproject_arguments(g, None, f"{DEFAULT_SIGMA:g}, off for Text2World models")
     g.add_argument(
+        "--reproject-blend",
+        action=argparse.BooleanOptionalAction,
+        help="multi-view models: blend the first pass's first frame where the rig's cameras overlap before it is "
+        f"reprojected, so the views agree there (default {'on' if DEFAULT_BLEND else 'off'}; never with "
+        "--condition-clip; docs/quality-vs-compute.md, 'Cameras that disagree where they overlap')",
+    )
+    g.add_argument(
         "--prompt-template",
         action=argparse.BooleanOptionalAction,
         help="multi-view models: rewrite each prompt into the training captions' template (weather, time of day, "
@@ -130,11 +137,12 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
     from drivewm.errors import DrivewmError
 
     multiview_only = args.rig or args.trajectory or args.condition_clip or args.reproject or args.reproject_walls
-    multiview_only = multiview_only or args.prompt_template or args.reproject_reshade
+    multiview_only = multiview_only or args.prompt_template or args.reproject_reshade or args.reproject_blend
     if multiview_only or args.trajectory_guidance != 1.0:  # None (not given) and off pass alike
         raise DrivewmError(
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
-            "/--reproject/--reproject-walls/--reproject-reshade/--prompt-template (multi-view models do)"
+            "/--reproject/--reproject-walls/--reproject-reshade/--reproject-blend/--prompt-template"
+            " (multi-view models do)"
         )
     options = generate_options(args)
     files = generate_text2world(args.model, options, args.out)

@@ -8,6 +8,7 @@ the clip's rig calibration is used; without it, everything is generated.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from drivewm.curate.captions import camera_direction, classify_manoeuvre, prompt
 from drivewm.diffusion.generate import GenerateOptions, decode_latents, warn_if_preview
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
+from drivewm.multiview.blend import blend_overlaps
 from drivewm.multiview.coding import decode_views, encode_views
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.reproject import Reprojection, refine_reprojected
@@ -92,9 +94,10 @@ def generate_multiview(
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer); with a
     ``reprojection`` sigma (default ``DEFAULT_SIGMA`` where the model has a tokenizer:
     ``Reprojection.resolved``; ``Reprojection()`` is off), each first pass is reprojected along the
-    trajectory and refined (drivewm.multiview.reproject); with ``prompt_template`` (the default) each
-    prompt is rewritten into the training captions' template (:func:`template_view_captions`), without
-    it sampled as given (:func:`view_captions`)."""
+    trajectory and refined (drivewm.multiview.reproject), its first frame blended where the cameras
+    overlap before (``reprojection.blend``, drivewm.multiview.blend; not with ``condition_clip``);
+    with ``prompt_template`` (the default) each prompt is rewritten into the training captions'
+    template (:func:`template_view_captions`), without it sampled as given (:func:`view_captions`)."""
     model = MultiView.from_pretrained(model_dir).to(options.device)
     reprojection = (reprojection or Reprojection(None)).resolved(bool(model.latent.tokenizer))
     warn_if_preview(model_dir, model.latent.tokenizer)
@@ -106,6 +109,8 @@ def generate_multiview(
         cond, rig, clip_speed = condition_latents(model, Path(condition_clip), rig)
         speed = clip_speed if np.isfinite(clip_speed) else speed
     rig = rig or model.training_rig
+    if condition_clip is not None:  # the first frames are the clip's own: they agree already
+        reprojection = dataclasses.replace(reprojection, blend=False)
     waypoints = resolve_trajectory(trajectory or "straight", mv.trajectory_waypoints, mv.trajectory_dt_s, speed)
     samples = []
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
@@ -125,6 +130,9 @@ def generate_multiview(
             videos = decode_latents(z[0], model.latent.tokenizer, model.device)  # (V, T, H, W, 3)
         else:  # the tokenizer reprojection already loaded decodes the first pass too
             videos = decode_views(tokenizer, z[0], model.device)
+            if reprojection.blend:
+                videos = videos.copy()
+                videos[:, 0] = blend_overlaps(videos[:, 0], rig, mv.warp_ground_m, reprojection.walls_m)
             z = refine_reprojected(model, tokenizer, rig, caps, waypoints, seed, videos, reprojection, sampling)
             videos = decode_views(tokenizer, z, model.device)
         extra = {
@@ -158,7 +166,9 @@ def generate_command(args: argparse.Namespace) -> int:
 
     options = generate_options(args)
     # sigma None: generate's default
-    reprojection = Reprojection(args.reproject, args.reproject_steps, args.reproject_walls, args.reproject_reshade)
+    reprojection = Reprojection(
+        args.reproject, args.reproject_steps, args.reproject_walls, args.reproject_reshade, args.reproject_blend
+    )
     files = generate_multiview(
         args.model,
         options,

@@ -34,7 +34,7 @@ from drivewm.config import finite_at_least
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, invert_T
 from drivewm.multiview.coding import encode_views
-from drivewm.multiview.defaults import DEFAULT_RESHADE, DEFAULT_SIGMA
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE, DEFAULT_SIGMA
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.reshade import reshade as reshade_road
 from drivewm.multiview.trajectories import poses_from_waypoints
@@ -106,9 +106,16 @@ class Reprojection:
     were instead of being pulled toward the camera (None = :data:`DEFAULT_RESHADE`):
     docs/quality-vs-compute.md, "Fog reads snow at --reproject 0.1"."""
 
+    blend: bool | None = DEFAULT_BLEND
+    """``--reproject-blend`` (generate only): the first pass's first frame blended where the rig's cameras
+    overlap before it is warped (drivewm.multiview.blend), so the views agree there (None =
+    :data:`DEFAULT_BLEND`). Never applied to a real clip's frames (``--condition-clip``, rollouts)."""
+
     def __post_init__(self) -> None:
         if self.reshade is None:
             self.reshade = DEFAULT_RESHADE
+        if self.blend is None:
+            self.blend = DEFAULT_BLEND
         if self.sigma is not None:
             finite_at_least("reprojection", 0, **{"--reproject": self.sigma})
         finite_at_least("reprojection", 0, **{"--reproject-walls": self.walls_m})
@@ -126,7 +133,8 @@ class Reprojection:
         """What a generated clip's metadata says of it."""
         record = {"reproject_sigma": self.sigma, "reproject_steps": self.steps if self.sigma else 0}
         record |= {"reproject_walls_m": self.walls_m} if self.sigma and self.walls_m else {}
-        return record | ({"reproject_reshade": True} if self.sigma and self.reshade else {})
+        record |= {"reproject_reshade": True} if self.sigma and self.reshade else {}
+        return record | ({"reproject_blend": True} if self.sigma and self.blend else {})
 
 
 def refine_reprojected(

@@ -63,14 +63,15 @@ class RolloutOptions:
     """Speed of a named trajectory (0 = the clip's own initial speed)."""
     reprojection: Reprojection = dataclasses.field(default_factory=lambda: Reprojection(DEFAULT_SIGMA))
     """Each window's first frame reprojected along the trajectory and refined (drivewm.multiview.reproject;
-    ``Reprojection()`` is off)."""
+    ``Reprojection()`` is off; never blended, drivewm.multiview.blend: the first frames are the clip's own)."""
     guidance_interval: tuple[float, float] | None = None
     """Guide only at sigma in (lo, hi] (drivewm.diffusion.sampling); None: at every sigma."""
 
     def __post_init__(self) -> None:
         if self.windows < 1 or self.steps < 1:
             raise DrivewmError("rollout: windows and steps must be >= 1")
-        self.reprojection = self.reprojection.resolved(True)  # a rollout decodes pixels: sigma None is the default
+        # a rollout decodes pixels: sigma None is the default; its first frames are the clip's own, never blended
+        self.reprojection = dataclasses.replace(self.reprojection.resolved(True), blend=False)
         weights = {"guidance": self.guidance, "trajectory guidance": self.trajectory_guidance}
         # a NaN speed had made NaN waypoints, a blank clip
         finite_at_least("rollout", 0, **weights, **{"--speed": self.speed_mps})

@@ -28,7 +28,7 @@ from torch import nn
 
 from drivewm.diffusion.dit import patchify
 from drivewm.errors import DrivewmError
-from drivewm.geometry import Rig, pixel_rays, project
+from drivewm.geometry import Camera, Rig, pixel_rays, project
 from drivewm.multiview.camera import patch_centres_px
 
 
@@ -59,21 +59,11 @@ def warp_grid(
     grid = np.zeros((v_count, len(T_ego0_from_ego), h, w, 2))
     valid = np.zeros((v_count, len(T_ego0_from_ego), h, w), dtype=bool)
     for v, cam in enumerate(rig.cameras):
-        d_cam = pixel_rays(cam.K, patch_centres_px(cam, latent_hw))  # (h*w, 3), one ray per latent pixel
         for t, T in enumerate(T_ego0_from_ego):
-            T_cam = T @ cam.T_ego_from_cam  # this camera at frame t, in the first ego frame
-            d = d_cam @ T_cam[:3, :3].T
-            o = T_cam[:3, 3]
-            depth = ray_depths(o, d, walls_m)
-            ground = depth < max_ground_m  # a point on the road or a wall; the rest at infinity
-            point = o + np.where(ground, depth, 0.0)[:, None] * d  # ground points; other rows unused
+            ground, point, d = flat_world_points(cam, latent_hw, T, max_ground_m, walls_m)
             found = np.zeros(len(d), dtype=bool)
             for s in [v, *[k for k in range(v_count) if k != v]]:  # own view first
-                src = rig.cameras[s]
-                R_s, c_s = src.T_ego_from_cam[:3, :3], src.T_ego_from_cam[:3, 3]  # first frame: ego0 = ego
-                px, _ = project(src.K, np.where(ground[:, None], point - c_s, d) @ R_s)  # NaN behind source camera s
-                x = (px[:, 0] + 0.5) * w / src.width - 0.5  # latent pixel coordinates of the source
-                y = (px[:, 1] + 0.5) * h / src.height - 0.5
+                x, y = source_pixels(rig.cameras[s], latent_hw, ground, point, d)
                 eps = 1e-6  # a pixel's own centre maps back onto itself up to rounding
                 ok = ~found & (x >= -eps) & (x <= w - 1 + eps) & (y >= -eps) & (y <= h - 1 + eps)
                 x, y = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
@@ -83,6 +73,33 @@ def warp_grid(
                 found |= ok
             valid[v, t] = found.reshape(h, w)
     return torch.from_numpy(grid).float(), torch.from_numpy(valid)
+
+
+def flat_world_points(
+    cam: Camera, grid_hw: tuple[int, int], T_ego0_from_ego: np.ndarray, max_ground_m: float, walls_m: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The flat world :func:`warp_grid` renders, for one camera of the rig at ego pose ``T_ego0_from_ego``
+    (4, 4; in the first ego frame): the ray through each centre of an h x w grid over its image
+    (row-major) followed to the road or a wall of the corridor within ``max_ground_m`` (``ground``
+    (N,) bool, ``point`` (N, 3) m there) or else to infinity (direction ``d`` (N, 3))."""
+    T_cam = T_ego0_from_ego @ cam.T_ego_from_cam  # this camera, in the first ego frame
+    d = pixel_rays(cam.K, patch_centres_px(cam, grid_hw)) @ T_cam[:3, :3].T
+    o = T_cam[:3, 3]
+    depth = ray_depths(o, d, walls_m)
+    ground = depth < max_ground_m  # a point on the road or a wall; the rest at infinity
+    point = o + np.where(ground, depth, 0.0)[:, None] * d  # ground points; other rows unused
+    return ground, point, d
+
+
+def source_pixels(
+    src: Camera, grid_hw: tuple[int, int], ground: np.ndarray, point: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where camera ``src`` of the first frame sees :func:`flat_world_points`' points: x and y (N,) in
+    the coordinates of an h x w grid over its image (NaN behind it; no bounds check)."""
+    h, w = grid_hw
+    R_s, c_s = src.T_ego_from_cam[:3, :3], src.T_ego_from_cam[:3, 3]  # first frame: ego0 = ego
+    px, _ = project(src.K, np.where(ground[:, None], point - c_s, d) @ R_s)
+    return (px[:, 0] + 0.5) * w / src.width - 0.5, (px[:, 1] + 0.5) * h / src.height - 0.5
 
 
 def check_corridor(rig: Rig, walls_m: float) -> None:

@@ -14,7 +14,7 @@ from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.geometry import Rig, yaw_of
 from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.defaults import DEFAULT_RESHADE
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE
 from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
 
@@ -124,7 +124,7 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
     assert not (tmp_path / "o").exists()
     assert Reprojection(None).resolved(True) == Reprojection(DEFAULT_SIGMA, reshade=True)  # generate's default
     assert Reprojection(0.3, reshade=None) == Reprojection(0.3, reshade=DEFAULT_RESHADE)  # not given: the default
-    assert Reprojection(0.3, reshade=False).record() == {"reproject_sigma": 0.3, "reproject_steps": 10}
+    assert Reprojection(0.3, reshade=False, blend=False).record() == {"reproject_sigma": 0.3, "reproject_steps": 10}
     assert Reprojection(0.3).record()["reproject_reshade"] is True
     assert "reproject_reshade" not in Reprojection(0).record()  # off: nothing to reshade
     assert Reprojection(None, 3).resolved(False) == Reprojection(0.0, 3)  # a preview model: no pixels to warp
@@ -134,6 +134,7 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
         (["rollout"], "default {:g}; docs"),
         (["worldmodel", "benchmark"], "{:g}, as"),
         (["generate"], "(default on;" if DEFAULT_RESHADE else "(default off;"),
+        (["generate"], "(default on; never" if DEFAULT_BLEND else "(default off; never"),
     )
     for command, says in helps:
         with pytest.raises(SystemExit):
@@ -144,10 +145,11 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
 def test_a_text2world_model_refuses_the_multiview_options_only_when_they_are_asked_for(tmp_path, capsys):
     """generate's multi-view defaults (reprojection, the prompt template) do not stop a Text2World model;
     asking for them does, before any sampling."""
-    for flags in (["--prompt-template"], ["--reproject", "0.5"], ["--reproject-walls", "25"], ["--reproject-reshade"]):
+    asked = (["--reproject", "0.5"], ["--reproject-walls", "25"], ["--reproject-reshade"], ["--reproject-blend"])
+    for flags in (["--prompt-template"], *asked):
         argv = ["generate", "--model", "shipped:text2world", "--prompt", "snow", "--out", str(tmp_path / "o")]
         assert main([*argv, *flags]) == 2
-        assert "--reproject-reshade/--prompt-template (multi-view models do)" in capsys.readouterr().err
+        assert "--reproject-reshade/--reproject-blend/--prompt-template" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
