@@ -164,6 +164,11 @@ def generate_command(args: argparse.Namespace) -> int:
     """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
     from drivewm.diffusion.commands import generate_options
 
+    if args.reproject_blend and args.condition_clip is not None:
+        raise DrivewmError(
+            f"{args.condition_clip}: --reproject-blend blends generated first frames; a --condition-clip's frames "
+            "are the clip's own and are never blended (--no-reproject-blend, or leave it out)"
+        )
     options = generate_options(args)
     # sigma None: generate's default
     reprojection = Reprojection(

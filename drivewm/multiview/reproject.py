@@ -105,7 +105,6 @@ class Reprojection:
     own distance (drivewm.multiview.reshade), so fog's airlight and a wet road's sheen stay where they
     were instead of being pulled toward the camera (None = :data:`DEFAULT_RESHADE`):
     docs/quality-vs-compute.md, "Fog reads snow at --reproject 0.1"."""
-
     blend: bool | None = DEFAULT_BLEND
     """``--reproject-blend`` (generate only): the first pass's first frame blended where the rig's cameras
     overlap before it is warped (drivewm.multiview.blend), so the views agree there (None =

@@ -54,11 +54,14 @@ def test_blending_keeps_views_that_agree_everywhere_and_refuses_a_mismatched_rig
         blend_overlaps(uniform, rig, walls_m=0.1)  # a corridor narrower than the rig
 
 
-def test_blending_is_recorded_on_by_default_and_never_in_a_rollout():
+def test_blending_is_recorded_on_by_default_and_never_in_a_rollout(tmp_path, capsys):
     assert Reprojection(0.1).record()["reproject_blend"] is True
     assert "reproject_blend" not in Reprojection(0.1, blend=False).record()
     assert "reproject_blend" not in Reprojection(0.0).record()  # off: no first frame is reprojected
     assert RolloutOptions("left").reprojection.blend is False  # a rollout's first frames are the clip's own
+    argv = ["generate", "--prompt", "snow", "--condition-clip", str(tmp_path / "c.tar"), "--out", str(tmp_path / "o")]
+    assert main([*argv, "--reproject-blend"]) == 2  # asked for on a real clip's frames: refused before any model loads
+    assert "are never blended" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 @pytest.mark.slow
