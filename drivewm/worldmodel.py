@@ -194,9 +194,9 @@ def benchmark_stages(
     trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
     ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
     captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
-    default, as are ``reproject_reshade`` and ``reproject_blend``, generate's --[no-]reproject-reshade and
-    --[no-]reproject-blend), the held-out clips ``heldout`` and
-    the generated ones scored into ``RUN/eval``, and the must-hold figures."""
+    default, as are ``reproject_reshade`` and ``reproject_blend``, generate's --[no-]reproject-reshade
+    and --[no-]reproject-blend), the held-out clips ``heldout`` and the generated ones scored into
+    ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
     stages = []
@@ -213,10 +213,9 @@ def benchmark_stages(
             argv += ["--prompt-template" if prompt_template else "--no-prompt-template"]
         if reproject_walls is not None:
             argv += ["--reproject-walls", f"{reproject_walls:g}"]
-        if reproject_reshade is not None:
-            argv += ["--reproject-reshade" if reproject_reshade else "--no-reproject-reshade"]
-        if reproject_blend is not None:
-            argv += ["--reproject-blend" if reproject_blend else "--no-reproject-blend"]
+        for flag, on in (("--reproject-reshade", reproject_reshade), ("--reproject-blend", reproject_blend)):
+            if on is not None:
+                argv += [flag if on else f"--no-{flag[2:]}"]
         stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])

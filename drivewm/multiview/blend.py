@@ -32,11 +32,9 @@ def blend_overlaps(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0, wa
     mean of every camera that sees its flat-world point, its own camera among them. A pixel no
     other camera sees keeps its colour; ``max_ground_m`` and ``walls_m`` as in
     :func:`drivewm.multiview.warp.warp_grid`."""
-    v_count, h, w, _ = frames.shape
-    if v_count != len(rig.cameras):
-        raise ValueError(f"blend_overlaps: {v_count} views for a rig of {len(rig.cameras)} cameras")
     check_corridor(rig, walls_m)
-    images = torch.from_numpy(np.ascontiguousarray(frames)).float().permute(0, 3, 1, 2)  # (V, 3, H, W)
+    images = view_tensor(frames, rig)
+    _, h, w, _ = frames.shape
     out = np.empty(frames.shape, dtype=np.float64)
     for v, cam in enumerate(rig.cameras):
         ground, point, d = flat_world_points(cam, (h, w), np.eye(4), max_ground_m, walls_m)
@@ -46,13 +44,9 @@ def blend_overlaps(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0, wa
             with np.errstate(invalid="ignore"):  # NaN: behind camera s
                 border = np.minimum(np.minimum(x + 0.5, w - 0.5 - x), np.minimum(y + 0.5, h - 0.5 - y))
             weight = np.where(border > 0, border, 0.0)  # px to the nearest image border, 0 outside
-            if not weight.any():
-                continue
-            grid = np.stack([(np.nan_to_num(x) + 0.5) / w * 2 - 1, (np.nan_to_num(y) + 0.5) / h * 2 - 1], axis=1)
-            grid = torch.from_numpy(grid).float().view(1, h, w, 2)
-            colour = F.grid_sample(images[s : s + 1], grid, mode="bilinear", padding_mode="border", align_corners=False)
-            total += weight[:, None] * colour[0].permute(1, 2, 0).reshape(-1, 3).double().numpy()
-            weights += weight
+            if weight.any():
+                total += weight[:, None] * sample_view(images, s, x, y)
+                weights += weight
         own = frames[v].reshape(-1, 3).astype(np.float64)
         seen = weights > 0
         out[v] = np.where(seen[:, None], total / np.where(seen, weights, 1.0)[:, None], own).reshape(h, w, 3)
@@ -64,8 +58,8 @@ def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100
     camera sees its flat-world point, over every such pair of ``frames`` (uint8 (V, H, W, 3), rig
     order) at least one pixel inside the other image: 0 for views that agree wherever they overlap
     (up to bilinear sampling and what parallax moves); NaN where no two cameras overlap."""
-    v_count, h, w, _ = frames.shape
-    images = torch.from_numpy(np.ascontiguousarray(frames)).float().permute(0, 3, 1, 2)
+    images = view_tensor(frames, rig)
+    _, h, w, _ = frames.shape
     total, count = 0.0, 0
     for v, cam in enumerate(rig.cameras):
         ground, point, d = flat_world_points(cam, (h, w), np.eye(4), max_ground_m, walls_m)
@@ -76,11 +70,24 @@ def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100
             x, y = source_pixels(src, (h, w), ground, point, d)
             with np.errstate(invalid="ignore"):
                 inside = (x >= 0.5) & (x <= w - 1.5) & (y >= 0.5) & (y <= h - 1.5)
-            if not inside.any():
-                continue
-            grid = np.stack([(x[inside] + 0.5) / w * 2 - 1, (y[inside] + 0.5) / h * 2 - 1], axis=1)
-            grid = torch.from_numpy(grid).float().view(1, 1, -1, 2)
-            colour = F.grid_sample(images[s : s + 1], grid, mode="bilinear", align_corners=False)[0, :, 0].T
-            total += float(np.abs(own[inside] - colour.double().numpy()).sum())
-            count += int(inside.sum()) * 3
+            if inside.any():
+                total += float(np.abs(own[inside] - sample_view(images, s, x[inside], y[inside])).sum())
+                count += int(inside.sum()) * 3
     return total / count if count else float("nan")
+
+
+def view_tensor(frames: np.ndarray, rig: Rig) -> torch.Tensor:
+    """uint8 (V, H, W, 3) views of ``rig`` -> float (V, 3, H, W) for :func:`sample_view`."""
+    if len(frames) != len(rig.cameras):
+        raise ValueError(f"{len(frames)} views for a rig of {len(rig.cameras)} cameras")
+    return torch.from_numpy(np.ascontiguousarray(frames)).float().permute(0, 3, 1, 2)
+
+
+def sample_view(images: torch.Tensor, s: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Colours (N, 3) of view ``s`` of :func:`view_tensor`'s ``images`` at pixel coordinates ``x``, ``y``
+    (N,), bilinear, clamped to the image (NaN read as 0: weigh them out)."""
+    h, w = images.shape[2:]
+    grid = np.stack([(np.nan_to_num(x) + 0.5) / w * 2 - 1, (np.nan_to_num(y) + 0.5) / h * 2 - 1], axis=1)
+    grid = torch.from_numpy(grid).float().view(1, 1, -1, 2)
+    colour = F.grid_sample(images[s : s + 1], grid, mode="bilinear", padding_mode="border", align_corners=False)
+    return colour[0, :, 0].T.double().numpy()
