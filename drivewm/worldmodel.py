@@ -174,49 +174,74 @@ def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]
     return stages
 
 
+@dataclasses.dataclass(frozen=True)
+class SampleFlags:
+    """How every benchmark sample is drawn: ``drivewm generate``'s sampling options, each None for
+    generate's default (as the model card's figures)."""
+
+    trajectory_guidance: float | None = None
+    """Guidance on the ego trajectory (``--trajectory-guidance``; generate's default: none)."""
+    reproject: float | None = None
+    """Reprojected refinement from this noise level (``--reproject``; 0 = off)."""
+    guidance_interval: str | None = None
+    """Guidance only at noise levels in (LO, HI], "LO,HI", or "all" (``--guidance-interval``)."""
+    prompt_template: bool | None = None
+    """Prompts rewritten into the training captions' template (``--[no-]prompt-template``)."""
+    reproject_walls: float | None = None
+    """The reprojection's corridor, m (``--reproject-walls``)."""
+    reproject_reshade: bool | None = None
+    """``--[no-]reproject-reshade``."""
+    reproject_blend: bool | None = None
+    """``--[no-]reproject-blend``."""
+
+    def __post_init__(self) -> None:
+        if self.trajectory_guidance is not None:
+            finite_at_least("worldmodel benchmark", 1, **{"--trajectory-guidance": self.trajectory_guidance})
+        if self.reproject is not None:
+            finite_at_least("worldmodel benchmark", 0, **{"--reproject": self.reproject})
+        if self.reproject_walls is not None:
+            finite_at_least("worldmodel benchmark", 0, **{"--reproject-walls": self.reproject_walls})
+
+    def argv(self) -> list[str]:
+        """The generate flags of the options given, in the order a run folder's stage markers hold
+        them (a rerun of an earlier benchmark resumes only if its commands are the same)."""
+        argv = []
+        if self.trajectory_guidance is not None:
+            argv += ["--trajectory-guidance", f"{self.trajectory_guidance:g}"]
+        if self.reproject is not None:
+            argv += ["--reproject", f"{self.reproject:g}"]
+        if self.guidance_interval is not None:
+            argv += ["--guidance-interval", self.guidance_interval]
+        if self.prompt_template is not None:
+            argv += ["--prompt-template" if self.prompt_template else "--no-prompt-template"]
+        if self.reproject_walls is not None:
+            argv += ["--reproject-walls", f"{self.reproject_walls:g}"]
+        for flag, on in (("--reproject-reshade", self.reproject_reshade), ("--reproject-blend", self.reproject_blend)):
+            if on is not None:
+                argv += [flag if on else f"--no-{flag[2:]}"]
+        return argv
+
+
 def benchmark_stages(
     p: WorldModelProfile,
     model: str,
     run: Path,
     heldout: Path,
     samples: int | None = None,
-    trajectory_guidance: float | None = None,
-    reproject: float | None = None,
-    guidance_interval: str | None = None,
-    prompt_template: bool | None = None,
-    reproject_walls: float | None = None,
-    reproject_reshade: bool | None = None,
-    reproject_blend: bool | None = None,
+    flags: SampleFlags = SampleFlags(),
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
-    profile's; seeds are per sample, so more samples keep the first ones' bytes; guidance on the
-    trajectory ``trajectory_guidance``, default none; reprojected refinement from ``reproject``,
-    ``guidance_interval`` "LO,HI" or "all" and ``prompt_template`` (prompts rewritten into the training
-    captions' template) and ``reproject_walls`` (the warp's corridor, m), each None for generate's
-    default, as are ``reproject_reshade`` and ``reproject_blend``, generate's --[no-]reproject-reshade
-    and --[no-]reproject-blend), the held-out clips ``heldout`` and the generated ones scored into
-    ``RUN/eval``, and the must-hold figures."""
+    profile's; seeds are per sample, so more samples keep the first ones' bytes; drawn as ``flags``
+    say), the held-out clips ``heldout`` and the generated ones scored into ``RUN/eval``, and the
+    must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
     stages = []
     for b in p.benchmarks:
         argv = ["generate", "--model", model, "--rig", p.rig, "--prompt", b.prompt, "--trajectory", b.trajectory]
         argv += ["--seed", str(b.seed), "--num-samples", str(samples), "--out", str(gen / b.name)]
-        if trajectory_guidance is not None:
-            argv += ["--trajectory-guidance", f"{trajectory_guidance:g}"]
-        if reproject is not None:
-            argv += ["--reproject", f"{reproject:g}"]
-        if guidance_interval is not None:
-            argv += ["--guidance-interval", guidance_interval]
-        if prompt_template is not None:
-            argv += ["--prompt-template" if prompt_template else "--no-prompt-template"]
-        if reproject_walls is not None:
-            argv += ["--reproject-walls", f"{reproject_walls:g}"]
-        for flag, on in (("--reproject-reshade", reproject_reshade), ("--reproject-blend", reproject_blend)):
-            if on is not None:
-                argv += [flag if on else f"--no-{flag[2:]}"]
-        stages.append((f"generate-{b.name}", [*argv, *p.generate]))
+        stages.append((f"generate-{b.name}", [*argv, *flags.argv(), *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
     )
@@ -235,13 +260,7 @@ def benchmark_worldmodel(
     profile_name: str,
     samples: int | None,
     tokenizer_eval: Path | None,
-    trajectory_guidance: float | None = None,
-    reproject: float | None = None,
-    guidance_interval: str | None = None,
-    prompt_template: bool | None = None,
-    reproject_walls: float | None = None,
-    reproject_reshade: bool | None = None,
-    reproject_blend: bool | None = None,
+    flags: SampleFlags = SampleFlags(),
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -254,12 +273,6 @@ def benchmark_worldmodel(
     folder = resolve_model_folder(model)  # a missing folder fails here, not at the first of twelve stages
     if not (folder / "config.json").is_file():
         raise DrivewmError(f"worldmodel benchmark: --model {model} is not a model folder (no config.json)")
-    if trajectory_guidance is not None:
-        finite_at_least("worldmodel benchmark", 1, **{"--trajectory-guidance": trajectory_guidance})
-    if reproject is not None:
-        finite_at_least("worldmodel benchmark", 0, **{"--reproject": reproject})
-    if reproject_walls is not None:
-        finite_at_least("worldmodel benchmark", 0, **{"--reproject-walls": reproject_walls})
     if not heldout.is_dir() and not heldout.is_file():
         raise DrivewmError(f"worldmodel benchmark: --heldout {heldout} is not a clip folder or an eval's metrics.json")
     profile = load_profile(profile_name)
@@ -273,20 +286,7 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
         # a rerun that brings the tokenizer's eval must read it: the figures stage's command is unchanged
         stage_marker(run, "figures").unlink(missing_ok=True)
-    stages = benchmark_stages(
-        profile,
-        model,
-        run,
-        heldout,
-        samples,
-        trajectory_guidance,
-        reproject,
-        guidance_interval,
-        prompt_template,
-        reproject_walls,
-        reproject_reshade,
-        reproject_blend,
-    )
+    stages = benchmark_stages(profile, model, run, heldout, samples, flags)
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
@@ -429,13 +429,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.profile,
             args.samples_per_prompt,
             args.tokenizer_eval,
-            args.trajectory_guidance,
-            args.reproject,
-            args.guidance_interval,
-            args.prompt_template,
-            args.reproject_walls,
-            args.reproject_reshade,
-            args.reproject_blend,
+            SampleFlags(**{f.name: getattr(args, f.name) for f in dataclasses.fields(SampleFlags)}),
         )
     )
     m = wsub.add_parser(

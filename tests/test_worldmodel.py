@@ -8,7 +8,7 @@ import pytest
 
 from drivewm import resources
 from drivewm.cli import build_parser, main
-from drivewm.worldmodel import benchmark_stages, load_profile, stage_commands
+from drivewm.worldmodel import SampleFlags, benchmark_stages, load_profile, stage_commands
 
 
 @pytest.mark.parametrize("profile", ["cpu", "gpu"])
@@ -53,39 +53,32 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     assert all(a[a.index("--num-samples") + 1] == "4" for n, a in more.items() if n.startswith("generate-"))
     parser = build_parser()
     assert all(callable(parser.parse_args(argv).func) for _, argv in mine)
-    guided = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, trajectory_guidance=4) if n[:9] == "generate-"]
-    assert len(guided) == len(p.benchmarks)
-    assert all(parser.parse_args(a).trajectory_guidance == 4.0 for a in guided)
-    assert all(parser.parse_args(a).trajectory_guidance == 1.0 for n, a in mine if n.startswith("generate-"))
-    refined = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject=0.5) if n[:9] == "generate-"]
-    assert all(parser.parse_args(a).reproject == 0.5 for a in refined) and len(refined) == len(p.benchmarks)
-    assert all(parser.parse_args(a).reproject is None for n, a in mine if n.startswith("generate-"))  # generate's
-    narrow = [
-        a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, guidance_interval="0.3,5") if n[:9] == "generate-"
-    ]
-    assert all(parser.parse_args(a).guidance_interval == (0.3, 5.0) for a in narrow) and len(narrow) == len(
-        p.benchmarks
+
+    def generated(**flags) -> list:  # each prompt's generate command, parsed, under the sampling flags given
+        stages = benchmark_stages(p, "m", tmp_path, tmp_path, flags=SampleFlags(**flags))
+        parsed = [parser.parse_args(a) for n, a in stages if n.startswith("generate-")]
+        assert len(parsed) == len(p.benchmarks)
+        return parsed
+
+    defaults = generated()  # none given: generate's own defaults
+    assert all(a.trajectory_guidance == 1.0 and a.reproject is None and a.reproject_walls == 0.0 for a in defaults)
+    assert all(
+        a.prompt_template is None and a.reproject_reshade is None and a.reproject_blend is None for a in defaults
     )
-    everywhere = [
-        a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, guidance_interval="all") if n[:9] == "generate-"
-    ]
-    assert all(parser.parse_args(a).guidance_interval is None for a in everywhere)
-    templated = [
-        a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, prompt_template=True) if n[:9] == "generate-"
-    ]
-    assert all(parser.parse_args(a).prompt_template for a in templated) and len(templated) == len(p.benchmarks)
-    assert all(parser.parse_args(a).prompt_template is None for n, a in mine if n.startswith("generate-"))
-    given = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, prompt_template=False) if n[:9] == "generate-"]
-    assert all(parser.parse_args(a).prompt_template is False for a in given) and len(given) == len(p.benchmarks)
-    walled = [a for n, a in benchmark_stages(p, "m", tmp_path, tmp_path, reproject_walls=25) if n[:9] == "generate-"]
-    assert all(parser.parse_args(a).reproject_walls == 25.0 for a in walled) and len(walled) == len(p.benchmarks)
-    assert all(parser.parse_args(a).reproject_walls == 0.0 for n, a in mine if n.startswith("generate-"))  # generate's
-    for flag in ("reproject_reshade", "reproject_blend"):
+    assert all(a.trajectory_guidance == 4.0 for a in generated(trajectory_guidance=4))
+    assert all(a.reproject == 0.5 for a in generated(reproject=0.5))
+    assert all(a.guidance_interval == (0.3, 5.0) for a in generated(guidance_interval="0.3,5"))
+    assert all(a.guidance_interval is None for a in generated(guidance_interval="all"))
+    assert all(a.reproject_walls == 25.0 for a in generated(reproject_walls=25))
+    for flag in ("prompt_template", "reproject_reshade", "reproject_blend"):
         for asked in (True, False):
-            stages = benchmark_stages(p, "m", tmp_path, tmp_path, **{flag: asked})
-            given = [a for n, a in stages if n[:9] == "generate-"]
-            assert all(getattr(parser.parse_args(a), flag) is asked for a in given) and len(given) == len(p.benchmarks)
-        assert all(getattr(parser.parse_args(a), flag) is None for n, a in mine if n[:9] == "generate-")  # generate's
+            assert all(getattr(a, flag) is asked for a in generated(**{flag: asked}))
+    # the order earlier runs' stage markers hold: a rerun with the same options resumes
+    every = SampleFlags(4, 0.1, "0.3,5", True, 25, False, True)
+    assert every.argv() == [
+        "--trajectory-guidance", "4", "--reproject", "0.1", "--guidance-interval", "0.3,5", "--prompt-template",
+        "--reproject-walls", "25", "--no-reproject-reshade", "--reproject-blend",
+    ]  # fmt: skip
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
@@ -99,9 +92,10 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
     monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label: ran.append((name, argv)))
     run = tmp_path / "run"
     argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
-    assert main(argv) == 0
+    assert main([*argv, "--reproject", "0.2", "--no-reproject-blend"]) == 0
     assert json.loads((run / "eval" / "heldout" / "metrics.json").read_text()) == earlier
-    full = benchmark_stages(load_profile("cpu"), "shipped:multiview", run, tmp_path / "earlier.json")
+    flags = SampleFlags(reproject=0.2, reproject_blend=False)  # the sampling flags reach every generate stage
+    full = benchmark_stages(load_profile("cpu"), "shipped:multiview", run, tmp_path / "earlier.json", flags=flags)
     assert ran == [(n, a) for n, a in full if n != "eval-heldout"] and len(ran) == len(full) - 1
     reference = dict(ran)["eval-generated"]
     assert reference[reference.index("--reference") + 1] == str(run / "eval" / "heldout" / "metrics.json")
