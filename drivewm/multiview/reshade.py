@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from drivewm.geometry import Rig, pixel_rays
+from drivewm.multiview.camera import patch_centres_px
 from drivewm.multiview.warp import ray_depths
 
 PROFILE_M = (3.0, 150.0)  # road distances the profile is read over (nearer or further: its ends)
@@ -43,12 +44,11 @@ def surface_distances(
     frame 0 to that point, whether the surface is the road, and the point's lateral position (m, y of
     the first ego frame; NaN at infinity); each (V, T, H, W)."""
     h, w = hw
-    uv = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), -1).reshape(-1, 2)
     shape = (len(rig.cameras), len(T_ego0_from_ego), h, w)
     d_t, d_0, road = np.full(shape, np.inf), np.full(shape, np.inf), np.zeros(shape, dtype=bool)
     lateral = np.full(shape, np.nan)
     for v, cam in enumerate(rig.cameras):
-        rays = pixel_rays(cam.K * np.array([[w / cam.width], [h / cam.height], [1.0]]), uv)
+        rays = pixel_rays(cam.K, patch_centres_px(cam, hw))  # the warp's rays (warp.flat_world_points)
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
         c0 = cam.T_ego_from_cam[:3, 3]
         for t, T in enumerate(T_ego0_from_ego):
