@@ -60,7 +60,9 @@ def _stages(run: Path) -> list[str]:
     for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
         m = read_json(marker)
         seconds = "" if m.get("seconds") is None else f"{m['seconds']:.0f}"
-        command = shlex.join(m.get("argv", [])).replace(str(run), "RUN")  # paste-able for another run folder
+        command = shlex.join(m.get("argv", []))
+        for path in (m.get("run"), str(run)):  # where the run was when the stage ran, and where it is
+            command = command.replace(path, "RUN") if path else command  # paste-able for another run folder
         rows.append(f"| {marker.stem} | {seconds} | `drivewm {command}` |")
     return rows
 

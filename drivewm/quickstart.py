@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import shlex
 import time
 from pathlib import Path
@@ -192,21 +193,36 @@ def stage_marker(out: Path, name: str) -> Path:
     return out / ".stages" / f"{name}.json"
 
 
-def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") -> float:
-    """Run one stage unless its marker says the same command finished; returns seconds spent."""
+def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart", relocatable: bool = False) -> float:
+    """Run one stage unless its marker says the same command finished; returns seconds spent.
+    ``relocatable``: a marker written when the run folder had another path (moved, copied from a GPU
+    machine, named from another directory) still counts if its command is this one with the run's
+    old path in place of ``out``; only for runs whose outputs hold no path into the run folder (the
+    benchmark's: a recipe's model folders record their tokenizer's path)."""
     argv = fill_first_log(argv, out)
     marker = stage_marker(out, name)
-    if marker.is_file() and json.loads(marker.read_text()).get("argv") == argv:
-        print(f"[{label}] {name}: done before, skipped")
-        return 0.0
+    if marker.is_file():
+        done = json.loads(marker.read_text())
+        if done.get("argv") == argv or (relocatable and in_run(done.get("argv"), done.get("run")) == in_run(argv, out)):
+            print(f"[{label}] {name}: done before, skipped")
+            return 0.0
     print(f"[{label}] {name}: drivewm {shlex.join(argv)}", flush=True)
     tic = time.perf_counter()
     code = main(argv)
     if code:
         raise DrivewmError(f"{label} stage {name!r} failed (exit {code}); rerun {label} to resume from it")
     seconds = time.perf_counter() - tic
-    write_json(marker, {"argv": argv, "seconds": seconds})
+    write_json(marker, {"argv": argv, "run": str(out), "seconds": seconds})
     return seconds
+
+
+def in_run(argv: list[str] | None, run: str | Path | None) -> list[str] | None:
+    """``argv`` with the run folder ``run`` (and every path under it) written as ``{run}``; None
+    when either is unknown (a marker from before the run's path was recorded)."""
+    if argv is None or run is None:
+        return None
+    run = str(run)
+    return ["{run}" + a[len(run) :] if a == run or a.startswith(run + os.sep) else a for a in argv]
 
 
 def quickstart(out: Path, profile_name: str = "full") -> Path:

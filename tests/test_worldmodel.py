@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import shutil
+from pathlib import Path
 
 import pytest
 
@@ -89,7 +91,7 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
     earlier = {"num_clips": 48, "tse_calibrated": 0.957, "clips": {"a": {"tse_calibrated": 0.9}}}
     (tmp_path / "earlier.json").write_text(json.dumps(earlier))
     ran = []
-    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label: ran.append((name, argv)))
+    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label, **kw: ran.append((name, argv)))
     run = tmp_path / "run"
     argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
     assert main([*argv, "--reproject", "0.2", "--no-reproject-blend"]) == 0
@@ -112,7 +114,7 @@ def test_a_rerun_given_the_tokenizer_eval_computes_the_figures_again(tmp_path, m
     marker.write_text(json.dumps({"argv": ["worldmodel", "figures", str(run)], "seconds": 0.1}))
     (tmp_path / "earlier.json").write_text(json.dumps({"num_clips": 1, "clips": {"a": {}}}))
     (tmp_path / "tok.json").write_text(json.dumps({"psnr": 29.93, "clips": {}}))
-    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label: None)
+    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label, **kw: None)
     argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
     assert main([*argv]) == 0
     assert marker.is_file()  # no tokenizer eval: the figures stay as they were
@@ -244,3 +246,39 @@ def test_an_unreadable_turn_counts_against_the_turn_sign_and_the_table_says_so(t
     sign = figs["turn_sign_rate"]
     assert (sign["value"], sign["clips"], sign["unreadable"]) == (round(2 / 3, 4), 3, 1)
     assert "| turn_sign_rate | 0.6667 (1 unreadable) | >= 0.9 | no |" in figures_markdown(figs)
+
+
+def test_a_benchmark_moved_to_another_folder_resumes_where_it_stopped(tmp_path, monkeypatch):
+    """A benchmark run copied from a GPU machine, moved, or named from another directory keeps its
+    finished stages: a marker's command counts with the run's old path in place of the new one.
+    Any other change reruns the stage, and a recipe run (whose model folders record their
+    tokenizer's path) is not relocatable."""
+    import drivewm.quickstart
+    from drivewm.quickstart import run_stage
+
+    ran = []
+    monkeypatch.setattr(drivewm.quickstart, "main", lambda argv: ran.append(argv) or 0)
+
+    def stage(run: Path, model: str = "m", relocatable: bool = True) -> list:
+        argv = ["generate", "--model", model, "--out", str(run / "generated" / "a"), "--ref", str(run)]
+        ran.clear()
+        run_stage("generate-a", argv, run, "worldmodel", relocatable=relocatable)
+        return ran[:]
+
+    old = tmp_path / "gpu" / "run"
+    assert stage(old) and not stage(old)  # ran once, then resumed
+    new = tmp_path / "moved"
+    shutil.move(old, new)
+    assert not stage(new)  # the same command with the run's new path: done before
+    from drivewm.model_card import _stages
+
+    assert _stages(new)[-1] == "| generate-a | 0 | `drivewm generate --model m --out RUN/generated/a --ref RUN` |"
+    assert stage(new, model="other")  # another model: runs
+    assert not stage(new, model="other")
+    shutil.move(new, tmp_path / "again")
+    assert stage(tmp_path / "again", model="other", relocatable=False)  # a recipe's stages rerun when moved
+    earlier = drivewm.quickstart.stage_marker(tmp_path / "again", "generate-a")
+    marker = json.loads(earlier.read_text())
+    earlier.write_text(json.dumps({"argv": marker["argv"], "seconds": 1.0}))  # written before the run was recorded
+    shutil.move(tmp_path / "again", tmp_path / "last")
+    assert stage(tmp_path / "last", model="other")  # its old path unknown: runs again
