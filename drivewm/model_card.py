@@ -56,13 +56,14 @@ def _data(run: Path) -> list[str]:
 
 
 def _stages(run: Path) -> list[str]:
+    from drivewm.quickstart import in_run
+
     rows = ["| stage | seconds | command |", "|---|---|---|"]
     for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
         m = read_json(marker)
         seconds = "" if m.get("seconds") is None else f"{m['seconds']:.0f}"
-        command = shlex.join(m.get("argv", []))
-        for path in (m.get("run"), str(run)):  # where the run was when the stage ran, and where it is
-            command = command.replace(path, "RUN") if path else command  # paste-able for another run folder
+        # paste-able for another run folder: the run's path when the stage ran (recorded since 2026-11-30) as RUN
+        command = shlex.join(in_run(m.get("argv", []), m.get("run") or run, "RUN"))
         rows.append(f"| {marker.stem} | {seconds} | `drivewm {command}` |")
     return rows
 

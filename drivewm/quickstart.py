@@ -216,13 +216,13 @@ def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart", 
     return seconds
 
 
-def in_run(argv: list[str] | None, run: str | Path | None) -> list[str] | None:
-    """``argv`` with the run folder ``run`` (and every path under it) written as ``{run}``; None
+def in_run(argv: list[str] | None, run: str | Path | None, name: str = "{run}") -> list[str] | None:
+    """``argv`` with the run folder ``run`` (and every path under it) written as ``name``; None
     when either is unknown (a marker from before the run's path was recorded)."""
     if argv is None or run is None:
         return None
     run = str(run)
-    return ["{run}" + a[len(run) :] if a == run or a.startswith(run + os.sep) else a for a in argv]
+    return [name + a[len(run) :] if a == run or a.startswith(run + os.sep) else a for a in argv]
 
 
 def quickstart(out: Path, profile_name: str = "full") -> Path:
