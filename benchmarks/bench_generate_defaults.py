@@ -23,9 +23,9 @@ from interleaved import add_sampling_arguments, alternate, print_medians
 
 from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import GenerateOptions
-from drivewm.multiview.defaults import DEFAULT_RESHADE
+from drivewm.multiview.defaults import DEFAULT_RESHADE, DEFAULT_SIGMA
 from drivewm.multiview.generate import generate_multiview
-from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection
+from drivewm.multiview.reproject import Reprojection
 from drivewm.train.checkpoint import load_model_folder
 
 

@@ -20,6 +20,11 @@ import argparse
 import cv2
 import numpy as np
 
+from drivewm.choices import resolve_model_folder
+from drivewm.eval.inputs import load_items
+from drivewm.multiview.coding import code_views
+from drivewm.tokenizer.model import Tokenizer
+
 
 def road_detail(frames: np.ndarray) -> np.ndarray:
     """uint8 (T, H, W, 3) -> (T,) mean absolute Laplacian of each frame's lower half."""
@@ -35,14 +40,7 @@ def main() -> None:
     parser.add_argument("--coded", help="code and decode every clip with this tokenizer (folder or shipped:tokenizer)")
     parser.add_argument("--max-clips", type=int, default=48)
     args = parser.parse_args()
-    from drivewm.eval.inputs import load_items
-
-    tokenizer = None
-    if args.coded:
-        from drivewm.choices import resolve_model_folder
-        from drivewm.tokenizer.model import Tokenizer
-
-        tokenizer = Tokenizer.from_pretrained(resolve_model_folder(args.coded)).eval()
+    tokenizer = Tokenizer.from_pretrained(resolve_model_folder(args.coded)).eval() if args.coded else None
     for folder in args.folders:
         items = load_items(folder)[: args.max_clips]
         rows: dict[str, list] = {}
@@ -51,8 +49,6 @@ def main() -> None:
             names = list(videos)
             clips = np.stack([videos[n] for n in names])
             if tokenizer is not None:
-                from drivewm.multiview.coding import code_views
-
                 clips = code_views(tokenizer, clips, clips.shape[2:4])
             for name, frames in zip(names, clips):
                 d = road_detail(frames)

@@ -24,8 +24,9 @@ from drivewm.config import check_guidance_interval, finite_at_least
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import decode_views, encode_views, frames_to_video
+from drivewm.multiview.defaults import DEFAULT_SIGMA
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection, refine_reprojected
+from drivewm.multiview.reproject import Reprojection, refine_reprojected
 from drivewm.multiview.trajectories import (
     NAMED,
     load_waypoints,

@@ -13,8 +13,9 @@ from mv_standin import PoolTokenizer
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
+from drivewm.multiview.defaults import DEFAULT_SIGMA
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection
+from drivewm.multiview.reproject import Reprojection
 from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
 

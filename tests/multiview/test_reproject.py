@@ -14,8 +14,8 @@ from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.geometry import Rig, yaw_of
 from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE
-from drivewm.multiview.reproject import DEFAULT_SIGMA, Reprojection, reproject_first_frame
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE, DEFAULT_SIGMA
+from drivewm.multiview.reproject import Reprojection, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
 
 FPS = 10.0
