@@ -193,6 +193,8 @@ class SampleFlags:
     """``--[no-]reproject-reshade``."""
     reproject_blend: bool | None = None
     """``--[no-]reproject-blend``."""
+    stitch: bool | None = None
+    """``--[no-]stitch``."""
 
     def __post_init__(self) -> None:
         if self.trajectory_guidance is not None:
@@ -216,7 +218,8 @@ class SampleFlags:
             argv += ["--prompt-template" if self.prompt_template else "--no-prompt-template"]
         if self.reproject_walls is not None:
             argv += ["--reproject-walls", f"{self.reproject_walls:g}"]
-        for flag, on in (("--reproject-reshade", self.reproject_reshade), ("--reproject-blend", self.reproject_blend)):
+        switches = ("--reproject-reshade", self.reproject_reshade), ("--reproject-blend", self.reproject_blend)
+        for flag, on in (*switches, ("--stitch", self.stitch)):
             if on is not None:
                 argv += [flag if on else f"--no-{flag[2:]}"]
         return argv
@@ -407,6 +410,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         action=argparse.BooleanOptionalAction,
         help="every sample's first frame blended where the cameras overlap before the reprojection "
         "(drivewm generate --reproject-blend; default generate's, on, as the model card's figures)",
+    )
+    b.add_argument(
+        "--stitch",
+        action=argparse.BooleanOptionalAction,
+        help="every frame of every sample blended where the cameras overlap (drivewm generate --stitch; default "
+        "generate's, on, as the model card's figures)",
     )
     b.add_argument(
         "--guidance-interval",

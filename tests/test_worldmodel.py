@@ -65,21 +65,22 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     defaults = generated()  # none given: generate's own defaults
     assert all(a.trajectory_guidance == 1.0 and a.reproject is None and a.reproject_walls == 0.0 for a in defaults)
     assert all(
-        a.prompt_template is None and a.reproject_reshade is None and a.reproject_blend is None for a in defaults
+        a.prompt_template is None and a.reproject_reshade is None and a.reproject_blend is None and a.stitch is None
+        for a in defaults
     )
     assert all(a.trajectory_guidance == 4.0 for a in generated(trajectory_guidance=4))
     assert all(a.reproject == 0.5 for a in generated(reproject=0.5))
     assert all(a.guidance_interval == (0.3, 5.0) for a in generated(guidance_interval="0.3,5"))
     assert all(a.guidance_interval is None for a in generated(guidance_interval="all"))
     assert all(a.reproject_walls == 25.0 for a in generated(reproject_walls=25))
-    for flag in ("prompt_template", "reproject_reshade", "reproject_blend"):
+    for flag in ("prompt_template", "reproject_reshade", "reproject_blend", "stitch"):
         for asked in (True, False):
             assert all(getattr(a, flag) is asked for a in generated(**{flag: asked}))
     # the order earlier runs' stage markers hold: a rerun with the same options resumes
-    every = SampleFlags(4, 0.1, "0.3,5", True, 25, False, True)
+    every = SampleFlags(4, 0.1, "0.3,5", True, 25, False, True, False)
     assert every.argv() == [
         "--trajectory-guidance", "4", "--reproject", "0.1", "--guidance-interval", "0.3,5", "--prompt-template",
-        "--reproject-walls", "25", "--no-reproject-reshade", "--reproject-blend",
+        "--reproject-walls", "25", "--no-reproject-reshade", "--reproject-blend", "--no-stitch",
     ]  # fmt: skip
 
 

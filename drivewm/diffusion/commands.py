@@ -22,7 +22,7 @@ from drivewm.choices import (
 )
 from drivewm.diffusion.dit_config import DIT_PRESETS
 from drivewm.multiview.commands import add_reproject_arguments
-from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_SIGMA
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_SIGMA, DEFAULT_STITCH
 from drivewm.recipe import add_recipe_arguments
 
 #: model_type -> "module:function" taking (args) and returning an exit status or None.
@@ -93,6 +93,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--condition-clip; docs/quality-vs-compute.md, 'Cameras that disagree where they overlap')",
     )
     g.add_argument(
+        "--stitch",
+        action=argparse.BooleanOptionalAction,
+        help="multi-view models: blend every decoded frame where the rig's cameras overlap, as a panorama is "
+        f"stitched, so the views agree there in every frame (default {'on' if DEFAULT_STITCH else 'off'}; never "
+        "with --condition-clip; docs/quality-vs-compute.md, 'Stitched: every frame blended')",
+    )
+    g.add_argument(
         "--prompt-template",
         action=argparse.BooleanOptionalAction,
         help="multi-view models: rewrite each prompt into the training captions' template (weather, time of day, "
@@ -138,10 +145,11 @@ def generate_text2world_command(args: argparse.Namespace) -> int:
 
     multiview_only = args.rig or args.trajectory or args.condition_clip or args.reproject or args.reproject_walls
     multiview_only = multiview_only or args.prompt_template or args.reproject_reshade or args.reproject_blend
+    multiview_only = multiview_only or args.stitch
     if multiview_only or args.trajectory_guidance != 1.0:  # None (not given) and off pass alike
         raise DrivewmError(
             f"{args.model}: a Text2World model takes no --rig/--trajectory/--condition-clip/--trajectory-guidance"
-            "/--reproject/--reproject-walls/--reproject-reshade/--reproject-blend/--prompt-template"
+            "/--reproject/--reproject-walls/--reproject-reshade/--reproject-blend/--stitch/--prompt-template"
             " (multi-view models do)"
         )
     options = generate_options(args)

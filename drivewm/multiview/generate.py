@@ -19,8 +19,9 @@ from drivewm.curate.captions import camera_direction, classify_manoeuvre, prompt
 from drivewm.diffusion.generate import GenerateOptions, decode_latents, warn_if_preview
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
-from drivewm.multiview.blend import blend_overlaps
+from drivewm.multiview.blend import blend_overlaps, stitch_views
 from drivewm.multiview.coding import decode_views, encode_views
+from drivewm.multiview.defaults import DEFAULT_STITCH
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.reproject import Reprojection, refine_reprojected
 from drivewm.multiview.rollout import clip_rig, initial_speed_mps, load_clip
@@ -89,6 +90,7 @@ def generate_multiview(
     trajectory_guidance: float = 1.0,
     reprojection: Reprojection | None = None,
     prompt_template: bool = True,
+    stitch: bool | None = None,
 ) -> list[Path]:
     """``options.num_samples`` clips per prompt for ``rig_spec`` (default: the training rig) under
     ``trajectory`` (default straight) and write them (drivewm.multiview.writer); with a
@@ -97,7 +99,9 @@ def generate_multiview(
     trajectory and refined (drivewm.multiview.reproject), its first frame blended where the cameras
     overlap before (``reprojection.blend``, drivewm.multiview.blend; not with ``condition_clip``);
     with ``prompt_template`` (the default) each prompt is rewritten into the training captions'
-    template (:func:`template_view_captions`), without it sampled as given (:func:`view_captions`)."""
+    template (:func:`template_view_captions`), without it sampled as given (:func:`view_captions`);
+    with ``stitch`` (None: :data:`DEFAULT_STITCH`; never with ``condition_clip``) every decoded frame
+    is blended where the cameras overlap (drivewm.multiview.blend.stitch_views)."""
     model = MultiView.from_pretrained(model_dir).to(options.device)
     reprojection = (reprojection or Reprojection(None)).resolved(bool(model.latent.tokenizer))
     warn_if_preview(model_dir, model.latent.tokenizer)
@@ -109,8 +113,9 @@ def generate_multiview(
         cond, rig, clip_speed = condition_latents(model, Path(condition_clip), rig)
         speed = clip_speed if np.isfinite(clip_speed) else speed
     rig = rig or model.training_rig
+    stitch = DEFAULT_STITCH if stitch is None else stitch
     if condition_clip is not None:  # the first frames are the clip's own: they agree already
-        reprojection = dataclasses.replace(reprojection, blend=False)
+        reprojection, stitch = dataclasses.replace(reprojection, blend=False), False
     waypoints = resolve_trajectory(trajectory or "straight", mv.trajectory_waypoints, mv.trajectory_dt_s, speed)
     samples = []
     jobs = [(p, options.seed + i) for i, p in enumerate(p for p in options.prompts for _ in range(options.num_samples))]
@@ -135,6 +140,8 @@ def generate_multiview(
                 videos[:, 0] = blend_overlaps(videos[:, 0], rig, mv.warp_ground_m, reprojection.walls_m)
             z = refine_reprojected(model, tokenizer, rig, caps, waypoints, seed, videos, reprojection, sampling)
             videos = decode_views(tokenizer, z, model.device)
+        if stitch:
+            videos = stitch_views(videos, rig, mv.warp_ground_m, reprojection.walls_m)
         extra = {
             "model": str(Path(model_dir).resolve()),
             "prompt": prompt,
@@ -146,6 +153,7 @@ def generate_multiview(
             "condition_clip": str(condition_clip or ""),
             "prompt_template": prompt_template,
             **reprojection.record(),
+            **({"stitched": True} if stitch else {}),
         }
         samples.append(GeneratedSample(videos, rig, prompt, caps, waypoints, mv.trajectory_dt_s, extra))
     return write_samples(out_dir, samples, model.latent.fps)
@@ -164,11 +172,12 @@ def generate_command(args: argparse.Namespace) -> int:
     """``drivewm generate`` for a multi-view model folder (called by drivewm.diffusion.commands)."""
     from drivewm.diffusion.commands import generate_options
 
-    if args.reproject_blend and args.condition_clip is not None:
-        raise DrivewmError(
-            f"{args.condition_clip}: --reproject-blend blends generated first frames; a --condition-clip's frames "
-            "are the clip's own and are never blended (--no-reproject-blend, or leave it out)"
-        )
+    for flag, on in (("--reproject-blend", args.reproject_blend), ("--stitch", args.stitch)):
+        if on and args.condition_clip is not None:
+            raise DrivewmError(
+                f"{args.condition_clip}: {flag} blends generated frames; a --condition-clip's frames are the "
+                f"clip's own and are never blended (--no-{flag[2:]}, or leave it out)"
+            )
     options = generate_options(args)
     # sigma None: generate's default
     reprojection = Reprojection(
@@ -184,6 +193,7 @@ def generate_command(args: argparse.Namespace) -> int:
         args.trajectory_guidance,
         reprojection,
         args.prompt_template is not False,
+        args.stitch,
     )
     print(f"wrote {len(files)} files to {args.out}")
     return 0

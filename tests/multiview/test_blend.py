@@ -10,7 +10,7 @@ from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
-from drivewm.multiview.blend import blend_overlaps, overlap_disagreement
+from drivewm.multiview.blend import blend_overlaps, overlap_disagreement, stitch_views
 from drivewm.multiview.reproject import Reprojection
 from drivewm.multiview.rollout import RolloutOptions
 
@@ -43,6 +43,25 @@ def test_views_that_disagree_where_their_cameras_overlap_agree_once_blended(sim_
     assert np.array_equal(blended[front, :, centre], disagreeing[front, :, centre])  # only its own camera sees it
 
 
+def test_stitching_makes_every_frame_agree_and_mixes_no_frame_into_another(sim_clip_dir):
+    """A simulated drive, each view brightened or darkened by a shift that changes from frame to
+    frame (as views refined each on its own can be): stitched, every frame's overlaps agree within a
+    fraction of what they disagreed, and each frame is its own frame blended, no other's."""
+    clip = next(iter_clips(sorted(sim_clip_dir.glob("*.tar"))[0]))
+    rig = clip.meta.get_rig()
+    videos = np.stack([clip.video(n)[:6] for n in rig.names]).astype(int)
+    sign = np.where(np.arange(len(rig.names)) % 2 == 0, 1, -1)[:, None]
+    shift = sign * np.array([40, -30, 20, 45, -40, 10])[None, :]  # (V, T): differs per view and per frame
+    disagreeing = (videos + shift[..., None, None, None]).clip(0, 255).astype(np.uint8)
+    stitched = stitch_views(disagreeing, rig)
+    for t in range(disagreeing.shape[1]):
+        before, after = overlap_disagreement(disagreeing[:, t], rig), overlap_disagreement(stitched[:, t], rig)
+        assert before > 15 and after < 0.2 * before, (t, before, after)
+        assert np.array_equal(stitched[:, t], blend_overlaps(disagreeing[:, t], rig))
+    with pytest.raises(ValueError, match="5 views for a rig of 6"):
+        stitch_views(disagreeing[:5], rig)
+
+
 def test_blending_keeps_views_that_agree_everywhere_and_refuses_a_mismatched_rig():
     rig = load_rig("nuscenes6").scaled(160, 96)
     uniform = np.full((6, 96, 160, 3), (90, 100, 110), np.uint8)
@@ -60,26 +79,30 @@ def test_blending_is_recorded_on_by_default_and_never_in_a_rollout(tmp_path, cap
     assert "reproject_blend" not in Reprojection(0.0).record()  # off: no first frame is reprojected
     assert RolloutOptions("left").reprojection.blend is False  # a rollout's first frames are the clip's own
     argv = ["generate", "--prompt", "snow", "--condition-clip", str(tmp_path / "c.tar"), "--out", str(tmp_path / "o")]
-    assert main([*argv, "--reproject-blend"]) == 2  # asked for on a real clip's frames: refused before any model loads
-    assert "are never blended" in capsys.readouterr().err and not (tmp_path / "o").exists()
+    for flag in ("--reproject-blend", "--stitch"):
+        assert main([*argv, flag]) == 2  # asked for on a real clip's frames: refused before any model loads
+        assert f"{flag} blends generated frames" in capsys.readouterr().err and not (tmp_path / "o").exists()
 
 
 @pytest.mark.slow
-def test_a_generated_clips_cameras_agree_where_they_overlap_with_the_blend(tmp_path):
-    """The shipped model, one prompt and seed with and without ``--reproject-blend``: the first
-    frames of the blended sample disagree across the overlaps by a fraction of the unblended ones'
-    (measured 40 -> 5 levels on validation prompts), the refined frames after it too, and the clip
-    records the blend."""
+def test_a_generated_clips_cameras_agree_where_they_overlap_with_the_blend_and_the_stitch(tmp_path):
+    """The shipped model, one prompt and seed with and without ``--reproject-blend`` (unstitched):
+    the first frames of the blended sample disagree across the overlaps by a fraction of the
+    unblended ones' (measured 40 -> 5 levels on validation prompts), the refined frames after it
+    too. Stitched (generate's default), the last frame disagrees by a fraction of the unstitched
+    one's. Each clip records what was done to it."""
     got = {}
-    for flag in ("--reproject-blend", "--no-reproject-blend"):
-        out = tmp_path / flag
+    for flags in (["--reproject-blend", "--no-stitch"], ["--no-reproject-blend", "--no-stitch"], []):
+        out = tmp_path / "_".join(flags or ["defaults"])
         argv = ["generate", "--prompt", "a clear day on a suburban road", "--trajectory", "left", "--seed", "5"]
         argv += ["--steps", "3", "--guidance", "1", "--device", "cpu", "--reproject-steps", "3", "--out", str(out)]
-        assert main([*argv, flag]) == 0
+        assert main([*argv, *flags]) == 0
         clip = next(iter_clips(sorted(out.glob("*.tar"))[0]))
         rig = clip.meta.get_rig()
         videos = np.stack([clip.video(n) for n in rig.names])
-        got[flag] = [overlap_disagreement(videos[:, t], rig) for t in (0, videos.shape[1] - 1)]
-        assert clip.meta.extra.get("reproject_blend", False) is (flag == "--reproject-blend")
-    blended, plain = got["--reproject-blend"], got["--no-reproject-blend"]
+        got[" ".join(flags)] = [overlap_disagreement(videos[:, t], rig) for t in (0, videos.shape[1] - 1)]
+        assert clip.meta.extra.get("reproject_blend", False) is ("--no-reproject-blend" not in flags)
+        assert clip.meta.extra.get("stitched", False) is ("--no-stitch" not in flags)
+    blended, plain = got["--reproject-blend --no-stitch"], got["--no-reproject-blend --no-stitch"]
     assert blended[0] < 0.5 * plain[0] and blended[1] < plain[1], got
+    assert got[""][1] < 0.5 * blended[1], got

@@ -14,7 +14,7 @@ from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
 from drivewm.geometry import Rig, yaw_of
 from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE, DEFAULT_SIGMA
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE, DEFAULT_SIGMA, DEFAULT_STITCH
 from drivewm.multiview.reproject import Reprojection, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
 
@@ -135,6 +135,7 @@ def test_bad_reprojection_settings_are_refused_before_any_model_loads(tmp_path, 
         (["worldmodel", "benchmark"], "{:g}, as"),
         (["generate"], "(default on;" if DEFAULT_RESHADE else "(default off;"),
         (["generate"], "(default on; never" if DEFAULT_BLEND else "(default off; never"),
+        (["generate"], "every frame (default on; never" if DEFAULT_STITCH else "every frame (default off; never"),
     )
     for command, says in helps:
         with pytest.raises(SystemExit):
@@ -146,10 +147,10 @@ def test_a_text2world_model_refuses_the_multiview_options_only_when_they_are_ask
     """generate's multi-view defaults (reprojection, the prompt template) do not stop a Text2World model;
     asking for them does, before any sampling."""
     asked = (["--reproject", "0.5"], ["--reproject-walls", "25"], ["--reproject-reshade"], ["--reproject-blend"])
-    for flags in (["--prompt-template"], *asked):
+    for flags in (["--prompt-template"], ["--stitch"], *asked):
         argv = ["generate", "--model", "shipped:text2world", "--prompt", "snow", "--out", str(tmp_path / "o")]
         assert main([*argv, *flags]) == 2
-        assert "--reproject-reshade/--reproject-blend/--prompt-template" in capsys.readouterr().err
+        assert "--reproject-reshade/--reproject-blend/--stitch/--prompt-template" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
