@@ -1,7 +1,9 @@
 """Time of one multi-view ``drivewm generate`` clip at its defaults (the prompt template, reprojected
-refinement from ``DEFAULT_SIGMA``, the warp reshaded by ``DEFAULT_RESHADE``) against plain sampling
-from noise (``--no-prompt-template --reproject 0``), end to end as the command runs it: model and
-tokenizer loaded, first pass, decode, warp, reshade, encode, refinement, decode, clip written.
+refinement from ``DEFAULT_SIGMA``, the warp reshaded by ``DEFAULT_RESHADE``, the first frame blended
+and every frame stitched where the cameras overlap) against plain sampling from noise
+(``--no-prompt-template --reproject 0 --no-stitch``), end to end as the command runs it: model and
+tokenizer loaded, first pass, decode, blend, warp, reshade, encode, refinement, decode, stitch, clip
+written.
 
 The shipped multi-view model (or ``--model``), the world-model benchmark's sampler settings (20 Heun
 steps, guidance 7, nuscenes6, a left turn). The two settings alternate, ``--repeats`` times each
@@ -23,7 +25,7 @@ from interleaved import add_sampling_arguments, alternate, print_medians
 
 from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import GenerateOptions
-from drivewm.multiview.defaults import DEFAULT_RESHADE, DEFAULT_SIGMA
+from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE, DEFAULT_SIGMA, DEFAULT_STITCH
 from drivewm.multiview.generate import generate_multiview
 from drivewm.multiview.reproject import Reprojection
 from drivewm.train.checkpoint import load_model_folder
@@ -39,18 +41,20 @@ def main() -> None:
     params = sum(v.numel() for v in state.values() if v.is_floating_point())
     print(f"{args.model}: {params / 1e6:.2f}M parameters; {args.steps} Heun steps, guidance {args.guidance:g}")
     default = f"template + reprojection from {DEFAULT_SIGMA:g}{', reshaded' if DEFAULT_RESHADE else ''}, 10 steps"
+    default += (", first frame blended" if DEFAULT_BLEND else "") + (", stitched" if DEFAULT_STITCH else "")
     print(f"{torch.get_num_threads()} threads; default: {default}")
     prompt = "light snow on a country lane, turning left"
 
-    def run(reprojection: Reprojection | None, template: bool):
+    def run(reprojection: Reprojection | None, template: bool, stitch: bool | None):
         def clip(r: int) -> None:
             options = GenerateOptions([prompt], args.steps, args.guidance, seed=r, device="cpu")
             with tempfile.TemporaryDirectory() as out:
-                generate_multiview(folder, options, "nuscenes6", "left", None, out, 1.0, reprojection, template)
+                generate_multiview(folder, options, "nuscenes6", "left", None, out, 1.0, reprojection, template, stitch)
 
         return clip
 
-    times = alternate({"plain": run(Reprojection(0.0), False), "default": run(None, True)}, args.repeats)
+    arms = {"plain": run(Reprojection(0.0), False, False), "default": run(None, True, None)}
+    times = alternate(arms, args.repeats)
     print_medians(times, "plain", "setting")
 
 
