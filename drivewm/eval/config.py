@@ -110,9 +110,12 @@ class ConsistencyConfig:
     compensate_exposure: bool = True
     """Calibrated TSE / CSE use the ego pose at each camera's own exposure time
     (``ClipMeta.camera_timestamps_ns``, drivewm.eval.exposure), not at the clip's tick."""
+    overlap_frame_step: int = 4
+    """``overlap_disagreement`` (read beside CSE) on every this-many-th frame."""
 
     def validate(self) -> None:
         at_least(self, 1, "frame_gap")
+        at_least(self, 1, "overlap_frame_step")
         at_least(self, 2, "overlap_grid")
         in_range(self, "overlap_min_fraction", 0, 1)
         require(

@@ -35,6 +35,11 @@ TABLE_ROWS = (
     ("cse_counted", "px", "CSE over the pairs that count only (the Cosmos paper's figure)"),
     ("cse_counted_fraction", "rate", "CSE camera pairs with enough distinct verified matches"),
     ("cse_matches", "count", "distinct verified matches per CSE camera pair (all frames)"),
+    (
+        "overlap_disagreement",
+        "levels",
+        "colour difference where two cameras see one flat-world point (real clips ~8, stitched views ~2)",
+    ),
     ("pose_success", "rate", "clips whose frames all register in COLMAP (higher is better)"),
     ("pose_success_path", "rate", "clips that register and travel their own ego path (m, within 2x; higher is better)"),
     ("path_ratio_median", "ratio", "median over clips: recovered ego path length over the clip's own (1: on it)"),

@@ -55,6 +55,7 @@ AGGREGATE_KEYS = (
     "cse",
     "cse_calibrated",
     *(f"{m}{suffix}" for m in ("tse", "tse_calibrated", "cse", "cse_calibrated") for suffix in SAMPSON_SUFFIXES),
+    "overlap_disagreement",
     "pose_success",
     "pose_success_path",
     "registered_fraction",
@@ -207,6 +208,7 @@ def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
     ego = _ego_at_cameras(item, cfg)
     r = cross_sampson(videos, item.rig, pairs, cfg.epipolar, matcher, cfg=cfg.consistency, ego_at_camera=ego)
     _put_sampson(metrics, "cse", r)
+    metrics["overlap_disagreement"] = _overlap_disagreement(item.rig, videos, cfg.consistency.overlap_frame_step)
     a, b = pairs[0]
     m = matcher.match((a, 0), videos[a][0], (b, 0), videos[b][0])
     artifacts["cse_matches"] = {
@@ -215,6 +217,37 @@ def _cse(item, videos, cfg, matcher, metrics, artifacts) -> None:
         "uv_a": m.uv_a,
         "uv_b": m.uv_b,
     }
+
+
+#: ``overlap_disagreement`` reads frames at most this wide (resized, the rig scaled alike): the colour
+#: of an overlap, not its fine detail, is what it compares, and a 1600x900 camera would cost seconds a frame.
+OVERLAP_WIDTH_PX = 320
+
+
+def _overlap_disagreement(rig, videos: dict[str, np.ndarray], step: int) -> float:
+    """Mean colour difference (8-bit levels) where two cameras see the same flat-world point, over
+    every ``step``-th frame (drivewm.multiview.blend.overlap_disagreement), every camera at the first
+    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. Real clips read about 10, the parallax of what
+    stands beside the road; views stitched through a flat world read about 2, so a CSE won by
+    stitching shows here (docs/eval-protocol.md)."""
+    import cv2
+
+    from drivewm.multiview.blend import overlap_disagreement
+
+    first = rig.cameras[0]
+    w = min(first.width, OVERLAP_WIDTH_PX)
+    h = max(1, round(first.height * w / first.width))
+    small = rig.scaled(w, h, fit="stretch")
+    frames = np.stack(
+        [
+            [
+                f if f.shape[:2] == (h, w) else cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA)
+                for f in videos[n][::step]
+            ]
+            for n in rig.names
+        ]
+    )  # (V, T, h, w, 3)
+    return overlap_disagreement(frames, small)
 
 
 def _put_sampson(metrics: dict, name: str, r: dict) -> None:

@@ -70,14 +70,16 @@ def stitch_views(videos: np.ndarray, rig: Rig, max_ground_m: float = 100.0, wall
 def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0, walls_m: float = 0.0) -> float:
     """Mean absolute colour difference (8-bit levels) between a pixel of one view and where another
     camera sees its flat-world point, over every such pair of ``frames`` (uint8 (V, H, W, 3), rig
-    order) at least one pixel inside the other image: 0 for views that agree wherever they overlap
-    (up to bilinear sampling and what parallax moves); NaN where no two cameras overlap."""
+    order; or (V, T, H, W, 3): pooled over the T frames, the geometry computed once) at least one
+    pixel inside the other image: 0 for views that agree wherever they overlap (up to bilinear
+    sampling and what parallax moves); NaN where no two cameras overlap."""
     check_views(frames, rig)
-    _, h, w, _ = frames.shape
+    videos = frames if frames.ndim == 5 else frames[:, None]
+    h, w = videos.shape[2:4]
     total, count = 0.0, 0
     for v, cam in enumerate(rig.cameras):
         ground, point, d = flat_world_points(cam, (h, w), np.eye(4), max_ground_m, walls_m)
-        own = frames[v].reshape(-1, 3).astype(np.float64)
+        own = videos[v].reshape(len(videos[v]), -1, 3).astype(np.float64)
         for s, src in enumerate(rig.cameras):
             if s == v:
                 continue
@@ -85,8 +87,8 @@ def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100
             with np.errstate(invalid="ignore"):
                 inside = (x >= 0.5) & (x <= w - 1.5) & (y >= 0.5) & (y <= h - 1.5)
             if inside.any():
-                total += float(np.abs(own[inside] - sample_frames(frames[s][None], x[inside], y[inside])[0]).sum())
-                count += int(inside.sum()) * 3
+                total += float(np.abs(own[:, inside] - sample_frames(videos[s], x[inside], y[inside])).sum())
+                count += own[:, inside].size
     return total / count if count else float("nan")
 
 
