@@ -137,6 +137,12 @@ def geometry_figures(gen: dict, real: dict) -> dict:
             "counted_fraction": counted,
             "real_counted_fraction": real_counted,
         }
+    cse = out["cse_calibrated_ratio_to_real"]
+    if "overlap_disagreement" in gen:  # beside it, what shows a CSE won by stitching (docs/eval-protocol.md)
+        cse |= {
+            "overlap_disagreement": gen["overlap_disagreement"],
+            "real_overlap_disagreement": real.get("overlap_disagreement"),
+        }
     return out
 
 
@@ -174,6 +180,10 @@ def figures_markdown(figs: dict) -> str:
             value = "n/a (no measurable clip)" if f["value"] is None else f"{f['value']:g}"
             if f.get("unreadable"):  # samples whose turn the eval could not read, counted as failures
                 value += f" ({f['unreadable']} unreadable)"
+            if f.get("overlap_disagreement") is not None:  # near 2 levels: the views were stitched
+                real = f.get("real_overlap_disagreement")
+                value += f" (overlap disagreement {f['overlap_disagreement']:.1f} levels"
+                value += f", held-out {real:.1f})" if real is not None else ")"
             lines.append(f"| {name} | {value} | {f['goal']} | {'yes' if f['holds'] else 'no'} |")
     return "\n".join(lines) + "\n"
 

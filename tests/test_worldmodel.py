@@ -226,6 +226,25 @@ def test_each_figure_can_fail(tmp_path, change, broken):
     assert [k for k, f in figs.items() if isinstance(f, dict) and not f["holds"]] == [broken]
 
 
+def test_the_cse_figure_carries_the_overlap_disagreement_that_shows_a_stitched_cse(tmp_path):
+    """Stitched views win CSE by construction (docs/eval-protocol.md): the CSE figure reports the eval's
+    ``overlap_disagreement`` beside it, generated and held-out, in figures.json and in the table; an
+    eval without it (before 2026-11-30) leaves the figure as it was."""
+    from drivewm.worldmodel_figures import figures, figures_markdown
+
+    _write_run(
+        tmp_path, GOOD_CLIPS, {**GOOD, "overlap_disagreement": 2.08}, {**REAL, "overlap_disagreement": 8.23}, 33.0
+    )
+    figs = figures(tmp_path)
+    cse = figs["cse_calibrated_ratio_to_real"]
+    assert (cse["overlap_disagreement"], cse["real_overlap_disagreement"]) == (2.08, 8.23) and cse["holds"]
+    assert "| cse_calibrated_ratio_to_real | 1.5 (overlap disagreement 2.1 levels, held-out 8.2) |" in figures_markdown(
+        figs
+    )
+    _write_run(tmp_path, GOOD_CLIPS, GOOD, REAL, 33.0)
+    assert "overlap_disagreement" not in figures(tmp_path)["cse_calibrated_ratio_to_real"]
+
+
 def test_tokenizer_psnr_below_goal_does_not_hold(tmp_path):
     from drivewm.worldmodel_figures import figures, figures_markdown
 
