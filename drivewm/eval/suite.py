@@ -227,27 +227,17 @@ OVERLAP_WIDTH_PX = 320
 def _overlap_disagreement(rig, videos: dict[str, np.ndarray], step: int) -> float:
     """Mean colour difference (8-bit levels) where two cameras see the same flat-world point, over
     every ``step``-th frame (drivewm.multiview.blend.overlap_disagreement), every camera at the first
-    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. Real clips read about 10, the parallax of what
+    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. Real clips read about 8, the parallax of what
     stands beside the road; views stitched through a flat world read about 2, so a CSE won by
     stitching shows here (docs/eval-protocol.md)."""
-    import cv2
-
     from drivewm.multiview.blend import overlap_disagreement
+    from drivewm.multiview.coding import resize_views
 
     first = rig.cameras[0]
     w = min(first.width, OVERLAP_WIDTH_PX)
     h = max(1, round(first.height * w / first.width))
-    small = rig.scaled(w, h, fit="stretch")
-    frames = np.stack(
-        [
-            [
-                f if f.shape[:2] == (h, w) else cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA)
-                for f in videos[n][::step]
-            ]
-            for n in rig.names
-        ]
-    )  # (V, T, h, w, 3)
-    return overlap_disagreement(frames, small)
+    frames = np.stack([resize_views(videos[n][None, ::step], (h, w))[0] for n in rig.names])  # (V, T, h, w, 3)
+    return overlap_disagreement(frames, rig.scaled(w, h, fit="stretch"))
 
 
 def _put_sampson(metrics: dict, name: str, r: dict) -> None:

@@ -48,11 +48,9 @@ def stitch_views(videos: np.ndarray, rig: Rig, max_ground_m: float = 100.0, wall
     check_corridor(rig, walls_m)
     _, t, h, w, _ = videos.shape
     out = np.empty(videos.shape, dtype=np.uint8)
-    for v, cam in enumerate(rig.cameras):
-        ground, point, d = flat_world_points(cam, (h, w), np.eye(4), max_ground_m, walls_m)
+    for v, seen_from in enumerate(lookups(rig, (h, w), max_ground_m, walls_m)):
         total, weights = np.zeros((t, h * w, 3)), np.zeros(h * w)
-        for s, src in enumerate(rig.cameras):
-            x, y = source_pixels(src, (h, w), ground, point, d)
+        for s, (x, y) in enumerate(seen_from):
             with np.errstate(invalid="ignore"):  # NaN: behind camera s
                 border = np.minimum(np.minimum(x + 0.5, w - 0.5 - x), np.minimum(y + 0.5, h - 0.5 - y))
             weight = np.where(border > 0, border, 0.0)  # px to the nearest image border, 0 outside
@@ -77,19 +75,26 @@ def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100
     videos = frames if frames.ndim == 5 else frames[:, None]
     h, w = videos.shape[2:4]
     total, count = 0.0, 0
-    for v, cam in enumerate(rig.cameras):
-        ground, point, d = flat_world_points(cam, (h, w), np.eye(4), max_ground_m, walls_m)
+    for v, seen_from in enumerate(lookups(rig, (h, w), max_ground_m, walls_m)):
         own = videos[v].reshape(len(videos[v]), -1, 3).astype(np.float64)
-        for s, src in enumerate(rig.cameras):
+        for s, (x, y) in enumerate(seen_from):
             if s == v:
                 continue
-            x, y = source_pixels(src, (h, w), ground, point, d)
             with np.errstate(invalid="ignore"):
                 inside = (x >= 0.5) & (x <= w - 1.5) & (y >= 0.5) & (y <= h - 1.5)
             if inside.any():
                 total += float(np.abs(own[:, inside] - sample_frames(videos[s], x[inside], y[inside])).sum())
                 count += own[:, inside].size
     return total / count if count else float("nan")
+
+
+def lookups(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float, walls_m: float):
+    """Per view of ``rig``, in rig order: where every camera (the view's own among them) sees the
+    flat-world points of the view's pixels, an (x, y) pair of (N,) arrays per camera
+    (:func:`drivewm.multiview.warp.source_pixels`; NaN behind it)."""
+    for cam in rig.cameras:
+        ground, point, d = flat_world_points(cam, grid_hw, np.eye(4), max_ground_m, walls_m)
+        yield [source_pixels(src, grid_hw, ground, point, d) for src in rig.cameras]
 
 
 def check_views(views: np.ndarray, rig: Rig) -> None:
