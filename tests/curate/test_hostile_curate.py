@@ -129,7 +129,13 @@ def test_pool_workers_exit_when_the_parent_is_killed(tmp_path):
         assert len(workers) >= 3, "the pool did not start"
         os.kill(parent.pid, signal.SIGKILL)
         parent.wait()
-        gone, alive = psutil.wait_procs([psutil.Process(p) for p in workers], timeout=15)
+        watched = []
+        for pid in workers:
+            try:
+                watched.append(psutil.Process(pid))
+            except psutil.NoSuchProcess:  # exited already, between the kill and this line: what is asked
+                pass
+        gone, alive = psutil.wait_procs(watched, timeout=15)
         assert not alive, f"workers {[p.pid for p in alive]} outlived their killed parent"
     finally:
         for pid in workers:  # the test's own processes, should any survive
