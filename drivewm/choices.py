@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
+import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -61,6 +62,33 @@ def resolve_model_folder(value: str | Path) -> Path:
     from drivewm.release import shipped_model  # PyTorch: imported only when a shipped model is named
 
     return shipped_model(value[len(SHIPPED_PREFIX) :])
+
+
+def portable_reference(target: str | Path, folder: str | Path, root: str | Path) -> str:
+    """How ``folder`` records the folder ``target`` it depends on (a model folder's tokenizer or
+    Text2World parent, a latent cache's tokenizer) so that the record survives a move: relative to
+    ``folder`` when ``target`` lies under ``root`` (the run folder both belong to: a recipe run,
+    copied back from a GPU machine, moves as a whole); ``shipped:KIND`` when it is an installed
+    shipped model (a fine-tune of the shipped weights outlives a new virtual environment or
+    drivewm's installed path changing); else its absolute path. :func:`resolve_reference` reads it."""
+    target, folder, root = (Path(p).resolve() for p in (target, folder, root))
+    if target.is_relative_to(root):
+        return os.path.relpath(target, folder)
+    from drivewm.release import RUN_FOLDERS, WEIGHTS_DIR  # PyTorch: only when a model folder is saved
+
+    for kind in RUN_FOLDERS:
+        if target == (WEIGHTS_DIR / kind).resolve():
+            return SHIPPED_PREFIX + kind
+    return str(target)
+
+
+def resolve_reference(reference: str, folder: str | Path) -> Path:
+    """The folder that ``reference`` (as :func:`portable_reference` writes it, or an absolute path)
+    names, recorded in ``folder``: a relative path is read from ``folder``."""
+    if reference.startswith(SHIPPED_PREFIX):
+        return resolve_model_folder(reference)
+    path = Path(reference)
+    return path if path.is_absolute() else (Path(folder) / path).resolve()
 
 
 def model_folder(value: str) -> Path:

@@ -193,17 +193,17 @@ def stage_marker(out: Path, name: str) -> Path:
     return out / ".stages" / f"{name}.json"
 
 
-def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart", relocatable: bool = False) -> float:
+def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") -> float:
     """Run one stage unless its marker says the same command finished; returns seconds spent.
-    ``relocatable``: a marker written when the run folder had another path (moved, copied from a GPU
-    machine, named from another directory) still counts if its command is this one with the run's
-    old path in place of ``out``; only for runs whose outputs hold no path into the run folder (the
-    benchmark's: a recipe's model folders record their tokenizer's path)."""
+    A marker written when the run folder had another path (moved, copied from a GPU machine, named
+    from another directory) still counts if its command is this one with the run's old path in place
+    of ``out``: what a stage writes records the folders it depends on relative to the run, or as
+    ``shipped:KIND`` (drivewm.choices.portable_reference), so a moved run's outputs still find them."""
     argv = fill_first_log(argv, out)
     marker = stage_marker(out, name)
     if marker.is_file():
         done = json.loads(marker.read_text())
-        if done.get("argv") == argv or (relocatable and in_run(done.get("argv"), done.get("run")) == in_run(argv, out)):
+        if done.get("argv") == argv or in_run(done.get("argv"), done.get("run")) == in_run(argv, out):
             print(f"[{label}] {name}: done before, skipped")
             return 0.0
     print(f"[{label}] {name}: drivewm {shlex.join(argv)}", flush=True)

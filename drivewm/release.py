@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 
 from drivewm.atomic import write_json
-from drivewm.choices import resolve_model_folder
+from drivewm.choices import resolve_model_folder, resolve_reference
 from drivewm.errors import DrivewmError
 from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, load_train_state, save_model_folder
 
@@ -99,9 +99,9 @@ def interpolate_folders(
     info = info_a if config_from == "base" else info_b
     extra = folder_extra(info)
     tok = (extra.get("latent") or {}).get("tokenizer")
-    if tok and not Path(tok).is_absolute():  # a shipped folder's ../tokenizer, wherever out is
+    if tok:  # a shipped folder's ../tokenizer, a run's own: the folder itself, recorded again for out
         folder = resolve_model_folder(base if config_from == "base" else tuned)
-        extra["latent"] = {**extra["latent"], "tokenizer": str((folder / tok).resolve())}
+        extra["latent"] = {**extra["latent"], "tokenizer": str(resolve_reference(tok, folder))}
     save_model_folder(out, info["model_type"], info["config"], state, extra)
     return Path(out)
 

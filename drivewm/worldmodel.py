@@ -294,7 +294,7 @@ def benchmark_worldmodel(
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
     for name, argv in stages:
-        run_stage(name, argv, run, "worldmodel", relocatable=True)  # its outputs hold no path into the run
+        run_stage(name, argv, run, "worldmodel")
 
 
 def _interval_text(value: str) -> str:

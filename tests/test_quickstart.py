@@ -204,6 +204,8 @@ def test_fine_tuning_changes_a_copy_and_leaves_the_shipped_weights_alone(quickst
 
 @pytest.mark.slow
 def test_one_curated_clip_is_transferred_to_snow_by_the_fine_tuned_shipped_transfer_model(quickstart_dir):
+    from drivewm.transfer.model import Transfer
+
     out, _ = quickstart_dir
     source = next(iter_clips(out / "clips"))
     (done,) = list(iter_clips(out / "transfer"))  # --max-clips 1: the first curated clip
@@ -213,7 +215,8 @@ def test_one_curated_clip_is_transferred_to_snow_by_the_fine_tuned_shipped_trans
     assert {r["pair_id"] for r in read_manifest(out / "paired_clips")} != {""}  # the model trained on pairs
     shipped_t2w, shipped_transfer = release.shipped_model("text2world"), release.shipped_model("transfer")
     transfer_model = json.loads((out / "transfer_model" / "config.json").read_text())
-    assert transfer_model["parent"] == str(shipped_t2w.resolve())  # the shipped transfer model's lineage
+    assert transfer_model["parent"] == "shipped:text2world"  # the shipped transfer model's lineage
+    assert Transfer.from_pretrained(out / "transfer_model").parent == str(shipped_t2w.resolve())
     shipped_cfg, tuned_cfg = (
         json.loads((shipped_transfer / "config.json").read_text())["config"],
         transfer_model["config"],
@@ -308,3 +311,27 @@ def test_rerun_reuses_finished_stages(quickstart_dir):
     stdout = run_quickstart(out)
     stages = re.findall(r"\[quickstart\] (\S+): ", stdout)
     assert stages and all(f"[quickstart] {s}: done before, skipped" in stdout for s in stages)
+
+
+@pytest.mark.slow
+def test_a_moved_quickstart_resumes_and_its_fine_tuned_models_find_their_tokenizer(quickstart_dir):
+    """The run folder renamed: every stage counts as done, and the fine-tuned models name the shipped
+    tokenizer (``shipped:tokenizer``) and their own folders relative to the run, not by the old path."""
+    from drivewm.multiview.model import MultiView
+    from drivewm.transfer.model import Transfer
+
+    out, _ = quickstart_dir
+    moved = out.with_name(out.name + "_moved")
+    shutil.move(out, moved)
+    try:
+        stdout = run_quickstart(moved)
+        stages = re.findall(r"\[quickstart\] (\S+): ", stdout)
+        assert stages and all(f"[quickstart] {s}: done before, skipped" in stdout for s in stages)
+        assert json.loads((moved / FINETUNED / "config.json").read_text())["latent"]["tokenizer"] == "shipped:tokenizer"
+        tokenizer = Path(MultiView.from_pretrained(moved / FINETUNED).latent.tokenizer)
+        assert tokenizer == release.shipped_model("tokenizer").resolve()
+        transfer = Transfer.from_pretrained(moved / "transfer_model")
+        assert str(out) not in transfer.parent and Path(transfer.latent.tokenizer) == tokenizer
+        assert str(out) not in (moved / "report.md").read_text()
+    finally:
+        shutil.move(moved, out)

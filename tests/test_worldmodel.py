@@ -268,21 +268,20 @@ def test_an_unreadable_turn_counts_against_the_turn_sign_and_the_table_says_so(t
     assert "| turn_sign_rate | 0.6667 (1 unreadable) | >= 0.9 | no |" in figures_markdown(figs)
 
 
-def test_a_benchmark_moved_to_another_folder_resumes_where_it_stopped(tmp_path, monkeypatch):
-    """A benchmark run copied from a GPU machine, moved, or named from another directory keeps its
-    finished stages: a marker's command counts with the run's old path in place of the new one.
-    Any other change reruns the stage, and a recipe run (whose model folders record their
-    tokenizer's path) is not relocatable."""
+def test_a_run_moved_to_another_folder_resumes_where_it_stopped(tmp_path, monkeypatch):
+    """A run copied from a GPU machine, moved, or named from another directory keeps its finished
+    stages: a marker's command counts with the run's old path in place of the new one. Any other
+    change reruns the stage (that the moved outputs still work: tests/train/test_relocation.py)."""
     import drivewm.quickstart
     from drivewm.quickstart import run_stage
 
     ran = []
     monkeypatch.setattr(drivewm.quickstart, "main", lambda argv: ran.append(argv) or 0)
 
-    def stage(run: Path, model: str = "m", relocatable: bool = True) -> list:
+    def stage(run: Path, model: str = "m") -> list:
         argv = ["generate", "--model", model, "--out", str(run / "generated" / "a"), "--ref", str(run)]
         ran.clear()
-        run_stage("generate-a", argv, run, "worldmodel", relocatable=relocatable)
+        run_stage("generate-a", argv, run, "worldmodel")
         return ran[:]
 
     old = tmp_path / "gpu" / "run"
@@ -296,7 +295,7 @@ def test_a_benchmark_moved_to_another_folder_resumes_where_it_stopped(tmp_path, 
     assert stage(new, model="other")  # another model: runs
     assert not stage(new, model="other")
     shutil.move(new, tmp_path / "again")
-    assert stage(tmp_path / "again", model="other", relocatable=False)  # a recipe's stages rerun when moved
+    assert not stage(tmp_path / "again", model="other")  # moved twice
     earlier = drivewm.quickstart.stage_marker(tmp_path / "again", "generate-a")
     marker = json.loads(earlier.read_text())
     earlier.write_text(json.dumps({"argv": marker["argv"], "seconds": 1.0}))  # written before the run was recorded

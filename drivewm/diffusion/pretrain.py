@@ -13,6 +13,7 @@ from pathlib import Path
 
 import torch
 
+from drivewm.choices import resolve_reference
 from drivewm.clips.latents import LatentCache, find_latent_cache
 from drivewm.config import at_least, to_dict
 from drivewm.device import resolve_device
@@ -137,8 +138,12 @@ def encoding_tokenizer(cache: LatentCache) -> tuple[Path | None, str]:
     that says so. None when the cache records none (synthetic latents) or the folder is gone: the model's
     samples are then latent previews, and the line a warning."""
     recorded = cache.tokenizer.get("path")
-    if recorded and Path(recorded).is_dir():
-        return Path(recorded), f"pretrain: decoding with {recorded}, the tokenizer that encoded {cache.dir}"
+    reference = cache.tokenizer.get("reference")  # portable (drivewm.choices.portable_reference); older caches lack it
+    candidates = [resolve_reference(reference, cache.dir)] if reference else []
+    candidates += [Path(recorded)] if recorded else []
+    for found in candidates:
+        if found.is_dir():
+            return found, f"pretrain: decoding with {found}, the tokenizer that encoded {cache.dir}"
     where = f"its tokenizer {recorded} is gone" if recorded else "it records no tokenizer"
     return None, (
         f"warning: pretrain: {cache.dir}: {where}; the model's samples will be latent previews, not images "

@@ -10,9 +10,10 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+import numpy as np
 import torch
 
-from drivewm.choices import resolve_model_folder
+from drivewm.choices import SHIPPED_PREFIX, resolve_model_folder, resolve_reference
 from drivewm.config import frame_rate, from_dict, require, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
@@ -22,7 +23,7 @@ from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.errors import DrivewmError
 from drivewm.text import TextConfig, build_text_encoder
-from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
+from drivewm.train.checkpoint import load_model_folder, load_weights, read_model_config, save_model_folder
 
 MODEL_TYPE = "text2world"
 
@@ -78,9 +79,28 @@ def read_latent_info(info: dict, folder: str | Path, dit: DiTConfig) -> LatentIn
             f"{where}: latent_shape {latent.latent_shape} does not fit the network (in_channels {dit.in_channels}, "
             f"t a multiple of patch_t {dit.patch_t}, h and w multiples of patch_size {dit.patch_size})"
         )
-    if latent.tokenizer and not Path(latent.tokenizer).is_absolute():
-        latent = dataclasses.replace(latent, tokenizer=str((Path(folder) / latent.tokenizer).resolve()))
+    if latent.tokenizer:
+        tokenizer = resolve_reference(latent.tokenizer, folder)
+        if latent.tokenizer.startswith(SHIPPED_PREFIX):
+            check_shipped_statistics(latent, tokenizer, where)
+        latent = dataclasses.replace(latent, tokenizer=str(tokenizer))
     return latent
+
+
+def check_shipped_statistics(latent: LatentInfo, tokenizer: Path, where: str) -> None:
+    """A model fine-tuned from the shipped weights records the shipped tokenizer by name, so a newer
+    drivewm's tokenizer decodes it; refused (DrivewmError) when that tokenizer codes other latents
+    than the model learned (its latent statistics differ): a decoder improved alone is taken, a new
+    latent space is not."""
+    info = read_model_config(tokenizer)
+    for name in ("latent_mean", "latent_std"):
+        ours, theirs = getattr(latent, name), info.get(name)
+        if theirs is None or len(theirs) != len(ours) or not np.allclose(ours, theirs, rtol=1e-3, atol=1e-6):
+            raise DrivewmError(
+                f"{where}: the model learned the latents of another shipped tokenizer than {tokenizer} ({name} "
+                "differs: a drivewm whose tokenizer codes other latents); set latent.tokenizer in its config.json "
+                "to the tokenizer folder it was trained with"
+            )
 
 
 class Text2World:

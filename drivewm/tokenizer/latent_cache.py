@@ -15,6 +15,7 @@ import torch
 from tqdm import tqdm
 
 from drivewm.atomic import remove_dead_temporaries
+from drivewm.choices import portable_reference
 from drivewm.clips import Clip
 from drivewm.clips.latents import (
     LATENT_CACHE_VERSION,
@@ -72,6 +73,8 @@ def encode_clips(
         raise BatchError(f"{clip_dir}: no clip could be encoded ({len(skipped)} failed)", lines or ["no clips found"])
     info = {
         "path": str(Path(model_dir).resolve()),
+        # read first: survives the clips and the tokenizer moving together, or drivewm installed elsewhere
+        "reference": portable_reference(model_dir, cache_dir, Path(clip_dir).resolve().parent.parent),
         "config": to_dict(tok.config),
         "latent_mean": tok.latent_mean.tolist(),
         "latent_std": tok.latent_std.tolist(),

@@ -37,7 +37,7 @@ from safetensors.torch import save_file
 
 from drivewm import __version__
 from drivewm.atomic import atomic_path, write_json
-from drivewm.choices import resolve_model_folder
+from drivewm.choices import portable_reference, resolve_model_folder
 from drivewm.errors import DrivewmError
 
 CONFIG_NAME = "config.json"
@@ -64,12 +64,29 @@ def save_model_folder(
     path.mkdir(parents=True, exist_ok=True)
     tensors = {k: v.detach().contiguous().cpu() for k, v in state_dict.items()}
     extra = {k: v for k, v in (extra or {}).items() if k not in SAVE_KEYS}  # e.g. a re-export's old digests
+    extra = portable_extra(extra, path)
     info = {"model_type": model_type, "drivewm_version": __version__, "config": config, **extra}
     info["weights_digest"] = _weights_digest(tensors)
     info["revision"] = _revision(info)
     with atomic_path(path / WEIGHTS_NAME) as tmp:
         save_file(tensors, str(tmp), metadata={REVISION_KEY: info["revision"]})
     write_json(path / CONFIG_NAME, info)
+
+
+def portable_extra(extra: dict, path: Path) -> dict:
+    """``extra`` with the folders a model folder at ``path`` depends on (``latent.tokenizer``, a transfer
+    model's ``parent``) recorded so that they survive a move (drivewm.choices.portable_reference, the
+    run folder being ``path``'s parent): a recipe's run folder, copied from a GPU machine or renamed,
+    keeps working, and so does a fine-tune of the shipped weights after drivewm is installed elsewhere.
+    Relative and ``shipped:`` records are kept as they are."""
+    extra = dict(extra)
+    latent = extra.get("latent")
+    tokenizer = latent.get("tokenizer") if isinstance(latent, dict) else None
+    if isinstance(tokenizer, str) and Path(tokenizer).is_absolute():
+        extra["latent"] = {**latent, "tokenizer": portable_reference(tokenizer, path, path.parent)}
+    if isinstance(extra.get("parent"), str) and Path(extra["parent"]).is_absolute():
+        extra["parent"] = portable_reference(extra["parent"], path, path.parent)
+    return extra
 
 
 def _revision(info: dict) -> str:

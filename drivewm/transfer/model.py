@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from drivewm.choices import resolve_model_folder
+from drivewm.choices import resolve_model_folder, resolve_reference
 from drivewm.config import from_dict, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
@@ -121,8 +121,8 @@ class Transfer:
         where = f"{path / 'config.json'}"
         config = from_dict(TransferModelConfig, upgrade_saved_config(info["config"]), where)
         parent = str(info.get("parent", ""))
-        if parent and not Path(parent).is_absolute():  # shipped weights point at ../text2world
-            parent = str((path / parent).resolve())
+        if parent:  # shipped weights point at ../text2world, a recipe's run at its own (portable_reference)
+            parent = str(resolve_reference(parent, path))
         model = cls(config, read_latent_info(info, path, config.dit), parent)
         load_weights(model.net, state, path)
         return model
