@@ -24,6 +24,7 @@ writes every per-clip row as JSON (and OUT.partial.jsonl as cases finish; target
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import time
@@ -56,6 +57,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="detail bands (model px) to score, comma-separated (drivewm transfer --detail-band; default: the "
         "default band only): each method is sampled once and scored at every band, rows METHOD~bandB beside "
         "METHOD (the default band)",
+    )
+    p.add_argument(
+        "--looks",
+        default="shared",
+        help="how the restored outputs are scored, comma-separated: shared (drivewm transfer's default: the "
+        "transfer's look shared between cameras where they overlap), own (each view's own, --no-shared-look; "
+        "rows METHOD~own-look)",
     )
     p.add_argument(
         "--model-resolution",
@@ -123,16 +131,16 @@ def print_cse_parts(summary: dict) -> None:
             print(f"  {target:<13}{name:<12}" + "   ".join(parts))
 
 
-def verdict(summary: dict, band_px: float | None = None) -> list[str]:
+def verdict(summary: dict, band_px: float | None = None, shared_look: bool = True) -> list[str]:
     """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR, both at
-    detail band ``band_px`` (None: the default)."""
+    detail band ``band_px`` (None: the default) and with the look shared between cameras or not."""
     from drivewm.transfer.benchmark import BAND_PX, band_name
 
     band = BAND_PX if band_px is None else band_px
     allm = summary["all"]
-    sdedit = [k for k in allm if k.startswith("sdedit@") and k == band_name(k.split("~")[0], band)]
+    sdedit = [k for k in allm if k.startswith("sdedit@") and k == band_name(k.split("~")[0], band, shared_look)]
     best = max(sdedit, key=lambda k: allm[k]["psnr"])
-    t, b = allm[band_name("transfer", band)], allm[best]
+    t, b = allm[band_name("transfer", band, shared_look)], allm[best]
     checks = [
         ("PSNR gain over best SDEdit", t["psnr"] - b["psnr"], ">=", MUST["psnr_gain_db"], f"dB vs {best}"),
         ("SSIM gain over best SDEdit", t["ssim"] - b["ssim"], ">", 0.0, f"vs {best}"),
@@ -194,8 +202,12 @@ def main(argv=None) -> int:
     print(f"model works at {model_hw[1]}x{model_hw[0]}; clips {clip_hw[1]}x{clip_hw[0]}, scored at {at[1]}x{at[0]}")
     t0 = time.perf_counter()
     bands = tuple(float(b) for b in args.detail_bands.split(",") if b) if args.detail_bands else (BAND_PX,)
+    names = {"shared": True, "own": False}
+    looks = tuple(names[k] for k in args.looks.split(",") if k) if set(args.looks.split(",")) <= set(names) else None
+    if not looks:
+        raise SystemExit(f"--looks: comma-separated shared and/or own, got {args.looks!r}")
     # CSE costs seconds per clip: the must-hold needs these only
-    cse_for = {"identity", "tokenizer"} | {band_name("transfer", b) for b in bands}
+    cse_for = {"identity", "tokenizer"} | {band_name("transfer", b, look) for b in bands for look in looks}
 
     partial = args.out.with_suffix(".partial.jsonl") if args.out else None
     done: list[str] = []
@@ -218,14 +230,15 @@ def main(argv=None) -> int:
         model_hw=model_hw,
         model_resolution=args.model_resolution,
         detail_bands=bands,
+        looks=looks,
     )
     summary = summarize(rows)
     print(f"scored in {time.perf_counter() - t0:.0f} s")
     print_table(summary, nfe)
     print_cse_parts(summary)
-    for band in bands:
-        print(f"must-holds at detail band {band:g} (model px):")
-        for line in verdict(summary, band):
+    for band, shared in itertools.product(bands, looks):
+        print(f"must-holds at detail band {band:g} (model px), look {'shared' if shared else 'own'}:")
+        for line in verdict(summary, band, shared):
             print(line)
     if args.out:
         record = {"args": {k: str(v) for k, v in vars(args).items()}, "summary": summary, "rows": rows}

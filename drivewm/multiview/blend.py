@@ -46,22 +46,54 @@ def stitch_views(videos: np.ndarray, rig: Rig, max_ground_m: float = 100.0, wall
     frame and are computed once."""
     check_views(videos, rig)
     check_corridor(rig, walls_m)
-    _, t, h, w, _ = videos.shape
-    out = np.empty(videos.shape, dtype=np.uint8)
-    for v, seen_from in enumerate(lookups(rig, (h, w), max_ground_m, walls_m)):
-        total, weights = np.zeros((t, h * w, 3)), np.zeros(h * w)
+    plan = feathering(rig, videos.shape[2:4], max_ground_m, walls_m)
+    return feathered_mean(videos, plan).round().clip(0, 255).astype(np.uint8)
+
+
+def feathering(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float = 100.0, walls_m: float = 0.0) -> list:
+    """How :func:`feathered_mean` blends views of ``rig`` of ``grid_hw`` (H, W): per view, in rig
+    order, one term per camera that sees some of its pixels' flat-world points, (camera, those
+    pixels' flat indices, where that camera sees them (x, y), their weights: px to its nearest image
+    border). Computed once for any number of frames and channels."""
+    h, w = grid_hw
+    plan = []
+    for seen_from in lookups(rig, (h, w), max_ground_m, walls_m):
+        terms = []
         for s, (x, y) in enumerate(seen_from):
             with np.errstate(invalid="ignore"):  # NaN: behind camera s
                 border = np.minimum(np.minimum(x + 0.5, w - 0.5 - x), np.minimum(y + 0.5, h - 0.5 - y))
-            weight = np.where(border > 0, border, 0.0)  # px to the nearest image border, 0 outside
-            if weight.any():
-                seen = weight > 0
-                total[:, seen] += weight[seen, None] * sample_frames(videos[s], x[seen], y[seen])
-                weights += weight
-        own = videos[v].reshape(t, -1, 3).astype(np.float64)
+            seen = np.flatnonzero(np.where(border > 0, border, 0.0))
+            if seen.size:
+                terms.append((s, seen, x[seen], y[seen], border[seen]))
+        plan.append(terms)
+    return plan
+
+
+def feathered_mean(
+    values: np.ndarray, plan: list, guide: np.ndarray | None = None, tolerance: float = 10.0
+) -> np.ndarray:
+    """float64 (V, T, H, W, C) of ``values`` (V, T, H, W, C, any dtype; views of a :func:`feathering`
+    plan's rig and size): each pixel the feathered mean of every camera that sees its flat-world point,
+    its own camera among them; a pixel no camera sees keeps its value. ``guide`` (V, T, H, W, C'):
+    another camera counts at a point only as far as the guide agrees there with the view's own,
+    weight times exp(-(d / ``tolerance``)^2), d the mean absolute difference of the guide's channels
+    (where the guide differs, the two cameras do not see one surface of the flat world)."""
+    _, t, h, w, c = values.shape
+    out = np.empty(values.shape, dtype=np.float64)
+    for v, terms in enumerate(plan):
+        total, weights = np.zeros((t, h * w, c)), np.zeros((t, h * w))
+        mine = None if guide is None else guide[v].reshape(t, h * w, -1).astype(np.float64)
+        for s, seen, x, y, weight in terms:
+            wt = np.broadcast_to(weight, (t, len(weight)))
+            if mine is not None and s != v:
+                d = np.abs(mine[:, seen] - sample_frames(guide[s], x, y)).mean(-1)
+                wt = wt * np.exp(-((d / tolerance) ** 2))
+            total[:, seen] += wt[..., None] * sample_frames(values[s], x, y)
+            weights[:, seen] += wt
+        own = values[v].reshape(t, -1, c).astype(np.float64)
         seen = weights > 0
-        mean = total / np.where(seen, weights, 1.0)[None, :, None]
-        out[v] = np.where(seen[None, :, None], mean, own).round().clip(0, 255).reshape(t, h, w, 3)
+        mean = total / np.where(seen, weights, 1.0)[..., None]
+        out[v] = np.where(seen[..., None], mean, own).reshape(t, h, w, c)
     return out
 
 

@@ -72,6 +72,11 @@ class TransferOptions:
     detail_band: float = BAND_PX
     """Model pixels: the source's structure finer than a Gaussian of this sigma replaces the transfer's
     (drivewm.transfer.detail; 0: only the detail the tokenizer dropped, as before the band)."""
+    shared_look: bool = True
+    """Share the transfer's look (its light, colour and haze coarser than the detail band, and its
+    contrast gain) between cameras where they see one point of the flat world, so two cameras of one
+    scene get one look where they overlap (drivewm.transfer.detail.share_look); the source's structure
+    stays each view's own. False: each view on its own, as before 2026-12-01."""
     model_resolution: bool = False
     """Write clips at the model's image size, the rig scaled to it; False (default) keeps the source's
     size and rig when the source is larger (drivewm.transfer.resolution)."""
@@ -116,7 +121,7 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
     o = options
     record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
     record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail, "detail_band": o.detail_band}
-    record |= {"model_resolution": o.model_resolution}
+    record |= {"model_resolution": o.model_resolution, "shared_look": o.detail and o.shared_look}
     if model_type == "transfer":
         from drivewm.transfer.model import Transfer
 
@@ -172,7 +177,8 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
     out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
     shown = resize_views(full, out_hw)  # the source at the output size: the detail's reference and the sheet's
     coded = decode_views(tokenizer, source, transferer.device) if options.detail else None
-    out = to_output_size(out, shown, coded, options.detail_band)
+    look_rig = clip.meta.get_rig() if options.shared_look else None  # at any size: the grid is the frames'
+    out = to_output_size(out, shown, coded, options.detail_band, rig=look_rig)
     rig, meta = rig_at_size(clip.meta.get_rig(), full.shape[2:4], out_hw), clip.meta
     if out_hw != full.shape[2:4]:
         meta = dataclasses.replace(meta, rig=rig.to_dict())

@@ -18,6 +18,7 @@ steps and guidance.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections import defaultdict
 from collections.abc import Callable
@@ -69,9 +70,11 @@ def paired_cases(
     return cases
 
 
-def band_name(method: str, band_px: float) -> str:
-    """A method's row name at a detail band (drivewm.transfer.detail): its own at the default, BAND_PX."""
-    return method if band_px == BAND_PX else f"{method}~band{band_px:g}"
+def band_name(method: str, band_px: float, shared_look: bool = True) -> str:
+    """A method's row name at a detail band (drivewm.transfer.detail), with its look shared between
+    cameras or each view's own: the method's own name at the defaults (BAND_PX, shared)."""
+    name = method if band_px == BAND_PX else f"{method}~band{band_px:g}"
+    return name if shared_look else f"{name}~own-look"
 
 
 @dataclasses.dataclass
@@ -114,14 +117,16 @@ def run_cases(
     model_hw: tuple[int, int] | None = None,
     model_resolution: bool = False,
     detail_bands: tuple[float, ...] = (BAND_PX,),
+    looks: tuple[bool, ...] = (True,),
 ) -> list[dict]:
     """One row per (case, method, or reference) with its scores; CSE only for the outputs named in
     ``cse_for`` (None: all). The tokenizer codes on ``device`` (where it is); methods take and return
     latents on the CPU. Methods work at ``model_hw`` (None: the clips' own size); outputs are scored at
     the size ``drivewm transfer`` writes (the source's when larger, unless ``model_resolution``),
     upsampled as it does (drivewm.transfer.resolution); ``detail``: every method's output gets the
-    source's lost detail back, once per ``detail_bands`` (rows named by :func:`band_name`: one network
-    run, several bands)."""
+    source's lost detail back, once per ``detail_bands`` and per ``looks`` (True: the transfer's look
+    shared between cameras, as ``drivewm transfer`` does by default; False: each view's own), rows
+    named by :func:`band_name`: one network run, several bands and looks."""
     if not detail:
         detail_bands = (BAND_PX,)
     rows = []
@@ -140,8 +145,9 @@ def run_cases(
         coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
             out = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
-            for band in detail_bands:
-                outputs[band_name(name, band)] = to_output_size(out, scored.source, coded_src, band)
+            for band, shared in itertools.product(detail_bands, looks):
+                rig = scored.rig if shared else None
+                outputs[band_name(name, band, shared)] = to_output_size(out, scored.source, coded_src, band, rig=rig)
         for name, out in outputs.items():
             row = {"pair_id": case.pair_id, "target": case.condition.name, "method": name}
             row |= {f"source_{k}": v for k, v in source_cse.items()} | {f"truth_{k}": v for k, v in truth_cse.items()}

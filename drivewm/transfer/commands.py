@@ -56,6 +56,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "tokenizer drops)",
     )
     p.add_argument(
+        "--no-shared-look",
+        action="store_true",
+        help="restore detail in each view on its own (default: the transfer's light, colour, haze and contrast "
+        "are shared between cameras where they overlap; the source's structure stays each view's own)",
+    )
+    p.add_argument(
         "--model-resolution",
         action="store_true",
         help="write clips at the model's image size, the rig scaled to it (default: the source's size and rig "
@@ -102,6 +108,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         args.max_clips,
         detail=not args.no_detail,
         **({} if args.detail_band is None else {"detail_band": args.detail_band}),
+        shared_look=not args.no_shared_look,
         model_resolution=args.model_resolution,
     )
     if args.model is None:

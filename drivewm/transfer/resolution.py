@@ -59,13 +59,15 @@ def to_output_size(
     band_px: float = BAND_PX,
     window_px: int = WINDOW_PX,
     min_gain: float = 0.0,
+    rig: Rig | None = None,
 ) -> np.ndarray:
     """The decoded transfer (at the model's size) upsampled to ``source``'s size, plus the source detail
     the round trip lost, its gain computed at that size; ``source_coded`` is the source decoded from its
     latents (model's size), None for no detail (upsampled only). ``band_px`` (in the model's pixels,
     scaled like the window; 0: the tokenizer's residual only): the source's structure finer than it
     replaces the transfer's (drivewm.transfer.detail); ``window_px`` (model pixels, scaled alike): the
-    window of the contrast gain."""
+    window of the contrast gain; ``rig`` (the views' cameras): the transfer's look is shared between
+    cameras where they overlap (drivewm.transfer.detail.restore_detail; None: each view on its own)."""
     size_hw, model_hw = source.shape[2:4], transferred.shape[2:4]
     out = resize_views(transferred, size_hw, UPSAMPLE)
     if source_coded is None:
@@ -73,5 +75,11 @@ def to_output_size(
     coded = resize_views(source_coded, size_hw, UPSAMPLE)
     band = band_px * upsampling(size_hw, model_hw)
     return restore_detail(
-        out, source, coded, window=detail_window_px(size_hw, model_hw, window_px), band_px=band, min_gain=min_gain
+        out,
+        source,
+        coded,
+        window=detail_window_px(size_hw, model_hw, window_px),
+        band_px=band,
+        min_gain=min_gain,
+        rig=rig,
     )

@@ -81,6 +81,7 @@ def test_transfer_keeps_every_label(models, inputs, tmp_path) -> None:
         assert clip.videos().shape == src.videos().shape == (6, 17, 192, 320, 3)  # the model works at 160x96
         assert clip.meta.extra["transfer"]["method"] == "transfer" and clip.meta.extra["speed_mps"] > 0
         assert clip.meta.extra["transfer"]["model_resolution"] is False
+        assert clip.meta.extra["transfer"]["shared_look"] is True  # the default
         assert (out / "sheets" / f"{clip.key}.png").is_file()
     assert (out / "contact_sheet.png").is_file()
 
@@ -190,3 +191,15 @@ def test_transfer_of_a_real_dashcam_video(models, shared_data, tmp_path) -> None
         # the model works at 160x96 (320x180 stretched, not cropped); the clip comes back at 320x180, rig kept
         assert clip.videos().shape == src.videos().shape == (1, 17, 180, 320, 3)
         assert clip.meta.rig == src.meta.rig
+
+
+def test_no_shared_look_restores_each_view_on_its_own_and_says_so(models, inputs, tmp_path) -> None:
+    """``--no-shared-look``: the same network output, each view's look its own; recorded in every clip.
+    Only pixels in the cameras' overlaps may differ from the default's."""
+    argv = ["transfer", str(inputs / "one"), "--model", str(models["transfer"]), "--to", "snow", "--steps", "1"]
+    assert main([*argv, "--out", str(tmp_path / "shared")]) == 0
+    assert main([*argv, "--no-shared-look", "--out", str(tmp_path / "own")]) == 0
+    (shared,), (own,) = (list(iter_clips(tmp_path / d)) for d in ("shared", "own"))
+    assert own.meta.extra["transfer"]["shared_look"] is False and shared.meta.extra["transfer"]["shared_look"]
+    differs = np.abs(own.videos().astype(int) - shared.videos()).max(-1) > 0
+    assert 0.0 < differs.mean() < 0.9
