@@ -16,7 +16,8 @@ by its parallax, as in any flat-world panorama.
 The refinement then redraws each view on its own, so :func:`stitch_views` (``drivewm generate
 --stitch``) blends every decoded frame the same way. Neither is for a real clip's frames: those
 agree already, and blending them would double their roadside (generate with ``--condition-clip``
-and rollouts leave them as they are; a transfer keeps its source's geometry and is not stitched).
+and rollouts leave them as they are; a transfer keeps its source's geometry and is not stitched,
+but shares its look through the same :func:`feathering`, drivewm.transfer.detail.share_look).
 Measured: docs/quality-vs-compute.md, "Cameras that disagree where they overlap" and "Stitched:
 every frame blended where the cameras overlap".
 """
