@@ -172,6 +172,10 @@ def verdict(summary: dict, band_px: float | None = None, shared_look: bool = Tru
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    names, keys = {"shared": True, "own": False}, [k for k in args.looks.split(",") if k]
+    if not keys or not set(keys) <= names.keys():
+        raise SystemExit(f"--looks: comma-separated shared and/or own, got {args.looks!r}")
+    looks = tuple(names[k] for k in keys)
     import torch
 
     from drivewm.atomic import write_text
@@ -202,10 +206,6 @@ def main(argv=None) -> int:
     print(f"model works at {model_hw[1]}x{model_hw[0]}; clips {clip_hw[1]}x{clip_hw[0]}, scored at {at[1]}x{at[0]}")
     t0 = time.perf_counter()
     bands = tuple(float(b) for b in args.detail_bands.split(",") if b) if args.detail_bands else (BAND_PX,)
-    names = {"shared": True, "own": False}
-    looks = tuple(names[k] for k in args.looks.split(",") if k) if set(args.looks.split(",")) <= set(names) else None
-    if not looks:
-        raise SystemExit(f"--looks: comma-separated shared and/or own, got {args.looks!r}")
     # CSE costs seconds per clip: the must-hold needs these only
     cse_for = {"identity", "tokenizer"} | {band_name("transfer", b, look) for b in bands for look in looks}
 

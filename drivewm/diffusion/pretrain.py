@@ -20,7 +20,7 @@ from drivewm.device import resolve_device
 from drivewm.diffusion.data import LatentDataset
 from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset, upgrade_saved_config
-from drivewm.diffusion.text2world import MODEL_TYPE, LatentInfo, Text2World, Text2WorldConfig
+from drivewm.diffusion.text2world import MODEL_TYPE, LatentInfo, Text2World, Text2WorldConfig, same_statistics
 from drivewm.errors import DrivewmError
 from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
@@ -124,7 +124,7 @@ def check_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> None:
     info = read_model_config(tokenizer_dir, TOKENIZER)
     recorded = cache.tokenizer
     same_config = "config" not in recorded or info.get("config") == recorded["config"]
-    same_stats = all(_close(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
+    same_stats = all(same_statistics(info.get(k), recorded.get(k)) for k in ("latent_mean", "latent_std"))
     if not same_config or not same_stats:
         raise DrivewmError(
             f"{cache.dir}: latents were encoded by another tokenizer ({cache.tokenizer.get('path')}) "
@@ -148,17 +148,6 @@ def encoding_tokenizer(cache: LatentCache) -> tuple[Path | None, str]:
     return None, (
         f"warning: pretrain: {cache.dir}: {where}; the model's samples will be latent previews, not images "
         "(pass --tokenizer TOKDIR to decode them)"
-    )
-
-
-def _close(a: list[float] | None, b: list[float] | None) -> bool:
-    """Equal up to half precision: shipped tokenizers store their statistics' buffers in fp16 (an 11-bit
-    significand, so rounding moves a value by up to 2^-11 = 4.9e-4 of it) while their config.json keeps
-    the fp32 values, and a cache records the statistics the loaded tokenizer encoded with."""
-    return (
-        a is None
-        or b is None
-        or (len(a) == len(b) and torch.allclose(torch.tensor(a), torch.tensor(b), rtol=1e-3, atol=1e-6))
     )
 
 

@@ -83,10 +83,9 @@ def restore_detail(
     transfer's (the gain still from the unblurred contrast). ``min_gain``: a floor on the gain (0, the
     default: none; floors up to 0.4 kept no more camera pairs, docs/transfer.md "Detail band").
     ``rig`` (the views' cameras, rig order; None: each view on its own): the transfer's look, its gain
-    and (with a band) what it changed of the coded source coarser than the band, is shared between
-    cameras where they see one point of the flat world (:func:`share_look`); each view keeps its own
-    coded source under that change and its own source's structure, so a transfer that changes
-    nothing gives every view its source back, and nothing of one view's scene crosses into another."""
+    and (with a band) its colour coarser than the band, is shared between cameras where they see one
+    point of the flat world and their coded sources agree there (:func:`share_look`); the source's
+    structure finer than the band stays each view's own."""
     if not transferred.shape == source.shape == source_coded.shape:
         raise ValueError(f"shapes differ: {transferred.shape}, {source.shape}, {source_coded.shape}")
     if not (math.isfinite(band_px) and band_px >= 0):
@@ -117,10 +116,10 @@ def restore_detail(
 def band_blur(image: np.ndarray, sigma: float) -> np.ndarray:
     """cv2.GaussianBlur of ``image`` (float32 (H, W, C)) at ``sigma`` px. A wide blur, sigma >=
     2 * WIDE_BLUR_PX (the band of a frame 4x the model's size or more: 77 px at 1600x900), runs on
-    the image shrunk k = sigma // WIDE_BLUR_PX times (area) and is brought back bilinearly: 1.5 s a
-    1600x900 frame became 0.01 s, which made a fleet clip's detail 5 minutes instead of 2 s, within
-    1.2 levels of the exact blur (0.03 on average, tests/transfer/test_resolution.py); narrower
-    blurs (16 px at 320x192) are the exact one."""
+    the image shrunk k = sigma // WIDE_BLUR_PX times (area) and is brought back bilinearly: 0.01 s a
+    1600x900 frame instead of 1.5 s (about 5 minutes of blurs a fleet clip), within 2 levels of the
+    exact blur and 0.03 on average (tests/transfer/test_resolution.py); narrower blurs (16 px at
+    320x192) are the exact one."""
     k = int(sigma // WIDE_BLUR_PX)
     if k < 2:
         return cv2.GaussianBlur(image, (0, 0), sigma)
