@@ -9,17 +9,17 @@ Every held-out drive is rendered by the simulator in the source and in each targ
 Prints, per target and over all, for the transfer model, SDEdit with the parent Text2World model at
 each sigma (same sampler, steps and guidance, so the same number of network evaluations), and the
 references ``identity`` (the source clip unchanged) and ``tokenizer`` (the true target coded and
-decoded: the ceiling of any latent method): PSNR / SSIM to the true target, the median SIFT
-displacement from the source frames, CSE over the source's CSE, and the adherence classifier's hit
-rate; then the must-holds of issue 18 against the best SDEdit sigma (by PSNR). Clips larger than the
-model's size (the simulator's 320x192) are scored at their own size, as `drivewm transfer` writes them:
-every method works at the model's size, is upsampled (bicubic) and gets the source detail back at full
-resolution (drivewm.transfer.resolution); ``--model-resolution`` scores at the model's size instead
-(the clips resized to it: the 160x96 figures). CSE (seconds per
+decoded: the ceiling of any latent method), and ``identity~noise`` (the source with 1 level of
+Gaussian noise: the CSE ratio of a change nobody sees, the measure's resolution): PSNR / SSIM to the
+true target, the median SIFT displacement from the source frames, CSE over the source's CSE, and the
+adherence classifier's hit rate; then the must-holds of issue 18 against the best SDEdit sigma (by
+PSNR). Clips larger than the model's size (the simulator's 320x192) are scored at their own size, as
+`drivewm transfer` writes them: every method works at the model's size, is upsampled (bicubic) and
+gets the source detail back at full resolution (drivewm.transfer.resolution); ``--model-resolution``
+scores at the model's size instead (the clips resized to it: the 160x96 figures). CSE (seconds per
 clip) is computed for the transfer model and the references only, with its parts (the share of
 camera pairs counted, the counted pairs' mean) beside the source's and the true target's. ``--out``
-writes every per-clip row as JSON (and OUT.partial.jsonl as cases finish; targets are interleaved).
-"""
+writes every per-clip row as JSON (and OUT.partial.jsonl as cases finish; targets are interleaved)."""
 
 from __future__ import annotations
 
@@ -111,12 +111,14 @@ def interleaved(cases: list) -> list:
 
 
 def print_table(summary: dict, nfe: int) -> None:
+    from drivewm.transfer.benchmark import REFERENCES
+
     cols = ("clips", "psnr", "ssim", "sift_shift_px", "cse_ratio", "cse_calibrated_ratio", "adherence")
-    print(f"{'target':<13}{'method':<12}{'nfe':>4}" + "".join(f"{c[:20]:>21}" for c in cols))
+    print(f"{'target':<13}{'method':<18}{'nfe':>4}" + "".join(f"{c[:20]:>21}" for c in cols))
     for target, methods in summary.items():
         for name, m in methods.items():
-            n = "-" if name in ("identity", "tokenizer") else str(nfe)
-            print(f"{target:<13}{name:<12}{n:>4}" + "".join(f"{m[c]:>21.3f}" for c in cols))
+            n = "-" if name in REFERENCES else str(nfe)
+            print(f"{target:<13}{name:<18}{n:>4}" + "".join(f"{m[c]:>21.3f}" for c in cols))
 
 
 def print_cse_parts(summary: dict) -> None:
@@ -128,19 +130,20 @@ def print_cse_parts(summary: dict) -> None:
             if not math.isfinite(m["cse_counted"]):
                 continue
             parts = [f"{m[w + 'cse_counted']:.2f} / {m[w + 'cse_counted_px']:.3f}" for w in ("", "source_", "truth_")]
-            print(f"  {target:<13}{name:<12}" + "   ".join(parts))
+            print(f"  {target:<13}{name:<18}" + "   ".join(parts))
 
 
 def verdict(summary: dict, band_px: float | None = None, shared_look: bool = True) -> list[str]:
     """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR, both at
     detail band ``band_px`` (None: the default) and with the look shared between cameras or not."""
-    from drivewm.transfer.benchmark import BAND_PX, band_name
+    from drivewm.transfer.benchmark import BAND_PX, NOISE_LEVELS, NOISE_NAME, band_name
 
     band = BAND_PX if band_px is None else band_px
     allm = summary["all"]
     sdedit = [k for k in allm if k.startswith("sdedit@") and k == band_name(k.split("~")[0], band, shared_look)]
     best = max(sdedit, key=lambda k: allm[k]["psnr"])
     t, b = allm[band_name("transfer", band, shared_look)], allm[best]
+    noise = allm.get(NOISE_NAME, {}).get("cse_ratio", math.nan)
     checks = [
         ("PSNR gain over best SDEdit", t["psnr"] - b["psnr"], ">=", MUST["psnr_gain_db"], f"dB vs {best}"),
         ("SSIM gain over best SDEdit", t["ssim"] - b["ssim"], ">", 0.0, f"vs {best}"),
@@ -150,7 +153,8 @@ def verdict(summary: dict, band_px: float | None = None, shared_look: bool = Tru
             t["cse_ratio"],
             "<=",
             MUST["cse_ratio"],
-            f"({t['cse_nan_clips']} clips without CSE; the true target render's own: {t['truth_cse_ratio']:.3f})",
+            f"({t['cse_nan_clips']} clips without CSE; the true target render's own: {t['truth_cse_ratio']:.3f}; "
+            f"the source with {NOISE_LEVELS:g} level of noise: {noise:.3f})",
         ),
         (
             "calibrated CSE / source's",
@@ -182,7 +186,7 @@ def main(argv=None) -> int:
     from drivewm.diffusion.dit import count_parameters
     from drivewm.sim.paired import parse_conditions
     from drivewm.tokenizer import Tokenizer
-    from drivewm.transfer.benchmark import BAND_PX, band_name, paired_cases, run_cases, summarize
+    from drivewm.transfer.benchmark import BAND_PX, REFERENCES, band_name, paired_cases, run_cases, summarize
     from drivewm.transfer.retarget import TargetCondition
     from drivewm.transfer.sampling import network_evaluations
 
@@ -207,7 +211,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     bands = tuple(float(b) for b in args.detail_bands.split(",") if b) if args.detail_bands else (BAND_PX,)
     # CSE costs seconds per clip: the must-hold needs these only
-    cse_for = {"identity", "tokenizer"} | {band_name("transfer", b, look) for b in bands for look in looks}
+    cse_for = set(REFERENCES) | {band_name("transfer", b, look) for b in bands for look in looks}
 
     partial = args.out.with_suffix(".partial.jsonl") if args.out else None
     done: list[str] = []

@@ -3,17 +3,19 @@
 For each pair id with a clip in the source condition and one in the target condition, the source
 clip is coded by the tokenizer and transferred by every method; each output is decoded and scored
 (drivewm.transfer.metrics): PSNR / SSIM against the target clip, SIFT displacement against the
-source frames, CSE against the source's, adherence to the target. Two references frame the
-numbers: ``identity`` (the source clip itself, what a method that changes nothing scores) and
-``tokenizer`` (the true target coded and decoded, the best any latent method can reach without
-the source's detail). With ``detail`` (the default of ``drivewm transfer``) every method's output
-gets the source detail the tokenizer dropped back (drivewm.transfer.detail), the same for all.
-Clips larger than the model's size are scored at their own size, as ``drivewm transfer`` writes
-them: methods and the tokenizer reference work at the model's size and are upsampled
-(drivewm.transfer.resolution); ``model_resolution`` scores everything at the model's size instead.
-Methods take the same number of network evaluations (``nfe``) when run with the same sampler,
-steps and guidance.
-"""
+source frames, CSE against the source's, adherence to the target. Two references frame the numbers:
+``identity`` (the source clip itself, what a method that changes nothing scores) and ``tokenizer``
+(the true target coded and decoded, the best any latent method can reach without the source's
+detail); beside them ``identity~noise`` (the source with Gaussian noise of NOISE_LEVELS added,
+invisible) gives the measures' resolution: a camera pair with barely the verified matches it needs
+in the source can lose them to that noise and count at the failed-pair penalty, so a difference in
+CSE ratio smaller than this row's distance from 1 says nothing about the method. With ``detail``
+(the default of ``drivewm transfer``) every method's output gets the source detail the tokenizer
+dropped back (drivewm.transfer.detail), the same for all. Clips larger than the model's size are
+scored at their own size, as ``drivewm transfer`` writes them: methods and the tokenizer reference
+work at the model's size and are upsampled (drivewm.transfer.resolution); ``model_resolution``
+scores everything at the model's size instead. Methods take the same number of network evaluations
+(``nfe``) when run with the same sampler, steps and guidance."""
 
 from __future__ import annotations
 
@@ -36,6 +38,10 @@ from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
 
+NOISE_LEVELS = 1.0  # sigma (uint8 levels) of the noise in the ``identity~noise`` reference
+NOISE_NAME = "identity~noise"
+REFERENCES = ("identity", NOISE_NAME, "tokenizer")  # rows that are no method: no network evaluations
+
 #: A method: (raw source latents (V, c, t, h, w), view captions, target, seeds) -> raw latents.
 Method = Callable[[torch.Tensor, list[str], TargetCondition, list[int]], torch.Tensor]
 
@@ -54,8 +60,9 @@ def paired_cases(
     location: str | Path, source: TargetCondition, targets: list[TargetCondition], max_per_target: int | None = None
 ) -> list[PairCase]:
     """Cases of the clips at ``location``: for each target, the pair ids that have a clip in ``source``
-    and one in that target (sorted by id; at most ``max_per_target``, evenly spaced over the sorted
-    ids, so a subset still spans every drive)."""
+    and one in that target (sorted by id), at most ``max_per_target`` of them spread over the drives:
+    the first clip of every drive, then the second of every drive, and so on (a drive is a pair id
+    without its ``-t<start tick>``), so a subset spans every drive even where curation dropped a clip."""
     by_id: dict[str, dict[TargetCondition, Clip]] = defaultdict(dict)
     for clip in iter_clips(location):
         cond = TargetCondition.of(clip.meta)
@@ -65,9 +72,19 @@ def paired_cases(
     for target in targets:
         ids = sorted(i for i, group in by_id.items() if source in group and target in group)
         if max_per_target is not None and len(ids) > max_per_target:
-            ids = [ids[int(k * len(ids) / max_per_target)] for k in range(max_per_target)]
+            ids = spread_over_drives(ids)[:max_per_target]
         cases += [PairCase(i, by_id[i][source], by_id[i][target], target) for i in ids]
     return cases
+
+
+def spread_over_drives(pair_ids: list[str]) -> list[str]:
+    """Sorted ``pair_ids`` reordered round-robin over their drives (sorted): each drive's first clip,
+    then each drive's second, and so on."""
+    by_drive: dict[str, list[str]] = defaultdict(list)
+    for pid in sorted(pair_ids):
+        by_drive[pid.rsplit("-t", 1)[0]].append(pid)
+    drives = [by_drive[d] for d in sorted(by_drive)]
+    return [clips[i] for i in range(max(map(len, drives), default=0)) for clips in drives if i < len(clips)]
 
 
 def band_name(method: str, band_px: float, shared_look: bool = True) -> str:
@@ -141,7 +158,11 @@ def run_cases(
         source_cse = cross_view_error(scored.source, scored.rig)  # {cse, cse_calibrated} of the source
         truth_cse = cross_view_error(scored.target, scored.rig)  # and of the simulator's own target render
         coded_truth = code_views(tokenizer, case.target.videos(), size_hw, device)
-        outputs = {"identity": scored.source, "tokenizer": to_output_size(coded_truth, scored.source, None)}
+        outputs = {
+            "identity": scored.source,
+            NOISE_NAME: with_noise(scored.source, NOISE_LEVELS, seed),
+            "tokenizer": to_output_size(coded_truth, scored.source, None),
+        }
         coded_src = decode_views(tokenizer, latents, device) if detail else None
         for name, method in methods.items():
             out = decode_views(tokenizer, method(latents, captions, case.condition, seeds), device)
@@ -159,6 +180,12 @@ def run_cases(
         if progress is not None:
             progress(case, rows[-len(outputs) :])
     return rows
+
+
+def with_noise(videos: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """uint8 ``videos`` plus Gaussian noise of ``sigma`` levels (drawn from ``seed``), rounded and clipped."""
+    noise = np.random.default_rng(seed).normal(0.0, sigma, videos.shape)
+    return np.clip(np.rint(videos + noise), 0, 255).astype(np.uint8)
 
 
 def summarize(rows: list[dict]) -> dict[str, dict[str, dict[str, float]]]:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from drivewm.clips import iter_clips
+from drivewm.transfer.benchmark import NOISE_LEVELS, with_noise
 from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.retarget import TargetCondition
 
@@ -57,3 +58,15 @@ def test_adherence_names_the_rendered_condition(snow_clip) -> None:
     _, videos = snow_clip
     assert adherent(videos, TargetCondition("snow", "day"))["match"] == 1.0
     assert adherent(videos, TargetCondition("clear", "night"))["match"] == 0.0
+
+
+def test_the_noise_reference_adds_one_invisible_level_fixed_by_its_seed(snow_clip) -> None:
+    """``identity~noise`` of the benchmark: the source plus Gaussian noise of NOISE_LEVELS (1 level), so
+    its PSNR to the source is about 10 log10(255^2 / (1 + 1/12)) = 47.8 dB (the rounding adds 1/12),
+    the same draw for the same seed and another for another."""
+    _, videos = snow_clip
+    noisy = with_noise(videos, NOISE_LEVELS, 0)
+    assert noisy.dtype == np.uint8 and np.array_equal(noisy, with_noise(videos, NOISE_LEVELS, 0))
+    assert not np.array_equal(noisy, with_noise(videos, NOISE_LEVELS, 1))
+    assert 47.0 < image_scores(noisy, videos)["psnr"] < 49.0
+    assert np.abs(noisy.astype(int) - videos).max() <= 6  # a 6-sigma draw at most, never a visible change

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from drivewm.transfer.benchmark import paired_cases, run_cases, summarize
+from drivewm.transfer.benchmark import NOISE_NAME, paired_cases, run_cases, summarize
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
 from drivewm.transfer.sdedit import sdedit_latents
@@ -63,3 +63,5 @@ def test_transfer_beats_sdedit_against_the_truth(trained) -> None:
     assert ours["ssim"] > summary[best]["ssim"], summary
     assert ours["psnr"] >= summary["identity"]["psnr"] + 3.0, summary
     assert ours["psnr"] >= summary["tokenizer"]["psnr"] - 3.0, summary
+    # the source with 1 level of noise scores to the truth what the source itself does
+    assert summary[NOISE_NAME]["psnr"] == pytest.approx(summary["identity"]["psnr"], abs=0.05), summary
