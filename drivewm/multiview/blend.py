@@ -137,11 +137,12 @@ def check_views(views: np.ndarray, rig: Rig) -> None:
 
 
 def sample_frames(frames: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Colours (T, N, 3) of uint8 frames (T, H, W, 3) at pixel coordinates ``x``, ``y`` (N,),
-    bilinear, clamped to the image (NaN read as 0: weigh them out)."""
+    """Colours float32 (T, N, C) of frames (T, H, W, C; uint8 or float) at pixel coordinates ``x``,
+    ``y`` (N,), bilinear, clamped to the image (NaN read as 0: weigh them out). float32 holds every
+    value exactly that float64 arithmetic on it needs (the callers' sums are float64)."""
     t, h, w, _ = frames.shape
     images = torch.from_numpy(np.ascontiguousarray(frames)).float().permute(0, 3, 1, 2)
     grid = np.stack([(np.nan_to_num(x) + 0.5) / w * 2 - 1, (np.nan_to_num(y) + 0.5) / h * 2 - 1], axis=1)
-    grid = torch.from_numpy(grid).float().view(1, 1, -1, 2).expand(t, -1, -1, -1)
+    grid = torch.from_numpy(grid.astype(np.float32)).view(1, 1, -1, 2).expand(t, -1, -1, -1)
     colour = F.grid_sample(images, grid, mode="bilinear", padding_mode="border", align_corners=False)
-    return colour[:, :, 0].transpose(1, 2).double().numpy()
+    return colour[:, :, 0].numpy().transpose(0, 2, 1)  # a view: no copy
