@@ -37,8 +37,9 @@ every camera that sees its point of the flat world (drivewm.multiview.blend.feat
 ``G(source_coded)`` agree there (within LOOK_TOLERANCE levels: one surface, not a building the flat
 world puts at infinity), while ``source - G(source_coded)`` stays the view's own. Two cameras then
 give one point one light and bring its structure back at one strength. Measured on the 9 held-out
-pairs at 320x192: CSE 1.61x to 1.01x the source's, every camera pair kept, PSNR +0.06 dB; on 3
-validation drives 1.84x to 1.53x (docs/transfer.md, "The look shared between cameras").
+pairs at 320x192: CSE 1.61x to 1.01x the source's, every camera pair kept, PSNR +0.06 dB; on the
+first 3 validation drives 1.84x to 1.53x, on all 6 1.32x (docs/transfer.md, "The look shared between
+cameras").
 """
 
 from __future__ import annotations

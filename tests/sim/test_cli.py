@@ -147,7 +147,7 @@ def test_worldmodel_heldout_drives_share_no_seed_with_training() -> None:
 def test_transfer_validation_drives_are_neither_trained_on_nor_benchmarked() -> None:
     used = {c.seed + i for name in ("transfer", "transfer_heldout") for c, n in load_recipe(name) for i in range(n)}
     validation = load_recipe("transfer_validation")
-    assert len(validation) == 12 and not {c.seed + i for c, n in validation for i in range(n)} & used
+    assert len(validation) == 24 and not {c.seed + i for c, n in validation for i in range(n)} & used
 
 
 def test_turns_recipe_turns_in_every_weather_on_seeds_of_its_own() -> None:
