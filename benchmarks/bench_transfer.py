@@ -77,6 +77,23 @@ def parse_args(argv=None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def check_args(args: argparse.Namespace) -> None:
+    """SystemExit naming the first option out of range, before any model loads."""
+    for name in ("model", "data"):
+        if not getattr(args, name).exists():
+            raise SystemExit(f"--{name}: {getattr(args, name)} does not exist")
+    try:
+        sigmas = [float(x) for x in args.sdedit_sigmas.split(",") if x]
+    except ValueError:
+        raise SystemExit(f"--sdedit-sigmas: comma-separated numbers, got {args.sdedit_sigmas!r}") from None
+    if not sigmas or not all(math.isfinite(x) and x > 0 for x in sigmas):
+        raise SystemExit(f"--sdedit-sigmas: at least one, each > 0 (the baseline to beat), got {args.sdedit_sigmas!r}")
+    for name in ("steps", "max_pairs", "threads"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise SystemExit(f"--{name.replace('_', '-')} must be >= 1, got {value}")
+
+
 def build_methods(args, targets):
     from drivewm.diffusion.text2world import Text2World
     from drivewm.transfer.model import Transfer
@@ -180,6 +197,7 @@ def main(argv=None) -> int:
     if not keys or not set(keys) <= names.keys():
         raise SystemExit(f"--looks: comma-separated shared and/or own, got {args.looks!r}")
     looks = tuple(names[k] for k in keys)
+    check_args(args)
     import torch
 
     from drivewm.atomic import write_text
@@ -196,6 +214,11 @@ def main(argv=None) -> int:
     model, parent, methods = build_methods(args, targets)
     tokenizer = Tokenizer.from_pretrained(model.latent.tokenizer).to(model.device)
     cases = interleaved(paired_cases(args.data, source, targets, args.max_pairs))
+    if not cases:
+        raise SystemExit(
+            f"no held-out pairs in {args.data}: no pair id has a clip in {source.name} and one in any of "
+            f"{', '.join(t.name for t in targets)} (curated with --recipe transfer from paired drives?)"
+        )
     nfe = network_evaluations(args.steps, args.guidance, args.sampler)
     params = f"{count_parameters(model.net) / 1e6:.2f}M parameters, parent {count_parameters(parent.dit) / 1e6:.2f}M"
     print(

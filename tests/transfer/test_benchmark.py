@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+from drivewm.release import WEIGHTS_DIR
 from drivewm.transfer.benchmark import spread_over_drives
 
 
@@ -16,3 +22,34 @@ def test_a_subset_of_pairs_spans_every_drive_even_where_a_clip_was_dropped() -> 
     # evenly spaced over the sorted ids (the rule before) took drive a's last clip and skipped drive b
     before = [sorted(ids)[int(k * len(ids) / 3)] for k in range(3)]
     assert [i.split("-")[0] for i in before] == ["a", "a", "c"]
+
+
+def load_bench_transfer():
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_transfer.py"
+    spec = importlib.util.spec_from_file_location("bench_transfer", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--max-pairs", "0"], "--max-pairs must be >= 1"),
+        (["--sdedit-sigmas", ","], "--sdedit-sigmas: at least one"),
+        (["--sdedit-sigmas", "1,x"], "--sdedit-sigmas: comma-separated numbers"),
+        (["--looks", "both"], "--looks: comma-separated shared and/or own"),
+        (["--targets", "rain:day"], "no held-out pairs in .*clear:day.*rain:day"),
+    ],
+)
+def test_bench_transfer_refuses_what_it_cannot_score(tmp_path, args, message) -> None:
+    """Each refused with one line naming the option; the last after the models load, on a folder of
+    clips without a rain pair (an empty one)."""
+    bench = load_bench_transfer()
+    with pytest.raises(SystemExit, match=message):
+        bench.main(["--model", str(WEIGHTS_DIR / "transfer"), "--data", str(tmp_path), *args])
+
+
+def test_bench_transfer_names_a_missing_folder(tmp_path) -> None:
+    with pytest.raises(SystemExit, match="--data: .*none does not exist"):
+        load_bench_transfer().main(["--model", str(WEIGHTS_DIR / "transfer"), "--data", str(tmp_path / "none")])
