@@ -71,14 +71,17 @@ def feathering(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float = 100.0, 
 
 
 def feathered_mean(
-    values: np.ndarray, plan: list, guide: np.ndarray | None = None, tolerance: float = 10.0
+    values: np.ndarray, plan: list, guide: np.ndarray | None = None, tolerance: float | None = None
 ) -> np.ndarray:
     """float64 (V, T, H, W, C) of ``values`` (V, T, H, W, C, any dtype; views of a :func:`feathering`
     plan's rig and size): each pixel the feathered mean of every camera that sees its flat-world point,
     its own camera among them; a pixel no camera sees keeps its value. ``guide`` (V, T, H, W, C'):
     another camera counts at a point only as far as the guide agrees there with the view's own,
     weight times exp(-(d / ``tolerance``)^2), d the mean absolute difference of the guide's channels
-    (where the guide differs, the two cameras do not see one surface of the flat world)."""
+    (where the guide differs, the two cameras do not see one surface of the flat world); a guide needs
+    its tolerance (levels of the guide's scale, > 0)."""
+    if guide is not None and not (tolerance is not None and tolerance > 0):
+        raise ValueError(f"feathered_mean: a guide needs a tolerance > 0, got {tolerance}")
     _, t, h, w, c = values.shape
     out = np.empty(values.shape, dtype=np.float64)
     for v, terms in enumerate(plan):

@@ -10,7 +10,7 @@ from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
-from drivewm.multiview.blend import blend_overlaps, overlap_disagreement, stitch_views
+from drivewm.multiview.blend import blend_overlaps, feathered_mean, feathering, overlap_disagreement, stitch_views
 from drivewm.multiview.reproject import Reprojection
 from drivewm.multiview.rollout import RolloutOptions
 
@@ -71,6 +71,10 @@ def test_blending_keeps_views_that_agree_everywhere_and_refuses_a_mismatched_rig
         blend_overlaps(uniform[:5], rig)
     with pytest.raises(DrivewmError):
         blend_overlaps(uniform, rig, walls_m=0.1)  # a corridor narrower than the rig
+    plan, values = feathering(rig, (96, 160)), uniform[:, None].astype(np.float32)
+    with pytest.raises(ValueError, match="a guide needs a tolerance > 0, got None"):
+        feathered_mean(values, plan, guide=values)  # the tolerance is the guide's scale: no default fits all
+    assert np.allclose(feathered_mean(values, plan, guide=values, tolerance=30.0), values)
 
 
 def test_blending_is_recorded_on_by_default_and_never_in_a_rollout(tmp_path, capsys):
