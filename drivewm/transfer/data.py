@@ -54,7 +54,16 @@ def clip_pairs(metas: list[ClipMeta], targets: list[TargetCondition] | None = No
 class PairDataset:
     """Samples (source clip, target clip, view) of a latent cache; all clips share one latent shape."""
 
-    def __init__(self, cache_dir: str | Path, sigma_data: float = 0.5, targets: list[TargetCondition] | None = None):
+    def __init__(
+        self,
+        cache_dir: str | Path,
+        sigma_data: float = 0.5,
+        targets: list[TargetCondition] | None = None,
+        repeat: dict[TargetCondition, int] | None = None,
+    ):
+        """``targets``: keep the pairs whose target is one of them (None: all); ``repeat``: the samples of
+        pairs whose target is a key there appear that many times (a rare or hard target drawn more
+        often, every other target still in the batches)."""
         self.cache = LatentCache(cache_dir)
         self.sigma_data = sigma_data
         self.metas = [ClipMeta.from_json(r["meta"], f"{self.cache.dir} clip {r['key']}") for r in self.cache.rows]
@@ -65,7 +74,13 @@ class PairDataset:
                 "--conditions and curate with --recipe transfer"
             )
         self._clips: dict[int, LatentClip] = {}
-        self.items = [(s, t, v) for s, t in self.pairs for v in range(len(self.metas[s].cameras))]
+        repeat = repeat or {}
+        self.items = [
+            (s, t, v)
+            for s, t in self.pairs
+            for _ in range(repeat.get(TargetCondition.of(self.metas[t]), 1))
+            for v in range(len(self.metas[s].cameras))
+        ]
         first = self._clip(self.pairs[0][0])
         self.latent_shape = tuple(first.latents.shape[1:])  # (c, t, h, w)
         self.fps = float(first.meta.fps)

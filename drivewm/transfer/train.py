@@ -46,6 +46,9 @@ class TransferTrainConfig:
     are trained more than for generation (EDM's -1.2 puts 6% of samples above sigma 2, 0.0 puts 28%)."""
     targets: list[str] = dataclasses.field(default_factory=list)
     """Target conditions to train, as WEATHER:TIME; empty = every condition the data pairs."""
+    target_repeat: dict[str, int] = dataclasses.field(default_factory=dict)
+    """WEATHER:TIME -> n: that target's pairs appear n times in an epoch, every other target once (night
+    drawn more often without training on night alone, which forgets the others: docs/transfer.md)."""
     train: TrainConfig = dataclasses.field(default_factory=TrainConfig)
     """Optimisation and run settings; ``batch_size`` counts (pair, view) samples."""
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
@@ -56,11 +59,19 @@ class TransferTrainConfig:
     def validate(self) -> None:
         if self.targets:
             parse_conditions(self.targets)
+        if self.target_repeat:
+            parse_conditions(list(self.target_repeat))
+            bad = {k: n for k, n in self.target_repeat.items() if not (isinstance(n, int) and n >= 1)}
+            if bad:
+                raise DrivewmError(f"target_repeat counts must be whole numbers >= 1, got {bad}")
         if self.sample_steps < 1:
             raise DrivewmError("transfer-train: sample_steps must be >= 1")
 
     def target_conditions(self) -> list[TargetCondition] | None:
         return [TargetCondition(w, t) for w, t in parse_conditions(self.targets)] if self.targets else None
+
+    def target_repeats(self) -> dict[TargetCondition, int]:
+        return {TargetCondition(*parse_conditions([k])[0]): n for k, n in self.target_repeat.items()}
 
 
 #: Named runs (copy-and-change of the dataclass defaults). ``debug`` is what 2 CPU cores post-train
@@ -177,7 +188,7 @@ def train_transfer(
     model = init_transfer(cfg, init_dir)
     tokenizer = Path(model.latent.tokenizer) if model.latent.tokenizer else None
     cache = find_latent_cache(Path(data_dir), tokenizer, cfg.data.latents)
-    dataset = PairDataset(cache, model.cfg.edm.sigma_data, cfg.target_conditions())
+    dataset = PairDataset(cache, model.cfg.edm.sigma_data, cfg.target_conditions(), cfg.target_repeats())
     if tokenizer is not None:
         check_tokenizer(dataset.cache, tokenizer)
     if dataset.latent_shape[0] != model.cfg.dit.in_channels:

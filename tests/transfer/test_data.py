@@ -61,3 +61,24 @@ def test_pair_dataset_samples(tmp_path) -> None:
 def test_no_pairs_is_a_clear_error(tmp_path) -> None:
     with pytest.raises(DrivewmError, match="no clip pairs"):
         PairDataset(_cache(tmp_path, METAS[3:5]))
+
+
+def test_a_repeated_target_is_drawn_more_often_and_the_others_stay(tmp_path) -> None:
+    """target_repeat {clear:night: 3}: the two pairs into night appear three times each, the four
+    others once, so night is 6 of 10 pairs' samples and every target still trains."""
+    night = TargetCondition("clear", "night")
+    data = PairDataset(_cache(tmp_path, METAS), repeat={night: 3})
+    conditions = [data[i].condition for i in range(0, len(data), 3)]  # one view of each repeated pair
+    assert len(data) == (2 * 3 + 4) * 3  # (night pairs x 3 + the others) x three cameras
+    assert conditions.count(night) == 6 and conditions.count(TargetCondition("snow", "day")) == 2
+    assert conditions.count(TargetCondition("clear", "day")) == 2
+
+
+def test_target_repeat_is_checked() -> None:
+    from drivewm.transfer.train import RECIPES
+
+    cfg = RECIPES.resolve("debug", overrides=["target_repeat={clear:night: 3}"])
+    assert cfg.target_repeats() == {TargetCondition("clear", "night"): 3}
+    for bad, message in (("{clear:night: 0}", "whole numbers >= 1"), ("{clear:nite: 2}", "clear:nite")):
+        with pytest.raises(DrivewmError, match=message):
+            RECIPES.resolve("debug", overrides=[f"target_repeat={bad}"])
