@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from drivewm.clips.format import Clip
+from drivewm.clips.format import Clip, pair_drive
 from drivewm.clips.shards import iter_clips
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import code_views, decode_views, encode_views, resize_views
@@ -82,7 +82,7 @@ def spread_over_drives(pair_ids: list[str]) -> list[str]:
     then each drive's second, and so on."""
     by_drive: dict[str, list[str]] = defaultdict(list)
     for pid in sorted(pair_ids):
-        by_drive[pid.rsplit("-t", 1)[0]].append(pid)
+        by_drive[pair_drive(pid)].append(pid)
     drives = [by_drive[d] for d in sorted(by_drive)]
     return [clips[i] for i in range(max(map(len, drives), default=0)) for clips in drives if i < len(clips)]
 
