@@ -53,3 +53,17 @@ def test_bench_transfer_refuses_what_it_cannot_score(tmp_path, args, message) ->
 def test_bench_transfer_names_a_missing_folder(tmp_path) -> None:
     with pytest.raises(SystemExit, match="--data: .*none does not exist"):
         load_bench_transfer().main(["--model", str(WEIGHTS_DIR / "transfer"), "--data", str(tmp_path / "none")])
+    with pytest.raises(SystemExit, match="--parent: .*t2w does not exist"):
+        load_bench_transfer().main(["--parent", str(tmp_path / "t2w"), "--data", str(tmp_path)])
+
+
+def test_bench_transfer_reads_shipped_names_as_the_installed_folders(tmp_path) -> None:
+    """No --model: the shipped transfer model, as ``drivewm transfer`` and bench_transfer_look.py
+    take it (the option was a plain path, so ``--model shipped:transfer`` was a missing folder); an
+    unknown kind is refused by name before any model loads."""
+    bench = load_bench_transfer()
+    args = bench.parse_args(["--data", str(tmp_path), "--parent", "shipped:text2world"])
+    bench.check_args(args)
+    assert args.model == WEIGHTS_DIR / "transfer" and args.parent == WEIGHTS_DIR / "text2world"
+    with pytest.raises(SystemExit, match="--model: no shipped model 'transfr'"):
+        bench.main(["--model", "shipped:transfr", "--data", str(tmp_path)])
