@@ -30,14 +30,20 @@ import math
 import time
 from pathlib import Path
 
+from drivewm.choices import model_folder
+
 MUST = {"psnr_gain_db": 3.0, "sift_shift_px": 2.0, "cse_ratio": 1.5, "adherence": 0.8}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", default="shipped:transfer", help="transfer model folder or shipped:transfer (default)")
     p.add_argument(
-        "--parent", help="Text2World folder (or shipped:text2world) for SDEdit (default: the model's parent)"
+        "--model", default="shipped:transfer", type=model_folder, help="transfer model folder (default: shipped)"
+    )
+    p.add_argument(
+        "--parent",
+        type=model_folder,
+        help="Text2World folder (or shipped:text2world) for SDEdit (default: the model's parent)",
     )
     p.add_argument(
         "--data", required=True, type=Path, help="held-out paired clip folder (any size; see --model-resolution)"
@@ -81,15 +87,6 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def check_args(args: argparse.Namespace) -> None:
     """SystemExit naming the first option out of range, before any model loads."""
-    from drivewm.choices import resolve_model_folder
-    from drivewm.errors import DrivewmError
-
-    for name in ("model", "parent"):
-        if getattr(args, name) is not None:
-            try:  # shipped:KIND is the installed folder; an unknown kind is refused here
-                setattr(args, name, resolve_model_folder(getattr(args, name)))
-            except DrivewmError as err:
-                raise SystemExit(f"--{name}: {err}") from None
     for name in ("model", "parent", "data"):
         if getattr(args, name) is not None and not getattr(args, name).exists():
             raise SystemExit(f"--{name}: {getattr(args, name)} does not exist")
