@@ -23,8 +23,8 @@ import tempfile
 import torch
 from interleaved import add_sampling_arguments, alternate, print_medians
 
-from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import GenerateOptions
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.defaults import DEFAULT_BLEND, DEFAULT_RESHADE, DEFAULT_SIGMA, DEFAULT_STITCH
 from drivewm.multiview.generate import generate_multiview
 from drivewm.multiview.reproject import Reprojection

@@ -20,9 +20,9 @@ import dataclasses
 import torch
 from interleaved import alternate, print_medians
 
-from drivewm.choices import resolve_model_folder
 from drivewm.clips import iter_clips
 from drivewm.clips.format import clip_from_arrays
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.coding import resize_views
 from drivewm.train.checkpoint import load_model_folder
 from drivewm.transfer.apply import TransferOptions, load_tokenizer, load_transferer, transfer_clip

@@ -3,10 +3,10 @@
 ``--sampler`` takes the keys of ``drivewm.diffusion.samplers.SAMPLERS``, ``--weather`` the entries
 of ``drivewm.logs.types.WEATHERS``, and so on: the CLI never repeats a registry by hand. A model
 folder argument (``--model``, ``--init``, ``--tokenizer``) also takes ``shipped:KIND``, the weights
-this drivewm ships (:func:`model_folder`), so a command that names them works wherever drivewm is
-installed. The
-registry's module is imported only when a value is checked or a help page is printed, so building
-the parser (``drivewm --help``) imports no stage code and no PyTorch.
+this drivewm ships (:func:`model_folder`; drivewm.model_folders resolves the name), so a command
+that names them works wherever drivewm is installed. The registry's module is imported only when a
+value is checked or a help page is printed, so building the parser (``drivewm --help``) imports no
+stage code and no PyTorch.
 """
 
 from __future__ import annotations
@@ -14,12 +14,12 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
-import os
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from drivewm.config import check_guidance_interval
+from drivewm.config import MAX_SEED, check_guidance_interval
 from drivewm.errors import DrivewmError
+from drivewm.model_folders import resolve_model_folder
 
 
 class RegistryChoices:
@@ -50,49 +50,9 @@ def add_registry_argument(parser: argparse.ArgumentParser, flag: str, registry: 
     parser.add_argument(flag, choices=RegistryChoices(registry), metavar=metavar, help=f"{help}: %(choices)s", **kwargs)
 
 
-#: Prefix of a model folder argument that names a shipped model: ``shipped:multiview``.
-SHIPPED_PREFIX = "shipped:"
-
-
-def resolve_model_folder(value: str | Path) -> Path:
-    """``shipped:KIND`` is the installed ``drivewm/weights/KIND`` (drivewm.release.shipped_model; an
-    unknown or missing kind raises DrivewmError), anything else a path as given."""
-    if not (isinstance(value, str) and value.startswith(SHIPPED_PREFIX)):
-        return Path(value)
-    from drivewm.release import shipped_model  # PyTorch: imported only when a shipped model is named
-
-    return shipped_model(value[len(SHIPPED_PREFIX) :])
-
-
-def portable_reference(target: str | Path, folder: str | Path, root: str | Path) -> str:
-    """How ``folder`` records the folder ``target`` it depends on (a model folder's tokenizer or
-    Text2World parent, a latent cache's tokenizer) so that the record survives a move: relative to
-    ``folder`` when ``target`` lies under ``root`` (the run folder both belong to: a recipe run,
-    copied back from a GPU machine, moves as a whole); ``shipped:KIND`` when it is an installed
-    shipped model (a fine-tune of the shipped weights outlives a new virtual environment or
-    drivewm's installed path changing); else its absolute path. :func:`resolve_reference` reads it."""
-    target, folder, root = (Path(p).resolve() for p in (target, folder, root))
-    if target.is_relative_to(root):
-        return os.path.relpath(target, folder)
-    from drivewm.release import RUN_FOLDERS, WEIGHTS_DIR  # PyTorch: only when a model folder is saved
-
-    for kind in RUN_FOLDERS:
-        if target == (WEIGHTS_DIR / kind).resolve():
-            return SHIPPED_PREFIX + kind
-    return str(target)
-
-
-def resolve_reference(reference: str, folder: str | Path) -> Path:
-    """The folder that ``reference`` (as :func:`portable_reference` writes it, or an absolute path)
-    names, recorded in ``folder``: a relative path is read from ``folder``."""
-    if reference.startswith(SHIPPED_PREFIX):
-        return resolve_model_folder(reference)
-    path = Path(reference)
-    return path if path.is_absolute() else (Path(folder) / path).resolve()
-
-
 def model_folder(value: str) -> Path:
-    """argparse ``type`` of a model folder argument (:func:`resolve_model_folder`)."""
+    """argparse ``type`` of a model folder argument: a path, or ``shipped:KIND``
+    (drivewm.model_folders.resolve_model_folder)."""
     try:
         return resolve_model_folder(value)
     except DrivewmError as exc:  # argparse turns this into the CLI's one-line error, exit 2
@@ -142,9 +102,6 @@ def whole_number(minimum: int, maximum: int | None = None) -> Callable[[str], in
 #: had run on one process and ``--max-clips -1`` had left out the last clip.
 at_least_one = whole_number(1)
 
-
-#: Largest seed a command takes (the simulator's, SUMO's ``--seed``); sample, window or view i adds i to it.
-MAX_SEED = 2**31 - 1
 
 #: argparse ``type`` of ``--seed`` (a larger one had ended ``drivewm generate`` in PyTorch's overflow traceback).
 seed = whole_number(0, MAX_SEED)

@@ -28,8 +28,8 @@ COMMAND_MODULES = (
     "drivewm.multiview.commands",  # posttrain, rollout
     "drivewm.eval.commands",  # eval
     "drivewm.transfer.commands",  # transfer, transfer-train
-    "drivewm.quickstart",  # quickstart
-    "drivewm.worldmodel",  # worldmodel train|figures|export
+    "drivewm.product.quickstart",  # quickstart
+    "drivewm.product.worldmodel",  # worldmodel train|figures|export
 )
 
 

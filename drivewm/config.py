@@ -184,6 +184,9 @@ def above(cfg: Any, low: float, *fields: str) -> None:
 #: overflowed the frame period in ns deep inside a run).
 FPS_RANGE = (1 / 60, 1000.0)
 
+#: Largest seed a config or command takes (the simulator's, SUMO's ``--seed``); sample, window or view i adds i to it.
+MAX_SEED = 2**31 - 1
+
 
 def frame_rate(cfg: Any, *fields: str) -> None:
     """Every named field of ``cfg`` is a frame rate in :data:`FPS_RANGE` (NaN fails)."""

@@ -20,8 +20,8 @@ import argparse
 import cv2
 import numpy as np
 
-from drivewm.choices import resolve_model_folder
 from drivewm.eval.inputs import load_items
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.coding import code_views
 from drivewm.tokenizer.model import Tokenizer
 

@@ -21,7 +21,7 @@ import argparse
 import numpy as np
 import torch
 
-from drivewm.choices import resolve_model_folder
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.posttrain import RECIPES, MultiViewTask

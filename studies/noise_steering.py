@@ -25,9 +25,9 @@ import dataclasses
 import cv2
 import numpy as np
 
-from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import decode_latents
 from drivewm.geometry import load_rig
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.generate import view_captions
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.trajectories import resolve_trajectory

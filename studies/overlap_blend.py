@@ -31,8 +31,8 @@ from pathlib import Path
 
 from reproject_sigma import VALIDATION
 
-from drivewm.choices import resolve_model_folder
 from drivewm.diffusion.generate import GenerateOptions
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.generate import generate_multiview
 from drivewm.multiview.reproject import Reprojection
 

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 from rollout_turns import front_yaw
 
-from drivewm.choices import resolve_model_folder
 from drivewm.geometry import yaw_of
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.coding import decode_views, encode_views
 from drivewm.multiview.generate import template_view_captions, view_captions
 from drivewm.multiview.model import MultiView

@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drivewm.choices import resolve_model_folder
 from drivewm.clips.shards import iter_clips
 from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.reproject import Reprojection
 from drivewm.multiview.rollout import RolloutOptions, rollout

@@ -24,10 +24,10 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from drivewm.choices import resolve_model_folder
 from drivewm.clips import ShardWriter, iter_clips
 from drivewm.clips.format import clip_from_arrays
 from drivewm.clips.shards import spread
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.coding import code_views
 from drivewm.tokenizer import Tokenizer
 

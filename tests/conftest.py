@@ -161,12 +161,12 @@ def dashcam_clips(shared_data, tmp_path_factory) -> Path:
 def fake_shipped_weights(tmp_path, monkeypatch) -> Path:
     """drivewm/weights/ replaced by folders that only look shipped (multiview, tokenizer): for
     tests of how ``shipped:KIND`` is resolved, not of the weights."""
-    from drivewm import release
+    from drivewm import model_folders
     from drivewm.train.checkpoint import WEIGHTS_NAME
 
     root = tmp_path / "fake_weights"
     for kind in ("multiview", "tokenizer"):
         (root / kind).mkdir(parents=True)
         (root / kind / WEIGHTS_NAME).write_bytes(b"weights")
-    monkeypatch.setattr(release, "WEIGHTS_DIR", root)
+    monkeypatch.setattr(model_folders, "WEIGHTS_DIR", root)
     return root

@@ -27,13 +27,14 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-from drivewm import release
+from drivewm import model_folders
 from drivewm.cli import build_parser
 from drivewm.clips import iter_clips, read_manifest
 from drivewm.curate.contact_sheet import thumb_width
 from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_config
-from drivewm.quickstart import FINETUNED, FIRST_LOG, MODELS, load_profile, stage_commands
-from drivewm.report import command_lines
+from drivewm.product.quickstart import FINETUNED, FIRST_LOG, MODELS, load_profile, stage_commands
+from drivewm.product.release import check_manifest
+from drivewm.product.report import command_lines
 from drivewm.train.checkpoint import WEIGHTS_NAME
 
 #: Whichever slow test runs first runs the whole pipeline: minutes, far more on a loaded machine.
@@ -141,7 +142,7 @@ def run_quickstart(out: Path) -> str:
 @pytest.fixture(scope="module")
 def shipped_manifest() -> dict:
     """The shipped weights' manifest, checked (sha256 of every file) before the quickstart runs."""
-    return release.check_manifest()
+    return check_manifest()
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +154,7 @@ def quickstart_dir(tmp_path_factory, shipped_manifest) -> tuple[Path, str]:
 def test_the_reports_turn_sign_is_the_benchmarks_figure_and_says_why_it_is_missing():
     """The report's ``turn_sign`` row: turning clips whose yaw has the asked sign, an unreadable turn
     a failure (as in the world-model benchmark); a set where nothing turns gets a dash saying so."""
-    from drivewm.report import _missing_reason, with_turn_sign
+    from drivewm.product.report import _missing_reason, with_turn_sign
 
     def clip(asked, read):
         return {"conditioned_yaw_change_deg": asked, "yaw_change_deg": read}
@@ -191,13 +192,13 @@ def test_every_stage_ran_and_both_models_are_scored(quickstart_dir):
 @pytest.mark.slow
 def test_fine_tuning_changes_a_copy_and_leaves_the_shipped_weights_alone(quickstart_dir, shipped_manifest):
     out, _ = quickstart_dir
-    assert release.check_manifest() == shipped_manifest  # every shipped file still has its sha256
-    shipped = load_file(release.shipped_model("multiview") / WEIGHTS_NAME)
+    assert check_manifest() == shipped_manifest  # every shipped file still has its sha256
+    shipped = load_file(model_folders.shipped_model("multiview") / WEIGHTS_NAME)
     tuned = load_file(out / FINETUNED / WEIGHTS_NAME)
     assert tuned.keys() == shipped.keys() and all(tuned[k].shape == shipped[k].shape for k in shipped)
     changed = [k for k in shipped if not np.allclose(tuned[k].float().numpy(), shipped[k].float().numpy(), atol=1e-4)]
     assert len(changed) > len(shipped) // 2, f"only {len(changed)} of {len(shipped)} tensors moved"
-    shipped_cfg = json.loads((release.shipped_model("multiview") / "config.json").read_text())["config"]
+    shipped_cfg = json.loads((model_folders.shipped_model("multiview") / "config.json").read_text())["config"]
     tuned_cfg = json.loads((out / FINETUNED / "config.json").read_text())["config"]
     assert same_dit(tuned_cfg["dit"], shipped_cfg["dit"])  # the shipped architecture, whatever its preset
 
@@ -213,7 +214,7 @@ def test_one_curated_clip_is_transferred_to_snow_by_the_fine_tuned_shipped_trans
     assert done.meta.cameras == source.meta.cameras and done.videos().shape[:2] == source.videos().shape[:2]
     assert done.meta.tags["weather"] == "snow" and done.meta.timestamps_ns == source.meta.timestamps_ns
     assert {r["pair_id"] for r in read_manifest(out / "paired_clips")} != {""}  # the model trained on pairs
-    shipped_t2w, shipped_transfer = release.shipped_model("text2world"), release.shipped_model("transfer")
+    shipped_t2w, shipped_transfer = model_folders.shipped_model("text2world"), model_folders.shipped_model("transfer")
     transfer_model = json.loads((out / "transfer_model" / "config.json").read_text())
     assert transfer_model["parent"] == "shipped:text2world"  # the shipped transfer model's lineage
     assert Transfer.from_pretrained(out / "transfer_model").parent == str(shipped_t2w.resolve())
@@ -329,7 +330,7 @@ def test_a_moved_quickstart_resumes_and_its_fine_tuned_models_find_their_tokeniz
         assert stages and all(f"[quickstart] {s}: done before, skipped" in stdout for s in stages)
         assert json.loads((moved / FINETUNED / "config.json").read_text())["latent"]["tokenizer"] == "shipped:tokenizer"
         tokenizer = Path(MultiView.from_pretrained(moved / FINETUNED).latent.tokenizer)
-        assert tokenizer == release.shipped_model("tokenizer").resolve()
+        assert tokenizer == model_folders.shipped_model("tokenizer").resolve()
         transfer = Transfer.from_pretrained(moved / "transfer_model")
         assert str(out) not in transfer.parent and Path(transfer.latent.tokenizer) == tokenizer
         assert str(out) not in (moved / "report.md").read_text()

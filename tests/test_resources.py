@@ -14,7 +14,7 @@ from drivewm.errors import DrivewmError
 from drivewm.eval.report import load_reference
 from drivewm.geometry import load_rig
 from drivewm.logs.topicmap import load_topic_map
-from drivewm.quickstart import RECIPE, load_profile
+from drivewm.product.quickstart import RECIPE, load_profile
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -20,15 +20,8 @@ from safetensors import safe_open
 from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.errors import DrivewmError
-from drivewm.release import (
-    MAX_FILE_BYTES,
-    MAX_TOTAL_BYTES,
-    WEIGHTS_DIR,
-    check_manifest,
-    export_run,
-    folder_extra,
-    shipped_model,
-)
+from drivewm.model_folders import WEIGHTS_DIR, shipped_model
+from drivewm.product.release import MAX_FILE_BYTES, MAX_TOTAL_BYTES, check_manifest, export_run, folder_extra
 
 STATS = Path(__file__).with_name("shipped_generation.json")
 # generate's defaults otherwise: the prompt template, reprojection from DEFAULT_SIGMA
@@ -103,7 +96,7 @@ def test_a_fine_tune_replaces_one_folder_and_its_record_adds_up(tmp_path):
     import torch
     from safetensors.torch import load_file
 
-    from drivewm.release import replace_shipped
+    from drivewm.product.release import replace_shipped
     from drivewm.train.checkpoint import load_model_folder, save_model_folder, save_train_state
 
     root = tmp_path / "weights"
@@ -136,7 +129,7 @@ def test_a_fine_tune_replaces_one_folder_and_its_record_adds_up(tmp_path):
 def test_a_gpu_fine_tune_without_its_train_state_is_recorded_from_its_metrics_apart_from_cpu_time(tmp_path):
     """A run brought back from a GPU machine with its weights and metrics only: its steps and seconds come
     from the last metrics row, and its seconds count as GPU seconds, not CPU seconds."""
-    from drivewm.release import replace_shipped
+    from drivewm.product.release import replace_shipped
 
     root = tmp_path / "weights"
     shutil.copytree(WEIGHTS_DIR, root)
@@ -167,7 +160,7 @@ def test_a_fine_tune_mixed_with_the_shipped_model_is_the_weighted_mean_and_keeps
     import torch
 
     from drivewm.multiview.model import MultiView
-    from drivewm.release import interpolate_folders
+    from drivewm.product.release import interpolate_folders
     from drivewm.train.checkpoint import load_model_folder, save_model_folder
 
     info, base = load_model_folder("shipped:multiview", "multiview")

@@ -10,7 +10,7 @@ import pytest
 
 from drivewm import resources
 from drivewm.cli import build_parser, main
-from drivewm.worldmodel import SampleFlags, benchmark_stages, load_profile, stage_commands
+from drivewm.product.worldmodel import SampleFlags, benchmark_stages, load_profile, stage_commands
 
 
 @pytest.mark.parametrize("profile", ["cpu", "gpu"])
@@ -87,12 +87,14 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
     """--heldout an earlier benchmark's RUN/eval/heldout/metrics.json: it becomes this run's reference
     as it is, and the held-out clips are not evaluated again; every other stage is the recipe's."""
-    import drivewm.quickstart
+    import drivewm.product.quickstart
 
     earlier = {"num_clips": 48, "tse_calibrated": 0.957, "clips": {"a": {"tse_calibrated": 0.9}}}
     (tmp_path / "earlier.json").write_text(json.dumps(earlier))
     ran = []
-    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label, **kw: ran.append((name, argv)))
+    monkeypatch.setattr(
+        drivewm.product.quickstart, "run_stage", lambda name, argv, run, label, **kw: ran.append((name, argv))
+    )
     run = tmp_path / "run"
     argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
     assert main([*argv, "--reproject", "0.2", "--no-reproject-blend"]) == 0
@@ -107,15 +109,15 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
 def test_a_rerun_given_the_tokenizer_eval_computes_the_figures_again(tmp_path, monkeypatch):
     """Generation and eval resume; the figures must not, or the tokenizer's PSNR given on a rerun never
     reaches figures.json (it stayed n/a until 2026-11-29): the figures stage's marker goes."""
-    import drivewm.quickstart
+    import drivewm.product.quickstart
 
     run = tmp_path / "run"
-    marker = drivewm.quickstart.stage_marker(run, "figures")
+    marker = drivewm.product.quickstart.stage_marker(run, "figures")
     marker.parent.mkdir(parents=True)
     marker.write_text(json.dumps({"argv": ["worldmodel", "figures", str(run)], "seconds": 0.1}))
     (tmp_path / "earlier.json").write_text(json.dumps({"num_clips": 1, "clips": {"a": {}}}))
     (tmp_path / "tok.json").write_text(json.dumps({"psnr": 29.93, "clips": {}}))
-    monkeypatch.setattr(drivewm.quickstart, "run_stage", lambda name, argv, run, label, **kw: None)
+    monkeypatch.setattr(drivewm.product.quickstart, "run_stage", lambda name, argv, run, label, **kw: None)
     argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
     assert main([*argv]) == 0
     assert marker.is_file()  # no tokenizer eval: the figures stay as they were
@@ -175,7 +177,7 @@ GOOD = {"pose_success": 0.8, "pose_success_path": 0.7, "tse_calibrated": 0.7, "c
 
 
 def test_figures_hold_on_a_run_that_meets_them(tmp_path):
-    from drivewm.worldmodel_figures import figures
+    from drivewm.product.figures import figures
 
     _write_run(tmp_path, GOOD_CLIPS, GOOD, REAL, 33.0)
     figs = figures(tmp_path)
@@ -217,7 +219,7 @@ def test_figures_hold_on_a_run_that_meets_them(tmp_path):
 def test_each_figure_can_fail(tmp_path, change, broken):
     import copy
 
-    from drivewm.worldmodel_figures import figures
+    from drivewm.product.figures import figures
 
     clips, gen, real = copy.deepcopy(GOOD_CLIPS), dict(GOOD), dict(REAL)
     change(clips, gen, real)
@@ -230,7 +232,7 @@ def test_the_cse_figure_carries_the_overlap_disagreement_that_shows_a_stitched_c
     """Stitched views win CSE by construction (docs/eval-protocol.md): the CSE figure reports the eval's
     ``overlap_disagreement`` beside it, generated and held-out, in figures.json and in the table; an
     eval without it (before 2026-11-30) leaves the figure as it was."""
-    from drivewm.worldmodel_figures import figures, figures_markdown
+    from drivewm.product.figures import figures, figures_markdown
 
     _write_run(
         tmp_path, GOOD_CLIPS, {**GOOD, "overlap_disagreement": 2.08}, {**REAL, "overlap_disagreement": 8.23}, 33.0
@@ -246,7 +248,7 @@ def test_the_cse_figure_carries_the_overlap_disagreement_that_shows_a_stitched_c
 
 
 def test_tokenizer_psnr_below_goal_does_not_hold(tmp_path):
-    from drivewm.worldmodel_figures import figures, figures_markdown
+    from drivewm.product.figures import figures, figures_markdown
 
     _write_run(tmp_path, GOOD_CLIPS, GOOD, REAL, 28.4)
     figs = figures(tmp_path)
@@ -257,7 +259,7 @@ def test_tokenizer_psnr_below_goal_does_not_hold(tmp_path):
 def test_an_unreadable_turn_counts_against_the_turn_sign_and_the_table_says_so(tmp_path):
     import copy
 
-    from drivewm.worldmodel_figures import figures, figures_markdown
+    from drivewm.product.figures import figures, figures_markdown
 
     clips = copy.deepcopy(GOOD_CLIPS)
     clips[1].pop("yaw_change_deg")  # the right turn: no motion read where the trajectory moves
@@ -272,11 +274,11 @@ def test_a_run_moved_to_another_folder_resumes_where_it_stopped(tmp_path, monkey
     """A run copied from a GPU machine, moved, or named from another directory keeps its finished
     stages: a marker's command counts with the run's old path in place of the new one. Any other
     change reruns the stage (that the moved outputs still work: tests/train/test_relocation.py)."""
-    import drivewm.quickstart
-    from drivewm.quickstart import run_stage
+    import drivewm.product.quickstart
+    from drivewm.product.quickstart import run_stage
 
     ran = []
-    monkeypatch.setattr(drivewm.quickstart, "main", lambda argv: ran.append(argv) or 0)
+    monkeypatch.setattr(drivewm.product.quickstart, "main", lambda argv: ran.append(argv) or 0)
 
     def stage(run: Path, model: str = "m") -> list:
         argv = ["generate", "--model", model, "--out", str(run / "generated" / "a"), "--ref", str(run)]
@@ -289,14 +291,14 @@ def test_a_run_moved_to_another_folder_resumes_where_it_stopped(tmp_path, monkey
     new = tmp_path / "moved"
     shutil.move(old, new)
     assert not stage(new)  # the same command with the run's new path: done before
-    from drivewm.model_card import _stages
+    from drivewm.product.model_card import _stages
 
     assert _stages(new)[-1] == "| generate-a | 0 | `drivewm generate --model m --out RUN/generated/a --ref RUN` |"
     assert stage(new, model="other")  # another model: runs
     assert not stage(new, model="other")
     shutil.move(new, tmp_path / "again")
     assert not stage(tmp_path / "again", model="other")  # moved twice
-    earlier = drivewm.quickstart.stage_marker(tmp_path / "again", "generate-a")
+    earlier = drivewm.product.quickstart.stage_marker(tmp_path / "again", "generate-a")
     marker = json.loads(earlier.read_text())
     earlier.write_text(json.dumps({"argv": marker["argv"], "seconds": 1.0}))  # written before the run was recorded
     shutil.move(tmp_path / "again", tmp_path / "last")

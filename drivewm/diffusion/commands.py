@@ -129,7 +129,7 @@ def generate_command(args: argparse.Namespace) -> int | None:
     from drivewm.train.checkpoint import read_model_config
 
     if args.model is None:
-        from drivewm.release import shipped_model
+        from drivewm.model_folders import shipped_model
 
         args.model = shipped_model("multiview")
     model_type = read_model_config(args.model).get("model_type")

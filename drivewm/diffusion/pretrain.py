@@ -13,7 +13,6 @@ from pathlib import Path
 
 import torch
 
-from drivewm.choices import resolve_reference
 from drivewm.clips.latents import LatentCache, find_latent_cache
 from drivewm.config import at_least, to_dict
 from drivewm.device import resolve_device
@@ -22,6 +21,7 @@ from drivewm.diffusion.denoiser import EDMConfig, edm_loss, sample_sigma
 from drivewm.diffusion.dit_config import DiTConfig, dit_preset, upgrade_saved_config
 from drivewm.diffusion.text2world import MODEL_TYPE, LatentInfo, Text2World, Text2WorldConfig, same_statistics
 from drivewm.errors import DrivewmError
+from drivewm.model_folders import resolve_reference
 from drivewm.paths import check_name
 from drivewm.recipe import RecipeBook
 from drivewm.text import TextConfig
@@ -138,7 +138,7 @@ def encoding_tokenizer(cache: LatentCache) -> tuple[Path | None, str]:
     that says so. None when the cache records none (synthetic latents) or the folder is gone: the model's
     samples are then latent previews, and the line a warning."""
     recorded = cache.tokenizer.get("path")
-    reference = cache.tokenizer.get("reference")  # portable (drivewm.choices.portable_reference); older caches lack it
+    reference = cache.tokenizer.get("reference")  # drivewm.model_folders.portable_reference; older caches lack it
     candidates = [resolve_reference(reference, cache.dir)] if reference else []
     candidates += [Path(recorded)] if recorded else []
     for found in candidates:

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from drivewm.choices import SHIPPED_PREFIX, resolve_model_folder, resolve_reference
 from drivewm.config import frame_rate, from_dict, require, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
@@ -22,6 +21,7 @@ from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.dit_config import DiTConfig, upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.errors import DrivewmError
+from drivewm.model_folders import SHIPPED_PREFIX, resolve_model_folder, resolve_reference
 from drivewm.text import TextConfig, build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, read_model_config, save_model_folder
 
@@ -69,7 +69,7 @@ class LatentInfo:
 def read_latent_info(info: dict, folder: str | Path, dit: DiTConfig) -> LatentInfo:
     """The ``latent`` entry of a model folder's config.json, checked to fit the folder's ``dit``; a relative
     tokenizer path (shipped weights point at ``../tokenizer``) is resolved against the model folder
-    (``shipped:KIND`` names the installed folder, drivewm.choices)."""
+    (``shipped:KIND`` names the installed folder, drivewm.model_folders)."""
     folder = resolve_model_folder(folder)
     where = f"{Path(folder) / 'config.json'} latent"
     latent = from_dict(LatentInfo, info.get("latent", {}), where)

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from drivewm.choices import MAX_SEED
-from drivewm.config import above, at_least, in_range, require
+from drivewm.config import MAX_SEED, above, at_least, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.recipe import RecipeBook
 

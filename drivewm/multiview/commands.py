@@ -160,7 +160,7 @@ def rollout_command(args: argparse.Namespace) -> int:
         args.guidance_interval,
     )
     if args.model is None:
-        from drivewm.release import shipped_model
+        from drivewm.model_folders import shipped_model
 
         args.model = shipped_model("multiview")
     model = MultiView.from_pretrained(args.model).to(args.device)

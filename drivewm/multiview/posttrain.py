@@ -16,7 +16,6 @@ from pathlib import Path
 
 import torch
 
-from drivewm.choices import resolve_model_folder
 from drivewm.clips.latents import find_latent_cache
 from drivewm.config import above, at_least, to_dict
 from drivewm.device import resolve_device
@@ -26,6 +25,7 @@ from drivewm.diffusion.pretrain import DataConfig
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
+from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.config import MultiViewConfig
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.init import from_text2world

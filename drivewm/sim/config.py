@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from drivewm.choices import MAX_SEED
-from drivewm.config import above, at_least, frame_rate, in_range, require
+from drivewm.config import MAX_SEED, above, at_least, frame_rate, in_range, require
 from drivewm.errors import DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY, TRAFFIC_DENSITIES, WEATHERS
 

@@ -23,8 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import MAX_SEED
-from drivewm.config import apply_overrides, load_yaml
+from drivewm.config import MAX_SEED, apply_overrides, load_yaml
 from drivewm.errors import DrivewmError
 from drivewm.sim.config import SimConfig
 from drivewm.sim.paired import in_conditions, parse_conditions

@@ -15,7 +15,6 @@ import torch
 from tqdm import tqdm
 
 from drivewm.atomic import remove_dead_temporaries
-from drivewm.choices import portable_reference
 from drivewm.clips import Clip
 from drivewm.clips.latents import (
     LATENT_CACHE_VERSION,
@@ -27,6 +26,7 @@ from drivewm.clips.latents import (
 from drivewm.clips.shards import BadClip, read_clips
 from drivewm.config import to_dict
 from drivewm.errors import BatchError, DrivewmError
+from drivewm.model_folders import portable_reference
 from drivewm.tokenizer.data import to_model_range
 from drivewm.tokenizer.model import Tokenizer
 from drivewm.tokenizer.tiling import TilingConfig, encode_tiled

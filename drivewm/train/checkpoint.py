@@ -37,11 +37,9 @@ from safetensors.torch import save_file
 
 from drivewm import __version__
 from drivewm.atomic import atomic_path, write_json
-from drivewm.choices import portable_reference, resolve_model_folder
 from drivewm.errors import DrivewmError
+from drivewm.model_folders import CONFIG_NAME, WEIGHTS_NAME, portable_reference, resolve_model_folder
 
-CONFIG_NAME = "config.json"
-WEIGHTS_NAME = "model.safetensors"
 TRAIN_STATE_NAME = "train_state.pt"
 PREVIOUS_STATE_NAME = "train_state.prev.pt"
 DAMAGED_SUFFIX = ".damaged"
@@ -75,7 +73,7 @@ def save_model_folder(
 
 def portable_extra(extra: dict, path: Path) -> dict:
     """``extra`` with the folders a model folder at ``path`` depends on (``latent.tokenizer``, a transfer
-    model's ``parent``) recorded so that they survive a move (drivewm.choices.portable_reference, the
+    model's ``parent``) recorded so that they survive a move (drivewm.model_folders.portable_reference, the
     run folder being ``path``'s parent): a recipe's run folder, copied from a GPU machine or renamed,
     keeps working, and so does a fine-tune of the shipped weights after drivewm is installed elsewhere.
     Relative and ``shipped:`` records are kept as they are."""
@@ -153,7 +151,7 @@ def read_model_type(path: str | Path) -> str | None:
 def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tuple[dict, dict[str, torch.Tensor]]:
     """Read a model folder; returns (config.json contents, state dict).
 
-    ``path`` may name a shipped model, ``shipped:KIND`` (drivewm.choices), as config fields such as
+    ``path`` may name a shipped model, ``shipped:KIND`` (drivewm.model_folders), as config fields such as
     a tokenizer run's ``init`` do. A missing folder/file or another ``model_type`` raises
     DrivewmError naming the folder.
     """

@@ -5,8 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
-from drivewm.choices import MAX_SEED
-from drivewm.config import above, at_least, in_range, require
+from drivewm.config import MAX_SEED, above, at_least, in_range, require
 
 Parallel = Literal["auto", "ddp", "fsdp"]
 

@@ -112,7 +112,7 @@ def transfer_command(args: argparse.Namespace) -> int:
         model_resolution=args.model_resolution,
     )
     if args.model is None:
-        from drivewm.release import shipped_model
+        from drivewm.model_folders import shipped_model
 
         args.model = shipped_model("transfer")
     report = transfer_clips(args.model, args.clips, options, args.out)

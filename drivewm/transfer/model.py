@@ -17,7 +17,6 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from drivewm.choices import resolve_model_folder, resolve_reference
 from drivewm.config import from_dict, to_dict
 from drivewm.device import resolve_device
 from drivewm.diffusion.data import denormalize_latents, normalize_latents
@@ -26,6 +25,7 @@ from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.dit_config import upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
+from drivewm.model_folders import resolve_model_folder, resolve_reference
 from drivewm.multiview.warp import WarpEncoder
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder

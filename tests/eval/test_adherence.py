@@ -41,8 +41,8 @@ def test_classifier_recognises_held_out_clips_coded_by_the_shipped_tokenizer(sim
     shipped models' 160x96 and coded by the shipped tokenizer keep their weather and time of day.
     (Before the coded domain, a coded snow render read as fog: the flakes are what a tokenizer drops.)"""
     from drivewm.clips import iter_clips
+    from drivewm.model_folders import shipped_model
     from drivewm.multiview.coding import code_views
-    from drivewm.release import shipped_model
     from drivewm.tokenizer import Tokenizer
 
     tok = Tokenizer.from_pretrained(shipped_model("tokenizer"))

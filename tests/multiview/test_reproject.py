@@ -185,9 +185,9 @@ def test_a_rollout_of_a_real_clip_refined_from_its_reprojection_turns_as_told(si
     """The shipped model continues one real simulated clip under left and right (Video2World, the
     same seed): reprojected from sigma 0.5, the continuations turn the asked way by more than 10
     degrees, and the clip records the setting."""
+    from drivewm.model_folders import shipped_model
     from drivewm.multiview.model import MultiView
     from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
-    from drivewm.release import shipped_model
     from drivewm.tokenizer import Tokenizer
 
     model = MultiView.from_pretrained(shipped_model("multiview"))

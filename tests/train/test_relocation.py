@@ -1,7 +1,7 @@
 """A run folder moved as a whole (copied back from a GPU machine, renamed) keeps working, and a
 fine-tune of the shipped weights keeps finding the shipped tokenizer wherever drivewm is installed:
 model folders and latent caches record the folders they depend on by
-drivewm.choices.portable_reference."""
+drivewm.model_folders.portable_reference."""
 
 from __future__ import annotations
 
@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 import torch
 
-from drivewm.choices import portable_reference, resolve_reference
 from drivewm.diffusion.dit_config import DiTConfig
 from drivewm.diffusion.generate import decode_latents
 from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
 from drivewm.errors import DrivewmError
-from drivewm.release import shipped_model
+from drivewm.model_folders import portable_reference, resolve_reference, shipped_model
 from drivewm.tokenizer import Tokenizer, preset
 from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.init import from_text2world

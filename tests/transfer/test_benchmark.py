@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from drivewm.release import WEIGHTS_DIR
+from drivewm.model_folders import WEIGHTS_DIR
 from drivewm.transfer.benchmark import spread_over_drives
 
 

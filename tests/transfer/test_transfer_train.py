@@ -12,7 +12,7 @@ from safetensors.torch import load_file
 
 from drivewm.cli import main
 from drivewm.clips.latents import write_latent_clip, write_latent_index
-from drivewm.release import export_folder
+from drivewm.product.release import export_folder
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.train import RECIPES, init_transfer, train_transfer
 

@@ -3,7 +3,7 @@
 Sections: the models (type, shape, parameters), the data (curation reports of the training and
 held-out clips), the recipe (every stage's exact command from ``RUN/.stages/``, with its wall time),
 steps and compute of every trained folder of the run (its training states), the must-hold figures
-(``RUN/eval/figures.md`` of :mod:`drivewm.worldmodel_figures`), the sha256 of every file, and the
+(``RUN/eval/figures.md`` of :mod:`drivewm.product.figures`), the sha256 of every file, and the
 author's notes (deviations from the recipe, what a figure predicts), given as a Markdown file.
 """
 
@@ -14,7 +14,9 @@ import shlex
 from pathlib import Path
 
 from drivewm.atomic import write_text
-from drivewm.worldmodel_figures import read_json
+from drivewm.product.figures import read_json
+from drivewm.product.quickstart import in_run
+from drivewm.train.record import training_record
 
 #: Config fields that say a network's size, in the card's models table.
 SHAPE_KEYS = (
@@ -56,8 +58,6 @@ def _data(run: Path) -> list[str]:
 
 
 def _stages(run: Path) -> list[str]:
-    from drivewm.quickstart import in_run
-
     rows = ["| stage | seconds | command |", "|---|---|---|"]
     for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
         m = read_json(marker)
@@ -71,8 +71,6 @@ def _stages(run: Path) -> list[str]:
 def _compute(run: Path) -> list[str]:
     """Steps and wall seconds of every trained folder of the run (intermediate stages included:
     the image-pretrained Text2World model is compute the shipped one was built on)."""
-    from drivewm.release import training_record
-
     rows = []
     for state in sorted(run.glob("*/train_state.pt"), key=lambda p: p.stat().st_mtime):
         rec = training_record(state.parent)

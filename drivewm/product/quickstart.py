@@ -30,10 +30,11 @@ from pathlib import Path
 
 from drivewm import resources
 from drivewm.atomic import write_json
-from drivewm.choices import SHIPPED_PREFIX, output_folder
+from drivewm.choices import output_folder
 from drivewm.cli import main
 from drivewm.config import from_dict, load_yaml
 from drivewm.errors import DrivewmError
+from drivewm.model_folders import SHIPPED_PREFIX
 
 RECIPE = resources.package_dir("recipes") / "quickstart.yaml"
 FIRST_LOG = "{first_log}"  # stands for the first simulated log, known once simulate has run
@@ -198,7 +199,7 @@ def run_stage(name: str, argv: list[str], out: Path, label: str = "quickstart") 
     A marker written when the run folder had another path (moved, copied from a GPU machine, named
     from another directory) still counts if its command is this one with the run's old path in place
     of ``out``: what a stage writes records the folders it depends on relative to the run, or as
-    ``shipped:KIND`` (drivewm.choices.portable_reference), so a moved run's outputs still find them."""
+    ``shipped:KIND`` (drivewm.model_folders.portable_reference), so a moved run's outputs still find them."""
     argv = fill_first_log(argv, out)
     marker = stage_marker(out, name)
     if marker.is_file():
@@ -227,7 +228,7 @@ def in_run(argv: list[str] | None, run: str | Path | None, name: str = "{run}") 
 
 def quickstart(out: Path, profile_name: str = "full") -> Path:
     """Run every stage into ``out`` and write the report; returns the report's path."""
-    from drivewm.report import write_report
+    from drivewm.product.report import write_report
 
     profile = load_profile(profile_name)
     stages = stage_commands(profile, out)

@@ -120,8 +120,8 @@ def gather(out: Path, rig: str, generations: list[str], models: list[str]) -> di
 
 def with_turn_sign(metrics: dict) -> dict:
     """``metrics`` with ``turn_sign``: the world-model benchmark's turn-sign figure
-    (drivewm.worldmodel_figures.trajectory_figures) over its clips, None where none turns."""
-    from drivewm.worldmodel_figures import trajectory_figures
+    (drivewm.product.figures.trajectory_figures) over its clips, None where none turns."""
+    from drivewm.product.figures import trajectory_figures
 
     if not metrics:
         return metrics
@@ -143,7 +143,7 @@ def _missing_reason(metrics: dict, key: str) -> str:
     if field != key and not any(f"{field}_match" in (c.get("adherence") or {}) for c in clips):
         return f"no prompt or clip tag names a {field.replace('_', ' ')}"
     if key == "turn_sign":
-        from drivewm.worldmodel_figures import TURN_DEG
+        from drivewm.product.figures import TURN_DEG
 
         return f"no clip's trajectory turns by more than the benchmark's {TURN_DEG:g} degrees"
     for clip in clips:

@@ -15,7 +15,7 @@ each training stage by its own train state:
 6. generate the benchmark clips (prompts and trajectories the training captions never use
    verbatim, fixed seeds) and score them next to the held-out clips with ``drivewm eval``;
 7. the must-hold figures against their goals (``drivewm worldmodel figures``,
-   drivewm/worldmodel_figures.py): ``RUN/eval/figures.json`` and ``figures.md``;
+   drivewm/product/figures.py): ``RUN/eval/figures.json`` and ``figures.md``;
 8. (profile key ``transfer_train``) paired drives, every drive in six conditions, training and
    held-out, and a weather / time-of-day transfer model post-trained from the video Text2World model
    (docs/transfer.md), scored by ``benchmarks/bench_transfer.py``.
@@ -270,8 +270,8 @@ def benchmark_worldmodel(
     against the held-out eval an earlier benchmark wrote (``heldout`` its metrics.json: copied to
     ``RUN/eval/heldout/`` and not evaluated again, so fine-tunes compared on it share one reference)."""
     from drivewm.atomic import write_json
-    from drivewm.choices import resolve_model_folder
-    from drivewm.quickstart import run_stage, stage_marker
+    from drivewm.model_folders import resolve_model_folder
+    from drivewm.product.quickstart import run_stage, stage_marker
 
     folder = resolve_model_folder(model)  # a missing folder fails here, not at the first of twelve stages
     if not (folder / "config.json").is_file():
@@ -340,7 +340,7 @@ def transfer_stages(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str
 
 def train_worldmodel(run: Path, profile_name: str) -> None:
     """Run (or resume) every stage of the recipe into ``run``."""
-    from drivewm.quickstart import run_stage
+    from drivewm.product.quickstart import run_stage
 
     profile = load_profile(profile_name)
     stages = stage_commands(profile, run)
@@ -463,21 +463,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _figures(args: argparse.Namespace) -> int:
-    from drivewm.worldmodel_figures import write_figures
+    from drivewm.product.figures import write_figures
 
     write_figures(args.run)
     return 0
 
 
 def _interpolate(args: argparse.Namespace) -> int:
-    from drivewm.release import interpolate_folders
+    from drivewm.product.release import interpolate_folders
 
     print(interpolate_folders(args.base, args.tuned, args.alpha, args.out, args.config_from))
     return 0
 
 
 def _export(args: argparse.Namespace) -> int:
-    from drivewm.release import export_run
+    from drivewm.product.release import export_run
 
     notes = args.notes.read_text() if args.notes else ""
     for path in export_run(args.run, args.out, notes):

@@ -6,8 +6,8 @@ cast them to the network's dtype), the diffusion models pointing at the tokenize
 path ``../tokenizer`` and the transfer model at its Text2World parent by ``../text2world``
 (resolved against the model folder, so the package works wherever it is installed), plus
 ``DIR/MANIFEST.json`` (sha256 and size of every file, training steps and seconds of every stage),
-which the model card (MODEL_CARD.md) quotes. ``shipped_model(kind)`` is the installed copy that
-``drivewm generate``, ``drivewm rollout`` and ``drivewm transfer`` use when no ``--model`` is given.
+which the model card (MODEL_CARD.md) quotes. ``replace_shipped`` puts a fine-tune in place of an
+installed folder; where the installed folders are (``shipped:KIND``) is drivewm.model_folders'.
 """
 
 from __future__ import annotations
@@ -20,29 +20,18 @@ from pathlib import Path
 import torch
 
 from drivewm.atomic import write_json
-from drivewm.choices import resolve_model_folder, resolve_reference
 from drivewm.errors import DrivewmError
-from drivewm.train.checkpoint import CONFIG_NAME, WEIGHTS_NAME, load_model_folder, load_train_state, save_model_folder
+from drivewm.model_folders import SHIPPED_KINDS, WEIGHTS_DIR, resolve_model_folder, resolve_reference
+from drivewm.product.model_card import write_model_card
+from drivewm.train.checkpoint import load_model_folder, save_model_folder
+from drivewm.train.record import training_record
 
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
-#: Model folders of a run, by the name they ship under.
-RUN_FOLDERS = {"tokenizer": "tokenizer", "text2world": "text2world", "multiview": "multiview", "transfer": "transfer"}
 #: Run folders an export may lack (a run without paired drives trains no transfer model).
 OPTIONAL_FOLDERS = ("transfer",)
 #: The model types a shipped folder may hold.
 MODEL_TYPES = ("drivewm-tokenizer", "text2world", "multiview", "transfer")
 MAX_FILE_BYTES = 16 * 1000 * 1000
 MAX_TOTAL_BYTES = 40 * 1000 * 1000
-
-
-def shipped_model(kind: str) -> Path:
-    """The installed model folder ``kind`` (tokenizer, text2world, multiview or transfer)."""
-    if kind not in RUN_FOLDERS:
-        raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
-    path = WEIGHTS_DIR / kind
-    if not (path / WEIGHTS_NAME).is_file():
-        raise DrivewmError(f"this drivewm has no shipped {kind} weights at {path}; give --model")
-    return path
 
 
 def sha256(path: Path) -> str:
@@ -106,39 +95,14 @@ def interpolate_folders(
     return Path(out)
 
 
-def training_record(run_dir: Path) -> dict:
-    """``{"steps", "train_seconds"}`` of a training run folder: from its training state, else from the
-    last row of its ``metrics.jsonl`` (a run brought back from a GPU machine with its weights and
-    metrics only); {} with neither."""
-    saved = load_train_state(run_dir)
-    if saved is None:
-        return metrics_record(Path(run_dir) / "metrics.jsonl")
-    seconds = saved.get("train_seconds")  # None: a run older than the loop's cumulative clock
-    return {"steps": int(saved["step"]), "train_seconds": None if seconds is None else float(seconds)}
-
-
-def metrics_record(path: Path) -> dict:
-    """``{"steps", "train_seconds"}`` from the last row of a training loop's metrics file ({} without one)."""
-    if not path.is_file():
-        return {}
-    rows = [line for line in path.read_text().splitlines() if line.strip()]
-    try:
-        last = json.loads(rows[-1]) if rows else {}
-        return {"steps": int(last["step"]), "train_seconds": float(last["train_seconds"])} if last else {}
-    except (ValueError, KeyError, TypeError):
-        raise DrivewmError(f"{path}: the last row is not a training loop's metrics row (step, train_seconds)") from None
-
-
 def export_run(run: str | Path, out: str | Path, notes: str = "") -> list[Path]:
     """Export the model folders of ``run`` (three, or four with a transfer model) into ``out``, write
-    the manifest and the model card (drivewm.model_card, with ``notes`` as its last section); returns
-    the files."""
-    from drivewm.model_card import write_model_card
-
+    the manifest and the model card (drivewm.product.model_card, with ``notes`` as its last section);
+    returns the files."""
     run, out = Path(run), Path(out)
-    folders = {n: f for n, f in RUN_FOLDERS.items() if n not in OPTIONAL_FOLDERS or (run / f).is_dir()}
-    records = {name: export_folder(run / folder, out / name) for name, folder in folders.items()}
-    files = folder_files(out, {name: out / name for name in folders})
+    kinds = [kind for kind in SHIPPED_KINDS if kind not in OPTIONAL_FOLDERS or (run / kind).is_dir()]
+    records = {kind: export_folder(run / kind, out / kind) for kind in kinds}
+    files = folder_files(out, {kind: out / kind for kind in kinds})
     manifest = {"files": manifest_files(out, files), "training": records}
     write_json(out / "MANIFEST.json", manifest)
     return [*files, out / "MANIFEST.json", write_model_card(run, out, manifest, notes)]
@@ -167,9 +131,9 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
     the model card's figures and sha256 are the caller's to update (tests/test_shipped_weights.py checks
     the sha256). ``device``: what the fine-tune ran on; a GPU's seconds are listed as ``gpu_seconds``,
     apart from the CPU seconds of ``train_seconds``. ``note``: what the record alone does not say (e.g.
-    that the folder is a fine-tune mixed with the shipped one, drivewm.release.interpolate_folders)."""
-    if kind not in RUN_FOLDERS:
-        raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(RUN_FOLDERS)}")
+    that the folder is a fine-tune mixed with the shipped one, drivewm.product.release.interpolate_folders)."""
+    if kind not in SHIPPED_KINDS:
+        raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(SHIPPED_KINDS)}")
     manifest = check_manifest(root)  # never build on a manifest that no longer matches its files
     record = training_record(Path(src))
     if not record:
@@ -182,7 +146,7 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
         record["note"] = note
     before = manifest["training"][kind]
     staged = root / f".{kind}.new"  # exported beside the shipped folder, which is replaced only once it fits
-    shipped = {n: root / n for n in RUN_FOLDERS if (root / n).is_dir()}
+    shipped = {n: root / n for n in SHIPPED_KINDS if (root / n).is_dir()}
     shutil.rmtree(staged, ignore_errors=True)
     try:
         export_folder(Path(src), staged)
@@ -214,4 +178,4 @@ def check_manifest(root: Path = WEIGHTS_DIR) -> dict:
     return manifest
 
 
-__all__ = ["CONFIG_NAME", "check_manifest", "export_run", "shipped_model"]
+__all__ = ["check_manifest", "export_run", "interpolate_folders", "replace_shipped"]
