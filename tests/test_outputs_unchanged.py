@@ -81,7 +81,7 @@ def _json_bytes(obj) -> bytes:
 
 
 def log_digest(path: Path) -> str:
-    """A drive log's content: images (JPEG bytes and times), poses, rig, scene, boxes and road."""
+    """A drive log's content: images (JPEG bytes and times), poses, rig, scene, boxes, static objects and road."""
     log = read_log(path)
     parts = [_json_bytes(log.rig.to_dict()), _json_bytes([log.scene.tags, log.scene.description])]
     for cam in log.rig.names:
@@ -91,6 +91,8 @@ def log_digest(path: Path) -> str:
         fields = [(b.track_id, b.category, b.center_xyz, b.size_lwh, b.yaw_rad, b.color_rgb) for b in boxes]
         parts.append(_json_bytes([tick, fields]))
     parts += [_json_bytes([r.kind, r.points_xyz, r.line_type]) for r in log.road]
+    statics = [(b.track_id, b.category, b.center_xyz, b.size_lwh, b.yaw_rad, b.color_rgb) for b in log.static]
+    parts += [_json_bytes(statics)] if statics else []  # logs without static objects keep their digest
     return _sha(*parts)
 
 

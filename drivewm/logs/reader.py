@@ -36,7 +36,7 @@ from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, LogIndex, RoadLin
 _IMAGE_SCHEMAS = (fox.IMAGE,) + ros.COMPRESSED_IMAGE + ros.RAW_IMAGE
 _CALIBRATION_SCHEMAS = (fox.CALIBRATION,) + ros.CAMERA_INFO
 _TF_SCHEMAS = (fox.TRANSFORMS, fox.TRANSFORM) + ros.TF_MESSAGE
-_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; "agents", "road" on request
+_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; the others on request
 
 
 @dataclasses.dataclass
@@ -51,9 +51,10 @@ class _Calibration:
 @dataclasses.dataclass
 class _Collected:
     """Everything read from the messages, before assembly. ``keep``: the optional kinds whose
-    payloads are decoded and kept ("image", "agents", "road"); image timestamps are always recorded."""
+    payloads are decoded and kept ("image", "agents", "road", "static"); image timestamps are always
+    recorded."""
 
-    keep: tuple[str, ...] = ("image", "agents", "road")
+    keep: tuple[str, ...] = ("image", "agents", "road", "static")
     image_stamps: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     images: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
     calibrations: dict[str, _Calibration] = dataclasses.field(default_factory=dict)
@@ -61,6 +62,7 @@ class _Collected:
     poses: list[tuple[int, np.ndarray]] = dataclasses.field(default_factory=list)
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     road: list[RoadLine] = dataclasses.field(default_factory=list)
+    static: list[AgentBox] = dataclasses.field(default_factory=list)
     scene: dict | None = None
     ros2: bool = False  # any CDR channel: ROS 2 frame names by default
 
@@ -74,7 +76,7 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
     naming a topic the log lacks, and images of a camera without calibration.
     """
     reader = LogStream(path, topic_map)
-    col = reader.collect(keep=("image", "agents", "road"))
+    col = reader.collect(keep=("image", "agents", "road", "static"))
     index = reader.assemble(col)
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in index.rig.names}
     agents = sorted(col.agents, key=lambda a: a[0])
@@ -88,6 +90,7 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
         agents,
         index.road,
         index.warnings,
+        index.static,
     )
     if require_images:
         log.validate()
@@ -110,8 +113,9 @@ class LogStream:
 
     def index(self, require_images: bool = True, road: bool = False) -> LogIndex:
         """Calibration, poses, scene and every image's (camera, timestamp), without payloads; the
-        road polylines only if ``road`` (a viewer draws them; they cost as much as the poses)."""
-        index = self.assemble(self.collect(keep=("road",) if road else ()))
+        road polylines and static objects only if ``road`` (a viewer draws them; they cost as much as
+        the poses)."""
+        index = self.assemble(self.collect(keep=("road", "static") if road else ()))
         if require_images:
             index.validate()
         return index
@@ -175,6 +179,8 @@ def _router(tmap: TopicMap):
             return "agents", None
         if s == fox.SCENE_UPDATE and info.topic == names.ROAD_TOPIC:
             return "road", None
+        if s == fox.SCENE_UPDATE and info.topic == names.STATIC_TOPIC:
+            return "static", None
         return None
 
     return route
@@ -221,6 +227,8 @@ def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap:
         col.agents.append(_agents(msg, tmap))
     elif kind == "road" and "road" in col.keep:
         col.road += fox.road_lines(data)
+    elif kind == "static" and "static" in col.keep:
+        col.static += fox.agents(data)[1]
 
 
 def _image(camera: str | None, msg: Message, tmap: TopicMap) -> tuple[str, ImageFrame]:
@@ -267,7 +275,9 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
     if not len(pose_ts):
         warnings.append(_no_poses(col, tmap, world, ego))
-    return LogIndex(str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road, warnings)
+    return LogIndex(
+        str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road, warnings, col.static
+    )
 
 
 def _order_warnings(col: _Collected, cameras: list[str]) -> list[str]:

@@ -8,7 +8,9 @@ Entity tree (world z up; timeline ``log_time`` = the log's ``timestamp_ns``):
   RDF axes; static) + the camera's images (EncodedImage per frame, stored bytes, not decoded);
 - ``world/ego_trajectory``: the ego path as line strips (static; split at pose gaps);
 - ``world/agents``: the other road users per tick (Boxes3D, labelled category:id);
-- ``world/road/KIND``: the road polylines of each kind, if the log has them (static);
+- ``world/static``: the static objects (buildings, poles, trees, ...) if the log has them (static Boxes3D);
+- ``world/road/KIND``: the road polylines of each kind, if the log has them (static; a
+  ``road_surface`` outline is drawn closed);
 - ``scene``: the tags and description (static TextDocument).
 
 The log is streamed (:class:`drivewm.logs.reader.LogStream`): images and agent boxes go to the
@@ -30,7 +32,12 @@ from drivewm.logs.types import LogIndex
 
 TIMELINE = "log_time"  # the MCAP log time; Rerun's own wall-clock "log_time"/"log_tick" are switched off
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
-ROAD_COLORS = {"lane_center": [80, 160, 255], "lane_boundary": [255, 255, 255], "road_edge": [255, 120, 0]}
+ROAD_COLORS = {
+    "lane_center": [80, 160, 255],
+    "lane_boundary": [255, 255, 255],
+    "road_edge": [255, 120, 0],
+    "road_surface": [110, 110, 120],
+}
 
 
 def _set_time(rec, timestamp_ns: int) -> None:
@@ -53,14 +60,23 @@ def log_static(rec, log: LogIndex) -> None:
         static=True,
     )
     for kind in sorted({line.kind for line in log.road}):
-        strips = [line.points_xyz for line in log.road if line.kind == kind]
+        strips = [_strip(line) for line in log.road if line.kind == kind]
         rec.log(
             f"world/road/{kind}", rr.LineStrips3D(strips, colors=[ROAD_COLORS.get(kind, [200, 200, 200])]), static=True
         )
+    if log.static:
+        rec.log("world/static", _boxes(log.static), static=True)
     tags = "\n".join(f"- **{k}**: {v}" for k, v in log.scene.tags.items())
     rec.log(
         "scene", rr.TextDocument(f"{tags}\n\n{log.scene.description}", media_type=rr.MediaType.MARKDOWN), static=True
     )
+
+
+def _strip(line) -> np.ndarray:
+    """A road polyline's points (N, 3); a surface outline closed by repeating its first point."""
+    if line.kind == "road_surface" and len(line.points_xyz):
+        return np.concatenate([line.points_xyz, line.points_xyz[:1]])
+    return line.points_xyz
 
 
 def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:

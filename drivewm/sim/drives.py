@@ -80,6 +80,7 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
     offsets = exposure_offsets_ns(len(rig.cameras), cfg.exposure_stagger_ms, 1e9 / cfg.fps)
     with LogWriter(out_path, rig, SceneInfo(dict(rec.tags), rec.description), "jpeg", cfg.jpeg_quality) as writer:
         _write_road(writer, rec)
+        writer.write_static(rec.ticks[0].timestamp_ns, rec.road.props)
         logged = rec.ticks[: cfg.num_ticks]
         for k, tick in enumerate(tqdm(logged, desc=out_path.name, unit="tick", disable=not progress, leave=False)):
             if cfg.exposure_stagger_ms > 0:
@@ -102,11 +103,12 @@ def _write_staggered(writer, renderer, rec: SceneRecording, k: int, offsets_ns: 
 
 
 def _write_road(writer, rec: SceneRecording) -> None:
-    """Log the road polylines once (the optional /road channel; viewers draw them)."""
+    """Log the road polylines and the outlines of the paved surface once (the optional /road channel)."""
     z = lambda p: np.concatenate([p, np.zeros((len(p), 1))], axis=1)  # noqa: E731  (x, y) -> (x, y, 0)
     lines = [RoadLine("lane_center", z(c)) for c in rec.road.lane_centers]
     lines += [RoadLine("lane_boundary", z(b.points_xy), b.line_type) for b in rec.road.boundaries]
     lines += [RoadLine("road_edge", z(e)) for e in rec.road.road_edges]
+    lines += [RoadLine("road_surface", z(p)) for p in rec.road.surface_polygons if len(p) >= 3]
     writer.write_road(rec.ticks[0].timestamp_ns, lines)
 
 
