@@ -108,13 +108,27 @@ def _portable(name: str, data: bytes) -> bytes:
     return _json_bytes(meta)
 
 
+#: Shard members digested apart from the clip's frames, poses and JSON (``SHARD:layout``), so the
+#: digests of those stay comparable with shards written before the members existed.
+SCENE_MEMBERS = (".layout.npz",)
+
+
+def _members_digest(tar: tarfile.TarFile, members: list[tarfile.TarInfo]) -> str:
+    return _sha(*[m.name.encode() + _portable(m.name, tar.extractfile(m).read()) for m in members])
+
+
 def clips_digest(clip_dir: Path) -> dict[str, str]:
-    """Per shard: every member's name and bytes; and the manifest's rows (source log folder dropped)."""
+    """Per shard: every member's name and bytes (the layout members under ``SHARD:layout``); and the
+    manifest's rows (source log folder dropped)."""
     out = {}
     for shard in sorted(clip_dir.glob("*.tar")):
         with tarfile.open(shard) as tar:
             members = sorted(tar.getmembers(), key=lambda m: m.name)
-            out[shard.name] = _sha(*[m.name.encode() + _portable(m.name, tar.extractfile(m).read()) for m in members])
+            clip = [m for m in members if not m.name.endswith(SCENE_MEMBERS)]
+            scene = [m for m in members if m.name.endswith(SCENE_MEMBERS)]
+            out[shard.name] = _members_digest(tar, clip)
+            if scene:
+                out[f"{shard.name}:layout"] = _members_digest(tar, scene)
     rows = [json.loads(line) for line in (clip_dir / "manifest.jsonl").read_text().splitlines()]
     out["manifest.jsonl"] = _sha(*[_portable(".json", _json_bytes(r)) for r in rows])
     return out

@@ -7,12 +7,16 @@ Simulated logs, Foxglove (protobuf or JSON) logs and ROS 2 logs all become the s
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
+
+if TYPE_CHECKING:
+    from drivewm.logs.agent_table import AgentTable
 
 #: Scene tag keys every log carries (values are free strings; these are the known ones).
 SCENE_TAG_KEYS = ("weather", "time_of_day", "road_type", "traffic_density", "source")
@@ -118,8 +122,9 @@ class LogIndex:
     """A drive without its image payloads: what a streaming reader knows before the images.
 
     As :class:`DriveLog`, but ``image_timestamps_ns``: camera name -> (M,) int64 timestamps of its
-    images in log (arrival) order, where DriveLog has the frames; and no agent boxes.
-    ``road`` and ``static`` are filled when the index was asked for them.
+    images in log (arrival) order, where DriveLog has the frames; and the road users as columns
+    (``agents``, in the world frame). ``agents``, ``road`` and ``static`` are filled when the index
+    was asked for them (``LogStream.index(layout=True)``).
     """
 
     path: str
@@ -132,6 +137,12 @@ class LogIndex:
     warnings: list[str] = dataclasses.field(default_factory=list)
     """What the reader repaired or left out, one line each (as :class:`DriveLog`)."""
     static: list[AgentBox] = dataclasses.field(default_factory=list)
+    agents: AgentTable | None = None
+
+    @property
+    def has_layout(self) -> bool:
+        """Whether the log knows any of the scene's structure (road users, static objects, road lines)."""
+        return bool(self.road or self.static or (self.agents is not None and len(self.agents)))
 
     def validate(self) -> None:
         """Raise DrivewmError naming the file if the log breaks the contract."""
