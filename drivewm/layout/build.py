@@ -33,18 +33,20 @@ def layout_from_world(
     road: list[RoadLine],
     where: str,
     radius_m: float = RADIUS_M,
+    T_world_from_ego0: np.ndarray | None = None,
 ) -> ClipLayout:
     """The layout of T frames: ``T_world_from_ego`` (T, 4, 4) the ego poses, ``frame_agents`` the road
     users seen in each frame, ``static`` and ``road`` the drive's static objects and road lines, all
-    in one world frame. Raises a one-line DrivewmError naming ``where`` for non-finite poses, an
-    unknown class, kind or paint."""
+    in one world frame; ``T_world_from_ego0``: the layout's frame (default: the first ego pose).
+    Raises a one-line DrivewmError naming ``where`` for non-finite poses, an unknown class, kind or
+    paint."""
     T_world_from_ego = np.asarray(T_world_from_ego, dtype=np.float64)
     if len(frame_agents) != len(T_world_from_ego) or len(timestamps_ns) != len(T_world_from_ego):
         raise DrivewmError(f"{where}: layout needs one pose, timestamp and agent list per frame")
     if not np.isfinite(T_world_from_ego).all():
         frame = int(np.flatnonzero(~np.isfinite(T_world_from_ego).all(axis=(1, 2)))[0])
         raise DrivewmError(f"{where}: layout T_world_from_ego is not finite (frame {frame})")
-    T_ego0_from_world = invert_T(T_world_from_ego[0])
+    T_ego0_from_world = invert_T(T_world_from_ego[0] if T_world_from_ego0 is None else T_world_from_ego0)
     path_xy = T_world_from_ego[:, :2, 3]
     rows = [(STATIC, b) for b in static if _reaches(path_xy, b, radius_m)]
     rows += [(t, b) for t, boxes in enumerate(frame_agents) for b in boxes if _reaches(path_xy, b, radius_m)]
@@ -127,9 +129,13 @@ def _thinned(points: np.ndarray, tolerance_m: float = LINE_TOLERANCE_M) -> np.nd
 def layout_from_log(
     log: LogIndex, timestamps_ns: np.ndarray, T_world_from_ego: np.ndarray, where: str, radius_m: float = RADIUS_M
 ) -> ClipLayout | None:
-    """The layout of a clip of ``log`` (indexed with ``layout=True``) at its frames' times and (smoothed)
-    ego poses, or None when the log knows no layout. A frame's road users are those of the agent
-    message nearest its time within half a frame interval (none there: no road users in that frame)."""
+    """The layout of a clip of ``log`` (indexed with ``layout=True``), or None when the log knows no
+    layout. ``timestamps_ns`` (T,) and ``T_world_from_ego`` (T, 4, 4) are the clip's frames and its
+    (smoothed) ego poses, whose first is ego0, the frame of ``trajectory_ego``. Each frame is placed at
+    the log's own ego pose nearest its time (the pose its images were taken at, so the layout lies on
+    the pixels), or at the clip's pose when the log has none within half a frame interval. A frame's
+    road users are those of the agent message nearest its time within half a frame interval (none
+    there: no road users in that frame)."""
     if not log.has_layout:
         return None
     ts = np.asarray(timestamps_ns, dtype=np.int64)
@@ -138,4 +144,19 @@ def layout_from_log(
     for t in ts:
         m = log.agents.nearest(int(t), tolerance) if log.agents is not None else None
         frames.append(log.agents.boxes(m) if m is not None else [])
-    return layout_from_world(ts, T_world_from_ego, frames, log.static, log.road, where, radius_m)
+    poses = _logged_poses(log, ts, tolerance, T_world_from_ego)
+    return layout_from_world(ts, poses, frames, log.static, log.road, where, radius_m, T_world_from_ego[0])
+
+
+def _logged_poses(log: LogIndex, ts: np.ndarray, tolerance: float, fallback: np.ndarray) -> np.ndarray:
+    """The log's finite ego pose nearest each time within ``tolerance``, else the ``fallback`` pose."""
+    out = np.array(fallback, dtype=np.float64)
+    if not len(log.pose_timestamps_ns):
+        return out
+    i = np.clip(np.searchsorted(log.pose_timestamps_ns, ts), 0, len(log.pose_timestamps_ns) - 1)
+    for k, t in enumerate(ts):
+        near = [j for j in (i[k] - 1, i[k]) if 0 <= j < len(log.pose_timestamps_ns)]
+        j = min(near, key=lambda j: abs(int(log.pose_timestamps_ns[j]) - int(t)))
+        if abs(int(log.pose_timestamps_ns[j]) - int(t)) <= tolerance and np.isfinite(log.T_world_from_ego[j]).all():
+            out[k] = log.T_world_from_ego[j]
+    return out

@@ -41,7 +41,11 @@ class ClipLayout:
     Lines: line i is ``line_points[line_start[i]:line_start[i + 1]]`` (P, 3) m, of kind
     ``line_kind[i]`` (:data:`LINE_KINDS`; a ``road_surface`` is a closed polygon outline) and paint
     ``line_paint[i]`` (:data:`PAINTS`).
-    Frames: ``timestamps_ns`` (T,) int64 and ``T_ego0_from_ego`` (T, 4, 4) (frame 0: identity).
+    Frames: ``timestamps_ns`` (T,) int64 and ``T_ego0_from_ego`` (T, 4, 4): the ego pose each frame's
+    images were taken at. ego0 is the first frame's ego, and frame 0 the identity, but for a curated
+    clip: there ego0 is the clip's first pose as ``KEY.ego.npy`` holds it (smoothed; the frame of its
+    ``trajectory_ego``) and each frame sits at the log's own pose, so frame 0 is off the identity by the
+    smoothing (centimetres).
     """
 
     timestamps_ns: np.ndarray

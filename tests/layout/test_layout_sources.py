@@ -112,3 +112,6 @@ def test_recording_without_pixels_gives_the_curated_layout(sim_clip_dir):
     want_boxes, want_lines = _world(want, clip.T_world_from_ego[0])
     np.testing.assert_allclose(boxes, want_boxes, atol=1e-9)
     np.testing.assert_allclose(lines, want_lines, atol=1e-9)
+    rendered_at = np.stack([t.T_world_from_ego for t in rec.ticks[17:34]])  # both place each frame there
+    np.testing.assert_allclose(rec.ticks[17].T_world_from_ego @ got.T_ego0_from_ego, rendered_at, atol=1e-9)
+    np.testing.assert_allclose(clip.T_world_from_ego[0] @ want.T_ego0_from_ego, rendered_at, atol=1e-9)
