@@ -81,7 +81,7 @@ def _json_bytes(obj) -> bytes:
 
 
 def log_digest(path: Path) -> str:
-    """A drive log's content: images (JPEG bytes and times), poses, rig, scene, boxes and road."""
+    """A drive log's content: images (JPEG bytes and times), poses, rig, scene, boxes, static objects and road."""
     log = read_log(path)
     parts = [_json_bytes(log.rig.to_dict()), _json_bytes([log.scene.tags, log.scene.description])]
     for cam in log.rig.names:
@@ -91,6 +91,8 @@ def log_digest(path: Path) -> str:
         fields = [(b.track_id, b.category, b.center_xyz, b.size_lwh, b.yaw_rad, b.color_rgb) for b in boxes]
         parts.append(_json_bytes([tick, fields]))
     parts += [_json_bytes([r.kind, r.points_xyz, r.line_type]) for r in log.road]
+    statics = [(b.track_id, b.category, b.center_xyz, b.size_lwh, b.yaw_rad, b.color_rgb) for b in log.static]
+    parts += [_json_bytes(statics)] if statics else []  # logs without static objects keep their digest
     return _sha(*parts)
 
 
@@ -106,13 +108,27 @@ def _portable(name: str, data: bytes) -> bytes:
     return _json_bytes(meta)
 
 
+#: Shard members digested apart from the clip's frames, poses and JSON (``SHARD:layout``), so the
+#: digests of those stay comparable with shards written before the members existed.
+SCENE_MEMBERS = (".layout.npz",)
+
+
+def _members_digest(tar: tarfile.TarFile, members: list[tarfile.TarInfo]) -> str:
+    return _sha(*[m.name.encode() + _portable(m.name, tar.extractfile(m).read()) for m in members])
+
+
 def clips_digest(clip_dir: Path) -> dict[str, str]:
-    """Per shard: every member's name and bytes; and the manifest's rows (source log folder dropped)."""
+    """Per shard: every member's name and bytes (the layout members under ``SHARD:layout``); and the
+    manifest's rows (source log folder dropped)."""
     out = {}
     for shard in sorted(clip_dir.glob("*.tar")):
         with tarfile.open(shard) as tar:
             members = sorted(tar.getmembers(), key=lambda m: m.name)
-            out[shard.name] = _sha(*[m.name.encode() + _portable(m.name, tar.extractfile(m).read()) for m in members])
+            clip = [m for m in members if not m.name.endswith(SCENE_MEMBERS)]
+            scene = [m for m in members if m.name.endswith(SCENE_MEMBERS)]
+            out[shard.name] = _members_digest(tar, clip)
+            if scene:
+                out[f"{shard.name}:layout"] = _members_digest(tar, scene)
     rows = [json.loads(line) for line in (clip_dir / "manifest.jsonl").read_text().splitlines()]
     out["manifest.jsonl"] = _sha(*[_portable(".json", _json_bytes(r)) for r in rows])
     return out

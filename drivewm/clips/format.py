@@ -1,7 +1,8 @@
 """The clip: synchronized multi-camera frames, ego poses and metadata (docs/DESIGN.md section 4).
 
-On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`) and
-``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) inside a WebDataset tar.
+On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`),
+``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) and, when its log knows the
+scene's structure, ``KEY.layout.npz`` (:class:`drivewm.layout.ClipLayout`) inside a WebDataset tar.
 Generated samples use the same format, so the benchmark scores real and generated clips alike.
 """
 
@@ -16,6 +17,7 @@ from drivewm.clips.video import H264Encoder, decode_mp4, encode_mp4
 from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
+from drivewm.layout.clip_layout import ClipLayout, layout_from_npz
 from drivewm.paths import check_name
 
 CLIP_FORMAT_VERSION = 1
@@ -103,16 +105,33 @@ class ClipMeta:
 @dataclasses.dataclass
 class Clip:
     """One clip in memory. ``mp4`` holds the encoded video per camera (rig order); ``videos``
-    decodes on first use to uint8 RGB (T, H, W, 3) per camera."""
+    decodes on first use to uint8 RGB (T, H, W, 3) per camera. ``layout_npz``: the
+    ``KEY.layout.npz`` bytes, None for a clip whose log knew no layout (read with :meth:`layout`)."""
 
     meta: ClipMeta
     mp4: dict[str, bytes]
     T_world_from_ego: np.ndarray
     _decoded: dict[str, np.ndarray] = dataclasses.field(default_factory=dict, repr=False)
+    layout_npz: bytes | None = dataclasses.field(default=None, repr=False)
 
     @property
     def key(self) -> str:
         return self.meta.key
+
+    @property
+    def has_layout(self) -> bool:
+        return self.layout_npz is not None
+
+    def layout(self) -> ClipLayout | None:
+        """The clip's layout (validated, one frame per clip frame), or None when its log had none."""
+        if self.layout_npz is None:
+            return None
+        layout = layout_from_npz(self.layout_npz, f"clip {self.key}")
+        if layout.num_frames != self.meta.num_frames:
+            raise DrivewmError(
+                f"clip {self.key}: layout has {layout.num_frames} frames, the clip {self.meta.num_frames}"
+            )
+        return layout
 
     def video(self, camera: str) -> np.ndarray:
         """Frames of one camera, uint8 RGB (T, H, W, 3)."""

@@ -39,6 +39,8 @@ from drivewm.curate.timing import StepClock
 from drivewm.curate.windows import WindowStream
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
+from drivewm.layout.build import layout_from_log
+from drivewm.layout.clip_layout import layout_to_npz
 from drivewm.logs.reader import LogStream
 from drivewm.logs.types import LogIndex
 from drivewm.paths import child_path, sanitize_name
@@ -124,7 +126,7 @@ def load_embeddings(out_dir: str | Path, result: dict) -> dict:
 def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, clock: StepClock) -> dict:
     """Curate one streamed log into ``out`` (shards only; the caller writes the marker)."""
     with clock.step("index"):
-        ctx = _context(reader.index(), cfg)
+        ctx = _context(reader.index(layout=True), cfg)
     for f in _stale_shards(out, name):
         f.unlink()
     kept_rows, embeddings, dropped = [], _Embeddings(), {}
@@ -166,6 +168,7 @@ class _LogContext:
     anonymizer: Callable[[np.ndarray], np.ndarray] | None
     clocks: _ClockReport
     encoders: dict[str, H264Encoder] = dataclasses.field(default_factory=dict)  # h264_keep_encoder: per camera
+    layout_errors: list[str] = dataclasses.field(default_factory=list)  # why clips went without their layout
 
 
 def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
@@ -339,7 +342,21 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
         videos = {c.name: frames[v] for v, c in enumerate(ctx.rig.cameras)}
         h264 = (cfg.crf, cfg.h264_preset, cfg.h264_threads, cfg.h264_yuv_converter)
         clip = clip_from_arrays(meta, videos, poses, *h264, encoders=_encoders(ctx))
+    with clock.step("layout"):
+        clip.layout_npz = _layout(ctx, meta.key, t_ns, poses)
     return clip, None, emb
+
+
+def _layout(ctx: _LogContext, key: str, t_ns: np.ndarray, poses: np.ndarray) -> bytes | None:
+    """``KEY.layout.npz`` of the clip, or None: the log knows no layout, its ego motion is unknown (its
+    objects cannot be put in the clip's ego frame), or the layout is bad (kept in ``layout_errors``)."""
+    if ctx.smooth is None or not ctx.log.has_layout:
+        return None
+    try:
+        return layout_to_npz(layout_from_log(ctx.log, t_ns, poses, f"{ctx.log.path}: clip {key}"))
+    except DrivewmError as exc:
+        ctx.layout_errors.append(str(exc))
+        return None
 
 
 def _encoders(ctx: _LogContext) -> dict[str, H264Encoder] | None:
@@ -467,6 +484,8 @@ def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock:
     ]
     warnings += _span_warnings(ctx)
     warnings += ctx.clocks.warnings(table, ctx.cfg.fps)
+    if ctx.layout_errors:
+        warnings.append(f"{len(ctx.layout_errors)} clip(s) without their layout: {ctx.layout_errors[0]}")
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")
     elif smooth.missing or smooth.rejected:

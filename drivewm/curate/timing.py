@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 
 #: The steps of the per-log stage, in pipeline order (the report and benchmark print them so).
-STEPS = ("index", "read", "decode", "resize", "shots", "filters", "encode", "write", "other")
+STEPS = ("index", "read", "decode", "resize", "shots", "filters", "encode", "layout", "write", "other")
 
 
 class StepClock:

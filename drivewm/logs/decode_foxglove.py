@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from drivewm.geometry import quat_xyzw_to_R
 from drivewm.logs.transforms import join_T, sec_nsec_to_ns, yaw_from_quat_xyzw
 from drivewm.logs.types import AgentBox, RoadLine
 
@@ -82,35 +83,53 @@ def transforms(msg: Any, schema_name: str) -> list[tuple[int, str, str, np.ndarr
 
 def agents(msg: Any) -> tuple[int, list[AgentBox]]:
     """SceneUpdate of cube entities -> (stamp_ns, boxes); the first cube of each entity is its box."""
-    boxes, stamp = [], 0
+    placed = scene_boxes(msg)
+    return (placed[0][1] if placed else 0), [box for _, _, box, _ in placed]
+
+
+def scene_boxes(msg: Any) -> list[tuple[str, int, AgentBox, np.ndarray]]:
+    """SceneUpdate of cube entities -> [(frame_id, stamp_ns, box, its length axis (3,) in the frame)]:
+    the first cube of each entity, its ``id`` the track id and its metadata ``category`` the category."""
+    out = []
     for ent in field(msg, "entities", []):
         cubes = list(field(ent, "cubes", []))
         if not cubes:
             continue
-        stamp = stamp or time_ns(field(ent, "timestamp"))
         cube = cubes[0]
         pose = field(cube, "pose", {})
         meta = {field(kv, "key"): field(kv, "value") for kv in field(ent, "metadata", [])}
         color = field(cube, "color", {})
-        boxes.append(
-            AgentBox(
-                track_id=field(ent, "id", ""),
-                category=meta.get("category", "unknown"),
-                center_xyz=vec3(field(pose, "position", {})),
-                size_lwh=vec3(field(cube, "size", {})),
-                yaw_rad=yaw_from_quat_xyzw(quat_xyzw(field(pose, "orientation", {"w": 1.0}))),
-                color_rgb=(float(field(color, "r", 0.5)), float(field(color, "g", 0.5)), float(field(color, "b", 0.5))),
-            )
+        q = quat_xyzw(field(pose, "orientation", {"w": 1.0}))
+        box = AgentBox(
+            track_id=field(ent, "id", ""),
+            category=meta.get("category", "unknown"),
+            center_xyz=vec3(field(pose, "position", {})),
+            size_lwh=vec3(field(cube, "size", {})),
+            yaw_rad=yaw_from_quat_xyzw(q),
+            color_rgb=(float(field(color, "r", 0.5)), float(field(color, "g", 0.5)), float(field(color, "b", 0.5))),
         )
-    return stamp, boxes
+        axis = quat_xyzw_to_R(q)[:, 0] if np.any(q) else np.array([1.0, 0.0, 0.0])
+        out.append((field(ent, "frame_id", ""), time_ns(field(ent, "timestamp")), box, axis))
+    return out
 
 
 def road_lines(msg: Any) -> list[RoadLine]:
-    """SceneUpdate of line-strip entities -> road polylines (kind and line type from metadata)."""
+    """SceneUpdate of line entities -> road polylines (kind and line type from metadata)."""
+    return [line for _, _, line, _ in scene_lines(msg)]
+
+
+def scene_lines(msg: Any) -> list[tuple[str, int, RoadLine, None]]:
+    """SceneUpdate of line entities -> [(frame_id, stamp_ns, polyline, None)], kind and line type from
+    the entity's metadata; each line primitive's pose applies to its points."""
     out = []
     for ent in field(msg, "entities", []):
         meta = {field(kv, "key"): field(kv, "value") for kv in field(ent, "metadata", [])}
+        frame, stamp = field(ent, "frame_id", ""), time_ns(field(ent, "timestamp"))
         for line in field(ent, "lines", []):
             points = np.array([vec3(p) for p in field(line, "points", [])], dtype=np.float64).reshape(-1, 3)
-            out.append(RoadLine(meta.get("kind", "line"), points, meta.get("line_type", "")))
+            pose = field(line, "pose", None)
+            if pose is not None:
+                T = join_T(vec3(field(pose, "position", {})), quat_xyzw(field(pose, "orientation", {"w": 1.0})))
+                points = points @ T[:3, :3].T + T[:3, 3] if np.isfinite(T).all() else points
+            out.append((frame, stamp, RoadLine(meta.get("kind", "line"), points, meta.get("line_type", "")), None))
     return out

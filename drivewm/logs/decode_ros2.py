@@ -13,6 +13,7 @@ import numpy as np
 
 from drivewm.errors import DrivewmError
 from drivewm.logs.transforms import join_T, sec_nsec_to_ns
+from drivewm.logs.types import AgentBox, RoadLine
 
 COMPRESSED_IMAGE = ("sensor_msgs/msg/CompressedImage", "sensor_msgs/CompressedImage")
 RAW_IMAGE = ("sensor_msgs/msg/Image", "sensor_msgs/Image")
@@ -90,3 +91,64 @@ def pose(msg: Any, schema_name: str) -> tuple[int, str, np.ndarray]:
         [p.position.x, p.position.y, p.position.z], [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]
     )
     return stamp_ns(msg.header), msg.header.frame_id, T
+
+
+MARKER_ARRAY = ("visualization_msgs/msg/MarkerArray", "visualization_msgs/MarkerArray")
+DETECTION3D_ARRAY = ("vision_msgs/msg/Detection3DArray", "vision_msgs/Detection3DArray")
+_CUBE, _LINE_STRIP, _LINE_LIST = 1, 4, 5  # visualization_msgs/Marker types
+_ADD = 0  # visualization_msgs/Marker action (DELETE and DELETEALL markers carry nothing to draw)
+
+
+def _pose_T(p: Any) -> np.ndarray:
+    return join_T(
+        [p.position.x, p.position.y, p.position.z], [p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w]
+    )
+
+
+def _box(
+    track_id: str, category: str, T_frame_from_box: np.ndarray, size: Any, color=(0.5, 0.5, 0.5)
+) -> tuple[AgentBox, np.ndarray]:
+    """(AgentBox in the pose's frame, its length axis (3,) there) from a box pose and its size (x along
+    its length): the axis keeps the heading exact when the frame is tilted against the world."""
+    R = T_frame_from_box[:3, :3]
+    yaw = float(np.arctan2(R[1, 0], R[0, 0]))
+    box = AgentBox(track_id, category, T_frame_from_box[:3, 3].copy(), np.array([size.x, size.y, size.z]), yaw, color)
+    return box, R[:, 0].copy()
+
+
+def markers(msg: Any) -> list[tuple[str, int, AgentBox | RoadLine, np.ndarray | None]]:
+    """visualization_msgs/MarkerArray -> [(frame_id, stamp_ns, AgentBox or RoadLine, a box's length axis
+    or None)]: CUBE markers are
+    boxes (category = ``ns``, track id = ``ns/id``), LINE_STRIP markers road lines and each pair of a
+    LINE_LIST one two-point line (``ns`` = "KIND" or "KIND/PAINT", e.g. "lane_boundary/dashed"); the
+    marker's pose applies to its points. Other types, and DELETE / DELETEALL markers, are skipped."""
+    out = []
+    for m in msg.markers:
+        if m.action != _ADD or m.type not in (_CUBE, _LINE_STRIP, _LINE_LIST):
+            continue
+        T = _pose_T(m.pose)
+        frame, stamp = m.header.frame_id, stamp_ns(m.header)
+        if m.type == _CUBE:
+            color = (float(m.color.r), float(m.color.g), float(m.color.b))
+            out.append((frame, stamp, *_box(f"{m.ns}/{m.id}", m.ns, T, m.scale, color)))
+            continue
+        kind, _, paint = m.ns.partition("/")
+        points = np.array([[p.x, p.y, p.z] for p in m.points], dtype=np.float64).reshape(-1, 3) @ T[:3, :3].T + T[:3, 3]
+        pieces = [points] if m.type == _LINE_STRIP else [points[i : i + 2] for i in range(0, len(points) - 1, 2)]
+        out += [(frame, stamp, RoadLine(kind, piece, paint), None) for piece in pieces if len(piece) >= 2]
+    return out
+
+
+def detections(msg: Any) -> list[tuple[str, int, AgentBox, np.ndarray]]:
+    """vision_msgs/Detection3DArray -> [(frame_id, stamp_ns, AgentBox, its length axis)]: the box of each detection
+    (``bbox.center``, ``bbox.size`` as length, width, height), category = the class id of its best
+    hypothesis, track id = its ``id``. A detection's own header wins over the array's when it is set."""
+    out = []
+    for i, d in enumerate(msg.detections):
+        header = d.header if d.header.frame_id else msg.header
+        best = max(d.results, key=lambda r: r.hypothesis.score, default=None)
+        category = best.hypothesis.class_id if best is not None else "unknown"
+        out.append(
+            (header.frame_id, stamp_ns(header), *_box(d.id or str(i), category, _pose_T(d.bbox.center), d.bbox.size))
+        )
+    return out

@@ -116,7 +116,11 @@ def _road_message(lines: list[RoadLine], t0: int) -> dict:
             "id": f"{line.kind}/{i}",
             "metadata": [{"key": "kind", "value": line.kind}, {"key": "line_type", "value": line.line_type}],
             "lines": [
-                {"type": 0, "thickness": 0.15, "points": [dict(zip("xyz", map(float, p))) for p in line.points_xyz]}
+                {
+                    "type": 1 if line.kind == "road_surface" else 0,  # LINE_LOOP for a polygon outline, else LINE_STRIP
+                    "thickness": 0.15,
+                    "points": [dict(zip("xyz", map(float, p))) for p in line.points_xyz],
+                }
             ],
         }
         for i, line in enumerate(lines)
@@ -151,6 +155,8 @@ def _static_messages(log: DriveLog, t0: int) -> list[tuple[str, dict, int]]:
     out.append((names.SCENE_TOPIC, {"tags": dict(log.scene.tags), "description": log.scene.description}, t0))
     if log.road:
         out.append((names.ROAD_TOPIC, _road_message(log.road, t0), t0))
+    if log.static:
+        out.append((names.STATIC_TOPIC, {"deletions": [], "entities": [_entity(t0, b) for b in log.static]}, t0))
     return out
 
 
@@ -181,6 +187,7 @@ def _schema_of(topic: str) -> str:
         names.TF_STATIC_TOPIC: "foxglove.FrameTransforms",
         names.AGENTS_TOPIC: "foxglove.SceneUpdate",
         names.ROAD_TOPIC: "foxglove.SceneUpdate",
+        names.STATIC_TOPIC: "foxglove.SceneUpdate",
         names.SCENE_TOPIC: names.SCENE_SCHEMA_NAME,
     }[topic]
 

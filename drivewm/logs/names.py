@@ -15,7 +15,8 @@ TF_TOPIC = "/tf"  # foxglove.FrameTransforms world -> ego, one per tick
 TF_STATIC_TOPIC = "/tf_static"  # foxglove.FrameTransforms ego -> CAMERA (T_ego_from_cam)
 SCENE_TOPIC = "/scene"  # JSON {"tags": {...}, "description": "..."}
 AGENTS_TOPIC = "/agents"  # foxglove.SceneUpdate, one cube entity per agent
-ROAD_TOPIC = "/road"  # foxglove.SceneUpdate, one line-strip entity per road polyline (optional, static)
+ROAD_TOPIC = "/road"  # foxglove.SceneUpdate, one line entity per road polyline or surface outline (optional, static)
+STATIC_TOPIC = "/static"  # foxglove.SceneUpdate, one cube entity per static object (optional, logged once)
 SCENE_SCHEMA_NAME = "drivewm.Scene"
 #: Name of the MCAP metadata record holding the rig name and camera order.
 METADATA_NAME = "drivewm"

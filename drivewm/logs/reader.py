@@ -9,8 +9,9 @@ map, decode only those channels, collect, then assemble the rig, poses and image
 Two ways in: :func:`read_log` holds the whole drive (:class:`DriveLog`, for small logs and
 tests). :class:`LogStream` reads an hour-long log in bounded memory: :meth:`LogStream.index`
 collects everything but image payloads and agent boxes (calibration, transforms, ego poses,
-scene, road, and each image's camera and timestamp: a few bytes per image), then
-:meth:`LogStream.stream` yields the images (and agents) one message at a time in log order,
+scene, and each image's camera and timestamp: a few bytes per image; on request the road users
+as columns, the static objects and the road lines, :mod:`drivewm.logs.scene_objects`), then
+:meth:`LogStream.stream` yields the images one message at a time in log order,
 so a consumer holds only what its own window needs. Both share the routing and assembly below.
 """
 
@@ -27,16 +28,17 @@ from drivewm.errors import DrivewmError
 from drivewm.geometry import Camera, Rig
 from drivewm.logs import decode_foxglove as fox
 from drivewm.logs import decode_ros2 as ros
-from drivewm.logs import names
+from drivewm.logs import names, scene_objects
 from drivewm.logs.frames import FrameGraph
 from drivewm.logs.mcap_source import ChannelInfo, Message, iter_messages, list_channels, log_files, read_metadata
+from drivewm.logs.scene_objects import SceneObjects
 from drivewm.logs.topicmap import TopicMap, load_topic_map
-from drivewm.logs.types import AgentBox, DriveLog, ImageFrame, LogIndex, RoadLine, SceneInfo
+from drivewm.logs.types import DriveLog, ImageFrame, LogIndex, SceneInfo
 
 _IMAGE_SCHEMAS = (fox.IMAGE,) + ros.COMPRESSED_IMAGE + ros.RAW_IMAGE
 _CALIBRATION_SCHEMAS = (fox.CALIBRATION,) + ros.CAMERA_INFO
 _TF_SCHEMAS = (fox.TRANSFORMS, fox.TRANSFORM) + ros.TF_MESSAGE
-_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; "agents", "road" on request
+_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; the others on request
 
 
 @dataclasses.dataclass
@@ -51,16 +53,16 @@ class _Calibration:
 @dataclasses.dataclass
 class _Collected:
     """Everything read from the messages, before assembly. ``keep``: the optional kinds whose
-    payloads are decoded and kept ("image", "agents", "road"); image timestamps are always recorded."""
+    payloads are decoded and kept ("image", "agents", "static", "road"); image timestamps are always
+    recorded."""
 
-    keep: tuple[str, ...] = ("image", "agents", "road")
+    keep: tuple[str, ...] = ("image", "agents", "static", "road")
     image_stamps: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     images: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
     calibrations: dict[str, _Calibration] = dataclasses.field(default_factory=dict)
     frames: FrameGraph = dataclasses.field(default_factory=FrameGraph)
     poses: list[tuple[int, np.ndarray]] = dataclasses.field(default_factory=list)
-    agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
-    road: list[RoadLine] = dataclasses.field(default_factory=list)
+    objects: SceneObjects = dataclasses.field(default_factory=SceneObjects)  # agents, static, road as logged
     scene: dict | None = None
     ros2: bool = False  # any CDR channel: ROS 2 frame names by default
 
@@ -74,10 +76,10 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
     naming a topic the log lacks, and images of a camera without calibration.
     """
     reader = LogStream(path, topic_map)
-    col = reader.collect(keep=("image", "agents", "road"))
+    col = reader.collect(keep=("image", *scene_objects.KINDS))
     index = reader.assemble(col)
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in index.rig.names}
-    agents = sorted(col.agents, key=lambda a: a[0])
+    agents = index.agents.as_messages()
     log = DriveLog(
         index.path,
         index.rig,
@@ -88,6 +90,7 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
         agents,
         index.road,
         index.warnings,
+        index.static,
     )
     if require_images:
         log.validate()
@@ -108,22 +111,22 @@ class LogStream:
         self.files = log_files(path)
         self._route = _router(self.tmap)
 
-    def index(self, require_images: bool = True, road: bool = False) -> LogIndex:
+    def index(self, require_images: bool = True, layout: bool = False) -> LogIndex:
         """Calibration, poses, scene and every image's (camera, timestamp), without payloads; the
-        road polylines only if ``road`` (a viewer draws them; they cost as much as the poses)."""
-        index = self.assemble(self.collect(keep=("road",) if road else ()))
+        road users (as columns), static objects and road lines only if ``layout`` (curation and the
+        viewer use them; they cost about as much as the poses)."""
+        index = self.assemble(self.collect(keep=scene_objects.KINDS if layout else ()))
         if require_images:
             index.validate()
         return index
 
     def stream(self, kinds: tuple[str, ...] = ("image",)) -> Iterator[tuple[str, Any]]:
-        """Messages of ``kinds`` one at a time in log order: ("image", (camera, ImageFrame)) and
-        ("agents", (timestamp_ns, [AgentBox])). A camera's images come in the order
-        :meth:`index` recorded their timestamps."""
+        """Messages of ``kinds`` one at a time in log order: ("image", (camera, ImageFrame)). A
+        camera's images come in the order :meth:`index` recorded their timestamps."""
         for f in self.files:
             for msg in iter_messages(f, lambda info: (self._route(info) or ("",))[0] in kinds):
                 kind, camera = self._route(msg.channel)
-                yield kind, _image(camera, msg, self.tmap) if kind == "image" else _agents(msg, self.tmap)
+                yield kind, _image(camera, msg, self.tmap)
 
     def collect(self, keep: tuple[str, ...]) -> _Collected:
         """One pass over every routed message (payloads kept for the kinds in ``keep``)."""
@@ -171,10 +174,9 @@ def _router(tmap: TopicMap):
             return "tf", None
         if s == names.SCENE_SCHEMA_NAME or (info.topic == names.SCENE_TOPIC and info.encoding == "json"):
             return "scene", None
-        if s == fox.SCENE_UPDATE and info.topic == names.AGENTS_TOPIC:
-            return "agents", None
-        if s == fox.SCENE_UPDATE and info.topic == names.ROAD_TOPIC:
-            return "road", None
+        for kind in scene_objects.KINDS:
+            if info.topic == getattr(tmap.layout, kind) and s in scene_objects.SCHEMAS[kind]:
+                return kind, None
         return None
 
     return route
@@ -217,21 +219,16 @@ def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap:
         col.poses.append((_stamp(tmap, stamp, msg), T))
     elif kind == "scene":
         col.scene = data if col.scene is None else col.scene
-    elif kind == "agents" and "agents" in col.keep:
-        col.agents.append(_agents(msg, tmap))
-    elif kind == "road" and "road" in col.keep:
-        col.road += fox.road_lines(data)
+    elif kind in scene_objects.KINDS and kind in col.keep:
+        items = scene_objects.decode(schema, data)
+        stamp = next((item[1] for item in items), 0)
+        col.objects.add(kind, items, _stamp(tmap, stamp, msg), tmap.layout.classes)
 
 
 def _image(camera: str | None, msg: Message, tmap: TopicMap) -> tuple[str, ImageFrame]:
     """(camera name, frame) of an image message; unmapped cameras are named by their frame_id."""
     frame_id, stamp, payload, fmt = _decode_image(msg.channel.schema_name, msg.data)
     return camera or frame_id, ImageFrame(_stamp(tmap, stamp, msg), payload, fmt)
-
-
-def _agents(msg: Message, tmap: TopicMap) -> tuple[int, list[AgentBox]]:
-    stamp, boxes = fox.agents(msg.data)
-    return _stamp(tmap, stamp, msg), boxes
 
 
 def _decode_image(schema: str, data: Any) -> tuple[str, int, bytes, str]:
@@ -267,7 +264,11 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
     pose_ts, T_world_from_ego = _ego_poses(col, world, ego)
     if not len(pose_ts):
         warnings.append(_no_poses(col, tmap, world, ego))
-    return LogIndex(str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), col.road, warnings)
+    place = scene_objects.placer(col.frames, pose_ts, T_world_from_ego, world, ego)
+    agents, static, road, lost = col.objects.place(place, world)
+    return LogIndex(
+        str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), road, warnings + lost, static, agents
+    )
 
 
 def _order_warnings(col: _Collected, cameras: list[str]) -> list[str]:

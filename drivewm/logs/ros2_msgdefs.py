@@ -1,4 +1,4 @@
-"""ROS 2 message definitions (Humble, trimmed of comments) as MCAP ``ros2msg`` schema text.
+"""ROS 2 message definitions (Humble, trimmed of comments; vision_msgs 4.1) as MCAP ``ros2msg`` schema text.
 
 No Python package ships them outside a ROS install, so the few drivewm writes are here; each
 schema is the type's own definition followed by its dependencies (the rosbag2 MCAP layout).
@@ -21,6 +21,29 @@ _DEFS = {
     "geometry_msgs/Twist": "Vector3 linear\nVector3 angular",
     "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance",
     "sensor_msgs/RegionOfInterest": "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify",
+    "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data",
+    "builtin_interfaces/Duration": "int32 sec\nuint32 nanosec",
+    "std_msgs/ColorRGBA": "float32 r\nfloat32 g\nfloat32 b\nfloat32 a",
+    "visualization_msgs/UVCoordinate": "float32 u\nfloat32 v",
+    "visualization_msgs/MeshFile": "string filename\nuint8[] data",
+    "visualization_msgs/Marker": (
+        "int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\nint32 LINE_LIST=5\n"
+        "int32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\nint32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\n"
+        "int32 TRIANGLE_LIST=11\nint32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n"
+        "std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\ngeometry_msgs/Pose pose\n"
+        "geometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\nbuiltin_interfaces/Duration lifetime\n"
+        "bool frame_locked\ngeometry_msgs/Point[] points\nstd_msgs/ColorRGBA[] colors\nstring texture_resource\n"
+        "sensor_msgs/CompressedImage texture\nUVCoordinate[] uv_coordinates\nstring text\nstring mesh_resource\n"
+        "MeshFile mesh_file\nbool mesh_use_embedded_materials"
+    ),
+    "visualization_msgs/msg/MarkerArray": "Marker[] markers",
+    "vision_msgs/ObjectHypothesis": "string class_id\nfloat64 score",
+    "vision_msgs/ObjectHypothesisWithPose": "ObjectHypothesis hypothesis\ngeometry_msgs/PoseWithCovariance pose",
+    "vision_msgs/BoundingBox3D": "geometry_msgs/Pose center\ngeometry_msgs/Vector3 size",
+    "vision_msgs/Detection3D": (
+        "std_msgs/Header header\nObjectHypothesisWithPose[] results\nBoundingBox3D bbox\nstring id"
+    ),
+    "vision_msgs/msg/Detection3DArray": "std_msgs/Header header\nDetection3D[] detections",
     "sensor_msgs/msg/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data",
     "sensor_msgs/msg/Image": (
         "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 "
@@ -38,7 +61,31 @@ _DEFS = {
     ),
 }
 
+_POSE = ["geometry_msgs/Pose", "geometry_msgs/Point", "geometry_msgs/Quaternion"]
 _DEPENDENCIES = {
+    "visualization_msgs/msg/MarkerArray": [
+        "visualization_msgs/Marker",
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        *_POSE,
+        "geometry_msgs/Vector3",
+        "std_msgs/ColorRGBA",
+        "builtin_interfaces/Duration",
+        "sensor_msgs/CompressedImage",
+        "visualization_msgs/UVCoordinate",
+        "visualization_msgs/MeshFile",
+    ],
+    "vision_msgs/msg/Detection3DArray": [
+        "vision_msgs/Detection3D",
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "vision_msgs/ObjectHypothesisWithPose",
+        "vision_msgs/ObjectHypothesis",
+        "geometry_msgs/PoseWithCovariance",
+        *_POSE,
+        "vision_msgs/BoundingBox3D",
+        "geometry_msgs/Vector3",
+    ],
     "sensor_msgs/msg/CompressedImage": ["std_msgs/Header", "builtin_interfaces/Time"],
     "sensor_msgs/msg/Image": ["std_msgs/Header", "builtin_interfaces/Time"],
     "sensor_msgs/msg/CameraInfo": ["std_msgs/Header", "builtin_interfaces/Time", "sensor_msgs/RegionOfInterest"],

@@ -36,6 +36,26 @@ class EgoPoseTopic:
 
 
 @dataclasses.dataclass
+class LayoutTopics:
+    """Where a log keeps the scene's structure (the layout of its clips, drivewm.layout). Each topic
+    carries foxglove.SceneUpdate, visualization_msgs/MarkerArray or (road users only)
+    vision_msgs/Detection3DArray; objects may be in the world frame, the ego frame or any frame with
+    a static transform to the ego."""
+
+    agents: str | None = "/agents"
+    """Road users, one message per tick (the boxes of that instant)."""
+    static: str | None = "/static"
+    """Static objects (buildings, poles, trees, ...), all boxes ever sent."""
+    road: str | None = "/road"
+    """Road lines (lane centres, lane borders, kerbs, surface outlines): line strips whose kind (and
+    paint) a SceneUpdate names in metadata ``kind`` (``line_type``) and a marker in its ``ns``, as
+    ``KIND`` or ``KIND/PAINT``."""
+    classes: dict[str, str] = dataclasses.field(default_factory=dict)
+    """The log's names -> drivewm's: a box category (entity ``category``, marker ``ns``, detection
+    ``class_id``) -> a layout class (drivewm.layout.classes), a marker ``ns`` -> ``KIND`` or ``KIND/PAINT``."""
+
+
+@dataclasses.dataclass
 class TopicMap:
     """Mapping of one family of logs (one vehicle/recorder) onto the drivewm drive-log contract."""
 
@@ -55,6 +75,8 @@ class TopicMap:
     """Scene tags for logs without a scene channel (e.g. source: fleet); the log's own tags win."""
     description: str = ""
     """Scene description for logs without a scene channel."""
+    layout: LayoutTopics = dataclasses.field(default_factory=LayoutTopics)
+    """Topics of the road users, static objects and road lines (default: drivewm's /agents, /static, /road)."""
     source: str = dataclasses.field(default="(in code)", init=False)
     """Where the map came from (set by :func:`load_topic_map`), for error messages."""
 

@@ -7,12 +7,16 @@ Simulated logs, Foxglove (protobuf or JSON) logs and ROS 2 logs all become the s
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
+
+if TYPE_CHECKING:
+    from drivewm.logs.agent_table import AgentTable
 
 #: Scene tag keys every log carries (values are free strings; these are the known ones).
 SCENE_TAG_KEYS = ("weather", "time_of_day", "road_type", "traffic_density", "source")
@@ -58,8 +62,10 @@ class AgentBox:
 class RoadLine:
     """A piece of static road geometry as a polyline in the world frame (optional in logs).
 
-    ``kind``: lane_center | lane_boundary | road_edge; ``line_type``: how it is painted (solid,
-    dashed, none; "" where it does not apply); ``points_xyz`` (N, 3) metres.
+    ``kind``: lane_center | lane_boundary | road_edge | road_surface; ``line_type``: how it is
+    painted (solid, dashed, none; "" where it does not apply); ``points_xyz`` (N, 3) metres. A
+    ``road_surface`` is the closed outline of a paved polygon (the last point joins the first; the
+    union of a log's surfaces is its paved area).
     """
 
     kind: str
@@ -83,8 +89,9 @@ class DriveLog:
     ``rig``: calibration of every camera (K, size, distortion, static ``T_ego_from_cam``), in
     the log's camera order. ``images``: camera name -> frames sorted by ``timestamp_ns``.
     ``pose_timestamps_ns`` (N,) int64 and ``T_world_from_ego`` (N, 4, 4): the per-tick ego pose.
-    ``agents``: optional (timestamp_ns, boxes) per tick, for viewers (simulated logs have them).
-    ``road``: optional static road polylines (lane centres, boundaries, edges), for viewers.
+    ``agents``: optional (timestamp_ns, boxes) per tick: the other road users (simulated logs have them).
+    ``road``: optional static road polylines (lane centres, boundaries, edges, surface outlines).
+    ``static``: optional static objects as boxes (buildings, poles, lamps, tree trunks and crowns).
     ``warnings``: what the reader repaired or left out (e.g. frames sorted back into time order), one
     line each; curation reports them per log.
     """
@@ -98,6 +105,7 @@ class DriveLog:
     agents: list[tuple[int, list[AgentBox]]] = dataclasses.field(default_factory=list)
     road: list[RoadLine] = dataclasses.field(default_factory=list)
     warnings: list[str] = dataclasses.field(default_factory=list)
+    static: list[AgentBox] = dataclasses.field(default_factory=list)
 
     @property
     def camera_names(self) -> list[str]:
@@ -114,7 +122,9 @@ class LogIndex:
     """A drive without its image payloads: what a streaming reader knows before the images.
 
     As :class:`DriveLog`, but ``image_timestamps_ns``: camera name -> (M,) int64 timestamps of its
-    images in log (arrival) order, where DriveLog has the frames; and no agent boxes.
+    images in log (arrival) order, where DriveLog has the frames; and the road users as columns
+    (``agents``, in the world frame). ``agents``, ``road`` and ``static`` are filled when the index
+    was asked for them (``LogStream.index(layout=True)``).
     """
 
     path: str
@@ -126,6 +136,13 @@ class LogIndex:
     road: list[RoadLine] = dataclasses.field(default_factory=list)
     warnings: list[str] = dataclasses.field(default_factory=list)
     """What the reader repaired or left out, one line each (as :class:`DriveLog`)."""
+    static: list[AgentBox] = dataclasses.field(default_factory=list)
+    agents: AgentTable | None = None
+
+    @property
+    def has_layout(self) -> bool:
+        """Whether the log knows any of the scene's structure (road users, static objects, road lines)."""
+        return bool(self.road or self.static or (self.agents is not None and len(self.agents)))
 
     def validate(self) -> None:
         """Raise DrivewmError naming the file if the log breaks the contract."""

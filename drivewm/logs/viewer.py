@@ -8,11 +8,14 @@ Entity tree (world z up; timeline ``log_time`` = the log's ``timestamp_ns``):
   RDF axes; static) + the camera's images (EncodedImage per frame, stored bytes, not decoded);
 - ``world/ego_trajectory``: the ego path as line strips (static; split at pose gaps);
 - ``world/agents``: the other road users per tick (Boxes3D, labelled category:id);
-- ``world/road/KIND``: the road polylines of each kind, if the log has them (static);
+- ``world/static``: the static objects (buildings, poles, trees, ...) if the log has them (static Boxes3D);
+- ``world/road/KIND``: the road polylines of each kind, if the log has them (static; a
+  ``road_surface`` outline is drawn closed);
 - ``scene``: the tags and description (static TextDocument).
 
-The log is streamed (:class:`drivewm.logs.reader.LogStream`): images and agent boxes go to the
-recording one message at a time, so an hour-long log needs no more memory than a short one.
+The log is streamed (:class:`drivewm.logs.reader.LogStream`): images go to the recording one
+message at a time, so an hour-long log needs no more memory than its index (the agent boxes are
+kept as columns, :mod:`drivewm.logs.agent_table`).
 """
 
 from __future__ import annotations
@@ -30,7 +33,12 @@ from drivewm.logs.types import LogIndex
 
 TIMELINE = "log_time"  # the MCAP log time; Rerun's own wall-clock "log_time"/"log_tick" are switched off
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
-ROAD_COLORS = {"lane_center": [80, 160, 255], "lane_boundary": [255, 255, 255], "road_edge": [255, 120, 0]}
+ROAD_COLORS = {
+    "lane_center": [80, 160, 255],
+    "lane_boundary": [255, 255, 255],
+    "road_edge": [255, 120, 0],
+    "road_surface": [110, 110, 120],
+}
 
 
 def _set_time(rec, timestamp_ns: int) -> None:
@@ -53,14 +61,23 @@ def log_static(rec, log: LogIndex) -> None:
         static=True,
     )
     for kind in sorted({line.kind for line in log.road}):
-        strips = [line.points_xyz for line in log.road if line.kind == kind]
+        strips = [_strip(line) for line in log.road if line.kind == kind]
         rec.log(
             f"world/road/{kind}", rr.LineStrips3D(strips, colors=[ROAD_COLORS.get(kind, [200, 200, 200])]), static=True
         )
+    if log.static:
+        rec.log("world/static", _boxes(log.static), static=True)
     tags = "\n".join(f"- **{k}**: {v}" for k, v in log.scene.tags.items())
     rec.log(
         "scene", rr.TextDocument(f"{tags}\n\n{log.scene.description}", media_type=rr.MediaType.MARKDOWN), static=True
     )
+
+
+def _strip(line) -> np.ndarray:
+    """A road polyline's points (N, 3); a surface outline closed by repeating its first point."""
+    if line.kind == "road_surface" and len(line.points_xyz):
+        return np.concatenate([line.points_xyz, line.points_xyz[:1]])
+    return line.points_xyz
 
 
 def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:
@@ -73,22 +90,21 @@ def trajectory_strips(T_world_from_ego: np.ndarray) -> list[np.ndarray]:
 
 
 def log_ticks(rec, log: LogIndex, stream: LogStream) -> dict[str, int]:
-    """Ego poses, then images and agent boxes as streamed, on the ``log_time`` timeline; returns
-    how many images and agent ticks were logged."""
+    """Ego poses and agent boxes (from the index, placed in the world frame), then the images as
+    streamed, on the ``log_time`` timeline; returns how many images and agent ticks were logged."""
     for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego):
         if np.all(np.isfinite(T)):
             _set_time(rec, ts)
             rec.log("world/ego", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
-    counts = {"image": 0, "agents": 0}
-    for kind, item in stream.stream(("image", "agents")):
-        counts[kind] += 1
-        if kind == "image":
-            name, frame = item
-            _set_time(rec, frame.timestamp_ns)
-            rec.log(f"world/ego/{name}", rr.EncodedImage(contents=frame.data, media_type=MEDIA_TYPES.get(frame.format)))
-        else:
-            _set_time(rec, item[0])
-            rec.log("world/agents", _boxes(item[1]))
+    agents = log.agents.as_messages() if log.agents is not None else []
+    for ts, boxes in agents:
+        _set_time(rec, ts)
+        rec.log("world/agents", _boxes(boxes))
+    counts = {"image": 0, "agents": len(agents)}
+    for _, (name, frame) in stream.stream(("image",)):
+        counts["image"] += 1
+        _set_time(rec, frame.timestamp_ns)
+        rec.log(f"world/ego/{name}", rr.EncodedImage(contents=frame.data, media_type=MEDIA_TYPES.get(frame.format)))
     return counts
 
 
@@ -110,7 +126,7 @@ def write_recording(stream: LogStream, out_path: str | Path) -> tuple[dict[str, 
     out_path = Path(out_path)
     if out_path.resolve() in {f.resolve() for f in stream.files}:  # the rename had replaced the log itself
         raise DrivewmError(f"{out_path}: is the drive log being read; write the recording elsewhere")
-    log = stream.index(require_images=False, road=True)
+    log = stream.index(require_images=False, layout=True)
     with atomic_path(out_path) as tmp:
         rec = rr.RecordingStream("drivewm", recording_id=Path(log.path).stem)
         rec.set_log_time_enabled(False)  # else Rerun stamps every row with the wall clock under the same name

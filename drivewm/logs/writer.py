@@ -4,7 +4,8 @@ Topics (see :mod:`drivewm.logs.names`): ``/CAMERA/image`` (foxglove.CompressedIm
 camera), ``/CAMERA/calibration`` (foxglove.CameraCalibration), ``/tf_static`` (FrameTransforms
 ego -> CAMERA, i.e. ``T_ego_from_cam``), ``/tf`` (FrameTransforms world -> ego per tick, i.e.
 ``T_world_from_ego``), ``/scene`` (JSON tags + description), ``/agents`` (foxglove.SceneUpdate cubes) and, optionally,
-``/road`` (foxglove.SceneUpdate line strips).
+``/road`` (foxglove.SceneUpdate line strips, and line loops for the road surface outlines) and ``/static``
+(foxglove.SceneUpdate cubes of the static objects, logged once).
 Every message's MCAP log time is its ``timestamp_ns``. Static messages (calibration, tf_static,
 scene) are logged at the first timestamp the writer sees.
 
@@ -84,6 +85,7 @@ class LogWriter:
         self._tf_ch = channels.FrameTransformsChannel(names.TF_TOPIC, context=ctx)
         self._agents_ch = channels.SceneUpdateChannel(names.AGENTS_TOPIC, context=ctx)
         self._road_ch = channels.SceneUpdateChannel(names.ROAD_TOPIC, context=ctx)
+        self._static_ch = channels.SceneUpdateChannel(names.STATIC_TOPIC, context=ctx)
         schema = foxglove.Schema(
             name=names.SCENE_SCHEMA_NAME, encoding="jsonschema", data=json.dumps(SCENE_JSON_SCHEMA).encode()
         )
@@ -157,8 +159,9 @@ class LogWriter:
     def _line_entity(self, timestamp_ns: int, index: int, line: RoadLine):
         m = messages
         points = [m.Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in line.points_xyz]
+        closed = line.kind == "road_surface"  # a polygon outline: the last point joins the first
         primitive = m.LinePrimitive(
-            type=m.LinePrimitiveLineType.LineStrip,
+            type=m.LinePrimitiveLineType.LineLoop if closed else m.LinePrimitiveLineType.LineStrip,
             thickness=0.15,
             points=points,
             color=m.Color(r=1.0, g=1.0, b=1.0, a=1.0),
@@ -229,6 +232,12 @@ class LogWriter:
         )
         self._road_ch.log(update, log_time=int(timestamp_ns))
 
+    def write_static(self, timestamp_ns: int, boxes: list[AgentBox]) -> None:
+        """Log the static objects (buildings, poles, trees, ...) once as cubes (optional)."""
+        self._ensure_static(timestamp_ns)
+        update = messages.SceneUpdate(entities=[self._cube_entity(timestamp_ns, b) for b in boxes])
+        self._static_ch.log(update, log_time=int(timestamp_ns))
+
     def close(self) -> Path:
         """Finish the MCAP file and rename it onto ``path``."""
         if not self._closed:
@@ -287,6 +296,8 @@ def write_log(log: DriveLog, path: str | Path) -> Path:
         events = drive_events(log)
         if log.road:
             w.write_road(events[0][0] if events else 0, log.road)
+        if log.static:
+            w.write_static(events[0][0] if events else 0, log.static)
         for ts, kind, payload in events:
             if kind == "pose":
                 w.write_pose(ts, payload[0])

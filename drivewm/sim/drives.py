@@ -16,7 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from drivewm.atomic import remove_dead_temporaries
-from drivewm.logs.types import RoadLine, SceneInfo
+from drivewm.logs.types import SceneInfo
 from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
 from drivewm.sim.exposure import exposure_offsets_ns, state_at
@@ -79,7 +79,8 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
     out_path.parent.mkdir(parents=True, exist_ok=True)
     offsets = exposure_offsets_ns(len(rig.cameras), cfg.exposure_stagger_ms, 1e9 / cfg.fps)
     with LogWriter(out_path, rig, SceneInfo(dict(rec.tags), rec.description), "jpeg", cfg.jpeg_quality) as writer:
-        _write_road(writer, rec)
+        writer.write_road(rec.ticks[0].timestamp_ns, rec.road.road_lines())  # the optional /road channel
+        writer.write_static(rec.ticks[0].timestamp_ns, rec.road.props)
         logged = rec.ticks[: cfg.num_ticks]
         for k, tick in enumerate(tqdm(logged, desc=out_path.name, unit="tick", disable=not progress, leave=False)):
             if cfg.exposure_stagger_ms > 0:
@@ -99,15 +100,6 @@ def _write_staggered(writer, renderer, rec: SceneRecording, k: int, offsets_ns: 
         t = rec.ticks[k].timestamp_ns + offset
         state = state_at(rec.ticks, k, t)
         writer.write_image(cam.name, t, renderer.render_camera(cam.name, state.T_world_from_ego, state.agents, t))
-
-
-def _write_road(writer, rec: SceneRecording) -> None:
-    """Log the road polylines once (the optional /road channel; viewers draw them)."""
-    z = lambda p: np.concatenate([p, np.zeros((len(p), 1))], axis=1)  # noqa: E731  (x, y) -> (x, y, 0)
-    lines = [RoadLine("lane_center", z(c)) for c in rec.road.lane_centers]
-    lines += [RoadLine("lane_boundary", z(b.points_xy), b.line_type) for b in rec.road.boundaries]
-    lines += [RoadLine("road_edge", z(e)) for e in rec.road.road_edges]
-    writer.write_road(rec.ticks[0].timestamp_ns, lines)
 
 
 def drive_name(cfg: SimConfig) -> str:

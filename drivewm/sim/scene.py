@@ -12,7 +12,7 @@ from typing import Literal
 
 import numpy as np
 
-from drivewm.logs.types import AgentBox
+from drivewm.logs.types import AgentBox, RoadLine
 
 LineType = Literal["solid", "dashed", "none"]
 
@@ -42,6 +42,15 @@ class RoadMap:
     road_edges: list[np.ndarray]
     surface_polygons: list[np.ndarray]
     props: list[AgentBox] = dataclasses.field(default_factory=list)
+
+    def road_lines(self) -> list[RoadLine]:
+        """The road as world polylines (z = 0): lane centres, lane borders with their paint, kerbs, and
+        the outlines of the surface polygons (what a log's ``/road`` channel carries)."""
+        z = lambda p: np.concatenate([p, np.zeros((len(p), 1))], axis=1)  # noqa: E731  (x, y) -> (x, y, 0)
+        lines = [RoadLine("lane_center", z(c)) for c in self.lane_centers]
+        lines += [RoadLine("lane_boundary", z(b.points_xy), b.line_type) for b in self.boundaries]
+        lines += [RoadLine("road_edge", z(e)) for e in self.road_edges]
+        return lines + [RoadLine("road_surface", z(p)) for p in self.surface_polygons if len(p) >= 3]
 
     def bounds_xy(self) -> tuple[np.ndarray, np.ndarray]:
         """(min_xy, max_xy) of every lane centre line (m)."""

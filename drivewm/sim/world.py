@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from drivewm.geometry import Rig, load_rig
 from drivewm.sim.conditions import condition_for
 from drivewm.sim.config import SimConfig
@@ -22,11 +24,17 @@ def sim_rig(cfg: SimConfig) -> Rig:
     return rig if cfg.width is None else rig.scaled(cfg.width, cfg.height, fit="stretch")
 
 
-def build_renderer(cfg: SimConfig, rec: SceneRecording, rig: Rig) -> Renderer:
-    """Place props along the recording's roads and build the renderer for its condition."""
+def place_world_props(cfg: SimConfig, rec: SceneRecording) -> tuple[np.ndarray, np.ndarray]:
+    """Place the props (lamps, buildings, trees) along the recording's roads into ``rec.road.props``
+    (seeded: the same drive gets the same props, rendered or not); returns the drawn area (lo_xy, hi_xy)."""
     xy = rec.ego_xy()
     lo, hi = xy.min(axis=0) - TEXTURE_MARGIN_M, xy.max(axis=0) + TEXTURE_MARGIN_M
-    urban = cfg.source == "sumo"
-    rec.road.props = place_props(rec.road, lo, hi, cfg.seed, urban)
+    rec.road.props = place_props(rec.road, lo, hi, cfg.seed, cfg.source == "sumo")
+    return lo, hi
+
+
+def build_renderer(cfg: SimConfig, rec: SceneRecording, rig: Rig) -> Renderer:
+    """Place props along the recording's roads and build the renderer for its condition."""
+    lo, hi = place_world_props(cfg, rec)
     cond = condition_for(cfg.weather, cfg.time_of_day)
-    return Renderer(rig, rec.road, cond, cfg.seed, lo, hi, urban, cfg.max_range_m)
+    return Renderer(rig, rec.road, cond, cfg.seed, lo, hi, cfg.source == "sumo", cfg.max_range_m)

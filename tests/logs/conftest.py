@@ -62,6 +62,15 @@ def synthetic_road() -> list[RoadLine]:
         RoadLine("lane_boundary", line(0.0), "dashed"),
         RoadLine("road_edge", line(-3.5), "solid"),
         RoadLine("road_edge", line(3.5), "solid"),
+        RoadLine("road_surface", np.concatenate([line(-3.5), line(3.5)[::-1]])),
+    ]
+
+
+def synthetic_static() -> list[AgentBox]:
+    """A building and a lamp post beside the road."""
+    return [
+        AgentBox("bldg0", "building", np.array([30.0, 12.0, 5.0]), np.array([14.0, 9.0, 10.0]), 0.2, (0.7, 0.6, 0.5)),
+        AgentBox("pole1", "pole", np.array([18.0, 5.1, 3.75]), np.array([0.22, 0.22, 7.5]), -1.3, (0.45, 0.46, 0.48)),
     ]
 
 
@@ -78,7 +87,8 @@ def make_synthetic_log(path: str = "synthetic") -> DriveLog:
         "a synthetic snowy drive",
     )
     agents = [(t, synthetic_agents(i)) for i, t in enumerate(ts)]
-    return DriveLog(path, rig, images, np.array(ts, dtype=np.int64), poses, scene, agents, synthetic_road())
+    stamps = np.array(ts, dtype=np.int64)
+    return DriveLog(path, rig, images, stamps, poses, scene, agents, synthetic_road(), static=synthetic_static())
 
 
 @pytest.fixture(scope="session")
@@ -122,11 +132,16 @@ def _assert_same_log(
     if agents:
         assert [t for t, _ in got.agents] == [t for t, _ in want.agents]
         for (_, gb), (_, wb) in zip(got.agents, want.agents):
-            assert [(b.track_id, b.category) for b in gb] == [(b.track_id, b.category) for b in wb]
-            for b, c in zip(gb, wb):
-                np.testing.assert_array_equal(b.center_xyz, c.center_xyz)
-                np.testing.assert_array_equal(b.size_lwh, c.size_lwh)
-                assert abs(b.yaw_rad - c.yaw_rad) < 1e-12 and np.allclose(b.color_rgb, c.color_rgb, atol=1e-7)
+            _assert_same_boxes(gb, wb)
+        _assert_same_boxes(got.static, want.static)
+
+
+def _assert_same_boxes(got: list[AgentBox], want: list[AgentBox]) -> None:
+    assert [(b.track_id, b.category) for b in got] == [(b.track_id, b.category) for b in want]
+    for b, c in zip(got, want):
+        np.testing.assert_array_equal(b.center_xyz, c.center_xyz)
+        np.testing.assert_array_equal(b.size_lwh, c.size_lwh)
+        assert abs(b.yaw_rad - c.yaw_rad) < 1e-12 and np.allclose(b.color_rgb, c.color_rgb, atol=1e-7)
 
 
 @pytest.fixture(scope="session")

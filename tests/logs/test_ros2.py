@@ -65,5 +65,59 @@ def test_shipped_nuscenes6_map_matches_the_exporter():
     want = ros2_topic_map(empty, (), "pose_stamped")
     got = load_topic_map("drivewm_ros2_nuscenes6")
     assert list(got.cameras) == rig.names
-    assert got.cameras == want.cameras and got.ego_pose == want.ego_pose
+    assert got.cameras == want.cameras and got.ego_pose == want.ego_pose and got.layout == want.layout
     assert (got.world_frame, got.ego_frame, got.rig_name) == (want.world_frame, want.ego_frame, want.rig_name)
+
+
+@pytest.mark.parametrize("agents", ["detections", "markers"])
+def test_ros2_bag_layout_reads_back_in_the_world_frame(tmp_path, synthetic_log, agents):
+    """Road users published per tick in base_link (Detection3DArray or MarkerArray CUBEs), static objects
+    and road lines as map-frame MarkerArrays come back placed in the world by the ego pose, as logged."""
+    path = write_log_ros2(synthetic_log, tmp_path / "bag.mcap", agents=agents)
+    got = read_log(path, topic_map=ros2_topic_map(synthetic_log, agents=agents))
+    finite = [(t, b) for t, b in synthetic_log.agents if np.isfinite(dict(_poses(synthetic_log))[t]).all()]
+    assert [t for t, _ in got.agents] == [t for t, _ in finite]  # the tick of the pose gap has no boxes
+    for (_, gb), (_, wb) in zip(got.agents, finite):
+        assert [b.category for b in gb] == [b.category for b in wb]
+        if agents == "detections":
+            assert [b.track_id for b in gb] == [b.track_id for b in wb]
+        for b, c in zip(gb, wb):
+            np.testing.assert_allclose(b.center_xyz, c.center_xyz, atol=1e-9)
+            np.testing.assert_allclose(b.size_lwh, c.size_lwh, atol=0)
+            assert abs(np.angle(np.exp(1j * (b.yaw_rad - c.yaw_rad)))) < 1e-9
+    tracks = {b.track_id for _, boxes in got.agents for b in boxes}
+    assert len(tracks) == 2  # each road user keeps its id over the ticks
+    assert [(b.track_id.split("/")[0], b.category) for b in got.static] == [("building", "building"), ("pole", "pole")]
+    for b, c in zip(got.static, synthetic_log.static):
+        np.testing.assert_allclose(b.center_xyz, c.center_xyz, atol=1e-12)
+    assert [(r.kind, r.line_type) for r in got.road] == [(r.kind, r.line_type) for r in synthetic_log.road]
+    for g, w in zip(got.road, synthetic_log.road):
+        np.testing.assert_allclose(g.points_xyz, w.points_xyz, atol=1e-12)
+
+
+def _poses(log):
+    return zip(log.pose_timestamps_ns.tolist(), log.T_world_from_ego)
+
+
+def test_topic_map_renames_classes_and_line_kinds(tmp_path, synthetic_log):
+    """A fleet's own names (a detector's class ids, a map's marker namespaces) become drivewm's."""
+    path = write_log_ros2(synthetic_log, tmp_path / "bag.mcap")
+    tmap = ros2_topic_map(synthetic_log)
+    tmap.layout.classes = {"truck": "bus", "lane_boundary/dashed": "lane_boundary/solid", "road_edge": "lane_center"}
+    got = read_log(path, topic_map=tmap)
+    assert {b.category for _, boxes in got.agents for b in boxes} == {"car", "bus"}
+    assert [(r.kind, r.line_type) for r in got.road][2:5] == [
+        ("lane_boundary", "solid"),
+        ("lane_center", "solid"),
+        ("lane_center", "solid"),
+    ]
+
+
+def test_boxes_that_cannot_be_placed_are_left_out_with_a_warning(tmp_path, synthetic_log):
+    """Detections in base_link, but the map reads no ego pose (its PoseStamped topic is not mapped): the
+    road users cannot be placed in the world; the map-frame objects and the images still read."""
+    path = write_log_ros2(synthetic_log, tmp_path / "bag.mcap", ego_pose="pose_stamped")
+    got = read_log(path, topic_map=ros2_topic_map(synthetic_log), require_images=False)
+    assert got.agents == [] and len(got.static) == 2 and len(got.road) == len(synthetic_log.road)
+    assert any("frame 'base_link' left out" in w for w in got.warnings)
+    assert all(len(frames) == 6 for frames in got.images.values())

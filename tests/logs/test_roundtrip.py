@@ -37,10 +37,11 @@ def test_file_layout_is_the_contract(synthetic_mcap, synthetic_log):
     assert layout["/CAM_FRONT/image"] == ("foxglove.CompressedImage", "protobuf")
     assert layout["/CAM_FRONT/calibration"] == ("foxglove.CameraCalibration", "protobuf")
     assert layout["/tf_static"] == layout["/tf"] == ("foxglove.FrameTransforms", "protobuf")
-    assert layout["/agents"] == ("foxglove.SceneUpdate", "protobuf")
+    assert layout["/agents"] == layout["/static"] == layout["/road"] == ("foxglove.SceneUpdate", "protobuf")
     assert layout["/scene"] == ("drivewm.Scene", "json")
     assert times["/CAM_FRONT/image"] == list(synthetic_log.pose_timestamps_ns)
     assert times["/tf"] == list(synthetic_log.pose_timestamps_ns)
+    assert times["/static"] == times["/road"] == [synthetic_log.pose_timestamps_ns[0]]  # once, at the start
 
 
 def test_images_written_from_arrays_decode_close(tmp_path):

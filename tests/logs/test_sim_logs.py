@@ -41,3 +41,22 @@ def test_sim_log_tags_say_the_conditions(sim_logs):
 def test_sim_log_round_trips(sim_logs, tmp_path, assert_same_log):
     log = sim_logs["roundabout_clear"]
     assert_same_log(read_log(write_log(log, tmp_path / "again.mcap")), log, rot_atol=1e-15)
+
+
+def test_sim_logs_carry_the_static_objects_and_road_surface(sim_logs):
+    """/static holds the props the renderer draws (lamps, trees, buildings), beside the road, and /road
+    the outlines of the paved surface besides the lane lines."""
+    from matplotlib.path import Path as MplPath
+
+    for name, log in sim_logs.items():
+        categories = {b.category for b in log.static}
+        assert categories == {"pole", "lamp", "trunk", "crown", "building"}, name
+        surfaces = [MplPath(r.points_xyz[:, :2]) for r in log.road if r.kind == "road_surface"]
+        assert surfaces and {r.kind for r in log.road} >= {"lane_boundary", "road_edge", "road_surface"}
+        on_road = np.zeros(len(log.static), dtype=bool)
+        for s in surfaces:
+            on_road |= s.contains_points(np.array([b.center_xyz[:2] for b in log.static]))
+        lamps = np.array([b.category == "lamp" for b in log.static])  # lamp heads hang over the road
+        assert not on_road[~lamps].any(), name
+        assert all(b.center_xyz[2] > 0 and np.all(b.size_lwh > 0) for b in log.static)
+        assert len({b.track_id for b in log.static}) == len(log.static)

@@ -68,6 +68,13 @@ def test_ego_trajectory_agents_and_road(recording, synthetic_log):
     (edges,) = _rows(recording, "/world/road/road_edge", "LineStrips3D:strips", static=True)
     assert len(edges) == 2 and len(edges[0]) == 9
     np.testing.assert_allclose(edges[1], synthetic_log.road[4].points_xyz, rtol=1e-6)
+    (surface,) = _rows(recording, "/world/road/road_surface", "LineStrips3D:strips", static=True)
+    outline = synthetic_log.road[5].points_xyz
+    np.testing.assert_allclose(surface[0], np.concatenate([outline, outline[:1]]), rtol=1e-6)  # drawn closed
+    (static,) = _rows(recording, "/world/static", "Boxes3D:labels", static=True)
+    assert static == ["building:bldg0", "pole:pole1"]
+    (centers,) = _rows(recording, "/world/static", "Boxes3D:centers", static=True)
+    np.testing.assert_allclose(centers[0], synthetic_log.static[0].center_xyz, rtol=1e-6)
     (text,) = _rows(recording, "/scene", "TextDocument:text", static=True)
     assert "**weather**: snow" in text[0] and "a synthetic snowy drive" in text[0]
 
