@@ -15,7 +15,22 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivewm.logs.types import AgentBox
+
+@dataclasses.dataclass
+class AgentBox:
+    """Another road user as an oriented 3D box in the world frame.
+
+    ``center_xyz`` is the box centre (m), ``size_lwh`` length/width/height (m), ``yaw_rad`` its
+    heading about +z; ``color_rgb`` in [0, 1]; ``category`` e.g. car, truck, pedestrian.
+    """
+
+    track_id: str
+    category: str
+    center_xyz: np.ndarray
+    size_lwh: np.ndarray
+    yaw_rad: float
+    color_rgb: tuple[float, float, float] = (0.5, 0.5, 0.5)
+
 
 #: ``T_world_from(frame_id, timestamps_ns (K,)) -> (K, 4, 4)``, or None when the frame cannot be placed.
 Placer = Callable[[str, np.ndarray], "np.ndarray | None"]

@@ -7,16 +7,13 @@ Simulated logs, Foxglove (protobuf or JSON) logs and ROS 2 logs all become the s
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
-
-if TYPE_CHECKING:
-    from drivewm.logs.agent_table import AgentTable
+from drivewm.logs.agent_table import AgentBox, AgentTable
 
 #: Scene tag keys every log carries (values are free strings; these are the known ones).
 SCENE_TAG_KEYS = ("weather", "time_of_day", "road_type", "traffic_density", "source")
@@ -40,22 +37,6 @@ class ImageFrame:
         if bgr is None:
             raise DrivewmError(f"image at {self.timestamp_ns} ns: cannot decode {self.format} data")
         return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-
-
-@dataclasses.dataclass
-class AgentBox:
-    """Another road user as an oriented 3D box in the world frame.
-
-    ``center_xyz`` is the box centre (m), ``size_lwh`` length/width/height (m), ``yaw_rad`` its
-    heading about +z; ``color_rgb`` in [0, 1]; ``category`` e.g. car, truck, pedestrian.
-    """
-
-    track_id: str
-    category: str
-    center_xyz: np.ndarray
-    size_lwh: np.ndarray
-    yaw_rad: float
-    color_rgb: tuple[float, float, float] = (0.5, 0.5, 0.5)
 
 
 @dataclasses.dataclass
