@@ -136,7 +136,7 @@ def interleaved(cases: list) -> list:
 
 
 def print_table(summary: dict, nfe: int) -> None:
-    from drivewm.transfer.benchmark import REFERENCES
+    from transfer_benchmark import REFERENCES
 
     cols = ("clips", "psnr", "ssim", "sift_shift_px", "cse_ratio", "cse_calibrated_ratio", "adherence")
     print(f"{'target':<13}{'method':<18}{'nfe':>4}" + "".join(f"{c[:20]:>21}" for c in cols))
@@ -161,7 +161,7 @@ def print_cse_parts(summary: dict) -> None:
 def verdict(summary: dict, band_px: float | None = None, shared_look: bool = True) -> list[str]:
     """The must-holds over all targets, the transfer model against the best SDEdit sigma by PSNR, both at
     detail band ``band_px`` (None: the default) and with the look shared between cameras or not."""
-    from drivewm.transfer.benchmark import BAND_PX, NOISE_LEVELS, NOISE_NAME, band_name
+    from transfer_benchmark import BAND_PX, NOISE_LEVELS, NOISE_NAME, band_name
 
     band = BAND_PX if band_px is None else band_px
     allm = summary["all"]
@@ -207,14 +207,21 @@ def main(argv=None) -> int:
     looks = tuple(names[k] for k in keys)
     check_args(args)
     import torch
+    from transfer_benchmark import (
+        BAND_PX,
+        REFERENCES,
+        band_name,
+        network_evaluations,
+        paired_cases,
+        run_cases,
+        summarize,
+    )
 
     from drivewm.atomic import write_text
     from drivewm.diffusion.dit import count_parameters
     from drivewm.sim.paired import parse_conditions
     from drivewm.tokenizer import Tokenizer
-    from drivewm.transfer.benchmark import BAND_PX, REFERENCES, band_name, paired_cases, run_cases, summarize
     from drivewm.transfer.retarget import TargetCondition
-    from drivewm.transfer.sampling import network_evaluations
 
     torch.set_num_threads(args.threads)
     source = TargetCondition(*parse_conditions(args.source)[0])

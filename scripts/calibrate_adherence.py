@@ -3,7 +3,7 @@
 ``python scripts/calibrate_adherence.py [--seeds 2] [--duration 1.0] [--tokenizer shipped:tokenizer]
 [--coded-size 160x96] [--out FILE]`` simulates short nuscenes6 drives (highway-env and SUMO) for
 every weather x time-of-day pair, computes :func:`drivewm.eval.adherence.condition_scores` per drive,
-fits the nearest-centroid tables (:func:`drivewm.eval.adherence.fit_calibration`) and writes them,
+fits the nearest-centroid tables (:func:`fit_calibration`) and writes them,
 with the training accuracy per domain, as the JSON table the package ships (read by
 :func:`drivewm.eval.adherence.load_calibration`). With ``--tokenizer``, every pair is rendered once
 more as a clip is curated (17 frames at 10 fps), resized to ``--coded-size`` and coded by that
@@ -26,7 +26,7 @@ from tqdm import tqdm
 from drivewm import resources
 from drivewm.atomic import write_text
 from drivewm.choices import model_folder
-from drivewm.eval.adherence import classify_condition, condition_scores, fit_calibration
+from drivewm.eval.adherence import FEATURES, classify_condition, condition_scores
 from drivewm.logs.reader import read_log
 from drivewm.logs.types import TIMES_OF_DAY, WEATHERS
 from drivewm.multiview.coding import code_views
@@ -35,6 +35,22 @@ from drivewm.tokenizer import Tokenizer
 
 SOURCES = (("highway", "highway"), ("sumo", "grid"))
 CODED_FRAMES, CODED_FPS = 17, 10.0  # a curated clip's length and rate (curate recipes worldmodel, transfer)
+
+
+def fit_calibration(samples: list[tuple]) -> dict:
+    """Fit the classifier tables from (scores, weather, time_of_day[, domain]) samples of labelled
+    renders; a sample with a domain (say ``coded``) adds to that domain's centroid of its class."""
+    X = np.array([[s[0][k] for k in FEATURES] for s in samples])
+    mean, std = X.mean(0), X.std(0) + 1e-6
+    Z = (X - mean) / std
+    labels = np.array(["/".join(s[1:3]) + (f"/{s[3]}" if len(s) > 3 and s[3] else "") for s in samples])
+    cents = {str(c): Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
+    return {
+        "features": list(FEATURES),
+        "mean": mean.round(8).tolist(),
+        "std": std.round(8).tolist(),
+        "centroids": cents,
+    }
 
 
 def render(weather: str, time_of_day: str, seed: int, source: tuple[str, str], duration_s: float, fps: float):

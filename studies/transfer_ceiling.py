@@ -27,16 +27,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections import defaultdict
+from pathlib import Path
 
 import cv2
 import numpy as np
 from tqdm import tqdm
 
 from drivewm.sim.paired import parse_conditions
-from drivewm.transfer.benchmark import ScoredPair, paired_cases
-from drivewm.transfer.metrics import cross_view_error, image_scores
 from drivewm.transfer.retarget import TargetCondition
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from transfer_benchmark import ScoredPair, paired_cases  # noqa: E402
+from transfer_metrics import cross_view_error, image_scores  # noqa: E402
 
 
 def guided_filter(guide: np.ndarray, image: np.ndarray, radius: int, eps: float) -> np.ndarray:

@@ -5,7 +5,7 @@ clear and in snow to train on, another drive (never seen) to score, both coded b
 stand-in tokenizer (tests/multiview/mv_standin.py), a tiny random Text2World parent. Each variant of
 ``transfer.*`` is post-trained from the same parent with the same steps, seed and data, then
 transfers the held-out clear clip to snow and is scored against the simulator's own snow rendering
-(drivewm.transfer.benchmark), beside SDEdit with the parent at the same Euler steps (the same
+(benchmarks/transfer_benchmark.py), beside SDEdit with the parent at the same Euler steps (the same
 network evaluations) and the two references (identity: the source unchanged; tokenizer: the coded
 truth). CSE is left out (seconds per clip, and meaningless on 8x8 blocks: see the test's docstring).
 
@@ -26,7 +26,6 @@ import torch
 
 from drivewm.atomic import write_text
 from drivewm.diffusion.dit import count_parameters
-from drivewm.transfer.benchmark import paired_cases, run_cases, summarize
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
 from drivewm.transfer.sdedit import sdedit_latents
@@ -37,6 +36,9 @@ from mv_standin import PoolTokenizer, write_pooled_cache  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "transfer"))
 from transfer_tiny import paired_clips, pooled_parent  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from transfer_benchmark import paired_cases, run_cases, summarize  # noqa: E402
 
 CLEAR, SNOW = TargetCondition("clear", "day"), TargetCondition("snow", "day")
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -33,11 +34,14 @@ from tqdm import tqdm
 
 from drivewm.diffusion.text2world import Text2World
 from drivewm.multiview.coding import decode_views, encode_views, resize_views
-from drivewm.transfer.benchmark import ScoredPair, paired_cases, score_output
-from drivewm.transfer.metrics import cross_view_error
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.resolution import output_size_hw, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from transfer_benchmark import ScoredPair, paired_cases, score_output  # noqa: E402
+from transfer_metrics import cross_view_error  # noqa: E402
+
 from drivewm.transfer.sdedit import sdedit_latents
 
 STEPS, SDEDIT_SIGMA = 8, 8.0  # the benchmark's: 8 Euler steps each, SDEdit's best sigma

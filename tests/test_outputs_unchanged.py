@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import safetensors.torch
+from synthetic_latents import make_synthetic_latent_cache
 
 from drivewm.cli import main
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.logs.reader import read_log
 
 GOLDEN = Path(__file__).with_name("outputs_unchanged.json")

@@ -239,8 +239,10 @@ def test_the_shipped_transfer_model_turns_an_unseen_clear_clip_to_snow_and_keeps
     within 2 px of its source position (issue 18's must-hold), labels kept."""
     from drivewm.diffusion.generate import video_to_uint8
     from drivewm.multiview.coding import frames_to_video
-    from drivewm.transfer.metrics import adherent, sift_shift_px
     from drivewm.transfer.retarget import TargetCondition
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    from transfer_metrics import adherent, sift_shift_px
 
     clear = next(c for c in iter_clips(sim_clip_dir) if c.meta.tags.get("weather") == "clear")
     assert main(["transfer", str(sim_clip_dir), "--to", "snow", "--max-clips", "1", "--out", str(tmp_path)]) == 0

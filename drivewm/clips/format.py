@@ -157,12 +157,6 @@ class Clip:
         return np.stack([self.video(c) for c in self.meta.cameras])
 
 
-def pair_drive(pair_id: str) -> str:
-    """The drive of a ``pair_id`` (``<drive_id>-t<start tick>``, drivewm.curate.stage.pair_id): every
-    window of one drive shares it."""
-    return pair_id.rsplit("-t", 1)[0]
-
-
 def clip_from_arrays(
     meta: ClipMeta,
     frames: dict[str, np.ndarray],

@@ -13,20 +13,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from drivewm.curate.images import analysis_grey
-
 THUMB_WH = (16, 9)
 
 
 def key_frames(T: int) -> list[int]:
     """The frames of a T-frame clip that the embedding looks at: first, middle, last."""
     return [0, T // 2, T - 1]
-
-
-def clip_embedding(frames: np.ndarray) -> np.ndarray:
-    """(V, T, H, W, 3) uint8 RGB -> (V * 3 * 144,) float32 unit vector (see :func:`grey_embedding`)."""
-    keep = key_frames(frames.shape[1])
-    return grey_embedding(np.stack([[analysis_grey(cam[t]) for t in keep] for cam in frames]))
 
 
 def grey_embedding(grey: np.ndarray) -> np.ndarray:

@@ -11,12 +11,6 @@ import cv2
 import numpy as np
 
 from drivewm.curate.config import FilterConfig
-from drivewm.curate.images import analysis_grey
-
-
-def grey_small(frames: np.ndarray) -> np.ndarray:
-    """(V, T, H, W, 3) uint8 RGB -> (V, T, h, 160) uint8 grey (aspect kept, images.analysis_grey)."""
-    return np.stack([np.stack([analysis_grey(f) for f in cam]) for cam in frames])
 
 
 def sharpness(grey: np.ndarray) -> float:
@@ -88,14 +82,10 @@ def ego_distance_m(positions_world: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(positions_world, axis=0), axis=1).sum())
 
 
-def score_clip(frames: np.ndarray, positions_world: np.ndarray | None, cfg: FilterConfig) -> dict[str, float]:
-    """All filter scores of one clip of uint8 RGB frames (V, T, H, W, 3); see :func:`score_grey`."""
-    return score_grey(grey_small(frames), positions_world, cfg)
-
-
 def score_grey(grey: np.ndarray, positions_world: np.ndarray | None, cfg: FilterConfig) -> dict[str, float]:
-    """All filter scores of one clip from its grey thumbnails (V, T, h, 160) uint8 (:func:`grey_small`,
-    or made once per frame while streaming). ``positions_world`` None means the ego motion is unknown."""
+    """All filter scores of one clip from its grey thumbnails (V, T, h, 160) uint8
+    (drivewm.curate.images.analysis_grey, made once per frame while streaming). ``positions_world``
+    None means the ego motion is unknown."""
     bad, luma = bad_exposure_fraction(grey, cfg.dark_luma, cfg.dark_highlight, cfg.bright_fraction)
     scores = {
         "sharpness": sharpness(grey),

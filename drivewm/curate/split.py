@@ -1,19 +1,12 @@
-"""Splitting synchronized ticks into clips: never across a time gap or a shot boundary.
+"""The valid runs of synchronized ticks: clips never cross a time gap.
 
-Shot boundaries come from scenedetect-headless's AdaptiveDetector run on the reference camera:
-it scores each frame's HSV + edge change (ContentDetector's score) against the rolling average
-of its neighbours, so steady fast camera motion (driving, where ContentDetector alone fires
-every few frames on textured scenes) is not a cut, while a hard cut still stands out. Clips are windows of
-``clip_frames`` consecutive valid ticks inside one segment, starting every ``stride_frames``.
+Inside a run, shot boundaries cut segments and clips are windows of ``clip_frames`` consecutive
+ticks inside one segment (drivewm.curate.windows, which finds them while the log streams).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
-import cv2
 import numpy as np
-from scenedetect import AdaptiveDetector, FrameTimecode
 
 
 def valid_runs(valid: np.ndarray) -> list[tuple[int, int]]:
@@ -21,31 +14,3 @@ def valid_runs(valid: np.ndarray) -> list[tuple[int, int]]:
     padded = np.concatenate([[False], np.asarray(valid, dtype=bool), [False]])
     edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
-
-
-def shot_boundaries(frames_rgb: Iterable[np.ndarray], fps: float, threshold: float, min_frames: int) -> list[int]:
-    """Indices i where a new shot starts at frame i (i > 0), from uint8 RGB (H, W, 3) frames in order.
-
-    ``threshold``: AdaptiveDetector's ratio of a frame's change score to its neighbours' average.
-    """
-    detector = AdaptiveDetector(adaptive_threshold=threshold, min_scene_len=min_frames)
-    cuts: list[int] = []
-    n = 0
-    for n, frame in enumerate(frames_rgb):
-        cuts += [
-            int(tc.frame_num)
-            for tc in detector.process_frame(FrameTimecode(n, float(fps)), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
-        ]
-    cuts += [int(tc.frame_num) for tc in detector.post_process(FrameTimecode(n + 1, float(fps)))]
-    return sorted(c for c in set(cuts) if c > 0)
-
-
-def split_segment(start: int, end: int, cuts: list[int]) -> list[tuple[int, int]]:
-    """Cut the range [start, end) at the (absolute) boundary indices in ``cuts``."""
-    bounds = [start] + [c for c in sorted(cuts) if start < c < end] + [end]
-    return [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-
-
-def clip_windows(segments: list[tuple[int, int]], clip_frames: int, stride_frames: int) -> list[tuple[int, int]]:
-    """[start, start + clip_frames) windows inside each segment, every ``stride_frames``."""
-    return [(s, s + clip_frames) for a, b in segments for s in range(a, b - clip_frames + 1, stride_frames)]

@@ -1,5 +1,4 @@
-"""Clip windows of a tick stream: the windows of :mod:`drivewm.curate.split`, emitted as soon as
-no later frame can change them.
+"""Clip windows of a tick stream, emitted as soon as no later frame can change them.
 
 Batch form (``split``): inside each valid run [a, b) long enough for a clip, shot boundaries of
 the reference camera cut the run into segments, and windows of ``clip_frames`` start every
@@ -8,8 +7,9 @@ frame per tick and reports a cut at frame c only after frame c + lag (AdaptiveDe
 a frame with ``window_width`` neighbours on each side: ``event_buffer_length``). A window
 [s, s + clip_frames) is final once every cut up to its last frame is known, or the run has
 ended; a known cut inside it starts a new segment at the cut instead. The windows and their
-order are exactly the batch ones (tests/curate/test_streaming.py), and the oldest tick a future
-window can use (:attr:`WindowStream.oldest_needed`) bounds what the caller must keep.
+order are exactly the batch ones (tests/curate/batch_split.py; test_streaming.py checks), and the
+oldest tick a future window can use (:attr:`WindowStream.oldest_needed`) bounds what the caller
+must keep.
 """
 
 from __future__ import annotations

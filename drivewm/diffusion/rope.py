@@ -59,8 +59,3 @@ def rotate(x: torch.Tensor, rotation: torch.Tensor) -> torch.Tensor:
     (..., head_dim // 2)); computed in float32 (complex bf16 does not exist), returned in x's dtype."""
     pairs = torch.view_as_complex(x.float().unflatten(-1, (-1, 2)).contiguous())  # (..., head_dim/2)
     return torch.view_as_real(pairs * rotation).flatten(-2).to(x.dtype)
-
-
-def apply_rope(x: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
-    """Rotate ``x`` (B, heads, N, head_dim) by ``angles`` (B, N, head_dim // 2), pairing adjacent channels."""
-    return rotate(x, rope_rotation(angles).unsqueeze(1))

@@ -143,22 +143,6 @@ def load_calibration() -> dict:
     return json.loads((resources.package_dir("tables") / "adherence_calibration.json").read_text())
 
 
-def fit_calibration(samples: list[tuple]) -> dict:
-    """Fit the classifier tables from (scores, weather, time_of_day[, domain]) samples of labelled
-    renders; a sample with a domain (say ``coded``) adds to that domain's centroid of its class."""
-    X = np.array([[s[0][k] for k in FEATURES] for s in samples])
-    mean, std = X.mean(0), X.std(0) + 1e-6
-    Z = (X - mean) / std
-    labels = np.array(["/".join(s[1:3]) + (f"/{s[3]}" if len(s) > 3 and s[3] else "") for s in samples])
-    cents = {str(c): Z[labels == c].mean(0).round(6).tolist() for c in sorted(set(labels))}
-    return {
-        "features": list(FEATURES),
-        "mean": mean.round(8).tolist(),
-        "std": std.round(8).tolist(),
-        "centroids": cents,
-    }
-
-
 def adherence(scores: dict[str, float], prompted: dict[str, str], calibration: dict | None = None) -> dict:
     """Per-clip adherence: for each prompted field (weather, time_of_day) whether the classifier
     agrees (1.0 / 0.0) and the probability it gives the prompted class."""

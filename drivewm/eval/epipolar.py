@@ -151,12 +151,6 @@ def verified_mask(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> 
     return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
 
 
-def verified_matches(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> Matches:
-    """The matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
-    keep = verified_mask(F_fit, m, cfg)
-    return Matches(m.uv_a[keep], m.uv_b[keep])
-
-
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
     """Median Sampson error of the verified matches ``m`` under F -- the same set for the fitted
     and the calibrated F (docs/eval-protocol.md, 'Per-pair error')."""

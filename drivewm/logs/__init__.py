@@ -3,8 +3,6 @@
 - :mod:`drivewm.logs.writer`: ``LogWriter`` / ``write_log`` (Foxglove SDK, protobuf, atomic);
 - :mod:`drivewm.logs.reader`: ``read_log`` (Foxglove protobuf or JSON, ROS 2 through a topic map);
 - :mod:`drivewm.logs.topicmap`: topic maps (``drivewm/topicmaps/*.yaml``);
-- :mod:`drivewm.logs.json_writer`, :mod:`drivewm.logs.ros2_writer`: exports as JSON-encoded
-  Foxglove and as a ROS 2 bag;
 - :mod:`drivewm.logs.viewer`: a Rerun recording of a log (``drivewm view``).
 
 Heavy modules (the Foxglove SDK, mcap decoders, rerun) load only when used, and the public names

@@ -81,26 +81,3 @@ class CameraVideos:
         if len(self._cache) > self.cache_size:
             self._cache.popitem(last=False)
         return frames
-
-
-class CropSampler:
-    """Random crops (B, 3, frames, H, W) in [-1, 1] from camera videos, drawn from (seed, step)."""
-
-    def __init__(self, videos: CameraVideos, frames: int, crop_hw: tuple[int, int], seed: int):
-        self.videos, self.frames, self.crop_hw, self.seed = videos, frames, tuple(crop_hw), seed
-        shortest = min(len(c.meta.timestamps_ns) for c in videos.clips)
-        if frames > shortest:
-            raise DrivewmError(f"training wants {frames} frames per sample but the shortest clip has {shortest}")
-
-    def batch(self, step: int, batch_size: int) -> torch.Tensor:
-        rng = np.random.default_rng([self.seed, step])
-        return torch.stack([self._crop(rng) for _ in range(batch_size)])
-
-    def _crop(self, rng: np.random.Generator) -> torch.Tensor:
-        frames = self.videos.frames(int(rng.integers(len(self.videos))))
-        (t_all, h_all, w_all, _), (ch, cw) = frames.shape, self.crop_hw
-        if ch > h_all or cw > w_all:
-            raise DrivewmError(f"crop {ch}x{cw} is larger than the clip frames {h_all}x{w_all}")
-        t0 = int(rng.integers(t_all - self.frames + 1))
-        y0, x0 = int(rng.integers(h_all - ch + 1)), int(rng.integers(w_all - cw + 1))
-        return to_model_range(np.ascontiguousarray(frames[t0 : t0 + self.frames, y0 : y0 + ch, x0 : x0 + cw]))

@@ -7,9 +7,9 @@ import json
 
 import pytest
 from safetensors.torch import load_file, save_file
+from synthetic_latents import make_synthetic_latent_cache
 
 from drivewm.clips.latents import LatentCache, find_latent_cache
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.errors import DrivewmError
 
 

@@ -8,12 +8,27 @@ import numpy as np
 
 from drivewm.curate.captions import Captioner, ClipInfo, TemplateCaptioner, classify_manoeuvre, load_captioner
 from drivewm.curate.config import FilterConfig
-from drivewm.curate.dedup import clip_embedding, near_duplicates
-from drivewm.curate.filters import bad_exposure_fraction, frozen_fraction, judge, score_clip, sharpness
+from drivewm.curate.dedup import grey_embedding, key_frames, near_duplicates
+from drivewm.curate.filters import bad_exposure_fraction, frozen_fraction, judge, score_grey, sharpness
+from drivewm.curate.images import analysis_grey
 from drivewm.geometry import load_rig
 
 sys.path.insert(0, str(Path(__file__).parent))
 from synth import texture  # noqa: E402
+
+
+def score_clip(frames: np.ndarray, positions_world: np.ndarray | None, cfg: FilterConfig) -> dict[str, float]:
+    """All filter scores of one clip of uint8 RGB frames (V, T, H, W, 3), as curation scores the
+    thumbnails it makes while streaming (drivewm.curate.filters.score_grey)."""
+    grey = np.stack([np.stack([analysis_grey(f) for f in cam]) for cam in frames])  # (V, T, h, 160)
+    return score_grey(grey, positions_world, cfg)
+
+
+def clip_embedding(frames: np.ndarray) -> np.ndarray:
+    """(V, T, H, W, 3) uint8 RGB -> the dedup embedding (drivewm.curate.dedup.grey_embedding) of its
+    key frames' analysis thumbnails, as curation makes them while streaming."""
+    keep = key_frames(frames.shape[1])
+    return grey_embedding(np.stack([[analysis_grey(cam[t]) for t in keep] for cam in frames]))
 
 
 def moving_clip(seed=0, V=2, T=17, H=96, W=160, step=2):

@@ -11,13 +11,13 @@ import cv2
 import numpy as np
 import pytest
 
-from drivewm.curate.split import clip_windows, shot_boundaries, split_segment
 from drivewm.curate.sync import synchronize
 from drivewm.curate.ticks import TickAssembler
 from drivewm.curate.windows import WindowStream
 from drivewm.logs.types import ImageFrame
 
 sys.path.insert(0, str(Path(__file__).parent))
+from batch_split import clip_windows, shot_boundaries, split_segment  # noqa: E402
 from synth import write_long_log  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]

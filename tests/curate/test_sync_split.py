@@ -1,6 +1,7 @@
 import numpy as np
+from batch_split import clip_windows, split_segment
 
-from drivewm.curate.split import clip_windows, split_segment, valid_runs
+from drivewm.curate.split import valid_runs
 from drivewm.curate.sync import synchronize
 
 MS = 1_000_000

@@ -45,8 +45,10 @@ from drivewm.atomic import write_text
 from drivewm.clips.latents import write_latent_index
 from drivewm.diffusion.data import LatentDataset, normalize_latents
 from drivewm.diffusion.pretrain import pretrain, pretrain_config
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.diffusion.text2world import Text2World
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from synthetic_latents import make_synthetic_latent_cache  # noqa: E402
 
 #: The sigma grid of the x0 error (VE noise levels; t = sigma / (1 + sigma) for the flow model).
 SIGMAS = [0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0]

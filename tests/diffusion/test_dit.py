@@ -6,14 +6,14 @@ import dataclasses
 
 import pytest
 import torch
+from synthetic_latents import make_synthetic_latent_cache
 from torch import nn
 
 from drivewm.cli import main
 from drivewm.diffusion.blocks import SUBLAYERS, BlockContext, DiTBlock, register_sublayer
 from drivewm.diffusion.dit import DiT, count_parameters, patchify, unpatchify
 from drivewm.diffusion.dit_config import DIT_PRESETS, DiTConfig, dit_preset
-from drivewm.diffusion.rope import apply_rope, grid_positions, rope_angles
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
+from drivewm.diffusion.rope import grid_positions, rope_angles, rope_rotation, rotate
 from drivewm.errors import DrivewmError
 
 CFG = DiTConfig(in_channels=4, hidden_dim=64, depth=2, num_heads=4, text_dim=16, adaln_lora_dim=8)
@@ -49,6 +49,12 @@ def test_patchify_roundtrip_and_output_shape():
 
 def test_fresh_dit_outputs_zero_so_edm_starts_at_c_skip_x():
     assert DiT(CFG)(*_inputs()).abs().max() == 0
+
+
+def apply_rope(x: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
+    """Rotate ``x`` (B, heads, N, head_dim) by ``angles`` (B, N, head_dim // 2) as attention does
+    (drivewm.diffusion.rope.rotate), pairing adjacent channels."""
+    return rotate(x, rope_rotation(angles).unsqueeze(1))
 
 
 def _rope_by_pairs(x: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 import torch
+from synthetic_latents import make_synthetic_latent_cache
 
 from drivewm.diffusion.data import LatentDataset, denormalize_latents
 from drivewm.diffusion.pretrain import pretrain, pretrain_config
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.diffusion.text2world import Text2World
 
 

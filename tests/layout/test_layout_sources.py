@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,10 +17,12 @@ from drivewm.curate import curate, load_curate_config
 from drivewm.layout import layout_from_recording
 from drivewm.layout.clip_layout import STATIC
 from drivewm.logs.reader import read_log
-from drivewm.logs.ros2_writer import ros2_topic_map, write_log_ros2
 from drivewm.logs.types import AgentBox
 from drivewm.sim.config import SimConfig
 from drivewm.sim.scene import LaneBoundary, RoadMap, SceneRecording, SceneTick
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "logs"))  # the test exporter of ROS 2 bags
+from ros2_writer import ros2_topic_map, write_log_ros2  # noqa: E402
 
 
 def _shared_drive(name: str) -> SimConfig:

@@ -7,9 +7,9 @@ import os
 from pathlib import Path
 
 import pytest
+from json_writer import write_log_json
 
 from drivewm.errors import DrivewmError
-from drivewm.logs.json_writer import write_log_json
 from drivewm.logs.reader import read_log
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import json
 
+from json_writer import write_log_json
 from mcap.reader import make_reader
 
-from drivewm.logs.json_writer import write_log_json
 from drivewm.logs.reader import read_log
 
 

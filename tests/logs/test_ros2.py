@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 import yaml
+from ros2_writer import ros2_topic_map, write_log_ros2
 
 from drivewm.logs.reader import read_log
-from drivewm.logs.ros2_writer import ros2_topic_map, write_log_ros2
 
 RECEIVE_DELAY_NS = 3_000_000
 

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 import torch
+from synthetic_latents import make_synthetic_latent_cache
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_leaves
 
 from drivewm.cli import main
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 
 TINY_T2W = [
     "--set",

@@ -4,13 +4,32 @@ import json
 
 import pytest
 import torch
+from einops import rearrange
 
 from drivewm.errors import DrivewmError
 from drivewm.tokenizer import PRESETS, Tokenizer, preset
 from drivewm.tokenizer.causal import CausalContext
 from drivewm.tokenizer.fsq import FSQ
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
-from drivewm.tokenizer.wavelet import haar_space, haar_time, inverse_haar_space, inverse_haar_time
+from drivewm.tokenizer.wavelet import SQRT2, haar_space, haar_time
+
+
+def inverse_haar_space(y: torch.Tensor) -> torch.Tensor:
+    """(B, 4C, T, h, w) -> (B, C, T, 2h, 2w); the inverse of drivewm.tokenizer.wavelet.haar_space."""
+    ll, lh, hl, hh = y.chunk(4, dim=1)
+    a, b = (ll + lh + hl + hh) / 2, (ll - lh + hl - hh) / 2
+    c, d = (ll + lh - hl - hh) / 2, (ll - lh - hl + hh) / 2
+    top = rearrange([a, b], "two b c t h w -> b c t h (w two)")
+    bottom = rearrange([c, d], "two b c t h w -> b c t h (w two)")
+    return rearrange([top, bottom], "two b c t h w -> b c t (h two) w")
+
+
+def inverse_haar_time(y: torch.Tensor, first_chunk: bool = True) -> torch.Tensor:
+    """(B, 2C, T', H, W) -> (B, C, T, H, W); the inverse of haar_time: drops the
+    duplicated frame 0 of a first chunk."""
+    low, high = y.chunk(2, dim=1)
+    x = rearrange([(low + high) / SQRT2, (low - high) / SQRT2], "two b c t h w -> b c (t two) h w")
+    return x[:, :, 1:] if first_chunk else x
 
 
 def random_video(T, H=64, W=96, seed=0):

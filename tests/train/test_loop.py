@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 import torch
 from safetensors.torch import load_file
+from synthetic_latents import make_synthetic_latent_cache
 
 from drivewm.diffusion.pretrain import pretrain, pretrain_config
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 from drivewm.train.loop import global_batch
 
 pytestmark = pytest.mark.slow  # trains models, under torchrun too

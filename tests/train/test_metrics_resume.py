@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from synthetic_latents import make_synthetic_latent_cache
 
 from drivewm.diffusion.pretrain import pretrain, pretrain_config
-from drivewm.diffusion.synthetic import make_synthetic_latent_cache
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_loop import TINY  # noqa: E402

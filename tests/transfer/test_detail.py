@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 
 from drivewm.transfer.detail import restore_detail
-from drivewm.transfer.metrics import sift_shift_px
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from transfer_metrics import sift_shift_px  # noqa: E402
 
 
 def _scene(seed: int = 0) -> np.ndarray:

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
 
 from drivewm.clips import iter_clips
-from drivewm.transfer.benchmark import NOISE_LEVELS, with_noise
-from drivewm.transfer.metrics import adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.retarget import TargetCondition
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from transfer_benchmark import NOISE_LEVELS, with_noise  # noqa: E402
+from transfer_metrics import adherent, cross_view_error, image_scores, sift_shift_px  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import pytest
 
-from drivewm.transfer.benchmark import NOISE_NAME, paired_cases, run_cases, summarize
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
 from drivewm.transfer.sdedit import sdedit_latents
@@ -27,6 +26,9 @@ from mv_standin import PoolTokenizer, write_pooled_cache  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from transfer_tiny import paired_clips, pooled_parent  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from transfer_benchmark import NOISE_NAME, paired_cases, run_cases, summarize  # noqa: E402
 
 CLEAR, SNOW = TargetCondition("clear", "day"), TargetCondition("snow", "day")
 

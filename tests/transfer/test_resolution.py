@@ -14,11 +14,12 @@ from drivewm.clips import iter_clips
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.multiview.coding import code_views, resize_views
 from drivewm.transfer.apply import Transferer, TransferOptions, transfer_clip
-from drivewm.transfer.metrics import image_scores, sift_shift_px
 from drivewm.transfer.resolution import UPSAMPLE, detail_window_px, output_size_hw, to_output_size
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "multiview"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from mv_standin import PoolTokenizer  # noqa: E402
+from transfer_metrics import image_scores, sift_shift_px  # noqa: E402
 
 MODEL_HW = (96, 160)
 
@@ -93,9 +94,10 @@ def test_shipped_model_transfers_a_sim_clip_at_its_resolution(clip, tmp_path) ->
     """``drivewm transfer`` with the shipped model (160x96) on a real 320x192 clip, clear to snow: the
     clip comes back at 320x192 with its rig, SIFT matches within 2 px of the source's (issue 18), and
     the adherence classifier calls it snow."""
+    from transfer_metrics import adherent
+
     from drivewm.cli import main
     from drivewm.clips.shards import ShardWriter
-    from drivewm.transfer.metrics import adherent
     from drivewm.transfer.retarget import TargetCondition
 
     with ShardWriter(tmp_path / "in", "in") as writer:
@@ -129,8 +131,9 @@ def test_the_detail_band_keeps_cross_view_matches_a_view_by_view_transfer_loses(
     own mid-scale pattern (noise blurred to 2 px at 160x96). With the tokenizer's residual only (band 0)
     camera pairs lose their verified matches; with the default band the source's structure there comes
     back and the clip's CSE is near the source's."""
+    from transfer_metrics import cross_view_error
+
     from drivewm.transfer.detail import BAND_PX
-    from drivewm.transfer.metrics import cross_view_error
 
     src, coded, transfer = _per_view_transfer(clip, 0.8)
     rig = clip.meta.get_rig()
@@ -149,7 +152,7 @@ def test_a_wide_gain_window_keeps_the_matches_a_per_view_texture_would_modulate_
     in two cameras' overlap and the pair loses verified matches; over the default window (two cells) it
     reads the condition's contrast. Stand-in: the coded clip at 0.3 contrast (dusk), each view with its
     own pattern (noise blurred to 2 px at 160x96), detail at the default band."""
-    from drivewm.transfer.metrics import cross_view_error
+    from transfer_metrics import cross_view_error
 
     src, coded, dusk = _per_view_transfer(clip, 0.3)
     one_cell = to_output_size(dusk, src, coded, window_px=9)  # the first default
@@ -185,9 +188,10 @@ def test_the_shared_look_makes_overlapping_cameras_agree_and_keeps_each_views_st
     and its contrast gain are the feathered mean of the cameras that see each flat-world point: the
     overlaps agree (the eval's overlap_disagreement), cross-view matches are kept, and the structure is
     each view's own source's (SIFT positions). A pixel no other camera sees is left as it was."""
+    from transfer_metrics import cross_view_error
+
     from drivewm.multiview.blend import feathering, overlap_disagreement
     from drivewm.transfer.detail import look_size
-    from drivewm.transfer.metrics import cross_view_error
 
     src, coded, transfer = _per_view_look(clip)
     rig = clip.meta.get_rig()

@@ -15,11 +15,13 @@ from drivewm.transfer.config import TransferConfig
 from drivewm.transfer.init import from_text2world
 from drivewm.transfer.model import Transfer
 from drivewm.transfer.retarget import TargetCondition
-from drivewm.transfer.sampling import network_evaluations
 from drivewm.transfer.sdedit import sdedit_latents
 
 sys.path.insert(0, str(Path(__file__).parent))
 from transfer_tiny import tiny_text2world  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from transfer_benchmark import network_evaluations  # noqa: E402
 
 TARGETS = [TargetCondition("snow", "day"), TargetCondition("clear", "night")]
 CAPTIONS = ["A snow day drive on a highway.", "A clear-weather night drive on a highway."]

@@ -1,4 +1,5 @@
-"""Export a drive log as a ROS 2 MCAP bag (CDR), laid out the way a ROS 2 car records one.
+"""Export a drive log as a ROS 2 MCAP bag (CDR), laid out the way a ROS 2 car records one: the
+ROS 2 reader's test bags.
 
 Per camera ``X`` (lower-cased name ``x``): ``/x/image_raw/compressed`` (sensor_msgs/CompressedImage)
 or ``/x/image_raw`` (sensor_msgs/Image rgb8, for ``raw_cameras``) and ``/x/camera_info``; frames
@@ -20,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 from mcap_ros2.writer import Writer
+from ros2_msgdefs import msgdef
 
 from drivewm.atomic import atomic_path
 from drivewm.geometry import R_BODY_FROM_OPENCV, invert_T, make_T
-from drivewm.logs.ros2_msgdefs import msgdef
 from drivewm.logs.topicmap import CameraTopics, EgoPoseTopic, LayoutTopics, TopicMap
 from drivewm.logs.transforms import ns_to_sec_nsec, split_T
 from drivewm.logs.types import AgentBox, DriveLog, RoadLine

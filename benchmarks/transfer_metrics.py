@@ -1,4 +1,4 @@
-"""What a transferred clip is scored on (benchmarks/bench_transfer.py, tests/transfer/).
+"""What a transferred clip is scored on (benchmarks/bench_transfer.py, tests/transfer/, studies/).
 
 Against the simulator's own rendering of the same drive in the target condition: PSNR and SSIM
 (drivewm.tokenizer.metrics). Geometry kept: SIFT matches between each source frame and its

@@ -1,4 +1,5 @@
-"""Write a drive log with JSON-encoded Foxglove messages (the same topics as :mod:`drivewm.logs.writer`).
+"""Write a drive log with JSON-encoded Foxglove messages (the same topics as
+:mod:`drivewm.logs.writer`): the reader's tests of JSON-encoded logs.
 
 Some recorders log Foxglove schemas as JSON rather than protobuf; no package ships those JSON
 schemas, so the subset drivewm uses is written out here, following the Foxglove schema docs

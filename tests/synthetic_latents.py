@@ -1,4 +1,6 @@
-"""A tiny synthetic latent cache (two captioned conditions) for smoke tests and benchmarks.
+"""A tiny synthetic latent cache (two captioned conditions) for the tests of the diffusion stages.
+
+Importable from any test (tests/conftest.py puts this folder on ``sys.path``).
 
 Condition ``k`` has latents ``brightness_k`` on the lower half of every channel-0..2 plane and
 noise elsewhere, so a model that follows its caption is easy to check without any tokenizer.

@@ -1,8 +1,10 @@
-"""The transfer benchmark: held-out paired drives, every method scored against the simulator's truth.
+"""The transfer benchmark (benchmarks/bench_transfer.py): held-out paired drives, every method scored
+against the simulator's truth. Importable by the tests and studies that score as it does (they put
+this folder on ``sys.path``).
 
 For each pair id with a clip in the source condition and one in the target condition, the source
 clip is coded by the tokenizer and transferred by every method; each output is decoded and scored
-(drivewm.transfer.metrics): PSNR / SSIM against the target clip, SIFT displacement against the
+(transfer_metrics.py): PSNR / SSIM against the target clip, SIFT displacement against the
 source frames, CSE against the source's, adherence to the target. Two references frame the numbers:
 ``identity`` (the source clip itself, what a method that changes nothing scores) and ``tokenizer``
 (the true target coded and decoded, the best any latent method can reach without the source's
@@ -15,7 +17,7 @@ dropped back (drivewm.transfer.detail), the same for all. Clips larger than the 
 scored at their own size, as ``drivewm transfer`` writes them: methods and the tokenizer reference
 work at the model's size and are upsampled (drivewm.transfer.resolution); ``model_resolution``
 scores everything at the model's size instead. Methods take the same number of network evaluations
-(``nfe``) when run with the same sampler, steps and guidance."""
+(``nfe``, :func:`network_evaluations`) when run with the same sampler, steps and guidance."""
 
 from __future__ import annotations
 
@@ -28,19 +30,36 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from transfer_metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
 
-from drivewm.clips.format import Clip, pair_drive
+from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import code_views, decode_views, encode_views, resize_views
 from drivewm.transfer.detail import BAND_PX
-from drivewm.transfer.metrics import CSE_KEYS, adherent, cross_view_error, image_scores, sift_shift_px
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, target_captions
 
 NOISE_LEVELS = 1.0  # sigma (uint8 levels) of the noise in the ``identity~noise`` reference
 NOISE_NAME = "identity~noise"
 REFERENCES = ("identity", NOISE_NAME, "tokenizer")  # rows that are no method: no network evaluations
+
+
+def pair_drive(pair_id: str) -> str:
+    """The drive of a ``pair_id`` (``<drive_id>-t<start tick>``, drivewm.curate.stage.pair_id): every
+    window of one drive shares it."""
+    return pair_id.rsplit("-t", 1)[0]
+
+
+def network_evaluations(steps: int, guidance: float, sampler: str) -> int:
+    """Denoiser calls of one sample, the unit the benchmark compares methods at: Euler N, Heun 2N - 1
+    (no correction on the last step), x2 with CFG. Transfer and its SDEdit baseline both sample with
+    drivewm.diffusion.sampling.sample (from pure noise, or from the source noised to ``start_sigma``:
+    Meng et al. 2022, arXiv 2108.01073, sec. 3); the Karras schedule then runs from the start down to
+    0, so N steps cost the same from any start."""
+    calls = steps if sampler == "euler" else 2 * steps - 1
+    return calls * (1 if guidance == 1.0 else 2)
+
 
 #: A method: (raw source latents (V, c, t, h, w), view captions, target, seeds) -> raw latents.
 Method = Callable[[torch.Tensor, list[str], TargetCondition, list[int]], torch.Tensor]
