@@ -22,6 +22,7 @@ from drivewm.errors import BatchError, DrivewmError
 COMMAND_MODULES = (
     "drivewm.sim.commands",  # simulate
     "drivewm.logs.commands",  # view
+    "drivewm.layout.commands",  # layout
     "drivewm.curate.commands",  # curate, import-video
     "drivewm.tokenizer.commands",  # tokenizer train|encode|decode|eval
     "drivewm.diffusion.commands",  # pretrain, generate

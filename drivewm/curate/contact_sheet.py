@@ -58,10 +58,26 @@ def write_contact_sheet(out_dir: Path, rows: list[dict], n_clips: int) -> Path |
     return write_clips_sheet(clips, Path(out_dir) / "contact_sheet.png")
 
 
+def write_pairs_sheet(pairs: list[tuple], path: Path) -> Path:
+    """Per pair, :func:`clip_block` of both clips side by side (6 px white between; a None left clip is
+    left out), pairs stacked top to bottom, into the PNG ``path``: a clip's frames beside what was made
+    from them (its layout, its transfer)."""
+    blocks = []
+    for a, b in pairs:
+        parts = [clip_block(c) for c in (a, b) if c is not None]
+        height = max(p.shape[0] for p in parts)
+        parts = [np.pad(p, ((0, height - p.shape[0]), (0, 6), (0, 0)), constant_values=255) for p in parts]
+        blocks.append(np.concatenate(parts, axis=1))
+    return _write_sheet(blocks, path)
+
+
 def write_clips_sheet(clips: list, path: Path) -> Path:
     """Stack :func:`clip_block` of every clip top to bottom (6 px white between) into the PNG ``path``;
     curated and generated clips share this layout, so their sheets compare row for row."""
-    blocks = [clip_block(clip) for clip in clips]
+    return _write_sheet([clip_block(clip) for clip in clips], path)
+
+
+def _write_sheet(blocks: list[np.ndarray], path: Path) -> Path:
     width = max(b.shape[1] for b in blocks)
     sheet = np.concatenate(
         [np.pad(b, ((0, 6), (0, width - b.shape[1]), (0, 0)), constant_values=255) for b in blocks], axis=0

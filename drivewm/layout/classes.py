@@ -1,4 +1,5 @@
-"""The names a layout may use: box classes, road line kinds and paints (docs/DESIGN.md section 4).
+"""The names a layout may use (box classes, road line kinds and paints) and the classes of label maps
+(docs/DESIGN.md section 4).
 
 A layout names each box's class and each line's kind and paint by these words; anything else is
 refused (:meth:`drivewm.layout.clip_layout.ClipLayout.validate`), so a renderer or a model never
@@ -22,6 +23,45 @@ BOX_CLASSES = ROAD_USERS + STATIC_OBJECTS
 LINE_KINDS = ("lane_center", "lane_boundary", "road_edge", "road_surface")
 #: How a line is painted; "" where paint does not apply (centre lines, surfaces, edges of unknown paint).
 PAINTS = ("", "solid", "dashed", "none")
+
+
+#: Semantic classes of a per-pixel label map (id = index): what the simulator's renderer draws at each
+#: pixel (drivewm.sim.render, ``--labels``) and what the layout renderer draws (drivewm.layout.render).
+LABEL_CLASSES = (
+    "sky",
+    "road",
+    "lane_paint",
+    "sidewalk",
+    "kerb",
+    "terrain",
+    "vehicle",
+    "pedestrian",
+    "building",
+    "vegetation",
+    "pole",
+    "barrier",
+    "sign",
+)
+LABEL_ID = {name: i for i, name in enumerate(LABEL_CLASSES)}
+#: The label of a box whose category has none (not a layout class, e.g. a test marker).
+UNLABELLED = 255
+#: The label of each box class.
+BOX_LABEL = {
+    **dict.fromkeys(("car", "van", "truck", "bus", "motorcycle", "bicycle"), "vehicle"),
+    "pedestrian": "pedestrian",
+    "building": "building",
+    "pole": "pole",
+    "lamp": "pole",
+    **dict.fromkeys(("trunk", "crown", "vegetation"), "vegetation"),
+    "barrier": "barrier",
+    "sign": "sign",
+}
+
+
+def label_id(box_class: str) -> int:
+    """The label id (index into :data:`LABEL_CLASSES`) a box of ``box_class`` is drawn with;
+    :data:`UNLABELLED` for a category that is not a layout class."""
+    return LABEL_ID[BOX_LABEL[box_class]] if box_class in BOX_LABEL else UNLABELLED
 
 
 def check_word(value: str, allowed: tuple[str, ...], field: str, where: str) -> str:

@@ -16,6 +16,7 @@ import dataclasses
 import cv2
 import numpy as np
 
+from drivewm.layout.classes import label_id
 from drivewm.logs.types import AgentBox
 
 NEAR_M = 0.05
@@ -65,7 +66,11 @@ class FaceTextures:
 @dataclasses.dataclass
 class BoxSet:
     """Boxes as arrays: face corners (N, 6, 4, 3) and outward normals (N, 6, 3) in the world frame,
-    bounding-sphere centres (N, 3) and radii (N,), each box's face textures and shading (N, 6)."""
+    bounding-sphere centres (N, 3) and radii (N,), each box's face textures and shading (N, 6), and
+    the label id (N,) uint8 each box gives its pixels in a label map (drivewm.layout.classes).
+    ``interpolation``: how textures are sampled. Bilinear (the default) blends texels, and its alpha
+    test follows the pixel-centre rule along the edges while cutting each corner by up to a fifth of
+    a texel; nearest (``cv2.INTER_NEAREST``) follows the rule exactly, corners too (solid faces)."""
 
     corners_world: np.ndarray
     normals_world: np.ndarray
@@ -73,13 +78,27 @@ class BoxSet:
     radii: np.ndarray
     textures: list[FaceTextures]
     shade: np.ndarray
+    labels: np.ndarray
+    interpolation: int = cv2.INTER_LINEAR
 
     @classmethod
-    def from_boxes(cls, boxes: list[AgentBox], textures: list[FaceTextures], shade_fn, bake: bool = False) -> BoxSet:
+    def from_boxes(
+        cls,
+        boxes: list[AgentBox],
+        textures: list[FaceTextures],
+        shade_fn,
+        bake: bool = False,
+        labels: np.ndarray | None = None,
+    ) -> BoxSet:
         """``shade_fn(normals_world (N, 6, 3)) -> (N, 6)`` gives each face's brightness; ``bake``:
-        multiply it into the textures once (static boxes) instead of per drawn face."""
+        multiply it into the textures once (static boxes) instead of per drawn face. ``labels``: (N,)
+        label ids (default: each box's category, :func:`drivewm.layout.classes.label_id`)."""
+        if labels is None:
+            labels = np.array([label_id(b.category) for b in boxes], np.uint8)
         if not boxes:
-            return cls(np.zeros((0, 6, 4, 3)), np.zeros((0, 6, 3)), np.zeros((0, 3)), np.zeros(0), [], np.zeros((0, 6)))
+            return cls(
+                np.zeros((0, 6, 4, 3)), np.zeros((0, 6, 3)), np.zeros((0, 3)), np.zeros(0), [], np.zeros((0, 6)), labels
+            )
         centers = np.array([b.center_xyz for b in boxes], np.float64)
         half = np.array([b.size_lwh for b in boxes], np.float64) / 2
         yaw = np.array([b.yaw_rad for b in boxes])
@@ -93,14 +112,21 @@ class BoxSet:
         if bake:
             textures = [t.shaded(k) for t, k in zip(textures, shade)]
             shade = np.ones_like(shade)
-        return cls(corners, normals, centers, np.linalg.norm(half, axis=1), textures, shade)
+        return cls(corners, normals, centers, np.linalg.norm(half, axis=1), textures, shade, labels)
 
 
 def draw_boxes(
-    img: np.ndarray, zbuf: np.ndarray, view, T_cam_from_world: np.ndarray, boxes: BoxSet, max_range_m: float
+    img: np.ndarray,
+    zbuf: np.ndarray,
+    view,
+    T_cam_from_world: np.ndarray,
+    boxes: BoxSet,
+    max_range_m: float,
+    label_img: np.ndarray | None = None,
 ) -> None:
     """Draw every face of ``boxes`` visible to ``view`` into ``img`` (H, W, 3) uint8 with z-test
-    against ``zbuf`` (H, W) float32 camera depth."""
+    against ``zbuf`` (H, W) float32 camera depth; ``label_img`` (H, W) uint8: also write each drawn
+    pixel's box label there (the same pixels, the same z-test)."""
     if len(boxes.centers) == 0:
         return
     R, t = T_cam_from_world[:3, :3], T_cam_from_world[:3, 3]
@@ -123,10 +149,12 @@ def draw_boxes(
         uv_all = quads[..., :2] / quads[..., 2:3] @ view.K[:2, :2].T + view.K[:2, 2]  # (F, 4, 2)
     rects = _pixel_rects(uv_all, view.width, view.height)  # (F, 4) x0, y0, x1, y1
     with np.errstate(divide="ignore", invalid="ignore"):  # rays parallel to a face plane: z = inf, never drawn
-        _draw_faces(img, zbuf, view, boxes, keep, mi, fi, quads, normals, depth_d, H, in_front, rects)
+        _draw_faces(img, zbuf, view, boxes, keep, mi, fi, quads, normals, depth_d, H, in_front, rects, label_img)
 
 
-def _draw_faces(img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, depth_d, H, in_front, rects) -> None:
+def _draw_faces(
+    img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, depth_d, H, in_front, rects, label_img
+) -> None:
     for k in np.flatnonzero(~in_front | (rects[:, 2] > rects[:, 0]) & (rects[:, 3] > rects[:, 1])):
         box, f = keep[mi[k]], fi[k]
         if in_front[k]:
@@ -138,9 +166,8 @@ def _draw_faces(img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, de
             rect = _pixel_rects(uv[None], view.width, view.height)[0]
             if rect[2] <= rect[0] or rect[3] <= rect[1]:
                 continue
-        draw_face(
-            img, zbuf, view, rect, normals[k], depth_d[k], H[k], boxes.textures[box].images[f], boxes.shade[box, f]
-        )
+        face = (normals[k], depth_d[k], H[k], boxes.textures[box].images[f], boxes.shade[box, f])
+        draw_face(img, zbuf, view, rect, *face, label_img, int(boxes.labels[box]), boxes.interpolation)
 
 
 def _pixel_rects(uv: np.ndarray, width: int, height: int) -> np.ndarray:
@@ -190,15 +217,19 @@ def draw_face(
     H: np.ndarray,
     tex_rgba: np.ndarray,
     shade: float,
+    label_img: np.ndarray | None = None,
+    label: int = 0,
+    interpolation: int = cv2.INTER_LINEAR,
 ) -> None:
     """Fill one planar face inside the pixel rectangle ``rect`` (x0, y0, x1, y1) where it is nearer
-    than the z-buffer: plane n . X = d in the camera frame, padded-texel -> pixel homography ``H``."""
+    than the z-buffer: plane n . X = d in the camera frame, padded-texel -> pixel homography ``H``;
+    and, given ``label_img``, write ``label`` at the same pixels."""
     x0, y0, x1, y1 = rect
     M = H.copy()
     M[0] -= x0 * H[2]
     M[1] -= y0 * H[2]
     warped = cv2.warpPerspective(
-        tex_rgba, M, (int(x1 - x0), int(y1 - y0)), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT
+        tex_rgba, M, (int(x1 - x0), int(y1 - y0)), flags=interpolation, borderMode=cv2.BORDER_CONSTANT
     )
     nx, ny, nz = (float(v) for v in normal_cam)  # Python floats keep the per-pixel maths in float32
     z = float(plane_d) / (nx * view.xn[None, x0:x1] + ny * view.yn[y0:y1, None] + nz)
@@ -212,3 +243,5 @@ def draw_face(
     mask = win.view(np.uint8)
     cv2.copyTo(rgb, mask, img[y0:y1, x0:x1])  # writes into the views in place (10-30x np.copyto with where)
     cv2.copyTo(z, mask, zroi)
+    if label_img is not None:
+        label_img[y0:y1, x0:x1][win] = label

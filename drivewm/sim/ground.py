@@ -15,6 +15,7 @@ import math
 import cv2
 import numpy as np
 
+from drivewm.layout.classes import LABEL_ID
 from drivewm.sim.conditions import Condition, to_uint8
 from drivewm.sim.scene import RoadMap, polyline_normals
 
@@ -43,12 +44,15 @@ DETAIL_LEVELS = 3  # grain drawn where the ground footprint of a pixel is under 
 @dataclasses.dataclass
 class GroundTexture:
     """Mip pyramid of the lit ground texture: ``levels[k]`` is (H_k, W_k, 3) uint8 RGB at
-    ``res_m * 2**k`` metres per texel, texel centres at ``origin_xy + res_k * (col, row)``."""
+    ``res_m * 2**k`` metres per texel, texel centres at ``origin_xy + res_k * (col, row)``.
+    ``labels``: the label id (drivewm.layout.classes) of each texel of level 0, (H_0, W_0) uint8, or
+    None when not asked for."""
 
     origin_xy: np.ndarray
     res_m: float
     levels: list[np.ndarray]
     border_rgb: tuple[int, int, int]
+    labels: np.ndarray | None = None
 
     def texel_coords(self, world_xy: np.ndarray, level: int) -> np.ndarray:
         """World points (N, 2) -> float texel coordinates (N, 2) (col, row) in ``levels[level]``."""
@@ -73,11 +77,14 @@ def build_ground(
     lamp_xy: np.ndarray,
     max_texels: int = 8_000_000,
     min_res_m: float = 0.06,
+    labels: bool = False,
 ) -> GroundTexture:
     """Rasterise the road map inside the world box [lo_xy, hi_xy] into a lit mip pyramid.
 
     Colour = class albedo (tinted, with paint and tyre tracks drawn in, uint8) x a per-texel
     gain = grain/patch luminance x ambient light x street-lamp pools, in cv2 per channel.
+    ``labels``: also each texel's label id (road, lane paint, sidewalk, kerb, terrain), drawn with the
+    same polygons and lines (no random draw: the colours are the same either way).
     """
     ext = hi_xy - lo_xy
     res = max(min_res_m, math.sqrt(ext[0] * ext[1] / max_texels))
@@ -85,6 +92,7 @@ def build_ground(
     raster = _Raster(lo_xy, res, (H, W))
     rng = np.random.default_rng([seed, 101])
     classes = _classes(road, raster, urban)
+    label_map = _labels(classes, road, raster) if labels else None
     base = _base_colors(classes, cond, raster, road, rng)
     gain = _luminance_noise(classes, rng, raster, cond)
     if urban and not cond.snow:
@@ -97,7 +105,7 @@ def build_ground(
     for _ in range(MIP_LEVELS - 1):
         levels.append(cv2.pyrDown(levels[-1]))
     border = tuple(int(c) for c in levels[-1].reshape(-1, 3).mean(axis=0))
-    return GroundTexture(np.asarray(lo_xy, dtype=np.float64), res, levels, border)
+    return GroundTexture(np.asarray(lo_xy, dtype=np.float64), res, levels, border, label_map)
 
 
 @dataclasses.dataclass
@@ -124,6 +132,17 @@ def _classes(road: RoadMap, raster: _Raster, urban: bool) -> np.ndarray:
     classes[dist_m <= KERB_WIDTH_M] = KERB
     classes[road_mask > 0] = ASPHALT
     return classes
+
+
+def _labels(classes: np.ndarray, road: RoadMap, raster: _Raster) -> np.ndarray:
+    """Label ids (H, W) uint8 of the ground classes, with the lane markings (the polylines
+    :func:`_markings` paints, without anti-aliasing) as lane paint."""
+    lut = np.zeros(len(ALBEDO), np.uint8)
+    for ground_class, name in ((GRASS, "terrain"), (SIDEWALK, "sidewalk"), (KERB, "kerb"), (ASPHALT, "road")):
+        lut[ground_class] = LABEL_ID[name]
+    labels = lut[classes]
+    _markings(labels, road, raster, LABEL_ID["lane_paint"], cv2.LINE_8)
+    return labels
 
 
 def _value_noise(shape: tuple[int, int], cell_px: int, rng: np.random.Generator) -> np.ndarray:
@@ -196,14 +215,14 @@ def _slab_joints(lum: np.ndarray, raster: _Raster, classes: np.ndarray) -> None:
     lum[joint] *= 0.7
 
 
-def _markings(img: np.ndarray, road: RoadMap, raster: _Raster, color) -> None:
+def _markings(img: np.ndarray, road: RoadMap, raster: _Raster, color, line_type: int = cv2.LINE_AA) -> None:
     """Paint lane borders into ``img``: solid lines whole, dashed lines as DASH_M/GAP_M dashes."""
     thick = raster.width_px(MARKING_WIDTH_M)
     for b in road.boundaries:
         if b.line_type == "none" or len(b.points_xy) < 2:
             continue
         pieces = [b.points_xy] if b.line_type == "solid" else _dashes(b.points_xy)
-        cv2.polylines(img, [raster.px(p) for p in pieces if len(p) >= 2], False, color, thick, cv2.LINE_AA, 4)
+        cv2.polylines(img, [raster.px(p) for p in pieces if len(p) >= 2], False, color, thick, line_type, 4)
 
 
 def _dashes(points_xy: np.ndarray) -> list[np.ndarray]:
