@@ -1,8 +1,9 @@
 """The clip: synchronized multi-camera frames, ego poses and metadata (docs/DESIGN.md section 4).
 
 On disk a clip is ``KEY.CAMERA.mp4`` per camera, ``KEY.json`` (:class:`ClipMeta`),
-``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64) and, when its log knows the
-scene's structure, ``KEY.layout.npz`` (:class:`drivewm.layout.ClipLayout`) inside a WebDataset tar.
+``KEY.ego.npy`` (T_world_from_ego per frame, (T, 4, 4) float64), when its log knows the scene's
+structure ``KEY.layout.npz`` (:class:`drivewm.layout.ClipLayout`), and when its log has label maps
+``KEY.CAMERA.labels.npz`` per camera (:mod:`drivewm.layout.labels`), inside a WebDataset tar.
 Generated samples use the same format, so the benchmark scores real and generated clips alike.
 """
 
@@ -18,6 +19,7 @@ from drivewm.config import from_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, rig_from_dict
 from drivewm.layout.clip_layout import ClipLayout, layout_from_npz
+from drivewm.layout.labels import labels_from_npz
 from drivewm.paths import check_name
 
 CLIP_FORMAT_VERSION = 1
@@ -106,13 +108,16 @@ class ClipMeta:
 class Clip:
     """One clip in memory. ``mp4`` holds the encoded video per camera (rig order); ``videos``
     decodes on first use to uint8 RGB (T, H, W, 3) per camera. ``layout_npz``: the
-    ``KEY.layout.npz`` bytes, None for a clip whose log knew no layout (read with :meth:`layout`)."""
+    ``KEY.layout.npz`` bytes, None for a clip whose log knew no layout (read with :meth:`layout`).
+    ``labels_npz``: camera name -> ``KEY.CAMERA.labels.npz`` bytes, for the cameras with label maps
+    (read with :meth:`labels`)."""
 
     meta: ClipMeta
     mp4: dict[str, bytes]
     T_world_from_ego: np.ndarray
     _decoded: dict[str, np.ndarray] = dataclasses.field(default_factory=dict, repr=False)
     layout_npz: bytes | None = dataclasses.field(default=None, repr=False)
+    labels_npz: dict[str, bytes] = dataclasses.field(default_factory=dict, repr=False)
 
     @property
     def key(self) -> str:
@@ -132,6 +137,20 @@ class Clip:
                 f"clip {self.key}: layout has {layout.num_frames} frames, the clip {self.meta.num_frames}"
             )
         return layout
+
+    def labels(self, camera: str) -> np.ndarray | None:
+        """The label map of each of ``camera``'s frames, uint8 (T, H, W) at the clip's image size (ids of
+        drivewm.layout.classes.LABEL_CLASSES; frame t labels image t), or None without label maps."""
+        if camera not in self.labels_npz:
+            return None
+        labels = labels_from_npz(self.labels_npz[camera], f"clip {self.key} {camera}")
+        cam = self.meta.get_rig().camera(camera)
+        if labels.shape != (self.meta.num_frames, cam.height, cam.width):
+            raise DrivewmError(
+                f"clip {self.key} {camera}: labels are {labels.shape}, the video "
+                f"({self.meta.num_frames}, {cam.height}, {cam.width})"
+            )
+        return labels
 
     def video(self, camera: str) -> np.ndarray:
         """Frames of one camera, uint8 RGB (T, H, W, 3)."""

@@ -1,8 +1,8 @@
 """WebDataset tar shards of clips, and the dataset manifest.
 
 Tars are written with the standard library's ``tarfile`` (members ``KEY.CAMERA.mp4``,
-``KEY.json``, ``KEY.ego.npy`` and, when the clip has one, ``KEY.layout.npz``, grouped by key as
-WebDataset expects) to a temporary name and
+``KEY.json``, ``KEY.ego.npy`` and, when the clip has them, ``KEY.layout.npz`` and
+``KEY.CAMERA.labels.npz``, grouped by key as WebDataset expects) to a temporary name and
 renamed when complete, so a killed run never leaves a partial shard. Readers refuse members
 with unsafe paths, check that ``KEY.json`` names the key of its members (a key becomes a file name
 downstream, so it must be a safe name: drivewm.paths) and never unpickle
@@ -104,6 +104,9 @@ def _add_clip(tar: tarfile.TarFile, clip: Clip) -> None:
         _add_member(tar, file_name(key, cam, ext="mp4"), clip.mp4[cam])
     if clip.layout_npz is not None:
         _add_member(tar, file_name(key, "layout", ext="npz"), clip.layout_npz)
+    for cam in clip.meta.cameras:
+        if cam in clip.labels_npz:
+            _add_member(tar, file_name(key, cam, "labels", ext="npz"), clip.labels_npz[cam])
 
 
 def list_shards(location: str | Path | Iterable[str | Path]) -> list[Path]:
@@ -198,7 +201,14 @@ def _clip_from_members(key: str, members: dict[str, bytes], shard: Path) -> Clip
     missing = [c for c in meta.cameras if f"{c}.mp4" not in members]
     if missing:
         raise DrivewmError(f"{where}: missing camera video(s) {missing}")
-    return Clip(meta, {c: members[f"{c}.mp4"] for c in meta.cameras}, ego, layout_npz=members.get("layout.npz"))
+    labels = {c: members[f"{c}.labels.npz"] for c in meta.cameras if f"{c}.labels.npz" in members}
+    return Clip(
+        meta,
+        {c: members[f"{c}.mp4"] for c in meta.cameras},
+        ego,
+        layout_npz=members.get("layout.npz"),
+        labels_npz=labels,
+    )
 
 
 def read_clips(location: str | Path | Iterable[str | Path]) -> Iterator[Clip | BadClip]:

@@ -33,6 +33,7 @@ from drivewm.config import to_dict
 from drivewm.curate import dedup, filters, images, split, sync, trajectory
 from drivewm.curate.captions import Captioner, ClipInfo, classify_manoeuvre, load_captioner
 from drivewm.curate.config import CurateConfig
+from drivewm.curate.labels import LabelFrames, labels_member
 from drivewm.curate.privacy import Anonymizer
 from drivewm.curate.ticks import TickAssembler, TickImages
 from drivewm.curate.timing import StepClock
@@ -42,7 +43,7 @@ from drivewm.geometry import Rig
 from drivewm.layout.build import layout_from_log
 from drivewm.layout.clip_layout import layout_to_npz
 from drivewm.logs.reader import LogStream
-from drivewm.logs.types import LogIndex
+from drivewm.logs.types import ImageFrame, LogIndex
 from drivewm.paths import child_path, sanitize_name
 
 MARKER_DIR = "logs"
@@ -132,8 +133,8 @@ def curate_stream(reader: LogStream, out: Path, name: str, cfg: CurateConfig, cl
     kept_rows, embeddings, dropped = [], _Embeddings(), {}
     try:
         with ShardWriter(out, name, cfg.clips_per_shard) as writer:
-            for start, ticks in _stream_windows(reader, ctx, clock):
-                clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock)
+            for start, ticks, label_maps in _stream_windows(reader, ctx, clock):
+                clip, reason, emb = _make_clip(ctx, name, start, ticks, embeddings, clock, label_maps)
                 if reason:
                     dropped[reason] = dropped.get(reason, 0) + 1
                     continue
@@ -168,7 +169,7 @@ class _LogContext:
     anonymizer: Callable[[np.ndarray], np.ndarray] | None
     clocks: _ClockReport
     encoders: dict[str, H264Encoder] = dataclasses.field(default_factory=dict)  # h264_keep_encoder: per camera
-    layout_errors: list[str] = dataclasses.field(default_factory=list)  # why clips went without their layout
+    scene_errors: list[str] = dataclasses.field(default_factory=list)  # why clips went without a layout or labels
 
 
 def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
@@ -240,16 +241,21 @@ class _ClockReport:
         return out
 
 
-def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> Iterator[tuple[int, list[TickImages]]]:
-    """(first tick, [TickImages]) of every final clip window, in order, reading the images once.
+def _stream_windows(
+    reader: LogStream, ctx: _LogContext, clock: StepClock
+) -> Iterator[tuple[int, list[TickImages], dict[int, list[ImageFrame]]]]:
+    """(first tick, [TickImages], label maps by camera index) of every final clip window, in order,
+    reading the images (and label maps) once.
 
-    Ticks are kept from the oldest one a future window may use to the newest complete one."""
+    Ticks are kept from the oldest one a future window may use to the newest complete one; a final
+    window waits for its label maps (:class:`drivewm.curate.labels.LabelFrames`) when the log has any."""
     cfg, cam = ctx.cfg, ctx.rig.cameras[0]
     runs = [(a, b) for a, b in split.valid_runs(ctx.table.valid) if b - a >= cfg.clip_frames]
     needed = np.zeros(len(ctx.table.tick_ns), dtype=bool)
     for a, b in runs:
         needed[a:b] = True
     assembler = TickAssembler(ctx.table, ctx.sorted_ns, needed)
+    labels = LabelFrames(ctx.table, ctx.log.label_timestamps_ns, needed)
     source = {c.name: (c.width, c.height) for c in ctx.log.rig.cameras}
     scales = [images.jpeg_scale(source[c.name], (c.width, c.height)) for c in ctx.rig.cameras]
     blank = _small(np.zeros((cam.height, cam.width, 3), np.uint8))
@@ -257,20 +263,28 @@ def _stream_windows(reader: LogStream, ctx: _LogContext, clock: StepClock) -> It
         runs, cfg.clip_frames, cfg.stride_frames, cfg.fps, cfg.shot_threshold, cfg.shot_min_frames, blank
     )
     buffer: dict[int, TickImages] = {}
-    stream = reader.stream(("image",))
+    pending: list[tuple[int, int, list[TickImages]]] = []  # final windows waiting for label maps
+    stream = reader.stream(("image", "labels") if labels.any else ("image",))
     while True:
         with clock.step("read"):
             item = next(stream, None)
         if item is None:
             break
-        for tick, frames in assembler.add(*item[1]):
+        if item[0] == "labels":
+            labels.add(*item[1])
+        for tick, frames in assembler.add(*item[1]) if item[0] == "image" else ():
             buffer[tick] = TickImages(frames, ctx.rig.cameras, clock.step, scales)
             with clock.step("shots"):
                 final = windows.push(tick, functools.partial(_reference_frame, buffer[tick]))
-            for start, end in final:
-                yield start, [buffer[t] for t in range(start, end)]
+            pending += [(start, end, [buffer[t] for t in range(start, end)]) for start, end in final]
             for t in [t for t in buffer if t < windows.oldest_needed]:
                 del buffer[t]
+        while pending and labels.ready(pending[0][0], pending[0][1]):
+            start, end, ticks = pending.pop(0)
+            yield start, ticks, labels.window(start, end)
+            labels.forget_before(min([windows.oldest_needed] + [p[0] for p in pending]))
+    for start, end, ticks in pending:  # the stream ended: what arrived is all there is
+        yield start, ticks, labels.window(start, end)
     assembler.finish(ctx.log.path)
 
 
@@ -314,8 +328,17 @@ def _small(img: np.ndarray, width: int = 320) -> np.ndarray:
     return cv2.resize(img, (width, h), interpolation=cv2.INTER_AREA) if img.shape[1] > width else img
 
 
-def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages], kept: _Embeddings, clock: StepClock):
-    """(clip or None, drop reason or None, embedding) for the ticks [start, start + len(ticks))."""
+def _make_clip(
+    ctx: _LogContext,
+    name: str,
+    start: int,
+    ticks: list[TickImages],
+    kept: _Embeddings,
+    clock: StepClock,
+    label_maps: dict[int, list[ImageFrame]],
+):
+    """(clip or None, drop reason or None, embedding) for the ticks [start, start + len(ticks));
+    ``label_maps``: camera index -> the label map (PNG) of each tick, for the cameras that have them."""
     cfg, V, T = ctx.cfg, len(ctx.rig.cameras), len(ticks)
     try:
         frames = np.stack([tick.image(v) for v in range(V) for tick in ticks])
@@ -344,18 +367,34 @@ def _make_clip(ctx: _LogContext, name: str, start: int, ticks: list[TickImages],
         clip = clip_from_arrays(meta, videos, poses, *h264, encoders=_encoders(ctx))
     with clock.step("layout"):
         clip.layout_npz = _layout(ctx, meta.key, t_ns, poses)
+        clip.labels_npz = _labels(ctx, meta, label_maps)
     return clip, None, emb
+
+
+def _labels(ctx: _LogContext, meta: ClipMeta, label_maps: dict[int, list[ImageFrame]]) -> dict[str, bytes]:
+    """``KEY.CAMERA.labels.npz`` per camera with label maps (an undecodable one costs only its camera's
+    member, kept in ``scene_errors``)."""
+    out = {}
+    for v, frames in label_maps.items():
+        cam = ctx.rig.cameras[v]
+        try:
+            out[cam.name] = labels_member(
+                frames, (cam.width, cam.height), meta.camera_times_ns(cam.name), f"{ctx.log.path}: {cam.name} labels"
+            )
+        except DrivewmError as exc:
+            ctx.scene_errors.append(str(exc))
+    return out
 
 
 def _layout(ctx: _LogContext, key: str, t_ns: np.ndarray, poses: np.ndarray) -> bytes | None:
     """``KEY.layout.npz`` of the clip, or None: the log knows no layout, its ego motion is unknown (its
-    objects cannot be put in the clip's ego frame), or the layout is bad (kept in ``layout_errors``)."""
+    objects cannot be put in the clip's ego frame), or the layout is bad (kept in ``scene_errors``)."""
     if ctx.smooth is None or not ctx.log.has_layout:
         return None
     try:
         return layout_to_npz(layout_from_log(ctx.log, t_ns, poses, f"{ctx.log.path}: clip {key}"))
     except DrivewmError as exc:
-        ctx.layout_errors.append(str(exc))
+        ctx.scene_errors.append(str(exc))
         return None
 
 
@@ -484,8 +523,8 @@ def _result(ctx: _LogContext, name: str, rows: list[dict], dropped: dict, clock:
     ]
     warnings += _span_warnings(ctx)
     warnings += ctx.clocks.warnings(table, ctx.cfg.fps)
-    if ctx.layout_errors:
-        warnings.append(f"{len(ctx.layout_errors)} clip(s) without their layout: {ctx.layout_errors[0]}")
+    if ctx.scene_errors:
+        warnings.append(f"{len(ctx.scene_errors)} layout(s) or label map(s) left out: {ctx.scene_errors[0]}")
     if smooth is None:
         warnings.append("no finite ego pose: ego motion unknown, motion filter skipped")
     elif smooth.missing or smooth.rejected:

@@ -15,14 +15,13 @@ On disk it is the shard member ``KEY.layout.npz`` (:func:`layout_to_npz` / :func
 from __future__ import annotations
 
 import dataclasses
-import io
-import zipfile
 
 import numpy as np
 
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, invert_T
 from drivewm.layout.classes import BOX_CLASSES, LINE_KINDS, PAINTS, check_word
+from drivewm.npz import load_npz, npz_bytes
 
 LAYOUT_FORMAT_VERSION = 1
 #: The frame index of a static box: present in every frame.
@@ -163,28 +162,15 @@ DTYPES = {
 
 
 def layout_to_npz(layout: ClipLayout) -> bytes:
-    """The ``KEY.layout.npz`` bytes of ``layout``: an ``np.savez_compressed`` archive (no pickles) whose
-    members carry a fixed date, so the same layout gives the same bytes."""
+    """The ``KEY.layout.npz`` bytes of ``layout`` (drivewm.npz: no pickles, the same layout the same bytes)."""
     arrays = {"format_version": np.int64(LAYOUT_FORMAT_VERSION)}
     arrays.update({name: np.asarray(getattr(layout, name), dtype=DTYPES[name]) for name in FIELDS})
-    out = io.BytesIO()
-    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as npz:
-        for name, values in arrays.items():
-            member = io.BytesIO()
-            np.lib.format.write_array(member, np.asarray(values), allow_pickle=False)
-            npz.writestr(
-                zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0)), member.getvalue(), zipfile.ZIP_DEFLATED
-            )
-    return out.getvalue()
+    return npz_bytes(arrays)
 
 
 def layout_from_npz(data: bytes, where: str) -> ClipLayout:
     """Parse and validate ``KEY.layout.npz`` bytes; a damaged or foreign file is a one-line DrivewmError."""
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            arrays = {name: npz[name] for name in npz.files}
-    except (ValueError, OSError, EOFError, zipfile.BadZipFile) as exc:
-        raise DrivewmError(f"{where}: layout is not a plain .npz ({exc.__class__.__name__})") from None
+    arrays = load_npz(data, f"{where}: layout")
     version = arrays.pop("format_version", None)
     if version is None or int(version) != LAYOUT_FORMAT_VERSION:
         raise DrivewmError(f"{where}: layout format_version {version}, this drivewm reads {LAYOUT_FORMAT_VERSION}")

@@ -20,6 +20,8 @@ STATIC_TOPIC = "/static"  # foxglove.SceneUpdate, one cube entity per static obj
 SCENE_SCHEMA_NAME = "drivewm.Scene"
 #: Name of the MCAP metadata record holding the rig name and camera order.
 METADATA_NAME = "drivewm"
+#: Name of the MCAP metadata record of a log with label maps: ``classes``, the label ids' names, comma-separated.
+LABELS_METADATA_NAME = "drivewm.labels"
 
 
 def image_topic(camera: str) -> str:
@@ -30,3 +32,15 @@ def image_topic(camera: str) -> str:
 def calibration_topic(camera: str) -> str:
     """``/CAMERA/calibration``: foxglove.CameraCalibration with frame_id = camera name."""
     return f"/{camera}/calibration"
+
+
+def labels_topic(camera: str) -> str:
+    """``/CAMERA/labels``: foxglove.CompressedImage (grey PNG label map, drivewm.layout.labels) with
+    frame_id = camera name and the timestamp of the camera's image it labels."""
+    return f"/{camera}/labels"
+
+
+def labels_camera(topic: str) -> str | None:
+    """The camera of a ``/CAMERA/labels`` topic, else None."""
+    parts = topic.split("/")
+    return parts[1] if len(parts) == 3 and parts[0] == "" and parts[2] == "labels" and parts[1] else None

@@ -38,7 +38,7 @@ from drivewm.logs.types import DriveLog, ImageFrame, LogIndex, SceneInfo
 _IMAGE_SCHEMAS = (fox.IMAGE,) + ros.COMPRESSED_IMAGE + ros.RAW_IMAGE
 _CALIBRATION_SCHEMAS = (fox.CALIBRATION,) + ros.CAMERA_INFO
 _TF_SCHEMAS = (fox.TRANSFORMS, fox.TRANSFORM) + ros.TF_MESSAGE
-_ALWAYS = ("image", "calibration", "tf", "pose", "scene")  # kinds every pass reads; the others on request
+_ALWAYS = ("image", "labels", "calibration", "tf", "pose", "scene")  # kinds every pass reads; the others on request
 
 
 @dataclasses.dataclass
@@ -53,12 +53,14 @@ class _Calibration:
 @dataclasses.dataclass
 class _Collected:
     """Everything read from the messages, before assembly. ``keep``: the optional kinds whose
-    payloads are decoded and kept ("image", "agents", "static", "road"); image timestamps are always
-    recorded."""
+    payloads are decoded and kept ("image", "labels", "agents", "static", "road"); image and label
+    timestamps are always recorded."""
 
-    keep: tuple[str, ...] = ("image", "agents", "static", "road")
+    keep: tuple[str, ...] = ("image", "labels", "agents", "static", "road")
     image_stamps: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     images: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
+    label_stamps: dict[str, list[int]] = dataclasses.field(default_factory=dict)
+    labels: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
     calibrations: dict[str, _Calibration] = dataclasses.field(default_factory=dict)
     frames: FrameGraph = dataclasses.field(default_factory=FrameGraph)
     poses: list[tuple[int, np.ndarray]] = dataclasses.field(default_factory=list)
@@ -76,9 +78,10 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
     naming a topic the log lacks, and images of a camera without calibration.
     """
     reader = LogStream(path, topic_map)
-    col = reader.collect(keep=("image", *scene_objects.KINDS))
+    col = reader.collect(keep=("image", "labels", *scene_objects.KINDS))
     index = reader.assemble(col)
     images = {name: sorted(col.images.get(name, []), key=lambda f: f.timestamp_ns) for name in index.rig.names}
+    labels = {name: sorted(frames, key=lambda f: f.timestamp_ns) for name, frames in col.labels.items()}
     agents = index.agents.as_messages()
     log = DriveLog(
         index.path,
@@ -91,6 +94,8 @@ def read_log(path: str | Path, topic_map: str | Path | TopicMap | None = None, r
         index.road,
         index.warnings,
         index.static,
+        labels,
+        index.label_classes,
     )
     if require_images:
         log.validate()
@@ -121,8 +126,9 @@ class LogStream:
         return index
 
     def stream(self, kinds: tuple[str, ...] = ("image",)) -> Iterator[tuple[str, Any]]:
-        """Messages of ``kinds`` one at a time in log order: ("image", (camera, ImageFrame)). A
-        camera's images come in the order :meth:`index` recorded their timestamps."""
+        """Messages of ``kinds`` one at a time in log order: ("image", (camera, ImageFrame)) and
+        ("labels", (camera, ImageFrame)) (a label map's PNG). A camera's images come in the order
+        :meth:`index` recorded their timestamps."""
         for f in self.files:
             for msg in iter_messages(f, lambda info: (self._route(info) or ("",))[0] in kinds):
                 kind, camera = self._route(msg.channel)
@@ -160,6 +166,8 @@ def _router(tmap: TopicMap):
 
     def route(info: ChannelInfo) -> tuple[str, str | None] | None:
         s = info.schema_name
+        if s == fox.IMAGE and names.labels_camera(info.topic):  # drivewm's label maps, not images
+            return "labels", names.labels_camera(info.topic)
         if info.topic == pose_topic:
             return _mapped(tmap, info, "ego_pose", ros.POSE_TYPES, ("pose", None))
         if tmap.cameras and info.topic in image_topics:
@@ -202,11 +210,12 @@ def _stamp(tmap: TopicMap, stamp_ns: int, msg: Message) -> int:
 def _handle(col: _Collected, routed: tuple[str, str | None], msg: Message, tmap: TopicMap) -> None:
     kind, camera = routed
     schema, data = msg.channel.schema_name, msg.data
-    if kind == "image":
+    if kind in ("image", "labels"):
         name, frame = _image(camera, msg, tmap)
-        col.image_stamps.setdefault(name, []).append(frame.timestamp_ns)
-        if "image" in col.keep:
-            col.images.setdefault(name, []).append(frame)
+        stamps, kept = (col.image_stamps, col.images) if kind == "image" else (col.label_stamps, col.labels)
+        stamps.setdefault(name, []).append(frame.timestamp_ns)
+        if kind in col.keep:
+            kept.setdefault(name, []).append(frame)
     elif kind == "calibration":
         frame_id, K, D, w, h = ros.camera_info(data) if schema in ros.CAMERA_INFO else fox.calibration(data)
         col.calibrations.setdefault(camera or frame_id, _Calibration(frame_id, K, D, w, h))
@@ -249,7 +258,8 @@ def _check_topics(path: str | Path, tmap: TopicMap, topics: set[str]) -> None:
 
 
 def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicMap, world: str, ego: str) -> LogIndex:
-    meta = read_metadata(files[0]).get(names.METADATA_NAME, {})
+    metadata = read_metadata(files[0])
+    meta = metadata.get(names.METADATA_NAME, {})
     without = sorted(set(col.image_stamps) - set(col.calibrations))
     if without:
         raise DrivewmError(f"{path}: images of camera(s) {without} have no calibration")
@@ -266,8 +276,21 @@ def _assemble(path: str | Path, files: list[Path], col: _Collected, tmap: TopicM
         warnings.append(_no_poses(col, tmap, world, ego))
     place = scene_objects.placer(col.frames, pose_ts, T_world_from_ego, world, ego)
     agents, static, road, lost = col.objects.place(place, world)
+    label_stamps = {name: np.asarray(t, dtype=np.int64) for name, t in col.label_stamps.items()}
+    label_classes = tuple(n for n in metadata.get(names.LABELS_METADATA_NAME, {}).get("classes", "").split(",") if n)
     return LogIndex(
-        str(path), rig, stamps, pose_ts, T_world_from_ego, _scene(col, tmap), road, warnings + lost, static, agents
+        str(path),
+        rig,
+        stamps,
+        pose_ts,
+        T_world_from_ego,
+        _scene(col, tmap),
+        road,
+        warnings + lost,
+        static,
+        agents,
+        label_stamps,
+        label_classes,
     )
 
 

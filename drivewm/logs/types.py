@@ -75,6 +75,8 @@ class DriveLog:
     ``static``: optional static objects as boxes (buildings, poles, lamps, tree trunks and crowns).
     ``warnings``: what the reader repaired or left out (e.g. frames sorted back into time order), one
     line each; curation reports them per log.
+    ``labels``: optional label maps, camera name -> grey PNG frames (drivewm.layout.labels) sorted by
+    ``timestamp_ns``, each at the time of the image it labels; ``label_classes`` the names of their ids.
     """
 
     path: str
@@ -87,6 +89,8 @@ class DriveLog:
     road: list[RoadLine] = dataclasses.field(default_factory=list)
     warnings: list[str] = dataclasses.field(default_factory=list)
     static: list[AgentBox] = dataclasses.field(default_factory=list)
+    labels: dict[str, list[ImageFrame]] = dataclasses.field(default_factory=dict)
+    label_classes: tuple[str, ...] = ()
 
     @property
     def camera_names(self) -> list[str]:
@@ -105,7 +109,8 @@ class LogIndex:
     As :class:`DriveLog`, but ``image_timestamps_ns``: camera name -> (M,) int64 timestamps of its
     images in log (arrival) order, where DriveLog has the frames; and the road users as columns
     (``agents``, in the world frame). ``agents``, ``road`` and ``static`` are filled when the index
-    was asked for them (``LogStream.index(layout=True)``).
+    was asked for them (``LogStream.index(layout=True)``). ``label_timestamps_ns``: camera name -> (L,)
+    int64 timestamps of its label maps (always; empty without labels), ``label_classes`` their ids' names.
     """
 
     path: str
@@ -119,6 +124,8 @@ class LogIndex:
     """What the reader repaired or left out, one line each (as :class:`DriveLog`)."""
     static: list[AgentBox] = dataclasses.field(default_factory=list)
     agents: AgentTable | None = None
+    label_timestamps_ns: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    label_classes: tuple[str, ...] = ()
 
     @property
     def has_layout(self) -> bool:

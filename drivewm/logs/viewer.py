@@ -6,6 +6,8 @@ Entity tree (world z up; timeline ``log_time`` = the log's ``timestamp_ns``):
 - ``world/ego``: ``T_world_from_ego`` per tick (Transform3D; NaN gaps are skipped);
 - ``world/ego/CAMERA``: ``T_ego_from_cam`` (static Transform3D) + Pinhole (K, size, OpenCV
   RDF axes; static) + the camera's images (EncodedImage per frame, stored bytes, not decoded);
+- ``world/ego/CAMERA/labels``: the camera's label maps, if the log has them (SegmentationImage per
+  frame, class names and colours from the static AnnotationContext on ``world``);
 - ``world/ego_trajectory``: the ego path as line strips (static; split at pose gaps);
 - ``world/agents``: the other road users per tick (Boxes3D, labelled category:id);
 - ``world/static``: the static objects (buildings, poles, trees, ...) if the log has them (static Boxes3D);
@@ -27,12 +29,29 @@ import rerun as rr
 
 from drivewm.atomic import atomic_path
 from drivewm.errors import DrivewmError
+from drivewm.layout.labels import labels_from_png
 from drivewm.logs.reader import LogStream
 from drivewm.logs.transforms import quat_xyzw_from_yaw
 from drivewm.logs.types import LogIndex
 
 TIMELINE = "log_time"  # the MCAP log time; Rerun's own wall-clock "log_time"/"log_tick" are switched off
 MEDIA_TYPES = {"jpeg": "image/jpeg", "png": "image/png"}
+#: Colours of the label classes (drivewm.layout.classes.LABEL_CLASSES), Cityscapes-like.
+LABEL_RGB = {
+    "sky": (70, 130, 180),
+    "road": (128, 64, 128),
+    "lane_paint": (255, 255, 255),
+    "sidewalk": (244, 35, 232),
+    "kerb": (196, 196, 196),
+    "terrain": (152, 251, 152),
+    "vehicle": (0, 0, 142),
+    "pedestrian": (220, 20, 60),
+    "building": (70, 70, 70),
+    "vegetation": (107, 142, 35),
+    "pole": (153, 153, 153),
+    "barrier": (190, 153, 153),
+    "sign": (220, 220, 0),
+}
 ROAD_COLORS = {
     "lane_center": [80, 160, 255],
     "lane_boundary": [255, 255, 255],
@@ -48,6 +67,12 @@ def _set_time(rec, timestamp_ns: int) -> None:
 def log_static(rec, log: LogIndex) -> None:
     """World axes, camera mounts and pinholes, ego trajectory, scene text."""
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    if log.label_classes:
+        classes = [
+            rr.ClassDescription(info=(i, name, LABEL_RGB.get(name, (255, 255, 255))))
+            for i, name in enumerate(log.label_classes)
+        ]
+        rec.log("world", rr.AnnotationContext(classes), static=True)
     for cam in log.rig.cameras:
         T = cam.T_ego_from_cam
         rec.log(f"world/ego/{cam.name}", rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]), static=True)
@@ -101,10 +126,14 @@ def log_ticks(rec, log: LogIndex, stream: LogStream) -> dict[str, int]:
         _set_time(rec, ts)
         rec.log("world/agents", _boxes(boxes))
     counts = {"image": 0, "agents": len(agents)}
-    for _, (name, frame) in stream.stream(("image",)):
-        counts["image"] += 1
+    for kind, (name, frame) in stream.stream(("image", "labels") if log.label_classes else ("image",)):
+        counts[kind] = counts.get(kind, 0) + 1
         _set_time(rec, frame.timestamp_ns)
-        rec.log(f"world/ego/{name}", rr.EncodedImage(contents=frame.data, media_type=MEDIA_TYPES.get(frame.format)))
+        if kind == "labels":
+            rec.log(f"world/ego/{name}/labels", rr.SegmentationImage(labels_from_png(frame.data, f"{name} labels")))
+        else:
+            media = MEDIA_TYPES.get(frame.format)
+            rec.log(f"world/ego/{name}", rr.EncodedImage(contents=frame.data, media_type=media))
     return counts
 
 

@@ -28,6 +28,7 @@ from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from drivewm.atomic import atomic_path
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Camera, Rig
+from drivewm.layout.labels import label_png
 from drivewm.logs import names
 from drivewm.logs.transforms import ns_to_sec_nsec, quat_xyzw_from_yaw, split_T
 from drivewm.logs.types import AgentBox, DriveLog, RoadLine, SceneInfo
@@ -48,18 +49,26 @@ class LogWriter:
 
     ``rig``: the cameras (their order is kept in the file's ``drivewm`` metadata record).
     ``scene``: tags + description for the ``/scene`` channel. ``image_format``: "jpeg" or "png"
-    for :meth:`write_images`; ``jpeg_quality``: OpenCV JPEG quality 0-100.
+    for :meth:`write_images`; ``jpeg_quality``: OpenCV JPEG quality 0-100. ``label_classes``: the
+    log carries label maps (:meth:`write_labels`) with ids of these classes (a metadata record).
     Use as a context manager; leaving the block on an exception discards the file.
     """
 
     def __init__(
-        self, path: str | Path, rig: Rig, scene: SceneInfo, image_format: str = "jpeg", jpeg_quality: int = 92
+        self,
+        path: str | Path,
+        rig: Rig,
+        scene: SceneInfo,
+        image_format: str = "jpeg",
+        jpeg_quality: int = 92,
+        label_classes: tuple[str, ...] = (),
     ):
         if image_format not in IMAGE_FORMATS:
             raise DrivewmError(f"{path}: image_format must be one of {IMAGE_FORMATS}, got {image_format!r}")
         self.path = Path(path)
         self.rig, self.scene = rig, scene
         self.image_format, self.jpeg_quality = image_format, int(jpeg_quality)
+        self.label_classes = tuple(label_classes)
         self._stack = contextlib.ExitStack()
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._open(tmp)
@@ -91,6 +100,13 @@ class LogWriter:
         )
         self._scene_ch = foxglove.Channel(names.SCENE_TOPIC, schema=schema, message_encoding="json", context=ctx)
         self._mcap.write_metadata(names.METADATA_NAME, {"rig": self.rig.name, "cameras": ",".join(self.rig.names)})
+        self._labels_ch = {}
+        if self.label_classes:
+            self._labels_ch = {
+                c.name: channels.CompressedImageChannel(names.labels_topic(c.name), context=ctx)
+                for c in self.rig.cameras
+            }
+            self._mcap.write_metadata(names.LABELS_METADATA_NAME, {"classes": ",".join(self.label_classes)})
 
     def _timestamp(self, timestamp_ns: int):
         sec, nsec = ns_to_sec_nsec(timestamp_ns)
@@ -208,6 +224,23 @@ class LogWriter:
         )
         self._image_ch[camera].log(msg, log_time=int(timestamp_ns if log_time_ns is None else log_time_ns))
 
+    def write_label_png(self, camera: str, timestamp_ns: int, png: bytes) -> None:
+        """Log one camera's label map (grey PNG bytes, drivewm.layout.labels) for its image at ``timestamp_ns``."""
+        if camera not in self._labels_ch:
+            raise DrivewmError(
+                f"{self.path}: no label channel for camera {camera!r} (open the writer with label_classes)"
+            )
+        self._ensure_static(timestamp_ns)
+        msg = messages.CompressedImage(
+            timestamp=self._timestamp(timestamp_ns), frame_id=camera, data=bytes(png), format="png"
+        )
+        self._labels_ch[camera].log(msg, log_time=int(timestamp_ns))
+
+    def write_labels(self, timestamp_ns: int, labels: dict[str, np.ndarray]) -> None:
+        """Log one label map (H, W) uint8 per camera name at ``timestamp_ns``."""
+        for camera, label_map in labels.items():
+            self.write_label_png(camera, timestamp_ns, label_png(label_map))
+
     def write_pose(self, timestamp_ns: int, T_world_from_ego: np.ndarray, log_time_ns: int | None = None) -> None:
         """Log the ego pose (4x4, NaN allowed for a gap) as a world -> ego FrameTransform (``log_time_ns``
         as for :meth:`write_encoded_image`)."""
@@ -281,18 +314,19 @@ def encode_image(image_rgb: np.ndarray, image_format: str = "jpeg", jpeg_quality
 
 def drive_events(log: DriveLog) -> list[tuple[int, str, tuple]]:
     """A DriveLog as time-ordered (timestamp_ns, kind, payload) events for a writer:
-    ("pose", (T_world_from_ego,)), ("agents", (boxes,)), ("image", (camera, ImageFrame)); at equal
-    times poses come first, then agents, then images."""
-    rank = {"pose": 0, "agents": 1, "image": 2}
+    ("pose", (T_world_from_ego,)), ("agents", (boxes,)), ("labels", (camera, ImageFrame)), ("image",
+    (camera, ImageFrame)); at equal times poses come first, then agents, then label maps, then images."""
+    rank = {"pose": 0, "agents": 1, "labels": 2, "image": 3}
     events = [(int(ts), "pose", (T,)) for ts, T in zip(log.pose_timestamps_ns, log.T_world_from_ego)]
     events += [(int(ts), "agents", (boxes,)) for ts, boxes in log.agents]
+    events += [(int(f.timestamp_ns), "labels", (cam, f)) for cam, frames in log.labels.items() for f in frames]
     events += [(int(f.timestamp_ns), "image", (cam, f)) for cam, frames in log.images.items() for f in frames]
     return sorted(events, key=lambda e: (e[0], rank[e[1]]))
 
 
 def write_log(log: DriveLog, path: str | Path) -> Path:
     """Write an in-memory :class:`DriveLog` to ``path``; images are copied as stored (no re-encoding)."""
-    with LogWriter(path, log.rig, log.scene) as w:
+    with LogWriter(path, log.rig, log.scene, label_classes=log.label_classes) as w:
         events = drive_events(log)
         if log.road:
             w.write_road(events[0][0] if events else 0, log.road)
@@ -303,6 +337,8 @@ def write_log(log: DriveLog, path: str | Path) -> Path:
                 w.write_pose(ts, payload[0])
             elif kind == "agents":
                 w.write_agents(ts, payload[0])
+            elif kind == "labels":
+                w.write_label_png(payload[0], ts, payload[1].data)
             else:
                 w.write_encoded_image(payload[0], ts, payload[1].data, payload[1].format)
     return Path(path)

@@ -46,6 +46,13 @@ def register(subparsers) -> None:
         default=None,
         help="camera i exposes at tick + i x this (ms), like rigs that fire cameras in turn (default 0: together)",
     )
+    p.add_argument(
+        "--labels",
+        action="store_true",
+        default=None,
+        help="also log every image's exact label map (road, lane paint, vehicle, building, vegetation, sky, ...) "
+        "as a lossless PNG on /CAMERA/labels",
+    )
     p.add_argument("--seed", type=seed, default=None, help="first seed (drive i uses seed + i)")
     p.add_argument(
         "--drives",
@@ -78,6 +85,7 @@ FLAG_FIELDS = {
     "height": "height",
     "seed": "seed",
     "exposure_stagger_ms": "exposure_stagger_ms",
+    "labels": "labels",
 }
 
 

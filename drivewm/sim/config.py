@@ -52,6 +52,10 @@ class SimConfig:
     """Camera i of the rig exposes at tick + i x this (ms), as rigs that fire cameras in turn (nuScenes:
     ~40 ms over the sweep); each image shows the world at its own exposure time and is logged with
     that time. 0: every camera at the tick. (cameras - 1) x stagger must stay below a tick."""
+    labels: bool = False
+    """Also log each image's exact label map (road, lane paint, vehicle, building, vegetation, sky, ...:
+    drivewm.layout.classes.LABEL_CLASSES) as a lossless PNG on /CAMERA/labels; curation carries it
+    into the shards (KEY.CAMERA.labels.npz). An output of the drive, not part of it (drive_id ignores it)."""
 
     def __post_init__(self) -> None:
         if self.scenario is None and self.source in SCENARIOS:

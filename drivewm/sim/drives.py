@@ -16,6 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from drivewm.atomic import remove_dead_temporaries
+from drivewm.layout.classes import LABEL_CLASSES
 from drivewm.logs.types import SceneInfo
 from drivewm.logs.writer import LogWriter
 from drivewm.sim.config import SimConfig
@@ -74,17 +75,23 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
     cfg.validate()
     rig = sim_rig(cfg)  # a bad rig fails before any simulation
     rec = record(cfg)
-    renderer = build_renderer(cfg, rec, rig)
+    renderer = build_renderer(cfg, rec, rig, labels=cfg.labels)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     offsets = exposure_offsets_ns(len(rig.cameras), cfg.exposure_stagger_ms, 1e9 / cfg.fps)
-    with LogWriter(out_path, rig, SceneInfo(dict(rec.tags), rec.description), "jpeg", cfg.jpeg_quality) as writer:
+    classes = LABEL_CLASSES if cfg.labels else ()
+    scene = SceneInfo(dict(rec.tags), rec.description)
+    with LogWriter(out_path, rig, scene, "jpeg", cfg.jpeg_quality, label_classes=classes) as writer:
         writer.write_road(rec.ticks[0].timestamp_ns, rec.road.road_lines())  # the optional /road channel
         writer.write_static(rec.ticks[0].timestamp_ns, rec.road.props)
         logged = rec.ticks[: cfg.num_ticks]
         for k, tick in enumerate(tqdm(logged, desc=out_path.name, unit="tick", disable=not progress, leave=False)):
             if cfg.exposure_stagger_ms > 0:
-                _write_staggered(writer, renderer, rec, k, offsets)
+                _write_staggered(writer, renderer, rec, k, offsets, cfg.labels)
+            elif cfg.labels:  # each label map is logged before the image it labels
+                images, labels = renderer.render_with_labels(tick.T_world_from_ego, tick.agents, tick.timestamp_ns)
+                writer.write_labels(tick.timestamp_ns, labels)
+                writer.write_images(tick.timestamp_ns, images)
             else:
                 writer.write_images(
                     tick.timestamp_ns, renderer.render(tick.T_world_from_ego, tick.agents, tick.timestamp_ns)
@@ -94,12 +101,18 @@ def simulate(cfg: SimConfig, out_path: str | Path, progress: bool = True) -> Pat
     return out_path
 
 
-def _write_staggered(writer, renderer, rec: SceneRecording, k: int, offsets_ns: list[int]) -> None:
-    """Each camera rendered from the world at its own exposure time and logged at that time."""
+def _write_staggered(writer, renderer, rec: SceneRecording, k: int, offsets_ns: list[int], labels: bool) -> None:
+    """Each camera rendered from the world at its own exposure time and logged at that time (its label
+    map first, with ``labels``)."""
     for cam, offset in zip(writer.rig.cameras, offsets_ns):
         t = rec.ticks[k].timestamp_ns + offset
         state = state_at(rec.ticks, k, t)
-        writer.write_image(cam.name, t, renderer.render_camera(cam.name, state.T_world_from_ego, state.agents, t))
+        if labels:
+            image, label_map = renderer.render_camera_with_labels(cam.name, state.T_world_from_ego, state.agents, t)
+            writer.write_labels(t, {cam.name: label_map})
+        else:
+            image = renderer.render_camera(cam.name, state.T_world_from_ego, state.agents, t)
+        writer.write_image(cam.name, t, image)
 
 
 def drive_name(cfg: SimConfig) -> str:

@@ -21,6 +21,8 @@ from drivewm.sim.config import SimConfig
 
 #: SimConfig fields that change the look of a drive, not the drive.
 CONDITION_FIELDS = ("weather", "time_of_day")
+#: SimConfig fields that add outputs to a drive's log, not change the drive.
+OUTPUT_FIELDS = ("labels",)
 
 
 def parse_condition(text: str) -> tuple[str, str]:
@@ -48,8 +50,9 @@ def parse_conditions(spec: str | list[str]) -> list[tuple[str, str]]:
 
 def drive_id(cfg: SimConfig) -> str:
     """Name of the drive ``cfg`` renders, the same in every condition: source, scenario and seed for
-    people, then a hash of every other non-condition field (rig, duration, size, traffic, ...)."""
-    fields = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in CONDITION_FIELDS}
+    people, then a hash of every other field that changes the drive (rig, duration, size, traffic, ...;
+    not the condition, not the extra outputs such as label maps)."""
+    fields = {k: v for k, v in dataclasses.asdict(cfg).items() if k not in CONDITION_FIELDS + OUTPUT_FIELDS}
     digest = hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:8]
     return f"{cfg.source}-{cfg.scenario}-s{cfg.seed:04d}-{digest}"
 

@@ -33,8 +33,9 @@ def place_world_props(cfg: SimConfig, rec: SceneRecording) -> tuple[np.ndarray, 
     return lo, hi
 
 
-def build_renderer(cfg: SimConfig, rec: SceneRecording, rig: Rig) -> Renderer:
-    """Place props along the recording's roads and build the renderer for its condition."""
+def build_renderer(cfg: SimConfig, rec: SceneRecording, rig: Rig, labels: bool = False) -> Renderer:
+    """Place props along the recording's roads and build the renderer for its condition (``labels``:
+    one that also draws label maps)."""
     lo, hi = place_world_props(cfg, rec)
     cond = condition_for(cfg.weather, cfg.time_of_day)
-    return Renderer(rig, rec.road, cond, cfg.seed, lo, hi, cfg.source == "sumo", cfg.max_range_m)
+    return Renderer(rig, rec.road, cond, cfg.seed, lo, hi, cfg.source == "sumo", cfg.max_range_m, labels)

@@ -199,7 +199,7 @@ def write_log_json(log: DriveLog, path: str | Path, indexed: bool = True) -> Pat
     ``indexed=False`` writes the bare layout some recorders produce: no chunks, no indexes and
     no summary section (readers must scan the file).
     """
-    events = drive_events(log)
+    events = [e for e in drive_events(log) if e[1] != "labels"]  # label maps stay drivewm's own logs'
     t0 = events[0][0] if events else 0
     messages = _static_messages(log, t0) + [(*_event_message(ts, k, p), ts) for ts, k, p in events]
     with atomic_path(path) as tmp, open(tmp, "wb") as f:

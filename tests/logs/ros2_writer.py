@@ -261,7 +261,7 @@ def write_log_ros2(
 ) -> Path:
     """Write ``log`` as a ROS 2 bag at ``path`` (atomic). ``agents``: the road users as
     ``detections`` (vision_msgs/Detection3DArray) or ``markers`` (visualization_msgs/MarkerArray)."""
-    events = [e for e in drive_events(log) if e[1] != "agents"]
+    events = [e for e in drive_events(log) if e[1] not in ("agents", "labels")]
     t0 = events[0][0] if events else 0
     messages = [(t0, *m) for m in _static_messages(log, t0)]
     for ts, kind, payload in events:
