@@ -193,7 +193,8 @@ def _box_set(layout: ClipLayout, rows: np.ndarray) -> BoxSet:
     textures = [_class_textures(b.category) for b in boxes]
     labels = np.array([label_id(b.category) for b in boxes], np.uint8)
     boxes = BoxSet.from_boxes(boxes, textures, _shade, bake=True, labels=labels)
-    return dataclasses.replace(boxes, interpolation=cv2.INTER_NEAREST)  # solid faces: exact pixel-centre coverage
+    # solid faces: exact pixel-centre coverage; nearest first, so that hidden faces are skipped
+    return dataclasses.replace(boxes, interpolation=cv2.INTER_NEAREST, front_to_back=True)
 
 
 def _shade(normals: np.ndarray) -> np.ndarray:

@@ -70,7 +70,9 @@ class BoxSet:
     the label id (N,) uint8 each box gives its pixels in a label map (drivewm.layout.classes).
     ``interpolation``: how textures are sampled. Bilinear (the default) blends texels, and its alpha
     test follows the pixel-centre rule along the edges while cutting each corner by up to a fifth of
-    a texel; nearest (``cv2.INTER_NEAREST``) follows the rule exactly, corners too (solid faces)."""
+    a texel; nearest (``cv2.INTER_NEAREST``) follows the rule exactly, corners too (solid faces).
+    ``front_to_back``: draw the faces nearest first, so that more of the far ones are found hidden
+    and skipped (the pixels are the same, but where two faces meet at exactly equal depth)."""
 
     corners_world: np.ndarray
     normals_world: np.ndarray
@@ -80,6 +82,7 @@ class BoxSet:
     shade: np.ndarray
     labels: np.ndarray
     interpolation: int = cv2.INTER_LINEAR
+    front_to_back: bool = False
 
     @classmethod
     def from_boxes(
@@ -148,14 +151,20 @@ def draw_boxes(
     with np.errstate(divide="ignore", invalid="ignore"):
         uv_all = quads[..., :2] / quads[..., 2:3] @ view.K[:2, :2].T + view.K[:2, 2]  # (F, 4, 2)
     rects = _pixel_rects(uv_all, view.width, view.height)  # (F, 4) x0, y0, x1, y1
+    near_z = np.maximum(quads[..., 2].min(axis=1), NEAR_M)  # (F,) the depth no pixel of the face is nearer than
     with np.errstate(divide="ignore", invalid="ignore"):  # rays parallel to a face plane: z = inf, never drawn
-        _draw_faces(img, zbuf, view, boxes, keep, mi, fi, quads, normals, depth_d, H, in_front, rects, label_img)
+        _draw_faces(
+            img, zbuf, view, boxes, keep, mi, fi, quads, normals, depth_d, H, in_front, rects, near_z, label_img
+        )
 
 
 def _draw_faces(
-    img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, depth_d, H, in_front, rects, label_img
+    img, zbuf, view, boxes: BoxSet, keep, mi, fi, quads, normals, depth_d, H, in_front, rects, near_z, label_img
 ) -> None:
-    for k in np.flatnonzero(~in_front | (rects[:, 2] > rects[:, 0]) & (rects[:, 3] > rects[:, 1])):
+    faces = np.flatnonzero(~in_front | (rects[:, 2] > rects[:, 0]) & (rects[:, 3] > rects[:, 1]))
+    if boxes.front_to_back:
+        faces = faces[np.argsort(near_z[faces], kind="stable")]
+    for k in faces:
         box, f = keep[mi[k]], fi[k]
         if in_front[k]:
             rect = rects[k]
@@ -166,6 +175,8 @@ def _draw_faces(
             rect = _pixel_rects(uv[None], view.width, view.height)[0]
             if rect[2] <= rect[0] or rect[3] <= rect[1]:
                 continue
+        if near_z[k] > zbuf[rect[1] : rect[3], rect[0] : rect[2]].max() * (1 + 1e-5):
+            continue  # every pixel of it lies behind what is drawn there: the z-test would refuse them all
         face = (normals[k], depth_d[k], H[k], boxes.textures[box].images[f], boxes.shade[box, f])
         draw_face(img, zbuf, view, rect, *face, label_img, int(boxes.labels[box]), boxes.interpolation)
 
