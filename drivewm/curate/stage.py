@@ -40,10 +40,10 @@ from drivewm.curate.timing import StepClock
 from drivewm.curate.windows import WindowStream
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
-from drivewm.layout.build import layout_from_log
+from drivewm.layout.build import layout_from_log, thin_road
 from drivewm.layout.clip_layout import layout_to_npz
 from drivewm.logs.reader import LogStream
-from drivewm.logs.types import ImageFrame, LogIndex
+from drivewm.logs.types import ImageFrame, LogIndex, RoadLine
 from drivewm.paths import child_path, sanitize_name
 
 MARKER_DIR = "logs"
@@ -170,6 +170,7 @@ class _LogContext:
     clocks: _ClockReport
     encoders: dict[str, H264Encoder] = dataclasses.field(default_factory=dict)  # h264_keep_encoder: per camera
     scene_errors: list[str] = dataclasses.field(default_factory=list)  # why clips went without a layout or labels
+    road: list[RoadLine] | None = None  # the log's road lines thinned (drivewm.layout.build.thin_road), once per log
 
 
 def _context(log: LogIndex, cfg: CurateConfig) -> _LogContext:
@@ -392,7 +393,9 @@ def _layout(ctx: _LogContext, key: str, t_ns: np.ndarray, poses: np.ndarray) -> 
     if ctx.smooth is None or not ctx.log.has_layout:
         return None
     try:
-        return layout_to_npz(layout_from_log(ctx.log, t_ns, poses, f"{ctx.log.path}: clip {key}"))
+        if ctx.road is None:
+            ctx.road = thin_road(ctx.log.road)
+        return layout_to_npz(layout_from_log(ctx.log, t_ns, poses, f"{ctx.log.path}: clip {key}", road=ctx.road))
     except DrivewmError as exc:
         ctx.scene_errors.append(str(exc))
         return None

@@ -5,8 +5,8 @@ clip's frames, :func:`layout_from_log`), the simulator without pixels (a
 :class:`drivewm.sim.scene.SceneRecording`, :func:`layout_from_recording`) and anything else that
 holds boxes and lines in a world frame (a future the multiverse simulates), through
 :func:`layout_from_world`. Objects farther than ``radius_m`` from every ego position of the clip
-are left out (the simulator draws nothing beyond 150 m); a line is cut to its runs within reach
-and thinned to the points that matter (Ramer-Douglas-Peucker, :data:`LINE_TOLERANCE_M`).
+are left out (the simulator draws nothing beyond 150 m); a line is thinned to the points that matter
+(Ramer-Douglas-Peucker, :data:`LINE_TOLERANCE_M`) and cut to its runs within reach.
 """
 
 from __future__ import annotations
@@ -34,10 +34,12 @@ def layout_from_world(
     where: str,
     radius_m: float = RADIUS_M,
     T_world_from_ego0: np.ndarray | None = None,
+    thin: bool = True,
 ) -> ClipLayout:
     """The layout of T frames: ``T_world_from_ego`` (T, 4, 4) the ego poses, ``frame_agents`` the road
     users seen in each frame, ``static`` and ``road`` the drive's static objects and road lines, all
-    in one world frame; ``T_world_from_ego0``: the layout's frame (default: the first ego pose).
+    in one world frame; ``T_world_from_ego0``: the layout's frame (default: the first ego pose);
+    ``thin``: thin the road lines (False: ``road`` is :func:`thin_road`'s already).
     Raises a one-line DrivewmError naming ``where`` for non-finite poses, an unknown class, kind or
     paint."""
     T_world_from_ego = np.asarray(T_world_from_ego, dtype=np.float64)
@@ -50,7 +52,7 @@ def layout_from_world(
     path_xy = T_world_from_ego[:, :2, 3]
     rows = [(STATIC, b) for b in static if _reaches(path_xy, b, radius_m)]
     rows += [(t, b) for t, boxes in enumerate(frame_agents) for b in boxes if _reaches(path_xy, b, radius_m)]
-    lines = [piece for line in road for piece in _within(line, path_xy, radius_m)]
+    lines = [piece for line in (thin_road(road) if thin else road) for piece in _within(line, path_xy, radius_m)]
     return _assemble(timestamps_ns, T_ego0_from_world @ T_world_from_ego, T_ego0_from_world, rows, lines, where)
 
 
@@ -87,7 +89,7 @@ def _assemble(timestamps_ns, T_ego0_from_ego, T_ego0_from_world, rows, lines, wh
         check_word(line.line_type, PAINTS, "line_paint", where)
     centers = np.array([b.center_xyz for b in boxes], dtype=np.float64).reshape(-1, 3)
     axes = np.array([[np.cos(b.yaw_rad), np.sin(b.yaw_rad), 0.0] for b in boxes]).reshape(-1, 3) @ R.T
-    points = [_thinned(line.points_xyz @ R.T + t) for line in lines]
+    points = [line.points_xyz @ R.T + t for line in lines]
     return ClipLayout(
         timestamps_ns=np.asarray(timestamps_ns, dtype=np.int64),
         T_ego0_from_ego=T_ego0_from_ego,
@@ -104,9 +106,15 @@ def _assemble(timestamps_ns, T_ego0_from_ego, T_ego0_from_world, rows, lines, wh
     )
 
 
-def _thinned(points: np.ndarray, tolerance_m: float = LINE_TOLERANCE_M) -> np.ndarray:
-    """The points (P, 3) of a polyline that Ramer-Douglas-Peucker keeps (Douglas & Peucker 1973): no
-    dropped point lies farther than ``tolerance_m`` from the chord that replaces it."""
+def thin_road(road: list[RoadLine], tolerance_m: float = LINE_TOLERANCE_M) -> list[RoadLine]:
+    """Every line with the points Ramer-Douglas-Peucker keeps (Douglas & Peucker 1973): no dropped point
+    lies farther than ``tolerance_m`` from the chord that replaces it. Thinning thinned lines changes
+    nothing (each split point is still the farthest of the fewer points); curation thins a log's road
+    once and builds every clip's layout from it (:func:`layout_from_log`'s ``road``)."""
+    return [RoadLine(line.kind, line.points_xyz[_kept(line.points_xyz, tolerance_m)], line.line_type) for line in road]
+
+
+def _kept(points: np.ndarray, tolerance_m: float) -> np.ndarray:
     keep = np.zeros(len(points), dtype=bool)
     keep[[0, -1]] = True
     stack = [(0, len(points) - 1)]
@@ -116,18 +124,23 @@ def _thinned(points: np.ndarray, tolerance_m: float = LINE_TOLERANCE_M) -> np.nd
             continue
         chord = points[b] - points[a]
         rel = points[a + 1 : b] - points[a]
-        off = np.linalg.norm(np.cross(rel, chord), axis=1) / max(np.linalg.norm(chord), 1e-12)
-        if np.linalg.norm(chord) < 1e-12:
-            off = np.linalg.norm(rel, axis=1)
-        k = int(np.argmax(off))
-        if off[k] > tolerance_m:
+        length = float(np.sqrt(chord @ chord))
+        along = rel @ chord / length if length > 1e-12 else np.zeros(len(rel))
+        off_sq = np.einsum("ij,ij->i", rel, rel) - along**2  # squared distance to the chord's line
+        k = int(np.argmax(off_sq))
+        if off_sq[k] > tolerance_m**2:
             keep[a + 1 + k] = True
             stack += [(a, a + 1 + k), (a + 1 + k, b)]
-    return points[keep]
+    return keep
 
 
 def layout_from_log(
-    log: LogIndex, timestamps_ns: np.ndarray, T_world_from_ego: np.ndarray, where: str, radius_m: float = RADIUS_M
+    log: LogIndex,
+    timestamps_ns: np.ndarray,
+    T_world_from_ego: np.ndarray,
+    where: str,
+    radius_m: float = RADIUS_M,
+    road: list[RoadLine] | None = None,
 ) -> ClipLayout | None:
     """The layout of a clip of ``log`` (indexed with ``layout=True``), or None when the log knows no
     layout. ``timestamps_ns`` (T,) and ``T_world_from_ego`` (T, 4, 4) are the clip's frames and its
@@ -135,7 +148,8 @@ def layout_from_log(
     the log's own ego pose nearest its time (the pose its images were taken at, so the layout lies on
     the pixels), or at the clip's pose when the log has none within half a frame interval. A frame's
     road users are those of the agent message nearest its time within half a frame interval (none
-    there: no road users in that frame)."""
+    there: no road users in that frame). ``road``: the log's road lines already thinned by
+    :func:`thin_road` (None: ``log.road``, thinned here)."""
     if not log.has_layout:
         return None
     ts = np.asarray(timestamps_ns, dtype=np.int64)
@@ -145,7 +159,8 @@ def layout_from_log(
         m = log.agents.nearest(int(t), tolerance) if log.agents is not None else None
         frames.append(log.agents.boxes(m) if m is not None else [])
     poses = _logged_poses(log, ts, tolerance, T_world_from_ego)
-    return layout_from_world(ts, poses, frames, log.static, log.road, where, radius_m, T_world_from_ego[0])
+    lines = thin_road(log.road) if road is None else road
+    return layout_from_world(ts, poses, frames, log.static, lines, where, radius_m, T_world_from_ego[0], thin=False)
 
 
 def _logged_poses(log: LogIndex, ts: np.ndarray, tolerance: float, fallback: np.ndarray) -> np.ndarray:
