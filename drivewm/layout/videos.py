@@ -75,6 +75,7 @@ def _render(item: Clip | BadClip, rig: Rig | None) -> tuple[Clip, Clip]:
     if layout is None:
         raise DrivewmError(f"clip {item.key}: no layout (its log knew no objects or road, or no ego poses)")
     target = rig or item.meta.get_rig()
+    layout.check_seen_by(target, f"clip {item.key}")
     frames = render_layout(target, layout)  # (V, T, H, W, 3)
     meta = dataclasses.replace(item.meta, rig=target.to_dict(), caption=f"layout of {item.key}", view_captions={})
     shown = Clip(meta, {}, item.T_world_from_ego)

@@ -12,6 +12,8 @@ from drivewm.clips import iter_clips, read_manifest
 from drivewm.errors import DrivewmError
 from drivewm.eval.config import MatchConfig
 from drivewm.eval.matching import FrameMatcher
+from drivewm.layout import layout_from_recording
+from drivewm.layout.clip_layout import FIELDS
 from drivewm.logs.reader import read_log
 from drivewm.sim import SimConfig
 from drivewm.sim.drives import record
@@ -45,6 +47,9 @@ def test_conditions_do_not_change_the_drive(source, scenario) -> None:
     ]
     assert a.tags["drive_id"] == b.tags["drive_id"] == drive_id(clear)
     assert a.tags["weather"] == "clear" and b.tags["weather"] == "snow"
+    layouts = [layout_from_recording(r, c) for r, c in ((a, clear), (b, snow))]  # the same layout to condition on
+    assert layouts[0].num_boxes > 0
+    assert all(np.array_equal(getattr(layouts[0], f), getattr(layouts[1], f)) for f in FIELDS)
     assert drive_id(dataclasses.replace(clear, seed=8)) != drive_id(clear)
     assert drive_id(dataclasses.replace(clear, duration_s=2.0)) != drive_id(clear)
 
