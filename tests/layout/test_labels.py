@@ -118,7 +118,9 @@ def _stamped_log(path, stagger_ns: int, labels_after_images: bool):
     return rig
 
 
-@pytest.mark.parametrize("stagger_ns,labels_after_images", [(0, False), (12_000_000, True)])
+@pytest.mark.parametrize(
+    "stagger_ns,labels_after_images", [pytest.param(0, False, marks=pytest.mark.slow), (12_000_000, True)]
+)
 def test_curation_keeps_each_label_map_with_its_frame(tmp_path, stagger_ns, labels_after_images):
     """Every clip frame's label map is the one logged with that camera's image: (tick + camera) % 13,
     with staggered exposures and label maps arriving after their images too; at a smaller clip size
