@@ -93,6 +93,9 @@ class LayoutRenderer:
     rays), then :meth:`render` or :meth:`render_frame`."""
 
     def __init__(self, rig: Rig, layout: ClipLayout, cfg: LayoutRenderConfig | None = None):
+        sizes = {(c.width, c.height) for c in rig.cameras}
+        if len(sizes) > 1:
+            raise DrivewmError(f"rig {rig.name}: cameras of several sizes {sorted(sizes)}; scale the rig to one size")
         self.rig, self.layout, self.cfg = rig, layout, cfg or LayoutRenderConfig()
         self.cfg.validate()
         self.ground = _ground_map(layout, self.cfg)
@@ -136,9 +139,6 @@ class LayoutRenderer:
 
 def render_layout(rig: Rig, layout: ClipLayout, cfg: LayoutRenderConfig | None = None) -> np.ndarray:
     """The layout video of every camera: uint8 RGB (V, T, H, W, 3) (the rig's cameras share one size)."""
-    sizes = {(c.width, c.height) for c in rig.cameras}
-    if len(sizes) > 1:
-        raise DrivewmError(f"rig {rig.name}: cameras of several sizes {sorted(sizes)}; scale the rig to one size")
     return LayoutRenderer(rig, layout, cfg).render()
 
 
