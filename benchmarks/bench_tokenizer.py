@@ -8,7 +8,7 @@
    - 4x8x8 against ``AutoencoderKLCogVideoX``.
    Parameter counts and ours/peer ratios are printed beside every figure. On CUDA (when present)
    the same models run in bf16 autocast; on the CPU in fp32.
-2. Quality at equal compute (``--data CLIPDIR``): drivewm ``tiny-8x8x8`` and the matched Cosmos
+2. Quality at equal compute (``--data CLIPDIR``): drivewm's tiny tokenizer at 8x8x8 and the matched Cosmos
    architecture trained by the same loop (drivewm.train, the tokenizer task), loss, data and
    budget of CPU seconds (each model's step cost is measured first, interleaved, and its step
    count set to fill the budget), then scored on held-out simulated clips (PSNR, SSIM) and on the
@@ -118,13 +118,14 @@ def throughput(frames: int, height: int, width: int, repeats: int, device: torch
     print(f"== throughput: 1 x 3 x {frames} x {height} x {width} on {device} ({dtype}), {threads} threads ==")
     video = (torch.rand(1, 3, frames, height, width, device=device) * 2 - 1).to(dtype)
     pairs = [
-        ("tiny-8x8x8", CosmosPeer("tiny")),
-        ("small-8x8x8", CosmosPeer("small")),
-        ("small-4x8x8", cogvideox_peer()),
+        (("tiny", "8x8x8"), CosmosPeer("tiny")),
+        (("small", "8x8x8"), CosmosPeer("small")),
+        (("small", "4x8x8"), cogvideox_peer()),
     ]
-    for ours_name, other in pairs:
+    for (size, compression), other in pairs:
+        ours_name = f"{size} {compression}"
         torch.manual_seed(0)
-        ours = Tokenizer(preset(ours_name)).eval().to(device, dtype)
+        ours = Tokenizer(preset(size, compression)).eval().to(device, dtype)
         med = interleaved_medians(ours, other.eval().to(device, dtype), video, repeats)
         print(
             f"{ours_name}: drivewm {params_m(ours):.2f}M | {type(other.net).__name__} {params_m(other):.2f}M | "
@@ -189,10 +190,11 @@ def step_cpu_seconds(task: TokenizerTask, batch_size: int, repeats: int = 3) -> 
 def equal_compute(data: Path, budget_s: float, work: Path, holdout: int, max_heldout: int) -> None:
     overrides = ["train.batch_size=4", "data.frames=17", "data.crop=[64,96]", f"data.holdout_percent={holdout}"]
     overrides += ["train.lr=5e-4", "train.warmup_steps=50", "train.log_every=50", "train.ema_decay=0.99"]
-    base = RECIPES.resolve("tiny-8x8x8", None, overrides)
+    tiny = {"compression": "8x8x8"}
+    base = RECIPES.resolve("tiny", None, overrides, tiny)
     videos = CameraVideos(load_clips(data, "train", holdout))
     dataset = CropDataset(videos, base.data.frames, tuple(base.data.crop))
-    tasks = {"drivewm tiny-8x8x8": TokenizerTask(base, dataset), "Cosmos tiny": PeerTask(base, dataset, "tiny")}
+    tasks = {"drivewm tiny 8x8x8": TokenizerTask(base, dataset), "Cosmos tiny": PeerTask(base, dataset, "tiny")}
     costs = {name: step_cpu_seconds(task, 4) for name, task in tasks.items()}
     heldout = torch.cat([clip_video(c) for c in load_clips(data, "holdout", holdout)])[:, :, :17]
     heldout = heldout[torch.linspace(0, len(heldout) - 1, min(max_heldout, len(heldout))).long()]  # spread evenly
@@ -201,7 +203,7 @@ def equal_compute(data: Path, budget_s: float, work: Path, holdout: int, max_hel
     for name, task in tasks.items():
         steps = max(1, int(budget_s / costs[name]))
         cfg = RECIPES.resolve(
-            "tiny-8x8x8", None, [*overrides, f"train.steps={steps}", f"train.checkpoint_every={steps}"]
+            "tiny", None, [*overrides, f"train.steps={steps}", f"train.checkpoint_every={steps}"], tiny
         )
         task.cfg = cfg
         tic = time.thread_time()

@@ -13,6 +13,11 @@ the stage's packaged recipes, ``drivewm/recipes/<stage>/NAME.yaml``)::
     config: {train: {steps: 2000}}      # nested field values
     overrides: [train.lr=1e-4]          # KEY=VALUE strings, exactly as --set takes them
 
+A stage whose presets have a second axis beside the size (the tokenizer's compression and quantizer)
+names it with a :class:`PresetAxis`: a flag (``--compression 8x8x8``, ``--fsq``) and a recipe key of
+the same name, which change the size's fields before the recipe's ``config`` applies; ``--preset``
+stays the size alone, as in every other stage.
+
 The result is validated once, by :func:`drivewm.config.from_dict` (unknown keys, wrong types and
 each config's ``validate()`` give a :class:`DrivewmError` naming the field), and printed by
 ``--dry-run``. Command modules add the same flags through :meth:`RecipeBook.add_arguments`, with
@@ -24,7 +29,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
@@ -34,6 +39,33 @@ from drivewm.errors import DrivewmError
 
 C = TypeVar("C")
 RECIPE_KEYS = ("preset", "config", "overrides")
+
+
+@dataclasses.dataclass(frozen=True)
+class PresetAxis:
+    """An axis of a stage's presets beside the size: ``--NAME VALUE`` (or the switch ``--NAME`` /
+    ``--no-NAME`` when there are no ``choices``), or the recipe key ``NAME``."""
+
+    name: str
+    """Flag and recipe key (``compression``: ``--compression``)."""
+    default: str | bool
+    """The value when neither the command line nor the recipe names one."""
+    apply: Callable[[str, dict, Any], dict]
+    """(preset name, the preset's fields, value) -> the fields for that value."""
+    help: str
+    """What the flag picks (its help line)."""
+    choices: tuple[str, ...] = ()
+    """The values the flag takes; () makes it an on/off switch."""
+    metavar: str | None = None
+    """How the help writes the flag's value (``TxHxW``)."""
+
+    def check(self, value: Any, where: str) -> Any:
+        """``value`` if the axis takes it, else a DrivewmError naming ``where``."""
+        ok = value in self.choices if self.choices else isinstance(value, bool)
+        if not ok:
+            takes = ", ".join(self.choices) if self.choices else "true or false"
+            raise DrivewmError(f"{where}: {self.name} must be one of {takes}, got {value!r}")
+        return value
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,16 +82,30 @@ class RecipeBook(Generic[C]):
     """Preset used when neither the command line nor the recipe names one."""
     recipes: str = ""
     """Folder of the stage's packaged recipes, ``drivewm/recipes/<recipes>/NAME.yaml`` ('' = none)."""
+    axes: tuple[PresetAxis, ...] = ()
+    """Axes of the presets beside the size (:class:`PresetAxis`); most stages have none."""
 
-    def resolve(self, preset: str | None = None, recipe: str | Path | None = None, overrides: list[str] = ()) -> C:
-        """The validated config of a run (see the module docstring for the order)."""
+    def resolve(
+        self,
+        preset: str | None = None,
+        recipe: str | Path | None = None,
+        overrides: list[str] = (),
+        axes: Mapping[str, Any] | None = None,
+    ) -> C:
+        """The validated config of a run (see the module docstring for the order); ``axes``: the
+        values of :attr:`axes` given on the command line (None or absent: the recipe's, else the default)."""
         path = self.recipe_path(recipe) if recipe is not None else None
-        data = load_recipe(path) if path is not None else {}
+        data = load_recipe(path, [a.name for a in self.axes]) if path is not None else {}
         name = preset or data.get("preset") or self.default
         if name not in self.presets:
             raise DrivewmError(f"{self.stage}: unknown preset {name!r}; known: {sorted(self.presets)}")
-        base = deep_merge(self.preset_fields(name), data.get("config", {}))
         where = f"{self.stage} recipe {path}" if path is not None else self.stage
+        fields = self.preset_fields(name)
+        for axis in self.axes:
+            value = (axes or {}).get(axis.name)
+            value = data.get(axis.name, axis.default) if value is None else value
+            fields = axis.apply(name, fields, axis.check(value, where))
+        base = deep_merge(fields, data.get("config", {}))
         return apply_overrides(self.config, base, [*data.get("overrides", []), *overrides], where)
 
     def preset_fields(self, name: str) -> dict:
@@ -80,12 +126,15 @@ class RecipeBook(Generic[C]):
         return resources.names(f"recipes/{self.recipes}") if self.recipes else []
 
     def add_arguments(self, parser: argparse.ArgumentParser) -> None:
-        """``--preset`` (choices from the book, if several), ``--recipe``, ``--set KEY=VALUE`` and ``--dry-run``."""
-        add_recipe_arguments(parser, self.presets, self.default, self.recipe_names() if self.recipes else None)
+        """``--preset`` (choices from the book, if several), a flag per axis, ``--recipe``, ``--set
+        KEY=VALUE`` and ``--dry-run``."""
+        packaged = self.recipe_names() if self.recipes else None
+        add_recipe_arguments(parser, self.presets, self.default, packaged, self.axes)
 
-    def from_args(self, args: argparse.Namespace) -> C:
-        """The config named by the flags of :meth:`add_arguments`."""
-        return self.resolve(getattr(args, "preset", None), args.recipe, args.overrides)
+    def from_args(self, args: argparse.Namespace, overrides: Iterable[str] = ()) -> C:
+        """The config named by the flags of :meth:`add_arguments`, then ``overrides`` (``KEY=VALUE``)."""
+        axes = {a.name: getattr(args, a.name) for a in self.axes}
+        return self.resolve(getattr(args, "preset", None), args.recipe, [*args.overrides, *overrides], axes)
 
 
 def add_override_arguments(parser: argparse.ArgumentParser, what: str = "a config field", run: str = "run") -> None:
@@ -97,31 +146,42 @@ def add_override_arguments(parser: argparse.ArgumentParser, what: str = "a confi
 
 
 def add_recipe_arguments(
-    parser: argparse.ArgumentParser, presets: Iterable[str], default: str, packaged: list[str] | None = None
+    parser: argparse.ArgumentParser,
+    presets: Iterable[str],
+    default: str,
+    packaged: list[str] | None = None,
+    axes: Iterable[PresetAxis] = (),
 ) -> None:
-    """The recipe flags with ``--preset`` choices ``presets`` (omitted when there is only one) and the
-    stage's ``packaged`` recipe names in the help. Command modules that must not import a stage's
-    (heavy) config classes to build the parser call it with the preset names; handlers resolve
-    through the book."""
-    presets = sorted(presets)
+    """The recipe flags with ``--preset`` choices ``presets`` (omitted when there is only one), a flag
+    per preset axis, and the stage's ``packaged`` recipe names in the help. Command modules that must
+    not import a stage's (heavy) config classes to build the parser call it with the preset names;
+    handlers resolve through the book."""
+    presets, axes = list(presets), list(axes)
     if len(presets) > 1:
-        help_text = f"named preset (default: the recipe's, else {default})"
-        parser.add_argument("--preset", choices=presets, help=help_text)
+        help_text = f"size (default: the recipe's, else {default})"
+        parser.add_argument("--preset", choices=presets, metavar="SIZE", help=f"{help_text}: %(choices)s")
+    for axis in axes:
+        if axis.choices:
+            help_text = f"{axis.help} (default: the recipe's, else {axis.default}): %(choices)s"
+            parser.add_argument(f"--{axis.name}", choices=axis.choices, metavar=axis.metavar, help=help_text)
+        else:
+            help_text = f"{axis.help} (default: the recipe's, else {'on' if axis.default else 'off'})"
+            parser.add_argument(f"--{axis.name}", action=argparse.BooleanOptionalAction, help=help_text)
+    keys = ", ".join(["preset", *(a.name for a in axes), "config", "overrides"])
     names = f"; packaged: {', '.join(packaged)}" if packaged else ""
-    parser.add_argument(
-        "--recipe", help=f"recipe YAML (keys: preset, config, overrides) or a packaged recipe's name{names}"
-    )
+    parser.add_argument("--recipe", help=f"recipe YAML (keys: {keys}) or a packaged recipe's name{names}")
     add_override_arguments(parser)
 
 
-def load_recipe(path: str | Path) -> dict:
-    """Read a recipe YAML; unknown keys or badly typed values give a DrivewmError naming the file."""
+def load_recipe(path: str | Path, axes: Iterable[str] = ()) -> dict:
+    """Read a recipe YAML (keys :data:`RECIPE_KEYS` and the stage's preset ``axes``); unknown keys or
+    badly typed values give a DrivewmError naming the file."""
     data = load_yaml(path)
-    unknown = sorted(set(data) - set(RECIPE_KEYS))
+    keys = [*RECIPE_KEYS, *axes]
+    unknown = sorted(set(data) - set(keys))
     if unknown:
         raise DrivewmError(
-            f"{path}: unknown recipe key(s) {unknown}; a recipe has {list(RECIPE_KEYS)} "
-            "(config fields go under 'config:')"
+            f"{path}: unknown recipe key(s) {unknown}; a recipe has {keys} (config fields go under 'config:')"
         )
     if "preset" in data and not isinstance(data["preset"], str):
         raise DrivewmError(f"{path}: 'preset' must be a preset name")

@@ -8,7 +8,7 @@ import dataclasses
 import pytest
 
 from drivewm.errors import DrivewmError
-from drivewm.recipe import RecipeBook, deep_merge
+from drivewm.recipe import PresetAxis, RecipeBook, deep_merge
 
 
 @dataclasses.dataclass
@@ -93,3 +93,47 @@ def test_one_preset_shows_no_preset_flag_and_recipes_resolve_by_packaged_name():
     assert book.recipe_path("quick").name == "quick.yaml" and book.recipe_path("quick").is_file()
     with pytest.raises(DrivewmError, match="demo recipe 'nope'.*packaged: default, quick"):
         book.recipe_path("nope")
+
+
+def _wider(preset: str, fields: dict, factor: str) -> dict:
+    return {**fields, "width": fields.get("width", 8) * int(factor)}
+
+
+def _trained(preset: str, fields: dict, on: bool) -> dict:
+    return {**fields, "train": {**fields.get("train", {}), "steps": 99}} if on else fields
+
+
+AXES = (PresetAxis("factor", "1", _wider, "width factor", ("1", "2", "4")), PresetAxis("long", False, _trained, "long"))
+AXIS_BOOK = dataclasses.replace(BOOK, axes=AXES)
+
+
+def test_a_preset_axis_is_a_flag_and_a_recipe_key_after_the_size(tmp_path):
+    """--preset stays the size; each axis changes the size's fields, from the command line, else the
+    recipe, else its default; the recipe's config and --set still come after."""
+    parser = argparse.ArgumentParser()
+    AXIS_BOOK.add_arguments(parser)
+    args = parser.parse_args(["--preset", "big", "--factor", "4", "--long"])
+    cfg = AXIS_BOOK.from_args(args)
+    assert (cfg.preset, cfg.width, cfg.train.steps) == ("big", 256, 99)
+    assert AXIS_BOOK.from_args(parser.parse_args([])).width == 4  # the defaults change nothing
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text("preset: big\nfactor: '2'\nlong: true\nconfig: {width: 5}\n")
+    assert AXIS_BOOK.resolve(None, recipe).width == 5  # the recipe's config comes after its axes
+    recipe.write_text("preset: big\nfactor: '2'\nlong: true\n")
+    assert (AXIS_BOOK.resolve(None, recipe).width, AXIS_BOOK.resolve(None, recipe).train.steps) == (128, 99)
+    cli = AXIS_BOOK.from_args(parser.parse_args(["--recipe", str(recipe), "--factor", "1", "--no-long"]))
+    assert (cli.width, cli.train.steps) == (64, 500)  # the command line beats the recipe
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--factor", "3"])
+
+
+@pytest.mark.parametrize(
+    ("text", "message"), [("factor: '3'\n", "factor must be one of 1, 2, 4"), ("long: 1\n", "long")]
+)
+def test_a_bad_axis_value_in_a_recipe_is_a_one_line_error(tmp_path, text, message):
+    recipe = tmp_path / "r.yaml"
+    recipe.write_text(text)
+    with pytest.raises(DrivewmError, match=message):
+        AXIS_BOOK.resolve(None, recipe)
+    with pytest.raises(DrivewmError, match="unknown recipe key"):
+        BOOK.resolve(None, recipe)  # a book without the axis refuses the key

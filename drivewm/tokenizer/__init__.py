@@ -1,18 +1,19 @@
 """Video tokenizer: a causal video autoencoder with continuous or FSQ latents (issue 4).
 
 ``Tokenizer`` (model.py) codes video (B, 3, T, H, W) in [-1, 1] to latents (B, c, t, h, w);
-``PRESETS`` (config.py) names the sizes and compressions; ``tiling.py`` codes long or large
+``preset(size, compression, fsq)`` (config.py) builds a preset's config; ``tiling.py`` codes long or large
 videos in causal chunks and blended tiles; ``train.py`` trains on clip shards.
 """
 
 _EXPORTS = {
-    "PRESETS": "drivewm.tokenizer.config",
+    "COMPRESSIONS": "drivewm.tokenizer.config",
+    "SIZES": "drivewm.tokenizer.config",
     "TokenizerConfig": "drivewm.tokenizer.config",
     "preset": "drivewm.tokenizer.config",
     "Tokenizer": "drivewm.tokenizer.model",
 }
 
-__all__ = ["PRESETS", "Tokenizer", "TokenizerConfig", "preset"]
+__all__ = ["COMPRESSIONS", "SIZES", "Tokenizer", "TokenizerConfig", "preset"]
 
 
 def __getattr__(name: str):

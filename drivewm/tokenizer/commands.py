@@ -16,8 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     t = tsub.add_parser(
         "train",
         help="train (or resume) a tokenizer on clip shards",
-        description="Presets are SIZE-TxHxW[-fsq] (e.g. small-4x8x8); override any field with --set, "
-        "e.g. --set train.steps=2000 --set data.crop=[96,160] --set model.base_channels=32.",
+        description="A preset is a size, a compression and a quantizer (--preset small --compression 8x8x8 "
+        "--fsq); override any field with --set, e.g. --set train.steps=2000 --set data.crop=[96,160].",
     )
     RECIPES.add_arguments(t)
     t.add_argument("--data", required=True, type=Path, help="clip folder (shards)")
@@ -94,7 +94,7 @@ def _train(args: argparse.Namespace) -> int:
     from drivewm.tokenizer.train import tokenizer_train
 
     _set_threads(args)
-    cfg = RECIPES.resolve(args.preset, args.recipe, [*args.overrides, f"train.device={args.device}"])
+    cfg = RECIPES.from_args(args, [f"train.device={args.device}"])
     print(json.dumps(to_dict(cfg), indent=2))
     if args.dry_run:
         return 0

@@ -1,8 +1,9 @@
-"""Tokenizer configuration and named presets (docs/DESIGN.md section 5).
+"""Tokenizer configuration and presets (docs/DESIGN.md section 5).
 
-A preset name reads ``SIZE-TxHxW[-fsq]``: ``debug-4x8x8`` compresses 4x in time and 8x in
-height and width into 16 continuous channels; ``base-8x8x8-fsq`` quantizes with FSQ instead.
-``debug``, ``small`` and ``base`` alone mean their ``-4x8x8`` continuous variant.
+A preset is a network size (:data:`SIZES`), a compression ``TxHxW`` (:data:`COMPRESSIONS`) and a
+quantizer: ``preset("debug")`` compresses 4x in time and 8x in height and width into 16 continuous
+channels; ``preset("base", "8x8x8", fsq=True)`` compresses 8x8x8 and quantizes with FSQ instead
+(``drivewm tokenizer train --preset base --compression 8x8x8 --fsq``).
 """
 
 from __future__ import annotations
@@ -140,7 +141,7 @@ class LossConfig:
             )
 
 
-#: Network sizes; the compression and quantizer variants are derived from these.
+#: Network sizes; the compression and quantizer are the other two axes of a preset.
 #: Parameter counts at 8x8x8 (continuous); Cosmos-architecture peers of matched size are in
 #: benchmarks/bench_tokenizer.py (tiny ~ diffusers AutoencoderKLCosmos at (32, 64, 64, 64), 1.75M;
 #: small ~ (32, 64, 128, 128), 5.1M).
@@ -152,8 +153,9 @@ SIZES: dict[str, dict] = {
         base_channels=96, channel_multipliers=[1, 4], num_res_blocks=2, encoder_mid_blocks=2, decoder_mid_blocks=4
     ),
 }
-#: Compression variants: name -> (temporal, spatial).
+#: Compressions ``TxHxW`` -> (temporal, spatial); the first is the default.
 COMPRESSIONS = {"4x8x8": (4, 8), "8x8x8": (8, 8), "8x16x16": (8, 16), "1x8x8": (1, 8)}
+DEFAULT_COMPRESSION = "4x8x8"
 #: Default FSQ levels per size (codebook 1,000 for debug, 64,000 otherwise as in Cosmos DV).
 FSQ_LEVELS = {
     "debug": [8, 5, 5, 5],
@@ -163,34 +165,33 @@ FSQ_LEVELS = {
 }
 
 
-def _build_presets() -> dict[str, TokenizerConfig]:
-    presets: dict[str, TokenizerConfig] = {}
-    for size, fields in SIZES.items():
-        for name, (temporal, spatial) in COMPRESSIONS.items():
-            mults = list(fields["channel_multipliers"])
-            patch_time = min(4, temporal)
-            mults = mults + [mults[-1]] * (int(math.log2(spatial // 4)) + 1 - len(mults))
-            common = dict(
-                fields,
-                channel_multipliers=mults,
-                temporal_compression=temporal,
-                spatial_compression=spatial,
-                patch_size=4,
-                patch_time=patch_time,
-            )
-            presets[f"{size}-{name}"] = TokenizerConfig(**common)
-            presets[f"{size}-{name}-fsq"] = TokenizerConfig(
-                **common, quantizer="fsq", fsq_levels=list(FSQ_LEVELS[size])
-            )
-        presets[size] = presets[f"{size}-4x8x8"]
-    return presets
+def compression_fields(size: str, compression: str) -> dict:
+    """The TokenizerConfig fields that ``compression`` (``TxHxW``) sets for ``size``: the two factors,
+    the temporal Haar patch (at most 4) and one channel multiplier per spatial stage (the size's last
+    repeated for a deeper downsampling)."""
+    temporal, spatial = COMPRESSIONS[compression]
+    mults = list(SIZES[size]["channel_multipliers"])
+    mults += [mults[-1]] * (int(math.log2(spatial // 4)) + 1 - len(mults))
+    return dict(
+        channel_multipliers=mults,
+        temporal_compression=temporal,
+        spatial_compression=spatial,
+        patch_size=4,
+        patch_time=min(4, temporal),
+    )
 
 
-PRESETS: dict[str, TokenizerConfig] = _build_presets()
+def fsq_fields(size: str) -> dict:
+    """The TokenizerConfig fields of FSQ latents for ``size``."""
+    return dict(quantizer="fsq", fsq_levels=list(FSQ_LEVELS[size]))
 
 
-def preset(name: str) -> TokenizerConfig:
-    """A fresh copy of the named preset; an unknown name lists the known ones."""
-    if name not in PRESETS:
-        raise DrivewmError(f"unknown tokenizer preset {name!r}; known: {sorted(PRESETS)}")
-    return copy.deepcopy(PRESETS[name])
+def preset(size: str, compression: str = DEFAULT_COMPRESSION, fsq: bool = False) -> TokenizerConfig:
+    """A fresh TokenizerConfig of network ``size`` at ``compression`` (``TxHxW``), FSQ-quantized
+    when ``fsq``; an unknown size or compression lists the known ones."""
+    if size not in SIZES:
+        raise DrivewmError(f"unknown tokenizer size {size!r}; known: {list(SIZES)}")
+    if compression not in COMPRESSIONS:
+        raise DrivewmError(f"unknown tokenizer compression {compression!r}; known: {list(COMPRESSIONS)}")
+    fields = {**copy.deepcopy(SIZES[size]), **compression_fields(size, compression)}
+    return TokenizerConfig(**fields, **(fsq_fields(size) if fsq else {}))

@@ -1,5 +1,7 @@
 """The tokenizer's run config and its RecipeBook (drivewm.recipe): model / loss / data / train, nested
-like every other stage's. No heavy imports, so ``drivewm tokenizer train --help`` lists the presets fast."""
+like every other stage's. ``--preset`` names the network size; the compression (``--compression
+TxHxW``) and the quantizer (``--fsq``) are the book's two preset axes. No heavy imports, so
+``drivewm tokenizer train --help`` lists the presets fast."""
 
 from __future__ import annotations
 
@@ -7,8 +9,17 @@ import dataclasses
 
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
-from drivewm.recipe import RecipeBook
-from drivewm.tokenizer.config import PRESETS, LossConfig, TokenizerConfig
+from drivewm.recipe import PresetAxis, RecipeBook
+from drivewm.tokenizer.config import (
+    COMPRESSIONS,
+    DEFAULT_COMPRESSION,
+    SIZES,
+    LossConfig,
+    TokenizerConfig,
+    compression_fields,
+    fsq_fields,
+    preset,
+)
 from drivewm.train.config import TrainConfig
 
 
@@ -41,7 +52,8 @@ class TokenizerTrainConfig:
     """A resolved tokenizer training run (printed by --dry-run, saved in train_state.pt)."""
 
     preset: str = "debug"
-    """The preset the run started from (drivewm.tokenizer.config.PRESETS)."""
+    """The network size the run started from (drivewm.tokenizer.config.SIZES); the model fields
+    record its compression and quantizer."""
     model: TokenizerConfig = dataclasses.field(default_factory=TokenizerConfig)
     """The network."""
     loss: LossConfig = dataclasses.field(default_factory=LossConfig)
@@ -66,7 +78,7 @@ class TokenizerTrainConfig:
             raise DrivewmError(f"tokenizer train: data.crop {self.data.crop} must be multiples of {s}")
 
 
-#: Training defaults per network size (the part of a preset name before the first '-').
+#: Training defaults per network size.
 TRAIN_DEFAULTS: dict[str, dict] = {
     "debug": dict(steps=300, batch_size=4, lr=3e-3, warmup_steps=20, ema_decay=0.99, checkpoint_every=100),
     "tiny": dict(steps=20000, batch_size=8, lr=5e-4, warmup_steps=200, ema_decay=0.999, checkpoint_every=500),
@@ -75,13 +87,36 @@ TRAIN_DEFAULTS: dict[str, dict] = {
 }
 
 
-def _presets() -> dict[str, dict]:
-    presets = {}
-    for name, model in PRESETS.items():
-        size = name.split("-")[0]
-        frames = 1 + 2 * model.temporal_compression
-        presets[name] = {"model": to_dict(model), "data": {"frames": frames}, "train": dict(TRAIN_DEFAULTS[size])}
-    return presets
+def _with_compression(size: str, fields: dict, compression: str) -> dict:
+    """A size's fields at ``compression``: the model's factors and stages, and training clips of two
+    latent steps after the first frame (``data.frames = 1 + 2T``)."""
+    model = {**fields["model"], **compression_fields(size, compression)}
+    data = {**fields.get("data", {}), "frames": 1 + 2 * model["temporal_compression"]}
+    return {**fields, "model": model, "data": data}
 
 
-RECIPES: RecipeBook[TokenizerTrainConfig] = RecipeBook("tokenizer train", TokenizerTrainConfig, _presets(), "debug")
+def _with_fsq(size: str, fields: dict, fsq: bool) -> dict:
+    """A size's fields with FSQ latents (the size's default levels) when ``fsq``."""
+    return {**fields, "model": {**fields["model"], **fsq_fields(size)}} if fsq else fields
+
+
+#: The preset axes beside the size (drivewm.recipe.PresetAxis).
+AXES = (
+    PresetAxis(
+        "compression",
+        DEFAULT_COMPRESSION,
+        _with_compression,
+        "compression in time x height x width",
+        tuple(COMPRESSIONS),
+        "TxHxW",
+    ),
+    PresetAxis("fsq", False, _with_fsq, "finite scalar quantization (FSQ) latents instead of continuous ones"),
+)
+
+RECIPES: RecipeBook[TokenizerTrainConfig] = RecipeBook(
+    "tokenizer train",
+    TokenizerTrainConfig,
+    {size: {"model": to_dict(preset(size)), "train": dict(TRAIN_DEFAULTS[size])} for size in SIZES},
+    "debug",
+    axes=AXES,
+)

@@ -20,7 +20,7 @@ def test_encode_keeps_what_it_would_write_again(sim_clip_dir, tmp_path):
     shards = sorted(sim_clip_dir.glob("*.tar"))
     (clips / shards[0].name).symlink_to(shards[0])
     torch.manual_seed(0)
-    tok = Tokenizer(preset("debug-4x8x8"))
+    tok = Tokenizer(preset("debug"))
     tok.save_pretrained(tmp_path / "tok")
 
     first = encode_clips(tmp_path / "tok", clips, "c", progress=False)

@@ -21,8 +21,8 @@ from drivewm.tokenizer.recipe import RECIPES
 from drivewm.tokenizer.train import tokenizer_train
 
 
-def pca_tokenizer(name: str, *videos: torch.Tensor) -> Tokenizer:
-    cfg = preset(name)
+def pca_tokenizer(size: str, *videos: torch.Tensor, compression: str = "4x8x8") -> Tokenizer:
+    cfg = preset(size, compression)
     cfg.linear_code = "pca"
     torch.manual_seed(0)
     tok = Tokenizer(cfg).eval()
@@ -50,7 +50,7 @@ def numpy_pca_reconstruction(video: np.ndarray, channels: int) -> np.ndarray:
 
 def test_untrained_pca_tokenizer_is_the_pca_codec_of_pixel_blocks():
     video = road()
-    tok = pca_tokenizer("tiny-4x8x8", video)
+    tok = pca_tokenizer("tiny", video)
     with torch.no_grad():
         recon, latents = tok(video)
     assert latents.shape == (1, 16, 3, 6, 10)
@@ -64,9 +64,9 @@ def test_pca_start_beats_the_block_average_start_on_unseen_frames():
     # fitted on four synthetic drives, scored on a fifth: the linear code generalizes, and it starts
     # well above the default network's untrained block-average codec (measured 24.4 against 20.3 dB)
     fit, scored = [road(9, seed=s) for s in range(4)], road(9, seed=9)
-    tok = pca_tokenizer("tiny-4x8x8", *fit)
+    tok = pca_tokenizer("tiny", *fit)
     torch.manual_seed(0)
-    plain = Tokenizer(preset("tiny-4x8x8")).eval()
+    plain = Tokenizer(preset("tiny")).eval()
     with torch.no_grad():
         pca_mse = (tok(scored)[0] - scored).pow(2).mean().item()
         plain_mse = (plain(scored)[0] - scored).pow(2).mean().item()
@@ -74,10 +74,10 @@ def test_pca_start_beats_the_block_average_start_on_unseen_frames():
     assert pca_db > 23 and pca_db > plain_db + 3, (pca_db, plain_db)
 
 
-@pytest.mark.parametrize("name", ["debug-4x8x8", "debug-8x8x8"])
-def test_linear_path_is_causal_chunked_equals_one_pass(name):
+@pytest.mark.parametrize("compression", ["4x8x8", "8x8x8"])
+def test_linear_path_is_causal_chunked_equals_one_pass(compression):
     video = road(17)
-    tok = pca_tokenizer(name, video)
+    tok = pca_tokenizer("debug", video, compression=compression)
     f = tok.config.temporal_compression
     with torch.no_grad():
         whole = tok.encode(video)
@@ -95,7 +95,7 @@ def test_linear_path_is_causal_chunked_equals_one_pass(name):
 
 def test_pca_code_saves_and_loads(tmp_path):
     video = road()
-    tok = pca_tokenizer("debug-4x8x8", video)
+    tok = pca_tokenizer("debug", video)
     tok.save_pretrained(tmp_path / "tok")
     loaded = Tokenizer.from_pretrained(tmp_path / "tok")
     assert loaded.config.linear_code == "pca"
@@ -104,12 +104,12 @@ def test_pca_code_saves_and_loads(tmp_path):
 
 
 def test_bad_linear_code_settings_are_refused():
-    cfg = preset("debug-4x8x8-fsq")
+    cfg = preset("debug", fsq=True)
     cfg.linear_code = "pca"
     with pytest.raises(DrivewmError, match="continuous latents"):
         Tokenizer(cfg)
     with pytest.raises(DrivewmError, match="'svd' is not one of \\['none', 'pca'\\]"):
-        RECIPES.resolve("debug-4x8x8", None, ["model.linear_code=svd"])
+        RECIPES.resolve("debug", None, ["model.linear_code=svd"])
 
 
 def test_training_fits_the_code_then_resumes_exactly(tmp_path):
@@ -119,7 +119,7 @@ def test_training_fits_the_code_then_resumes_exactly(tmp_path):
     overrides = ["model.linear_code=pca", "train.batch_size=2", "data.frames=5", "data.crop=[32,48]"]
     overrides += ["data.holdout_percent=0", "data.linear_fit_batches=4", "data.stats_batches=1"]
     overrides += ["train.steps=6", "train.checkpoint_every=3", "train.log_every=1"]
-    cfg = RECIPES.resolve("debug-4x8x8", None, overrides)
+    cfg = RECIPES.resolve("debug", None, overrides)
     tokenizer_train(cfg, clips, tmp_path / "straight")
     tokenizer_train(cfg, clips, tmp_path / "resumed", stop_after=3)
     tokenizer_train(cfg, clips, tmp_path / "resumed")

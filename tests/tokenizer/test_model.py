@@ -7,7 +7,7 @@ import torch
 from einops import rearrange
 
 from drivewm.errors import DrivewmError
-from drivewm.tokenizer import PRESETS, Tokenizer, preset
+from drivewm.tokenizer import Tokenizer, preset
 from drivewm.tokenizer.causal import CausalContext
 from drivewm.tokenizer.fsq import FSQ
 from drivewm.tokenizer.tiling import TilingConfig, decode_tiled, encode_tiled
@@ -37,10 +37,10 @@ def random_video(T, H=64, W=96, seed=0):
     return torch.rand(1, 3, T, H, W, generator=g) * 2 - 1
 
 
-@pytest.fixture(scope="module", params=["debug-4x8x8", "debug-8x8x8", "debug-8x8x8-fsq"])
+@pytest.fixture(scope="module", params=[("4x8x8", False), ("8x8x8", False), ("8x8x8", True)])
 def tok(request):
     torch.manual_seed(0)
-    return Tokenizer(preset(request.param)).eval()
+    return Tokenizer(preset("debug", *request.param)).eval()
 
 
 def test_haar_is_orthonormal_and_invertible():
@@ -54,10 +54,10 @@ def test_haar_is_orthonormal_and_invertible():
 
 
 def test_presets_have_the_advertised_shapes():
-    for name in ["debug-4x8x8", "debug-8x8x8", "debug-8x8x8-fsq", "debug-1x8x8", "debug-8x16x16"]:
-        cfg = PRESETS[name]
+    for name in [("4x8x8", False), ("8x8x8", False), ("8x8x8", True), ("1x8x8", False), ("8x16x16", False)]:
+        cfg = preset("debug", *name)
         torch.manual_seed(0)
-        model = Tokenizer(preset(name)).eval()
+        model = Tokenizer(cfg).eval()
         f, s = cfg.temporal_compression, cfg.spatial_compression
         video = random_video(1 + 2 * f)
         with torch.no_grad():
@@ -66,7 +66,7 @@ def test_presets_have_the_advertised_shapes():
             assert model.decode(z).shape == video.shape
             image = model.encode(video[:, :, :1])  # T = 1: image use
             assert image.shape[2] == 1 and torch.allclose(image, z[:, :, :1], atol=1e-5)
-    assert PRESETS["debug-4x8x8"].code_channels == 16
+    assert preset("debug").code_channels == 16 and preset("debug", fsq=True).code_channels == 4
 
 
 @torch.no_grad()
@@ -134,7 +134,7 @@ def test_save_load_encode_identical_and_no_pickle(tmp_path, tok):
 
 def test_bad_input_is_a_clear_error(tmp_path):
     torch.manual_seed(0)
-    model = Tokenizer(preset("debug-4x8x8")).eval()
+    model = Tokenizer(preset("debug")).eval()
     with pytest.raises(DrivewmError, match="4 channels"):
         model.encode(torch.zeros(1, 4, 5, 64, 64))
     with pytest.raises(DrivewmError, match=r"6 frames.*1 \+ k\*4"):
@@ -147,7 +147,7 @@ def test_bad_input_is_a_clear_error(tmp_path):
         model.decode(torch.zeros(1, 4, 2, 8, 8))
     # a model folder whose weights belong to another config
     model.save_pretrained(tmp_path / "a")
-    other = Tokenizer(preset("debug-8x8x8-fsq"))
+    other = Tokenizer(preset("debug", "8x8x8", fsq=True))
     other.save_pretrained(tmp_path / "b")
     (tmp_path / "b" / "config.json").write_text((tmp_path / "a" / "config.json").read_text())
     with pytest.raises(DrivewmError, match="config.json .* and model.safetensors .* come from different saves"):
@@ -158,5 +158,5 @@ def test_bad_input_is_a_clear_error(tmp_path):
         Tokenizer.from_pretrained(tmp_path / "b")
     with pytest.raises(DrivewmError, match="not a drivewm model folder"):
         Tokenizer.from_pretrained(tmp_path / "missing")
-    with pytest.raises(DrivewmError, match="unknown tokenizer preset"):
+    with pytest.raises(DrivewmError, match="unknown tokenizer size 'huge-3x3x3'"):
         preset("huge-3x3x3")

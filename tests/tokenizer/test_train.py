@@ -1,6 +1,6 @@
 """Training on simulated clips, held-out reconstruction, FSQ codebook use, exact resume, CLI.
 
-PSNR bound (held-out simulated clips, debug-4x8x8 (0.12M parameters), 100 steps of 4 crops of
+PSNR bound (held-out simulated clips, the debug size at 4x8x8 (0.12M parameters), 100 steps of 4 crops of
 64x96x9 at the preset's lr 3e-3): the untrained network is by construction a block-average codec
 (identity-initialized ends, zero-initialized residual branches, averaging shortcuts), which
 scores 21.3 dB (SSIM 0.49) on these clips; 100 steps must add at least 1.5 dB and reach 23 dB
@@ -35,22 +35,23 @@ HOLDOUT = 25  # percent of clips held out by key hash: 3 of the 12 simulated cli
 VIEWS = 2  # cameras scored per held-out clip (evaluation at 192x320 dominates the test time)
 
 
-def run_config(name: str, steps: int, *overrides: str) -> TokenizerTrainConfig:
+def run_config(steps: int, *overrides: str, compression: str = "4x8x8", fsq: bool = False) -> TokenizerTrainConfig:
+    """A debug-size run of ``steps`` on small crops."""
     base = ["train.batch_size=4", "data.frames=9", "data.crop=[64,96]", f"data.holdout_percent={HOLDOUT}"]
     base += [f"train.steps={steps}", "train.checkpoint_every=50", "train.log_every=10"]
-    return RECIPES.resolve(name, None, [*base, *overrides])
+    return RECIPES.resolve("debug", None, [*base, *overrides], {"compression": compression, "fsq": fsq})
 
 
 @pytest.fixture(scope="module")
 def trained(sim_clip_dir, tmp_path_factory):
     out = tmp_path_factory.mktemp("tok") / "debug"
-    tokenizer_train(run_config("debug-4x8x8", 100), sim_clip_dir, out)
+    tokenizer_train(run_config(100), sim_clip_dir, out)
     return out
 
 
 def test_trained_debug_model_reconstructs_heldout_sim_clips(trained, sim_clip_dir, tmp_path):
     torch.manual_seed(0)
-    Tokenizer(preset("debug-4x8x8")).save_pretrained(tmp_path / "untrained")
+    Tokenizer(preset("debug")).save_pretrained(tmp_path / "untrained")
     before = evaluate_tokenizer(
         tmp_path / "untrained", sim_clip_dir, tmp_path / "e0", "holdout", HOLDOUT, max_views=VIEWS, progress=False
     )
@@ -86,7 +87,7 @@ def test_tiled_and_chunked_equal_one_pass_on_trained_model(trained, sim_clip_dir
 def test_fsq_variant_uses_its_codebook(sim_clip_dir, tmp_path):
     # 40 steps; the 1,000-code debug codebook ([8, 5, 5, 5]) on 3 held-out clips x 2 views (14,400 code positions):
     # measured ~11% of the codes used (14.5% with all 6 views); a collapsed quantizer would use a handful
-    tokenizer_train(run_config("debug-4x8x8-fsq", 40), sim_clip_dir, tmp_path / "fsq")
+    tokenizer_train(run_config(40, fsq=True), sim_clip_dir, tmp_path / "fsq")
     metrics = evaluate_tokenizer(
         tmp_path / "fsq", sim_clip_dir, tmp_path / "eval", "holdout", HOLDOUT, max_views=VIEWS, progress=False
     )
@@ -100,7 +101,7 @@ def test_resume_continues_exactly(sim_clip_dir, tmp_path):
     # with the adversarial term on from step 1, so the discriminator and its optimizer resume too
     small = ["train.batch_size=2", "data.frames=5", "data.crop=[32,48]", "train.checkpoint_every=2"]
     small += ["data.stats_batches=1", "loss.adversarial=0.1", "loss.adversarial_start=1", "train.log_every=1"]
-    cfg = run_config("debug-4x8x8", 4, *small)
+    cfg = run_config(4, *small)
     tokenizer_train(cfg, sim_clip_dir, tmp_path / "straight")
     tokenizer_train(cfg, sim_clip_dir, tmp_path / "resumed", stop_after=2)  # "killed" after the step-2 checkpoint
     assert torch.load(tmp_path / "resumed" / "train_state.pt", weights_only=True)["step"] == 2
@@ -119,7 +120,7 @@ def test_resume_continues_exactly(sim_clip_dir, tmp_path):
     assert [r["loss"] for r in rows] == [r["loss"] for r in resumed]
     assert "adversarial" in rows[-1] and "discriminator" in rows[-1] and "psnr" in rows[-1]
     with pytest.raises(DrivewmError, match="different model"):
-        tokenizer_train(run_config("debug-8x8x8", 6, *small, "data.frames=9"), sim_clip_dir, tmp_path / "resumed")
+        tokenizer_train(run_config(6, *small, "data.frames=9", compression="8x8x8"), sim_clip_dir, tmp_path / "resumed")
 
 
 def test_cli_encode_decode_eval(trained, sim_clip_dir, tmp_path, capsys):
@@ -196,7 +197,9 @@ def test_cli_train_overrides_and_bad_config(sim_clip_dir, tmp_path, capsys):
                 "tokenizer",
                 "train",
                 "--preset",
-                "debug-8x8x8",
+                "debug",
+                "--compression",
+                "8x8x8",
                 "--data",
                 str(sim_clip_dir),
                 "--out",
@@ -275,7 +278,7 @@ def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_p
     parent) stay valid while reconstructions improve."""
     # other crops than the parent's: statistics measured again on them would differ (they did, until 2026-11-29)
     overrides = [f"init={trained}", "freeze_encoder=true", "train.checkpoint_every=20", "data.crop=[48,80]"]
-    cfg = run_config("debug-4x8x8", 20, *overrides, "data.frames=17", "train.seed=5")
+    cfg = run_config(20, *overrides, "data.frames=17", "train.seed=5")
     tokenizer_train(cfg, sim_clip_dir, tmp_path / "dec")
     parent, tuned = Tokenizer.from_pretrained(trained), Tokenizer.from_pretrained(tmp_path / "dec")
     for (name, a), (_, b) in zip(parent.encoder.state_dict().items(), tuned.encoder.state_dict().items()):
@@ -283,7 +286,7 @@ def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_p
     assert torch.equal(parent.latent_std, tuned.latent_std) and torch.equal(parent.latent_mean, tuned.latent_mean)
     assert any(not torch.equal(a, b) for a, b in zip(parent.decoder.parameters(), tuned.decoder.parameters()))
     with pytest.raises(DrivewmError, match="freeze_encoder needs init"):
-        run_config("debug-4x8x8", 1, "freeze_encoder=true")
+        run_config(1, "freeze_encoder=true")
 
 
 def test_a_deeper_decoder_grows_from_its_parent(trained, sim_clip_dir, tmp_path):
@@ -304,7 +307,7 @@ def test_a_deeper_decoder_grows_from_its_parent(trained, sim_clip_dir, tmp_path)
             load_parent(Tokenizer(dataclasses.replace(parent.config, **changed)), trained)
 
     tune = [f"init={trained}", "freeze_encoder=true", f"model.decoder_mid_blocks={have + 2}", "train.lr=1e-2"]
-    tokenizer_train(run_config("debug-4x8x8", 10, *tune), sim_clip_dir, tmp_path / "deeper")
+    tokenizer_train(run_config(10, *tune), sim_clip_dir, tmp_path / "deeper")
     tuned = Tokenizer.from_pretrained(tmp_path / "deeper")
     assert len(tuned.decoder.mid) == have + 2
     assert tuned.decoder.mid[have + 1].conv2.temporal.conv.weight.abs().sum() > 0  # the added blocks trained
@@ -316,9 +319,9 @@ def test_decoder_fine_tuning_of_a_linear_code_tokenizer_keeps_its_latents(sim_cl
     """The PCA code is half of the encoder (its basis codes and decodes): freeze_encoder must freeze it,
     or a decoder fine-tune of the recipe's tokenizer (`linear_code: pca`) moves every latent."""
     pca = ["model.linear_code=pca", "data.linear_fit_batches=2", "data.stats_batches=2"]
-    tokenizer_train(run_config("debug-4x8x8", 10, *pca), sim_clip_dir, tmp_path / "parent")
+    tokenizer_train(run_config(10, *pca), sim_clip_dir, tmp_path / "parent")
     tune = [f"init={tmp_path / 'parent'}", "freeze_encoder=true", "train.lr=1e-2"]
-    tokenizer_train(run_config("debug-4x8x8", 10, *pca, *tune), sim_clip_dir, tmp_path / "dec")
+    tokenizer_train(run_config(10, *pca, *tune), sim_clip_dir, tmp_path / "dec")
     parent, tuned = Tokenizer.from_pretrained(tmp_path / "parent"), Tokenizer.from_pretrained(tmp_path / "dec")
     video = torch.rand(1, 3, 9, 64, 96, generator=torch.Generator().manual_seed(0)) * 2 - 1
     with torch.no_grad():
