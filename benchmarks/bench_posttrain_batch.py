@@ -8,7 +8,7 @@ this CPU. Steps interleave the three; medians.
 
 CLIPDIR holds a latent cache of the init's tokenizer (``drivewm tokenizer encode``). The batch work
 is CPU work on the training thread whatever the device: on one H200 a step of the shipped model at
-batch 32 took 0.19 s in all (docs/quality-vs-compute.md), so the uncached batch time here is the
+batch 32 took 0.19 s in all (docs/results.md), so the uncached batch time here is the
 share of that step a GPU spent waiting.
 """
 

@@ -10,7 +10,7 @@ counted on each side, and per camera pair the mean distinct verified matches and
 
     python studies/cse_by_condition.py RUN/eval/generated/metrics.json RUN/eval/heldout/metrics.json
 
-Numbers: docs/quality-vs-compute.md ("Cameras that disagree where they overlap").
+Numbers: git show a88b7a4:docs/quality-vs-compute.md, "Cameras that disagree where they overlap".
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ one snow and one fog clip, raw and through each tokenizer (frame 8, twice the si
     python studies/decoder_sharpness.py HELDOUT_CLIPS before=TOK_A now=shipped:tokenizer adv=TOK_B \\
         [--every 8] [--figure docs/figures/decoder_sharpness.jpg]
 
-Numbers: docs/quality-vs-compute.md ("The decoder's learning rate decayed").
+Numbers: git show a88b7a4:docs/quality-vs-compute.md, "The decoder's learning rate decayed".
 """
 
 from __future__ import annotations

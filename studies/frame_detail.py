@@ -10,7 +10,7 @@ generator on it could at best give back).
 
     python studies/frame_detail.py FOLDER [...] [--coded shipped:tokenizer] [--max-clips 48]
 
-Numbers: docs/quality-vs-compute.md ("Cameras that disagree where they overlap").
+Numbers: git show a88b7a4:docs/quality-vs-compute.md, "Cameras that disagree where they overlap".
 """
 
 from __future__ import annotations

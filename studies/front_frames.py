@@ -7,7 +7,7 @@ is the first sample's CAM_FRONT at the given frames, labelled with the run and t
     python studies/front_frames.py --run "sigma 0.5=RUN_A" --run "sigma 0.3=RUN_B" \\
         --prompts snow_left,night_left,clear_right --out docs/figures/reproject_sigma.jpg
 
-Numbers and the figure: docs/quality-vs-compute.md.
+Numbers: git show a88b7a4:docs/quality-vs-compute.md.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ the loss of held-out turning clips under mirrored minus under their own waypoint
     python studies/heldout_loss.py MODEL_DIR [MODEL_DIR ...] --cache LATENT_CACHE [--clips 48] [--draws 4]
 
 The first model is the reference of the paired differences. About 10 s per model per 48 clips on an
-H200 and 2 minutes on 2 CPU cores. Numbers: docs/quality-vs-compute.md ("A GPU fine-tune at batch 32").
+H200 and 2 minutes on 2 CPU cores. Numbers: studies/README.md.
 """
 
 from __future__ import annotations

@@ -10,8 +10,7 @@ PSNR from ``drivewm tokenizer eval``'s metrics.json when given.
     python studies/linear_code_reference.py CLIPDIR [--channels 16,32] [--tokenizer-metrics EVAL/metrics.json ...]
 
 Blocks start at frame 1 (frame 0 is coded alone by the tokenizer and scores higher), so the
-reference is slightly harsh on itself. Numbers: docs/quality-vs-compute.md ("The tokenizer never
-trained on the frames it codes most", part 2).
+reference is slightly harsh on itself. Numbers: studies/README.md.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ is the horizon) and the median image motion of those below and above it.
 
     python studies/match_rows.py CLIPS_OR_SAMPLES [...] [--max-clips 6] [--camera CAM_FRONT]
 
-Numbers: docs/quality-vs-compute.md ("Pose success without motion").
+Numbers: git show a88b7a4:docs/quality-vs-compute.md, "Pose success without motion".
 """
 
 from __future__ import annotations

@@ -11,8 +11,8 @@ the first four. With the 4x temporal tokenizer, pairs 0, 4, 8 and 12 cross a lat
     python studies/motion_profile.py CLIPS_OR_SAMPLES [...] [--max-clips 6]
 
 Dense flow reads low where texture is blurred (the far road a reprojection magnifies), so compare
-folders at one resolution and read the ratio before the pixels. Numbers: docs/quality-vs-compute.md
-("The 320x192 model continued on CPU").
+folders at one resolution and read the ratio before the pixels.
+Numbers: git show a88b7a4:docs/quality-vs-compute.md, "The 320x192 model continued on CPU".
 """
 
 from __future__ import annotations

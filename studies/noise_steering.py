@@ -14,7 +14,7 @@ decoded 160x96 video; a 36 degree turn over the clip moves the front camera's co
 ``--strength``: sample with this correlation instead of the model's own (e.g. 0.9 on a model trained
 on independent noise: does noise alone steer it?). Prints one row per prompt: the flow under each
 noise and their difference (left minus right: positive where the noise steers). About 30 s per
-sample on 2 CPU cores. Numbers: docs/quality-vs-compute.md ("Warped noise").
+sample on 2 CPU cores. Numbers: git show a88b7a4:docs/quality-vs-compute.md, "Warped noise".
 """
 
 from __future__ import annotations

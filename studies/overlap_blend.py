@@ -19,9 +19,7 @@ and with it to ``OUT/blend`` (the same first passes), for ``drivewm eval``:
     drivewm eval OUT/own --out OUT/eval_own --reference HELDOUT_EVAL/metrics.json
     drivewm eval OUT/blend --out OUT/eval_blend --reference HELDOUT_EVAL/metrics.json
 
-About 50 s per prompt and seed on 2 CPU cores. Numbers: docs/quality-vs-compute.md ("Cameras that
-disagree where they overlap"; measured with this study's first version, which patched the same
-blend into generate).
+About 50 s per prompt and seed on 2 CPU cores. Numbers: studies/README.md.
 """
 
 from __future__ import annotations

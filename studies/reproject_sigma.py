@@ -15,11 +15,9 @@ is not taken, however close its turns.
     python studies/reproject_sigma.py MODEL_DIR [--sigmas 0.5,0.75,1,1.5] [--steps 20] [--prompt-template] [--out DIR]
         [--[no-]reproject-reshade]
 
-The warp is reshaded (drivewm.multiview.reshade) unless ``--no-reproject-reshade`` is given: the
-library's default since 2026-11-30; the runs documented before then ran without it unless they say so.
+The warp is reshaded (drivewm.multiview.reshade) unless ``--no-reproject-reshade`` is given, as the library does.
 
-About 90 s per prompt with four SIGMAs on 2 CPU cores. Numbers: docs/quality-vs-compute.md
-("Reprojected refinement").
+About 90 s per prompt with four SIGMAs on 2 CPU cores. Numbers: studies/README.md.
 """
 
 from __future__ import annotations

@@ -13,9 +13,8 @@ over the whole rollout, the real first frame included.
 
 Prints a row per clip: the yaw under each trajectory and their difference (left minus right:
 positive where the model turns the way it is told); then the turn sign rate over all rollouts and
-the mean difference. The warp is reshaded unless ``--no-reproject-reshade`` is given (the library's
-default since 2026-11-30; the runs documented before then ran without it unless they say so). About
-40 s per rollout on 2 CPU cores. Numbers: docs/quality-vs-compute.md ("Turns repeated").
+the mean difference. The warp is reshaded unless ``--no-reproject-reshade`` is given. About
+40 s per rollout on 2 CPU cores. Numbers: git show a88b7a4:docs/quality-vs-compute.md, "Turns repeated".
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ Each coded clip keeps its source's metadata, ego poses and tags and is written w
 settings as ``drivewm generate``'s samples (crf 18), at the clips' own size (which must be one the
 tokenizer takes: the shipped one is trained at 160x96). ``--max-clips`` spreads the subset over
 the input as ``drivewm eval --max-clips`` does, so the same N clips are scored raw and coded.
-Numbers: docs/quality-vs-compute.md.
+Numbers: git show a88b7a4:docs/quality-vs-compute.md.
 """
 
 from __future__ import annotations

@@ -3,13 +3,12 @@
 A 17-frame clip is 5 latent frames at 4x8x8: frame 0 alone, then frames 1-4, 5-8, 9-12, 13-16. The
 causal temporal convolutions see a different left context at each: replicated frame 0 before latent
 frame 1, real frames from latent frame 2 on. A tokenizer trained on 5-frame crops (latent frames 0
-and 1, the shipped one's recipe until 2026-11-29) never learned latent frames 2-4, which make up
+and 1, the shipped tokenizer's first recipe) never learned latent frames 2-4, which make up
 three quarters of every clip it codes; this study shows it and what training on the clip length buys.
 
     python studies/tokenizer_frames.py CLIPDIR LABEL=TOKENIZER ... [--every 4] [--plot FIGURE.png]
 
-``--every N`` scores every N-th clip. Numbers: docs/quality-vs-compute.md ("The tokenizer never
-trained on the frames it codes most").
+``--every N`` scores every N-th clip. Numbers: studies/README.md.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ moving-camera rays and the reverse: which of the two pathways carries the turn; 
 static rig's rays turned by a constant 20 degrees with and against each clip's turn: whether the
 model reads a ray as a place in the rig, the layout of the road there; about 2 minutes each).
 drivewm.multiview.trajectory_probe holds the probe; post-training logs the same gap as
-``trajectory_loss_gap``. Numbers: docs/quality-vs-compute.md.
+``trajectory_loss_gap``. Numbers: git show a88b7a4:docs/quality-vs-compute.md.
 """
 
 from __future__ import annotations

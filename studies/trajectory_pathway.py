@@ -3,7 +3,7 @@ only the trajectory and camera encoders train at a high learning rate, the rest 
 whole network at post-training's rate.
 
 The shipped multi-view model's waypoints move the denoising loss by about 0.1 % (studies/
-trajectory_loss_gap.py, docs/quality-vs-compute.md). Both zero-initialised branches are small
+trajectory_loss_gap.py). Both zero-initialised branches are small
 (0.1M of 7M parameters) and learn at the backbone's rate; this asks whether they reach a larger gap
 when they alone train, ten times as fast. Each step draws 2 clips of the cache that turn by more
 than 5 degrees, with post-training's own loss (``MultiViewTask.loss``: one noise level per clip,
@@ -16,7 +16,7 @@ among the training draws, so this measures what the pathway can hold, not what g
     python studies/trajectory_pathway.py drivewm/weights/multiview CACHE --train all --lr 1e-4
 
 About 2.5 s a step on one thread at the shipped size (6 views of 5 x 12 x 20 latents, batch 2).
-Numbers: docs/quality-vs-compute.md.
+Numbers: git show a88b7a4:docs/quality-vs-compute.md.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ Set-up, and why each part is there:
   one that responds at random 1/2; one-sided binomial p against 1/2. Also the conditional EDM
   loss with each clip's own vs its swapped trajectory.
 
-Measured (2026-11-21, 12 clips, rate 0.25 rad/s, 24 turned copies + 12 unturned; CPU, 1 thread):
+Measured (12 clips, rate 0.25 rad/s, 24 turned copies + 12 unturned; CPU, 1 thread):
 
 | training | sampling | pairs agreeing (p) | EDM loss own / swapped, sigma 1 and 5 |
 | --- | --- | --- | --- |
@@ -39,7 +39,7 @@ at sigma >= 1, for every copy), but its 1.6 s samples do not carry the turn into
 estimator recovers better than chance: the seed decides the recovered yaw more than the
 trajectory.
 
-Second round (2026-11-21, same set-up unless named; 9 or 12 clips):
+Second round (same set-up unless named; 9 or 12 clips):
 
 | change | pairs agreeing |
 | --- | --- |

@@ -4,7 +4,7 @@
 the road at frame t is looked up where the first frame saw it, further away. In fog that far road
 is mostly airlight, so the warped road brightens frame by frame: on a held-out straight fog drive
 the true frames' ground stays at one luma while the warp of its own first frame climbs by tens of
-levels, and a generated fog sample refined from 0.1 reads snow (docs/quality-vs-compute.md).
+levels, and a generated fog sample refined from 0.1 reads snow.
 
 Two corrections, both from the first frame alone (as a generated sample gives it) and both using
 the distances the warp knows (the road plane, the corridor's walls; points at infinity are left):
@@ -25,7 +25,7 @@ against the true ones over the pixels the warp renders; then the mean PSNR per w
     python studies/warp_haze.py HELDOUT_CLIPS [--weathers fog,clear,snow,rain] [--per-weather 3] [--walls 25]
         [--method profile|koschmieder]
 
-Numbers: docs/quality-vs-compute.md ("Fog reads snow at --reproject 0.1").
+Numbers: studies/README.md.
 """
 
 from __future__ import annotations

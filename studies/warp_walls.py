@@ -12,7 +12,7 @@ ratio and TFE against the same waypoints).
 
     python studies/warp_walls.py CLIPS [--walls 0,6,10,15,25,40] [--keys K1,K2,...] [--max-clips 8] [--out DIR]
 
-Numbers: docs/quality-vs-compute.md ("The flat-world warp stands still").
+Numbers: git show a88b7a4:docs/quality-vs-compute.md, "The flat-world warp stands still".
 """
 
 from __future__ import annotations

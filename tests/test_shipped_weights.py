@@ -50,7 +50,7 @@ def test_every_shipped_file_is_in_the_manifest_with_its_sha256_and_within_the_li
 
 def test_the_shipped_diffusion_models_share_the_shipped_tokenizers_latent_space():
     """Every shipped diffusion model was trained on latents normalised by the shipped tokenizer's
-    statistics; a tokenizer replaced by a decoder fine-tune (the shipped one since 2026-11-29) must keep
+    statistics; a tokenizer replaced by a decoder fine-tune (as the shipped one is) must keep
     them, and the encoder that made them, or every shipped model would read its latents wrongly."""
     tokenizer = json.loads((shipped_model("tokenizer") / "config.json").read_text())
     for kind in ("text2world", "multiview", "transfer"):
@@ -272,7 +272,7 @@ if __name__ == "__main__":
 
 
 def test_a_config_field_naming_a_shipped_model_loads_it():
-    """``--set init=shipped:tokenizer`` (a tokenizer run's decoder fine-tuning, docs/quality-vs-compute.md)
+    """``--set init=shipped:tokenizer`` (a tokenizer run's decoder fine-tuning)
     reads the installed folder, tensor for tensor; an unknown kind is a one-line error."""
     from drivewm.train.checkpoint import load_model_folder
 

@@ -108,7 +108,7 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
 
 def test_a_rerun_given_the_tokenizer_eval_computes_the_figures_again(tmp_path, monkeypatch):
     """Generation and eval resume; the figures must not, or the tokenizer's PSNR given on a rerun never
-    reaches figures.json (it stayed n/a until 2026-11-29): the figures stage's marker goes."""
+    reaches figures.json: the figures stage's marker goes."""
     import drivewm.product.quickstart
 
     run = tmp_path / "run"
@@ -231,7 +231,7 @@ def test_each_figure_can_fail(tmp_path, change, broken):
 def test_the_cse_figure_carries_the_overlap_disagreement_that_shows_a_stitched_cse(tmp_path):
     """Stitched views win CSE by construction (docs/eval-protocol.md): the CSE figure reports the eval's
     ``overlap_disagreement`` beside it, generated and held-out, in figures.json and in the table; an
-    eval without it (before 2026-11-30) leaves the figure as it was."""
+    eval without it (an older metrics.json) leaves the figure as it was."""
     from drivewm.product.figures import figures, figures_markdown
 
     _write_run(

@@ -159,7 +159,7 @@ def test_the_shipped_model_refined_from_a_reprojection_turns_as_told(tmp_path):
     """The shipped multi-view model, the same prompt and seed under the left and right turns, with
     generate's defaults (reprojection from DEFAULT_SIGMA, the prompt in the training captions' template):
     the samples' front cameras turn the asked way by more than 10 degrees (from noise alone they turn
-    by a few degrees at most, mostly the other way: docs/quality-vs-compute.md), and the clip records
+    by a few degrees at most, mostly the other way: docs/results.md), and the clip records
     how it was made."""
     from drivewm.multiview.generate import template_view_captions
 

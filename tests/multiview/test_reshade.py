@@ -46,10 +46,10 @@ def test_a_road_that_looks_alike_at_every_distance_is_left_as_it_is():
 @pytest.mark.parametrize("size", [(320, 192), (160, 96)])
 def test_the_reshading_reads_distances_along_the_warps_own_rays(size):
     """Every pixel's surface is where the warp finds it (warp.flat_world_points): the same rays through
-    the same pixel centres, whether the images are the rig's own size or smaller. Until 2026-11-30 the
-    reshading cast its rays through centres half a pixel away (K scaled as if pixel centres sat at
-    half-integers): its road distances were 1 % off the warp's at the median, up to 1 m within 20 m
-    and a third or more near the horizon."""
+    the same pixel centres, whether the images are the rig's own size or smaller. Rays cast through
+    centres half a pixel away (K scaled as if pixel centres sat at half-integers) put the road
+    distances 1 % off the warp's at the median, up to 1 m within 20 m and a third or more near the
+    horizon."""
     rig = load_rig("nuscenes6").scaled(320, 192)
     w, h = size
     rel = relative_poses(np.array([[1.5 * (k + 1), 0.3 * k, 0.0] for k in range(8)]), 9, 0.1)

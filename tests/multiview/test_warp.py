@@ -144,7 +144,7 @@ def test_a_corridor_narrower_than_the_rig_is_refused():
 
 def test_warp_with_walls_moves_the_roadside_by_its_parallax():
     """In a corridor, the walled warp reproduces the later frames where the flat-world warp leaves the
-    walls at infinity (docs/quality-vs-compute.md, "The flat-world warp stands still")."""
+    walls at infinity (studies/warp_walls.py)."""
     rig = load_rig("front3")
     poses = np.stack([np.eye(4), T_from_xyz_yaw(4.0, 0.2, 0.0, 0.1), T_from_xyz_yaw(8.0, 1.0, 0.0, 0.3)])
     first = corridor_frame(rig, poses[0], 12.0)

@@ -276,7 +276,7 @@ def test_perceptual_term_needs_local_weights(tmp_path):
 def test_decoder_fine_tuning_keeps_the_latent_space(trained, sim_clip_dir, tmp_path):
     """init + freeze_encoder: only the decoder trains, so latents (and latent caches made with the
     parent) stay valid while reconstructions improve."""
-    # other crops than the parent's: statistics measured again on them would differ (they did, until 2026-11-29)
+    # other crops than the parent's: statistics measured again on them would differ
     overrides = [f"init={trained}", "freeze_encoder=true", "train.checkpoint_every=20", "data.crop=[48,80]"]
     cfg = run_config(20, *overrides, "data.frames=17", "train.seed=5")
     tokenizer_train(cfg, sim_clip_dir, tmp_path / "dec")
