@@ -71,7 +71,12 @@ class LogWriter:
         self.label_classes = tuple(label_classes)
         self._stack = contextlib.ExitStack()
         tmp = self._stack.enter_context(atomic_path(self.path))
-        self._open(tmp)
+        try:
+            self._open(tmp)
+        except BaseException as exc:  # e.g. a full disk: the temporary goes, the error names the log
+            with contextlib.suppress(Exception):  # a writer left open panics when the interpreter exits
+                self._mcap.close()
+            discard_held(self._stack, exc)
         self._static_written = False
         self._closed = False
 
