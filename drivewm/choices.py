@@ -20,6 +20,7 @@ from pathlib import Path
 from drivewm.config import MAX_SEED, check_guidance_interval
 from drivewm.errors import DrivewmError
 from drivewm.model_folders import resolve_model_folder
+from drivewm.paths import confine_to
 
 
 class RegistryChoices:
@@ -59,10 +60,32 @@ def model_folder(value: str) -> Path:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
+#: The installed package: no command writes inside it (its ``weights/`` are the shipped models, replaced
+#: only by drivewm.release.replace_shipped).
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
 def output_folder(value: str) -> Path:
-    """argparse ``type`` of an ``--out`` folder: a folder, or a path that can become one; a file there or on
-    the way to it is refused before any work (mkdir had ended the command in a FileExistsError traceback)."""
+    """argparse ``type`` of an ``--out`` folder, resolved once, here: a folder, or a path that can become one.
+    Refused before any work: an empty path (``Path("")`` is the current folder), a folder inside the installed
+    package (its shipped weights are read-only to drivewm), and a file there or on the way to it (mkdir had
+    ended the command in a FileExistsError traceback). Writes under it never follow a symlink out of it
+    (drivewm.paths.confine_to)."""
+    path = _writable_path(value)
+    confine_to(path)
+    return path
+
+
+def _writable_path(value: str) -> Path:
+    """``value`` as a path a command may write: not empty, not inside the package, no file on the way to it."""
+    if not value.strip():
+        raise argparse.ArgumentTypeError("an empty path names no folder; give the output folder")
     path = Path(value)
+    if path.resolve().is_relative_to(PACKAGE_DIR):
+        raise argparse.ArgumentTypeError(
+            f"{value}: lies inside the installed drivewm package ({PACKAGE_DIR}), whose shipped weights no "
+            "command may write; choose a folder outside it"
+        )
     for part in (path, *path.parents):
         if part.exists():
             if not part.is_dir():
@@ -78,7 +101,7 @@ def output_file(value: str) -> Path:
     path = Path(value)
     if path.is_dir():
         raise argparse.ArgumentTypeError(f"{value}: is a folder, not a file")
-    output_folder(str(path.parent))
+    _writable_path(str(path.parent))
     return path
 
 

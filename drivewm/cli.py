@@ -4,7 +4,11 @@ Each stage owns a small ``commands.py`` module with ``register(subparsers)``: it
 sub-parser(s) and sets ``func(args) -> int | None``. Those modules import only argparse-level
 things at the top, so ``drivewm --help`` stays fast; the heavy imports happen inside ``func``.
 This file parses, dispatches and turns :class:`DrivewmError` into one line and exit status 2 (a
-:class:`BatchError`, a batch that produced nothing usable, adds one line per failed item).
+:class:`BatchError`, a batch that produced nothing usable, adds one line per failed item). It is also the
+one place that does so for an ``OSError`` of the file system (full, read-only, no permission:
+drivewm.errors.storage_message), naming the path; other ``OSError`` s are bugs and keep their traceback.
+A command that declares ``lock_out`` (``set_defaults(lock_out="generate")``) runs holding its ``--out``
+folder's lock (drivewm.lock), so two runs never write one output folder.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import select
 import sys
 
 from drivewm import __version__
-from drivewm.errors import BatchError, DrivewmError
+from drivewm.errors import BatchError, DrivewmError, storage_message
 
 #: Modules that register sub-commands, in help order.
 COMMAND_MODULES = (
@@ -97,15 +101,30 @@ def _main(argv: list[str] | None) -> int:
         parser.print_help()
         return 1
     try:
-        return int(args.func(args) or 0)
+        return _run(args)
     except DrivewmError as exc:
         print(f"error: {exc}", file=sys.stderr)
         for line in exc.failures if isinstance(exc, BatchError) else ():
             print(f"  {line}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        if (message := storage_message(exc)) is None:
+            raise
+        print(f"error: {message}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command, holding its output folder's lock when it declares ``lock_out`` (a dry run writes nothing)."""
+    if getattr(args, "lock_out", None) is None or getattr(args, "dry_run", False):
+        return int(args.func(args) or 0)
+    from drivewm.lock import folder_lock
+
+    with folder_lock(args.out, args.lock_out):
+        return int(args.func(args) or 0)
 
 
 if __name__ == "__main__":

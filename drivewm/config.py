@@ -27,20 +27,79 @@ C = TypeVar("C")
 _SCIENTIFIC = re.compile(r"[-+]?\d+(\.\d*)?[eE][-+]?\d+")
 
 
+#: The most nodes a YAML document may hold once every alias is expanded where it is used. Aliases are
+#: welcome (a recipe names a list once and uses it twice), but 370 bytes of nested aliases expand to a
+#: billion nodes ("billion laughs"), which every walk over the result (checking, copying, printing) pays for.
+MAX_YAML_NODES = 100_000
+
+
 def load_yaml(path: str | Path) -> dict:
-    """Read a YAML mapping; a missing file or a non-mapping gives a clear error."""
+    """Read a YAML mapping (:func:`parse_yaml`); a missing file or a non-mapping gives a clear error. The one
+    reader of drivewm's YAML: recipes, rigs, topic maps, quickstart and world-model profiles."""
     path = Path(path)
     if not path.is_file():
         raise DrivewmError(f"{path}: config file not found")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError, RecursionError) as exc:
-        raise DrivewmError(f"{path}: not valid YAML ({exc.__class__.__name__})") from None
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DrivewmError(f"{path}: not valid YAML (UnicodeDecodeError)") from None
+    data = parse_yaml(text, str(path))
     if data is None:
         return {}
     if not isinstance(data, dict):
         raise DrivewmError(f"{path}: expected a mapping at the top level, got {type(data).__name__}")
     return data
+
+
+def parse_yaml(text: str, where: str) -> Any:
+    """The value of a YAML document (safe types only: no Python objects), refused with a DrivewmError naming
+    ``where`` when it is not YAML, when an alias refers to a node that contains it (a structure holding itself),
+    or when its aliases expand it beyond :data:`MAX_YAML_NODES` nodes. Checked on the composed nodes, where an
+    alias is one shared node, before anything is built."""
+    loader = None
+    try:
+        loader = yaml.SafeLoader(text)  # reads the text's first characters: a control character fails here
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_expansion(node, where)
+        return loader.construct_document(node)
+    except (yaml.YAMLError, RecursionError) as exc:
+        raise DrivewmError(f"{where}: not valid YAML ({exc.__class__.__name__})") from None
+    finally:
+        if loader is not None:
+            loader.dispose()
+
+
+def _check_expansion(root: yaml.Node, where: str) -> None:
+    """Refuse a node graph with a cycle, or whose tree (every alias expanded) has more than MAX_YAML_NODES nodes.
+
+    Depth-first, each shared node sized once: size(node) = 1 + the sizes of its children."""
+    sizes: dict[int, int] = {}
+    open_nodes: set[int] = set()  # on the path from the root: meeting one again is a cycle
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, finished = stack.pop()
+        children = _yaml_children(node)
+        if finished:
+            open_nodes.discard(id(node))
+            sizes[id(node)] = 1 + sum(sizes[id(c)] for c in children)
+            if sizes[id(node)] > MAX_YAML_NODES:
+                raise DrivewmError(
+                    f"{where}: its aliases expand it to more than {MAX_YAML_NODES:,} values; write the values out"
+                )
+        elif id(node) in open_nodes:
+            raise DrivewmError(f"{where}: an alias refers to a node that contains it (line {node.start_mark.line + 1})")
+        elif id(node) not in sizes:
+            open_nodes.add(id(node))
+            stack.append((node, True))
+            stack += [(c, False) for c in children]
+
+
+def _yaml_children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return list(node.value) if isinstance(node, yaml.SequenceNode) else []
 
 
 def _coerce(value: Any, tp: Any, where: str, finite: bool = True) -> Any:
@@ -214,10 +273,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     key, raw = text.split("=", 1)
     if not key:
         raise DrivewmError(f"override {text!r}: empty key")
-    try:
-        value = yaml.safe_load(raw)
-    except (yaml.YAMLError, RecursionError) as exc:
-        raise DrivewmError(f"override {text!r}: value is not valid YAML ({exc.__class__.__name__})") from None
+    value = parse_yaml(raw, f"override {text!r}: value")
     if isinstance(value, str) and _SCIENTIFIC.fullmatch(value.strip()):
         value = float(value)  # YAML 1.1 reads 1e-3 (no dot) as a string; users mean the number
     return key.split("."), value

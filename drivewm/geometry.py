@@ -8,6 +8,7 @@ Transforms are 4x4 ``T_a_from_b`` mapping points in frame b into frame a. Points
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from pathlib import Path
 
 import numpy as np
@@ -332,14 +333,26 @@ def load_rig(name_or_path: str | Path) -> Rig:
     return rig_from_dict(load_yaml(path), str(path))
 
 
+#: The keys of a rig, and of a camera in it (and in its ``defaults``); any other is refused, so a misspelt
+#: ``yaw_dg`` or ``distorsion`` never leaves a calibration silently at its default.
+RIG_KEYS = ("name", "defaults", "cameras")
+CAMERA_KEYS = (
+    "name", "width", "height", "K", "distortion", "T_ego_from_cam",
+    "hfov_deg", "xyz", "roll_deg", "pitch_deg", "yaw_deg",
+)  # fmt: skip
+
+
 def rig_from_dict(data: dict, where: str = "rig") -> Rig:
     """Build a rig from its dict form: explicit ``K``/``T_ego_from_cam`` or the compact form
-    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see drivewm/rigs/README.md)."""
+    (``hfov_deg``, ``xyz``, ``yaw_deg``/``pitch_deg``/``roll_deg``; see drivewm/rigs/README.md).
+    Unknown keys are refused with the nearest known one suggested."""
     if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
         raise DrivewmError(f"{where}: a rig needs a non-empty 'cameras' list")
+    check_keys(data, RIG_KEYS, where)
     defaults = data.get("defaults", {})
     if not isinstance(defaults, dict) or not all(isinstance(c, dict) for c in data["cameras"]):
         raise DrivewmError(f"{where}: 'defaults' and every entry of 'cameras' must be mappings")
+    check_keys(defaults, CAMERA_KEYS, f"{where}: defaults")
     cams = [_camera_from_dict({**defaults, **c}, where, i) for i, c in enumerate(data["cameras"])]
     names = [c.name for c in cams]
     if len(set(names)) != len(names):
@@ -352,6 +365,7 @@ def _camera_from_dict(d: dict, rig_where: str, index: int) -> Camera:
     if not isinstance(d.get("name"), str):
         raise DrivewmError(f"{rig_where}: camera {index}: 'name' must be a string, got {d.get('name')!r}")
     where = f"{rig_where}: camera {d['name']!r}"
+    check_keys(d, CAMERA_KEYS, where)
     width, height = _integer(d, "width", where), _integer(d, "height", where)
     if "K" in d:
         K = _numbers(d["K"], (3, 3), f"{where} K")
@@ -376,6 +390,15 @@ def _camera_from_dict(d: dict, rig_where: str, index: int) -> Camera:
         return Camera(d["name"], K, width, height, T, dist)
     except DrivewmError as exc:
         raise DrivewmError(f"{rig_where}: {exc}") from None
+
+
+def check_keys(d: dict, known: tuple[str, ...], where: str) -> None:
+    """Refuse a key of ``d`` that is not in ``known``, suggesting the nearest known one (difflib)."""
+    for key in d:
+        if key not in known:
+            near = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+            hint = f"did you mean {near[0]!r}? " if near else ""
+            raise DrivewmError(f"{where}: unknown key {key!r} ({hint}known: {', '.join(known)})")
 
 
 def _integer(d: dict, key: str, where: str) -> int:

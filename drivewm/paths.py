@@ -7,11 +7,17 @@ or an absolute path. Every writer and reader builds such paths with :func:`child
 only *safe names* (letters, digits, ``_`` and ``-``; no dots, so ``KEY.CAMERA.mp4`` splits back
 unambiguously) and checks that the result stays inside its folder. Names derived from user files
 (a log's file stem) go through :func:`sanitize_name` first.
+
+The other direction too: readers list a folder of data with :func:`visible_entries`, which leaves out
+hidden names (a writer's temporary holds a half-written file under its final name), and an output
+folder, resolved once where ``--out`` is parsed (:func:`confine_to`), is never left through a symlink
+inside it (:func:`check_confined`, called by every atomic write).
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 from pathlib import Path
 
@@ -42,6 +48,37 @@ def child_path(folder: str | Path, *names: str, ext: str = "", what: str = "name
     if path.resolve().parent != folder.resolve():  # a symlink named like a safe name can still point away
         raise DrivewmError(f"{path}: resolves outside {folder}")
     return path
+
+
+def visible_entries(folder: str | Path, pattern: str = "*") -> list[Path]:
+    """The entries of ``folder`` matching ``pattern`` (one level, sorted), hidden names left out: a writer's
+    temporary (``.NAME.HOST-PIDNS-PID.XXXX.tmp``, drivewm.atomic), which holds a half-written shard, log or
+    video under its final name, the folder lock (``.drivewm.lock``) and every other dot file. Every reader that
+    lists a folder of data (clip shards, logs, videos) lists it with this, so nothing half-written is read."""
+    return sorted(p for p in Path(folder).glob(pattern) if not p.name.startswith("."))
+
+
+#: The output folders of this process's commands: the path as given (absolute) -> where it resolved when the
+#: command line was parsed (:func:`confine_to`).
+_OUTPUT_FOLDERS: dict[str, str] = {}
+
+
+def confine_to(folder: str | Path) -> None:
+    """Take ``folder`` as an output folder of this process, resolved now and once: every write under it
+    (drivewm.atomic) must stay inside where it resolved (:func:`check_confined`). Called where ``--out`` is parsed."""
+    given = os.path.abspath(folder)
+    _OUTPUT_FOLDERS[given] = os.path.realpath(given)
+
+
+def check_confined(path: str | Path) -> None:
+    """Refuse (DrivewmError) a write to ``path`` under an output folder (:func:`confine_to`) whose folder resolves
+    outside it: a symlink inside the run folder (``RUN/samples -> /elsewhere``) is never followed out of it."""
+    target = os.path.abspath(path)
+    for given, real in _OUTPUT_FOLDERS.items():
+        if target.startswith(given + os.sep):
+            parent = os.path.realpath(os.path.dirname(target))
+            if parent != real and not parent.startswith(real + os.sep):
+                raise DrivewmError(f"{path}: a symlink inside {given} leads out of it (to {parent}); not followed")
 
 
 def sanitize_name(text: str, fallback: str = "item") -> str:

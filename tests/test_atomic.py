@@ -196,3 +196,86 @@ def test_simulate_killed_mid_drive_then_rerun_leaves_no_temporaries_and_the_same
     assert main([*argv, "--out", str(tmp_path / "whole")]) == 0
     (log,) = (tmp_path / "killed").glob("*.mcap")
     assert log.read_bytes() == (tmp_path / "whole" / log.name).read_bytes()
+
+
+def _dead_pid() -> int:
+    """The pid of a process that ran and ended (reaped): no process of this host has it now."""
+    proc = subprocess.Popen(["true"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_writers_first_write_into_a_folder_removes_the_dead_temporaries_there(tmp_path):
+    """Every writer (issue 70), not only those that call remove_dead_temporaries: the first atomic write of a
+    process into a folder sweeps it, so a killed run's torn file does not outlive the rerun; a live writer's
+    temporary stays."""
+    from drivewm.atomic import _HOST, _PIDNS
+
+    dead = tmp_path / "gen" / f".generated-000000.tar.{_HOST}-{_PIDNS}-{_dead_pid()}.k2j4x8y1.tmp"
+    live = tmp_path / "gen" / f".sample_001.mp4.{_HOST}-{_PIDNS}-{os.getpid()}.q8w2e4r6.tmp"
+    for folder in (dead, live):
+        folder.mkdir(parents=True)
+        (folder / folder.name.split(".")[1]).write_bytes(b"torn")
+    write_bytes(tmp_path / "gen" / "sample_000.mp4", b"whole")
+    assert sorted(p.name for p in (tmp_path / "gen").iterdir()) == sorted([live.name, "sample_000.mp4"])
+
+
+def test_metrics_rows_are_strict_json(tmp_path):
+    """A non-finite number is written as null (the metrics files' documented form), never a bare NaN, which
+    no strict JSON reader takes; numpy scalars are written as numbers."""
+    import math
+
+    import numpy as np
+
+    from drivewm.atomic import write_json
+
+    with JsonlAppender(tmp_path / "metrics.jsonl") as log:
+        log.write({"step": 1, "loss": float("nan"), "grad_norm": np.float32(2.5), "lr": [math.inf, -math.inf]})
+    write_json(tmp_path / "metrics.json", {"tse": np.float64("nan"), "clips": {"a": {"cse": 1.0}}})
+
+    def refuse(token):
+        raise ValueError(f"{token} is not JSON")
+
+    strict = lambda text: json.loads(text, parse_constant=refuse)  # noqa: E731
+    assert strict((tmp_path / "metrics.jsonl").read_text()) == {
+        "step": 1,
+        "loss": None,
+        "grad_norm": 2.5,
+        "lr": [None, None],
+    }
+    assert strict((tmp_path / "metrics.json").read_text()) == {"tse": None, "clips": {"a": {"cse": 1.0}}}
+
+
+def test_a_symlinked_log_is_refused_and_the_file_it_points_to_is_untouched(tmp_path):
+    outside = tmp_path / "outside.txt"
+    outside.write_text("someone's file\n")
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.jsonl").symlink_to(outside)
+    with pytest.raises(DrivewmError, match=r"metrics\.jsonl: is a symlink"):
+        JsonlAppender(run / "metrics.jsonl")
+    assert outside.read_text() == "someone's file\n"
+
+
+def test_a_symlink_inside_an_output_folder_is_not_followed_out_of_it(tmp_path):
+    """The output folder, resolved once where --out is parsed (drivewm.paths.confine_to): a folder symlinked
+    inside it (``RUN/samples -> elsewhere``) is refused for writing, while the output folder itself may be a
+    symlink the user made, and a symlink at a final name is replaced, never written through."""
+    from drivewm.paths import confine_to
+
+    elsewhere, real_run = tmp_path / "elsewhere", tmp_path / "disk" / "run"
+    elsewhere.mkdir()
+    real_run.mkdir(parents=True)
+    (tmp_path / "run").symlink_to(real_run)  # the user's --out: a link to another disk
+    run = tmp_path / "run"
+    confine_to(run)
+    (run / "samples").symlink_to(elsewhere)
+    write_bytes(run / "config.json", b"{}")  # through the user's own link: fine
+    with pytest.raises(DrivewmError, match=r"samples/step_1\.png: a symlink inside .* leads out of it"):
+        write_bytes(run / "samples" / "step_1.png", b"png")
+    with pytest.raises(DrivewmError, match="leads out of it"):
+        JsonlAppender(run / "samples" / "metrics.jsonl")
+    (run / "report.json").symlink_to(elsewhere / "report.json")
+    write_bytes(run / "report.json", b"{}")
+    assert not (run / "report.json").is_symlink() and list(elsewhere.iterdir()) == []
+    assert (real_run / "config.json").read_bytes() == b"{}"

@@ -66,7 +66,7 @@ def test_tokenizer_pieces_are_validated(cls, override, message):
 
 @pytest.mark.parametrize("text", ["crop=[64,", "a={b", "x=!!python/object:os.system ls", "k='unclosed"])
 def test_unparsable_override_values_are_one_line_errors(text):
-    with pytest.raises(DrivewmError, match=r"^override .*: value is not valid YAML"):
+    with pytest.raises(DrivewmError, match=r"^override .*: value: not valid YAML"):
         parse_override(text)
 
 

@@ -155,3 +155,28 @@ def test_scaled_refuses_a_silent_aspect_change():
     with pytest.raises(DrivewmError, match="not 'same'"):
         cam.scaled(160, 96, "squash")
     assert cam.scaled(161, 96).width == 161  # one pixel of rounding is not an aspect change
+
+
+@pytest.mark.parametrize(
+    "yaml_text, message",
+    [
+        (
+            "cameras:\n  - {name: c, width: 64, height: 48, hfov_deg: 60, xyz: [1, 0, 1], yaw_dg: 90}\n",
+            "camera 'c': unknown key 'yaw_dg' (did you mean 'yaw_deg'?",
+        ),
+        (
+            "cameras:\n  - {name: c, width: 64, height: 48, hfov_deg: 60, xyz: [1, 0, 1], distorsion: [0.1]}\n",
+            "camera 'c': unknown key 'distorsion' (did you mean 'distortion'?",
+        ),
+        ("defaults: {widht: 64}\ncameras:\n  - {name: c}\n", "defaults: unknown key 'widht' (did you mean 'width'?"),
+        ("camera:\n  - {name: c}\ncameras:\n  - {name: c}\n", "unknown key 'camera' (did you mean 'cameras'?"),
+    ],
+)
+def test_a_misspelt_rig_key_is_refused_with_the_nearest_name(tmp_path, yaml_text, message):
+    """Issue 70: a misspelt key had been ignored, leaving the calibration silently at its default (a camera
+    looking forward instead of 90 degrees left, no distortion)."""
+    path = tmp_path / "rig.yaml"
+    path.write_text(yaml_text)
+    with pytest.raises(DrivewmError) as err:
+        load_rig(path)
+    assert str(err.value).startswith(f"{path}: {message}") and "\n" not in str(err.value)

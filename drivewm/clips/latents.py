@@ -59,6 +59,8 @@ def write_latent_clip(
     metadata; returns its index row."""
     if latents.ndim != 5:
         raise DrivewmError(f"clip {meta.key}: latents must be (V, c, t, h, w), got {tuple(latents.shape)}")
+    if not torch.isfinite(latents).all():  # read back, one NaN turns every weight of a training run NaN
+        raise DrivewmError(f"clip {meta.key}: the tokenizer coded NaN or infinite latents; not cached")
     path = child_path(cache_dir, meta.key, ext="safetensors", what="clip key")
     tensors = {
         "latents": latents.detach().to(torch.float32).contiguous().cpu(),

@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drivewm.atomic import atomic_path, write_text
+from drivewm.atomic import atomic_path, discard_held, finish_held, write_text
 from drivewm.clips.format import Clip, ClipMeta, validate_meta
 from drivewm.errors import DrivewmError
-from drivewm.paths import check_name, child_path, file_name
+from drivewm.paths import check_name, child_path, file_name, visible_entries
 
 MANIFEST_NAME = "manifest.jsonl"
 
@@ -54,11 +54,12 @@ class ShardWriter:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
             self.flush()
-        elif self._open is not None:
+        elif self._open is not None:  # the open shard is discarded (its temporary removed)
             stack, tar, _ = self._open
-            tar.close()
-            stack.__exit__(exc_type, exc, tb)  # atomic_path removes the temporary
             self._open = None
+            with contextlib.suppress(Exception):  # a full disk fails this too
+                tar.close()
+            discard_held(stack, exc)  # raises exc, as a storage OSError naming the shard on a full disk
 
     def write(self, clip: Clip) -> None:
         validate_meta(clip.meta)
@@ -80,10 +81,10 @@ class ShardWriter:
         if self._open is None:
             return
         stack, tar, path = self._open
-        tar.close()
-        stack.close()
+        self._open = None
+        finish_held(stack, tar.close)
         self.written += [(path.name, key) for key in self._keys]
-        self._open, self._keys = None, []
+        self._keys = []
         self._index += 1
 
 
@@ -110,19 +111,26 @@ def _add_clip(tar: tarfile.TarFile, clip: Clip) -> None:
 
 
 def list_shards(location: str | Path | Iterable[str | Path]) -> list[Path]:
-    """Tar files of a dataset folder (sorted), a single tar, or a list of either."""
+    """Tar files of a dataset folder (sorted), a single tar, or a list of either. A folder's hidden entries
+    are never listed (drivewm.paths.visible_entries): a killed writer's torn shard lies in one."""
     if isinstance(location, (str, Path)):
         location = [location]
     shards: list[Path] = []
     for loc in location:
         loc = Path(loc)
         if loc.is_dir():
-            shards += sorted(p for p in loc.glob("*.tar") if not p.name.startswith("."))
+            shards += [p for p in visible_entries(loc, "*.tar") if p.is_file()]
         elif loc.is_file() and loc.suffix == ".tar":
             shards.append(loc)
         else:
             raise DrivewmError(f"{loc}: not a clip shard (.tar) or a folder of shards")
     return shards
+
+
+def shard_folders(location: str | Path) -> list[Path]:
+    """The sub-folders of ``location`` that hold clip shards (e.g. ``drivewm generate`` outputs, one folder per
+    prompt), sorted; hidden ones (a writer's temporary, which holds a torn shard) are never among them."""
+    return [p for p in visible_entries(location) if p.is_dir() and list_shards(p)]
 
 
 def _safe_member(name: str, shard: Path) -> str:

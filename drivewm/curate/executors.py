@@ -21,17 +21,20 @@ from concurrent.futures import as_completed
 from drivewm.curate.config import CurateConfig
 from drivewm.curate.pool import WORKER_PRELOAD, one_thread_per_worker
 from drivewm.curate.stage import curate_log, load_embeddings
-from drivewm.errors import DrivewmError
+from drivewm.errors import DrivewmError, no_room
 from drivewm.workers import process_pool
 
 Progress = Callable[[dict], None]
 
 
 def _safe_curate(log: str, out_dir: str, cfg: CurateConfig, name: str) -> dict:
-    """The stage, with unexpected exceptions turned into a failed result (the batch goes on)."""
+    """The stage, with unexpected exceptions turned into a failed result (the batch goes on); a full or
+    read-only output folder (drivewm.errors.no_room) stops the batch, since every log would fail on it."""
     try:
         return curate_log(log, out_dir, cfg, name)
     except Exception as exc:  # a bug or an unforeseen bad input: report it, keep the other logs
+        if no_room(exc):
+            raise
         detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return {
             "log": log,

@@ -106,7 +106,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "road, traffic, the trajectory's manoeuvre and speed; other words dropped); on by default, "
         "--no-prompt-template samples the prompt as given",
     )
-    g.set_defaults(func=generate_command)
+    g.set_defaults(func=generate_command, lock_out="generate")
 
 
 def pretrain_command(args: argparse.Namespace) -> int:

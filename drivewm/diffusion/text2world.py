@@ -8,6 +8,7 @@ camera, tokenizer folder), and ``model.safetensors`` with the DiT's (EMA) weight
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,10 @@ from drivewm.text import TextConfig, build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, read_model_config, save_model_folder
 
 MODEL_TYPE = "text2world"
+#: The most latent values one sample may have (c * t * h * w): 256 MB of float32, ~18x a 33-frame 1280x720
+#: clip coded 8x8x4 with 16 channels. Sampling holds several tensors of this size per view, so a typo's
+#: ``latent_shape`` (77 GB) is refused where the config is read, not met as an allocation failure.
+MAX_LATENT_VALUES = 2**26
 
 
 @dataclasses.dataclass
@@ -60,6 +65,7 @@ class LatentInfo:
     def validate(self) -> None:
         shape = self.latent_shape
         require(len(shape) == 4 and min(shape) >= 1, "latent_shape", shape, "4 sizes (c, t, h, w) >= 1")
+        require(math.prod(shape) <= MAX_LATENT_VALUES, "latent_shape", shape, f"<= {MAX_LATENT_VALUES:,} values")
         for name in ("latent_mean", "latent_std"):  # one per channel: a shorter list broadcasts silently
             require(len(getattr(self, name)) == shape[0], name, getattr(self, name), f"{shape[0]} numbers (c)")
         require(min(self.latent_std) > 0, "latent_std", self.latent_std, "> 0 (a 0 turns every sample flat)")

@@ -65,7 +65,7 @@ def register(subparsers) -> None:
 
 
 def run_eval(args: argparse.Namespace) -> int:
-    from drivewm.eval.report import json_safe
+    from drivewm.atomic import strict_json
     from drivewm.eval.suite import evaluate
 
     if args.metrics:
@@ -90,7 +90,7 @@ def run_eval(args: argparse.Namespace) -> int:
         threads=args.threads,
     )
     # The same values as metrics.json's top level, as strict JSON (NaN -> null), so a script can parse stdout.
-    summary = json_safe({k: v for k, v in metrics.items() if k not in ("clips", "config")})
+    summary = strict_json({k: v for k, v in metrics.items() if k not in ("clips", "config")})
     print(json.dumps(summary, indent=2, allow_nan=False))
     print(f"wrote {args.out}/metrics.json and metrics.md")
     failed = [m["error"] for m in metrics["clips"].values() if "error" in m]

@@ -13,10 +13,11 @@ import av
 import numpy as np
 
 from drivewm.clips.format import Clip
-from drivewm.clips.shards import BadClip, list_shards, read_shard
+from drivewm.clips.shards import BadClip, list_shards, read_shard, shard_folders
 from drivewm.clips.video import decode_mp4
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, load_rig
+from drivewm.paths import visible_entries
 
 
 @dataclasses.dataclass
@@ -134,15 +135,11 @@ def items_from_clips(location: Path, rig: Rig | None, fit: str = "same") -> list
     return items
 
 
-def _shard_folders(location: Path) -> list[Path]:
-    return sorted(p for p in location.iterdir() if p.is_dir() and any(p.glob("*.tar")))
-
-
 def items_from_clip_folders(location: Path, rig: Rig | None, fit: str = "same") -> list[EvalItem]:
     """A folder of clip-shard folders (e.g. ``drivewm generate`` outputs, one folder per prompt):
     every folder's clips, keyed ``FOLDER/KEY`` so that equal keys of different folders stay apart."""
     items = []
-    for folder in _shard_folders(location):
+    for folder in shard_folders(location):
         items += [dataclasses.replace(i, key=f"{folder.name}/{i.key}") for i in items_from_clips(folder, rig, fit)]
     return items
 
@@ -153,8 +150,10 @@ def _clip_item(clip: Clip | BadClip, rig: Rig | None, fit: str) -> EvalItem:
     m = clip.meta
     clip_rig = m.get_rig()
     if rig is not None:
-        c0 = clip_rig.cameras[0]
-        clip_rig = _rig_for(rig, [n for n in rig.names if n in m.cameras], c0.width, c0.height, fit)
+        c0, shared = clip_rig.cameras[0], [n for n in rig.names if n in m.cameras]
+        if not shared:
+            raise DrivewmError(f"clip {m.key}: the rig {rig.name} ({rig.names}) shares no camera with its {m.cameras}")
+        clip_rig = _rig_for(rig, shared, c0.width, c0.height, fit)
     return EvalItem(
         m.key,
         clip_rig,
@@ -171,7 +170,7 @@ def _clip_item(clip: Clip | BadClip, rig: Rig | None, fit: str) -> EvalItem:
 
 def items_from_mp4_folder(location: Path, rig: Rig, fit: str = "same") -> list[EvalItem]:
     """A folder of ``CAMERA.mp4`` (one clip), or a folder of such folders (one clip each)."""
-    folders = [location] if any(location.glob("*.mp4")) else sorted(p for p in location.iterdir() if p.is_dir())
+    folders = [location] if visible_entries(location, "*.mp4") else [p for p in visible_entries(location) if p.is_dir()]
     items = []
     for folder in folders:
         try:
@@ -215,9 +214,9 @@ def load_items(
     rig_obj = load_rig(rig) if isinstance(rig, (str, Path)) else rig
     if not location.exists():
         raise DrivewmError(f"{location}: no such file or folder")
-    if location.suffix == ".tar" or (location.is_dir() and any(location.glob("*.tar"))):
+    if location.suffix == ".tar" or (location.is_dir() and list_shards(location)):
         return items_from_clips(location, rig_obj, fit)
-    if location.is_dir() and _shard_folders(location):
+    if location.is_dir() and shard_folders(location):
         return items_from_clip_folders(location, rig_obj, fit)
     if rig_obj is None:
         raise DrivewmError(f"{location}: mp4 inputs need --rig (camera names, intrinsics and extrinsics)")

@@ -166,26 +166,13 @@ def _log_clip(rec, rr, result) -> None:
         )
 
 
-def json_safe(obj):
-    """``obj`` with NaN / inf written as None and numpy scalars as Python numbers (strict JSON)."""
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
-
-
 def write_report(
     out_dir: Path, metrics: dict, results: list, reference: str | Path | None, pictures: bool = True
 ) -> None:
     """metrics.json (NaN written as null), metrics.md, error_distributions.png and eval.rrd."""
     ref = load_reference(reference)
     out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "metrics.json", json_safe(metrics))
+    write_json(out_dir / "metrics.json", metrics)
     write_text(out_dir / "metrics.md", markdown_table(metrics, ref))
     if pictures:
         plot_distributions(out_dir / "error_distributions.png", metrics)

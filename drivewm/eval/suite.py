@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from drivewm.clips.shards import spread
 from drivewm.config import to_dict
-from drivewm.errors import DrivewmError
+from drivewm.errors import DrivewmError, no_room
 from drivewm.eval.adherence import adherence, condition_scores
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, overlapping_pairs, temporal_sampson
@@ -94,6 +94,8 @@ def evaluate_item(item: EvalItem, cfg: EvalConfig, threads: int = 1) -> ClipResu
     except DrivewmError as exc:
         return ClipResult(item.key, {"error": str(exc)}, {})
     except Exception as exc:  # noqa: BLE001 - one clip's failure must not end the batch
+        if no_room(exc):  # a full or read-only disk is every clip's failure: the command stops on it
+            raise
         detail = traceback.format_exception_only(type(exc), exc)[-1].strip()
         return ClipResult(item.key, {"error": f"{item.key}: unexpected error: {detail}"}, {})
 

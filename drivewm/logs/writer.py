@@ -25,7 +25,7 @@ import numpy as np
 from foxglove import channels, messages
 from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-from drivewm.atomic import atomic_path
+from drivewm.atomic import atomic_path, discard_held, finish_held
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Camera, Rig
 from drivewm.layout.labels import label_png
@@ -71,7 +71,12 @@ class LogWriter:
         self.label_classes = tuple(label_classes)
         self._stack = contextlib.ExitStack()
         tmp = self._stack.enter_context(atomic_path(self.path))
-        self._open(tmp)
+        try:
+            self._open(tmp)
+        except BaseException as exc:  # e.g. a full disk: the temporary goes, the error names the log
+            with contextlib.suppress(Exception):  # a writer left open panics when the interpreter exits
+                self._mcap.close()
+            discard_held(self._stack, exc)
         self._static_written = False
         self._closed = False
 
@@ -275,17 +280,20 @@ class LogWriter:
         """Finish the MCAP file and rename it onto ``path``."""
         if not self._closed:
             self._closed = True
-            self._ensure_static(0)
-            self._mcap.close()
-            self._stack.close()
+            finish_held(self._stack, lambda: (self._ensure_static(0), self._mcap.close()))
         return self.path
 
-    def abort(self) -> None:
-        """Stop writing and discard the file (``path`` is left as it was)."""
+    def abort(self, exc: BaseException | None = None) -> None:
+        """Stop writing and discard the file (``path`` is left as it was); with ``exc`` (what stopped the writing),
+        raise it again (as a storage OSError naming the path when the disk is full: drivewm.atomic.finish_held)."""
         if not self._closed:
             self._closed = True
-            self._mcap.close()
-            self._stack.__exit__(DrivewmError, DrivewmError("aborted"), None)
+            with contextlib.suppress(Exception):  # a full disk fails this too; the file is discarded anyway
+                self._mcap.close()
+            if exc is None:
+                self._stack.__exit__(DrivewmError, DrivewmError("aborted"), None)
+            else:
+                discard_held(self._stack, exc)
 
     def __enter__(self) -> LogWriter:
         return self
@@ -294,7 +302,7 @@ class LogWriter:
         if exc_type is None:
             self.close()
         else:
-            self.abort()
+            self.abort(exc)
 
 
 def distortion_model(distortion: np.ndarray) -> str:

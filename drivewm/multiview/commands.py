@@ -85,7 +85,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument(
         "--device", default="auto", choices=["auto", "cpu", "cuda"], help="where to run (auto: CUDA when available)"
     )
-    r.set_defaults(func=rollout_command)
+    r.set_defaults(func=rollout_command, lock_out="rollout")
 
 
 def add_reproject_arguments(

@@ -136,16 +136,7 @@ def _update_state(digest, obj: object) -> None:
 
 def read_model_type(path: str | Path) -> str | None:
     """The ``model_type`` of the model folder ``path`` (DrivewmError when it is not one)."""
-    cfg_path = Path(path) / CONFIG_NAME
-    if not cfg_path.is_file():
-        raise DrivewmError(f"{path}: not a drivewm model folder (no {CONFIG_NAME})")
-    try:
-        info = json.loads(cfg_path.read_text())
-    except json.JSONDecodeError:
-        raise DrivewmError(f"{cfg_path}: not valid JSON") from None
-    if not isinstance(info, dict):
-        raise DrivewmError(f"{cfg_path}: expected a JSON object")
-    return info.get("model_type")
+    return read_model_config(path).get("model_type")
 
 
 def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tuple[dict, dict[str, torch.Tensor]]:
@@ -163,6 +154,7 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
         state, revision = _read_weights(path / WEIGHTS_NAME)
         if info.get("revision") in (None, revision):  # None: written before revisions, or by hand
             _check_weights(path, info, state)
+            check_finite(state, f"{path / WEIGHTS_NAME}")
             return info, state
         time.sleep(READ_WAIT_S)
     raise DrivewmError(
@@ -181,6 +173,14 @@ def _check_weights(path: Path, info: dict, state: dict[str, torch.Tensor]) -> No
         )
 
 
+def check_finite(state: dict[str, torch.Tensor], where: str) -> None:
+    """Refuse (DrivewmError) weights holding NaN or infinity, naming the first such tensor: a diverged run's
+    weights generate black clips and turn every weight of a fine-tune NaN, so they never pass silently."""
+    for name, tensor in state.items():
+        if tensor.is_floating_point() and not torch.isfinite(tensor).all():
+            raise DrivewmError(f"{where}: tensor {name} holds NaN or infinity (a diverged training run's weights)")
+
+
 def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None = None) -> dict:
     """``config.json`` of a model folder, checked to be a JSON object of ``model_type`` (one of several;
     None: any)."""
@@ -190,11 +190,12 @@ def read_model_config(path: str | Path, model_type: str | tuple[str, ...] | None
         raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
     try:
         info = json.loads(cfg_path.read_text())
-    except ValueError:
+    except (ValueError, RecursionError):
         raise DrivewmError(f"{cfg_path}: not valid JSON") from None
-    if not isinstance(info, dict) or (types is not None and info.get("model_type") not in types):
-        model = info.get("model_type") if isinstance(info, dict) else None
-        raise DrivewmError(f"{path}: model_type is {model!r}, expected {' or '.join(types)}")
+    if not isinstance(info, dict):
+        raise DrivewmError(f"{cfg_path}: expected a JSON object, got {type(info).__name__}")
+    if types is not None and info.get("model_type") not in types:
+        raise DrivewmError(f"{path}: model_type is {info.get('model_type')!r}, expected {' or '.join(types)}")
     if types is not None and not isinstance(info.get("config"), dict):  # every loader builds its network from it
         raise DrivewmError(
             f"{cfg_path}: 'config' must be a mapping of the network's settings, got {info.get('config')!r}"

@@ -5,6 +5,10 @@ loss, how EMA weights become a model folder and a sample grid); the loop owns th
 with warm-up, gradient clipping, EMA, bf16 autocast on GPUs (fp32 on the CPU), parallelism via
 drivewm.train.parallelize, ``metrics.jsonl``, periodic sample grids, and resumable checkpoints.
 
+A step whose loss, gradient norm or logged term is NaN or infinite stops the run at once with a one-line
+error naming the step, before the optimizer applies it and before anything is saved from it, so the run
+folder keeps its last good checkpoint and a rerun (with a lower learning rate, say) resumes from there.
+
 Exact resume and world-size independence come from making every random draw a function of
 (seed, step, position in the global batch): the data order is a seeded permutation per epoch and
 each sample gets its own noise seed, so the data position *is* the step, and rank r of W simply
@@ -153,6 +157,8 @@ class _Run:
     """Wall seconds spent in training steps over the whole run, resumes included (compute spent)."""
     budget_steps: int | None = None
     """The step count a budgeted run settled on (``TrainConfig.budget_minutes``), once it has."""
+    saved_step: int | None = None
+    """The step of the newest checkpoint in the run folder (None before the first)."""
 
 
 def _setup(task: TrainTask, cfg: TrainConfig) -> _Run:
@@ -226,7 +232,7 @@ def _resume(run: _Run, task: TrainTask, out_dir: Path) -> None:
         options=StateDictOptions(full_state_dict=True),
     )
     run.ema.load_state_dict(state["ema"])
-    run.step = int(state["step"])
+    run.step = run.saved_step = int(state["step"])
     run.train_seconds = float(state.get("train_seconds", 0.0))
     run.budget_steps = state.get("budget_steps")
     torch.set_rng_state(state["rng"]["torch"])
@@ -254,6 +260,7 @@ def _checkpoint(run: _Run, task: TrainTask, out_dir: Path, config_record: dict) 
                 "task": task.extra_state(),
             },
         )
+    run.saved_step = run.step
     barrier(run.info)
 
 
@@ -285,17 +292,50 @@ def _train_step(run: _Run, task: TrainTask, cfg: TrainConfig) -> tuple[float, fl
     grad_norm = torch.nn.utils.clip_grad_norm_(
         run.model.parameters(), cfg.grad_clip if cfg.grad_clip > 0 else float("inf")
     )
-    run.optimizer.step()
-    run.optimizer.zero_grad(set_to_none=True)
-    run.ema.update(run.model, step)
-    run.step += 1
-    terms = {**terms, **task.after_step(run.step)}
     mean_loss = loss.detach()
     if info.distributed:
         dist.all_reduce(mean_loss)  # SUM (gloo has no AVG)
         mean_loss /= info.world_size
     grad_norm = grad_norm.full_tensor() if hasattr(grad_norm, "full_tensor") else grad_norm
-    return float(mean_loss), float(grad_norm), terms
+    mean_loss, grad_norm = float(mean_loss), float(grad_norm)  # every rank: the reduced loss, the global norm
+    check_finite_step(step + 1, {"loss": mean_loss, "grad_norm": grad_norm})  # before the update: weights stay good
+    run.optimizer.step()
+    run.optimizer.zero_grad(set_to_none=True)
+    run.ema.update(run.model, step)
+    run.step += 1
+    terms = {**terms, **task.after_step(run.step)}
+    check_finite_step(run.step, terms)  # e.g. a discriminator that diverged: stopped before it is checkpointed
+    return mean_loss, grad_norm, terms
+
+
+class NonFiniteStep(Exception):
+    """A training step (``step``, counted from 1 as metrics rows count) whose loss, gradient norm or a logged
+    term is NaN or infinite (``values``: the ones that are)."""
+
+    def __init__(self, step: int, values: dict[str, float]):
+        super().__init__(f"step {step}: {values}")
+        self.step, self.values = step, values
+
+
+def check_finite_step(step: int, values: dict[str, float]) -> None:
+    """Raise :class:`NonFiniteStep` when a value of ``values`` is not finite."""
+    bad = {k: v for k, v in values.items() if isinstance(v, float) and not math.isfinite(v)}
+    if bad:
+        raise NonFiniteStep(step, bad)
+
+
+def diverged(stop: NonFiniteStep, out_dir: Path, saved_step: int | None) -> DrivewmError:
+    """The one-line error of a run stopped at its first non-finite step, saying what ``out_dir`` keeps."""
+    kept = (
+        f"{out_dir} keeps the last good checkpoint (step {saved_step}), which a rerun resumes"
+        if saved_step is not None
+        else f"nothing was saved in {out_dir}"
+    )
+    values = ", ".join(f"{k} {v}" for k, v in stop.values.items())
+    return DrivewmError(
+        f"train: step {stop.step}: {values} (not finite): the run diverged and stopped; {kept} "
+        "(lower train.lr or set train.grad_clip first)"
+    )
 
 
 def train(
@@ -326,7 +366,13 @@ def train(
     probe: list[float] = []  # this call's step times while a budgeted run sets its step count
     while run.step < min(cfg.steps, stop):
         tic = time.perf_counter()
-        loss, grad_norm, terms = _train_step(run, task, cfg)
+        try:
+            loss, grad_norm, terms = _train_step(run, task, cfg)
+        except NonFiniteStep as stop:
+            bar.close()
+            if metrics:
+                metrics.close()
+            raise diverged(stop, out_dir, run.saved_step) from None
         seconds = time.perf_counter() - tic
         busy_s, busy_steps = busy_s + seconds, busy_steps + 1
         run.train_seconds += seconds

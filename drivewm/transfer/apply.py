@@ -15,7 +15,6 @@ a BatchError (exit 2), as in curate and encode.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 from pathlib import Path
 
@@ -34,6 +33,7 @@ from drivewm.errors import BatchError, DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
 from drivewm.multiview.coding import decode_views, encode_views, resize_views
 from drivewm.multiview.writer import grid_layout, tile_views
+from drivewm.train.checkpoint import read_model_config
 from drivewm.transfer.detail import BAND_PX
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
@@ -114,10 +114,7 @@ class Transferer:
 def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transferer:
     """A transfer model folder, or a Text2World folder run as SDEdit (needs ``options.start_sigma``)."""
     model_dir = Path(model_dir)
-    cfg_path = model_dir / "config.json"
-    if not cfg_path.is_file():
-        raise DrivewmError(f"{model_dir}: not a drivewm model folder (no config.json)")
-    model_type = json.loads(cfg_path.read_text()).get("model_type")
+    model_type = read_model_config(model_dir).get("model_type")
     o = options
     record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
     record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail, "detail_band": o.detail_band}

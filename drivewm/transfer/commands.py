@@ -67,7 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write clips at the model's image size, the rig scaled to it (default: the source's size and rig "
         "when larger; the model still works at its size and the detail above it comes from the source)",
     )
-    p.set_defaults(func=transfer_command)
+    p.set_defaults(func=transfer_command, lock_out="transfer")
 
     t = sub.add_parser("transfer-train", help="post-train a transfer model from a Text2World model on paired clips")
     t.add_argument(

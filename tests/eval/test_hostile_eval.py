@@ -97,3 +97,36 @@ def test_one_frame_clip_and_ragged_camera_videos_are_reported(tmp_path, capsys):
         _error_lines(err)[1]
         == "  clip0: the cameras' videos have different frame counts {'CAM_FRONT_LEFT': 8, 'CAM_FRONT': 17}"
     )
+
+
+def test_a_killed_writers_temporary_is_never_scored(tmp_path, capsys):
+    """Issue 70: ``generate`` killed while its first shard was open leaves the shard in a hidden temporary
+    (``OUT/.generated-000000.tar.HOST-NS-PID.XXXX.tmp/generated-000000.tar``); eval had taken that folder
+    for a folder of clip folders and scored it. No reader descends into a hidden name: alone it is no
+    input (exit 2), beside a whole shard only the whole shard's clips are scored, in both layouts."""
+    out = tmp_path / "gen"
+    temporary = out / ".generated-000000.tar.host-4026531836-99999.k2j4x8y1.tmp"
+    write_shard(temporary, "generated", ["torn0", "torn1"])  # whole bytes: what counts is where it lies
+    rc, err, metrics = _eval(capsys, out, tmp_path / "e1", "--rig", "front3")
+    assert rc == 2 and "torn0" not in json.dumps(metrics) and err.splitlines()[-1].startswith("error: ")
+    write_shard(out, "generated", ["sample_000"])
+    rc, err, metrics = _eval(capsys, out, tmp_path / "e2")
+    assert rc == 0 and list(metrics["clips"]) == ["sample_000"]
+    prompts = tmp_path / "prompts"  # a folder of generate outputs, one per prompt
+    write_shard(prompts / "snow", "generated", ["sample_000"])
+    write_shard(prompts / ".rain.host-1-99999.k2j4x8y1.tmp" / "rain", "generated", ["sample_000"])
+    rc, err, metrics = _eval(capsys, prompts, tmp_path / "e3")
+    assert rc == 0 and list(metrics["clips"]) == ["snow/sample_000"]
+
+
+def test_a_rig_sharing_no_camera_with_the_clips_is_named(tmp_path, capsys):
+    """``--rig`` whose cameras the clips do not have had failed with "min() arg is an empty sequence"."""
+    write_shard(tmp_path / "clips", "c", ["c0"])  # front3's CAM_FRONT_LEFT and CAM_FRONT
+    (tmp_path / "back.yaml").write_text(
+        "name: back\ncameras:\n"
+        "  - {name: CAM_BACK, width: 64, height: 48, hfov_deg: 90, xyz: [0, 0, 1.5], yaw_deg: 180}\n"
+    )
+    rc, err, _ = _eval(capsys, tmp_path / "clips", tmp_path / "ev2", "--rig", str(tmp_path / "back.yaml"))
+    assert rc == 2 and _error_lines(err)[1] == (
+        "  clip c0: the rig back (['CAM_BACK']) shares no camera with its ['CAM_FRONT_LEFT', 'CAM_FRONT']"
+    )
