@@ -16,6 +16,7 @@ Output: uint8 RGB (V, T, H, W, 3) at the rig's size, and on request the label ma
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import cv2
@@ -78,13 +79,14 @@ class LayoutRenderConfig:
     """Ground and boxes farther than this from a camera are not drawn."""
     map_margin_m: float = 160.0
     """The ground map covers the clip's ego path and this much around it (beyond: off-road colour)."""
-    max_map_texels: int = 8_000_000
-    """Texels of the ground map at most (its resolution follows from the area, at least ``min_texel_m``)."""
-    min_texel_m: float = 0.05
-    """Finest ground map texel (m)."""
+    texel_m: float = 0.12
+    """Ground map texel (m), coarser only where the map would exceed ``max_map_texels``. One texel size
+    for every clip lets clips of one rig share the cameras' precomputed rays (the renderer's set-up)."""
+    max_map_texels: int = 12_000_000
+    """Texels of the ground map at most."""
 
     def validate(self) -> None:
-        above(self, 0, "max_range_m", "min_texel_m", "max_map_texels")
+        above(self, 0, "max_range_m", "texel_m", "max_map_texels")
         at_least(self, 0, "map_margin_m")
 
 
@@ -144,6 +146,20 @@ def render_layout(rig: Rig, layout: ClipLayout, cfg: LayoutRenderConfig | None =
 
 # ----------------------------------------------------------------------------- the ground map
 
+#: The cameras' precomputed rays and ground hits (drivewm.sim.camera_view) of the last rigs rendered, by
+#: (rig, texel size, range): they depend on nothing else, and cost as much as drawing a few frames.
+_VIEWS: dict[tuple[str, float, float], list[CameraView]] = {}
+
+
+def _views(rig: Rig, texel_m: float, max_range_m: float) -> list[CameraView]:
+    key = (json.dumps(rig.to_dict(), sort_keys=True), texel_m, max_range_m)
+    if key not in _VIEWS:
+        cond = condition_for("clear", "day")  # CameraView also precomputes a sky and fog the layout does not use
+        if len(_VIEWS) >= 4:
+            del _VIEWS[next(iter(_VIEWS))]
+        _VIEWS[key] = [CameraView.build(c, texel_m, MIP_LEVELS, cond, max_range_m) for c in rig.cameras]
+    return _VIEWS[key]
+
 
 def _ground_map(layout: ClipLayout, cfg: LayoutRenderConfig) -> GroundTexture:
     """The layout's road drawn top-down in ego0 around the clip's ego path, with its mip pyramid, and
@@ -151,7 +167,7 @@ def _ground_map(layout: ClipLayout, cfg: LayoutRenderConfig) -> GroundTexture:
     path = layout.T_ego0_from_ego[:, :2, 3]
     lo, hi = path.min(axis=0) - cfg.map_margin_m, path.max(axis=0) + cfg.map_margin_m
     ext = hi - lo
-    res = max(cfg.min_texel_m, math.sqrt(ext[0] * ext[1] / cfg.max_map_texels))
+    res = max(cfg.texel_m, math.sqrt(ext[0] * ext[1] / cfg.max_map_texels))
     shape = (int(math.ceil(ext[1] / res)) + 1, int(math.ceil(ext[0] / res)) + 1)
     rgb = np.empty((*shape, 3), np.uint8)
     rgb[:] = OFF_ROAD_RGB
