@@ -53,6 +53,15 @@ class SamplingConfig:
         """:attr:`guidance_interval` as the sampler takes it."""
         return check_guidance_interval("sampling.guidance_interval", self.guidance_interval)
 
+    def sample_kwargs(self) -> dict:
+        """The keyword arguments of ``MultiView.sample_latents`` these settings give (besides ``steps``)."""
+        return {
+            "guidance": self.guidance,
+            "sampler": self.sampler,
+            "trajectory_guidance": self.trajectory_guidance,
+            "guidance_interval": self.interval(),
+        }
+
     def record(self) -> dict:
         """What a generated clip's metadata keeps of the sampling."""
         return {

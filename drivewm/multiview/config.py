@@ -34,7 +34,7 @@ class MultiViewConfig:
     rays (set ``moving_camera_rays`` false with it, so a token's rays only say where it looks)."""
     warp_condition: bool = False
     """Video2World: also give every later latent frame the first frame of the rig warped into its
-    cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity
+    cameras along the trajectory (drivewm.views.warp; road-plane + plane-at-infinity
     reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
     it predicts the simulated clips' later frames no better than copying the first frame (see
     studies/turned_following.py)."""
@@ -46,11 +46,6 @@ class MultiViewConfig:
     warp_ground_m: float = 100.0
     """The warp follows rays that meet the road within this distance (m) to the road plane and all
     others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""
-    warp_walls_m: float = 0.0
-    """The training warp's corridor (``warp_condition``, ``warped_noise``): vertical planes this far (m)
-    left and right of the first ego frame, so what stands beside the road passes by with parallax
-    (drivewm.multiview.warp.warp_grid ``walls_m``; sampling's own is ``--reproject-walls``). 0 = road
-    and infinity only. docs/quality-vs-compute.md, "The flat-world warp stands still"."""
     ray_scale_m: float = 10.0
     """Ray moments (o x d, metres) are divided by this before the ray MLP."""
     temporal_compression: int = 4
@@ -74,7 +69,7 @@ class MultiViewConfig:
 
     def validate(self) -> None:
         require(self.cross_view in ("joint", "neighbors"), "cross_view", self.cross_view, "'joint' or 'neighbors'")
-        at_least(self, 0, "neighbors", "trajectory_waypoints", "warp_ground_m", "warp_walls_m", "speed_mps")
+        at_least(self, 0, "neighbors", "trajectory_waypoints", "warp_ground_m", "speed_mps")
         at_least(self, 1, "camera_width", "trajectory_width", "temporal_compression")
         above(self, 0, "trajectory_scale_m", "trajectory_dt_s", "ray_scale_m")
         in_range(self, "video2world_prob", 0, 1)

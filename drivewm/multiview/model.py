@@ -27,18 +27,20 @@ from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.dit_config import upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
+from drivewm.diffusion.warp_encoder import WarpEncoder
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig, invert_T, rig_from_dict
-from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
+from drivewm.multiview.camera import CameraEncoder
 from drivewm.multiview.config import MultiViewModelConfig
 from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
 from drivewm.multiview.frame_motion import FrameMotionEncoder, frame_motion_features
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
-from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
 from drivewm.multiview.warped_noise import warp_noise
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
+from drivewm.views.rays import moving_token_rays, plucker_rays, token_rays
+from drivewm.views.warp import warp_first_frame, warp_grid
 
 MODEL_TYPE = "multiview"
 
@@ -59,7 +61,7 @@ class MultiViewConditioning(Conditioning):
     None = no per-frame motion conditioning."""
     warp_grid: torch.Tensor | None = None
     """(B V, T, h, w, 2) where every latent pixel's ray lies in the rig's first latent frame
-    (drivewm.multiview.warp.warp_grid); None = no reprojected conditioning."""
+    (drivewm.views.warp.warp_grid); None = no reprojected conditioning."""
     warp_valid: torch.Tensor | None = None
     """(B V, T, h, w) bool: some view's first frame sees that ray."""
     trajectory_keep: torch.Tensor | None = None
@@ -211,7 +213,7 @@ class MultiView:
         are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
         trajectory's effect w times (drivewm.diffusion.sampling.guided; twice the network evaluations).
         ``start_latents`` (B, V, c, t, h, w) raw: sample from them noised to ``start_sigma`` (SDEdit;
-        drivewm.multiview.reproject), not from pure noise. ``guidance_interval`` (lo, hi): both guidances
+        drivewm.generate.reproject), not from pure noise. ``guidance_interval`` (lo, hi): both guidances
         only at sigma in (lo, hi] (drivewm.diffusion.sampling; None: at every sigma).
         """
         v = len(rig.cameras)
@@ -336,9 +338,7 @@ def clip_warp_grids(
     for wp in np.asarray(trajectories):
         poses = poses_from_waypoints(wp, t, mv.trajectory_dt_s, fps / mv.temporal_compression)
         grids.append(
-            warp_grid(
-                rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m, mv.warp_walls_m
-            )
+            warp_grid(rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m)
         )  # frame 0 is the ego frame itself
     return torch.cat([g for g, _ in grids]), torch.cat([m for _, m in grids])
 

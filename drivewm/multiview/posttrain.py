@@ -75,7 +75,7 @@ class PosttrainConfig:
     (docs/quality-vs-compute.md, "The shipped multi-view model at 320x192")."""
     warp_lr_scale: float = 1.0
     """Learning-rate multiplier of the reprojected first frame's projection (``multiview.warp_condition``,
-    drivewm.multiview.warp.WarpEncoder). It starts at zero, and AdamW moves a weight by about the
+    drivewm.diffusion.warp_encoder). It starts at zero, and AdamW moves a weight by about the
     learning rate a step, so at the whole model's rate it stays near zero for hundreds of steps
     (docs/quality-vs-compute.md, "A warp-conditioned fine-tune on the CPU"); ControlNet-style
     branches are trained faster for the same reason."""
@@ -370,14 +370,13 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     DrivewmError. A model trained with per-frame motion keeps it, with the rays it was trained with
     (its trained motion encoder is not dropped because this run's config left the default), one
     trained with warped noise keeps its correlation unless this run sets another, and one trained
-    on the reprojected first frame keeps it, with its corridor unless this run sets one."""
+    on the reprojected first frame keeps it."""
     if init.cfg.multiview.frame_motion:
         mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
     if init.cfg.multiview.warped_noise and not mv.warped_noise:  # what its samples' noise means
         mv = dataclasses.replace(mv, warped_noise=init.cfg.multiview.warped_noise)
     if init.cfg.multiview.warp_condition:
-        walls = mv.warp_walls_m or init.cfg.multiview.warp_walls_m
-        mv = dataclasses.replace(mv, warp_condition=True, warp_walls_m=walls)
+        mv = dataclasses.replace(mv, warp_condition=True)
     model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}

@@ -21,9 +21,9 @@ import torch
 from drivewm.diffusion.denoiser import edm_loss
 from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.geometry import T_from_xyz_yaw
-from drivewm.multiview.camera import moving_token_rays
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.model import MultiView, build_conditioning
+from drivewm.views.rays import moving_token_rays
 
 #: Clips whose waypoints turn by more than this (degrees) are probed.
 MIN_TURN_DEG = 15.0

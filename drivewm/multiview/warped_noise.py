@@ -10,7 +10,7 @@ with fresh noise,
     n_t = a * warp_t(n_0) + sqrt(1 - a^2) * e_t   where the warp finds a source pixel, e_t elsewhere,
 
 so every value stays standard normal and a (``multiview.warped_noise``) is the correlation along the
-motion. The warp is :func:`drivewm.multiview.warp.warp_grid`'s (rig calibration and waypoints, the
+motion. The warp is :func:`drivewm.views.warp.warp_grid`'s (rig calibration and waypoints, the
 road plane and the plane at infinity; a left turn fetches from the front-left camera), sampled at the
 nearest latent pixel so values are copied, never averaged (an average of normals is not unit normal).
 A model learns what warped noise means in training (the clip's own trajectory warps its noise) and
@@ -30,7 +30,7 @@ from einops import rearrange
 
 def warp_noise(noise: torch.Tensor, grid: torch.Tensor, valid: torch.Tensor, num_views: int, a: float) -> torch.Tensor:
     """(B V, c, T, h, w) independent standard normal noise -> the same shape, each later frame the first
-    frame's noise warped by ``grid`` (B V, T, h, w, 2) (:func:`drivewm.multiview.warp.warp_grid`'s, over
+    frame's noise warped by ``grid`` (B V, T, h, w, 2) (:func:`drivewm.views.warp.warp_grid`'s, over
     the views side by side) with weight ``a``, and its own noise with weight sqrt(1 - a^2); its own
     noise alone where ``valid`` (B V, T, h, w) is False. The first frame is unchanged; a = 0 is the
     identity."""
