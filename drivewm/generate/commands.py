@@ -13,27 +13,27 @@ import json
 from pathlib import Path
 
 from drivewm import resources
-from drivewm.choices import model_folder, output_folder
+from drivewm.choices import at_least_one, model_folder, output_folder, seed
 from drivewm.recipe import add_recipe_arguments
 
-#: Shortcut flags: flag -> (config field, argparse type, help). Each given one is ``--set FIELD=VALUE``.
+#: Shortcut flags by dest (``--num-samples`` is ``num_samples``) -> (config field, argparse type, help);
+#: each one given is ``--set FIELD=VALUE``, after the recipe and before ``--set``.
 SHORTCUTS = {
-    "--steps": ("sampling.steps", int, "sampler steps (default 35)"),
-    "--guidance": ("sampling.guidance", float, "classifier-free guidance scale (default 7)"),
-    "--trajectory-guidance": ("sampling.trajectory_guidance", float, "weigh the trajectory's effect (default 1)"),
-    "--sampler": ("sampling.sampler", str, "heun (default) or euler"),
-    "--seed": ("sampling.seed", int, "sample (rollout: window) i uses seed + i (default 0)"),
-    "--trajectory": ("trajectory", str, "straight|left|right|stop or a waypoint file (N, 3) m (default straight)"),
-    "--device": ("device", str, "auto (default: CUDA when available), cpu or cuda"),
+    "steps": ("sampling.steps", at_least_one, "sampler steps (default 35)"),
+    "guidance": ("sampling.guidance", float, "classifier-free guidance scale (default 7)"),
+    "trajectory_guidance": ("sampling.trajectory_guidance", float, "weigh the trajectory's effect (default 1)"),
+    "sampler": ("sampling.sampler", str, "heun (default) or euler"),
+    "seed": ("sampling.seed", seed, "sample (rollout: window) i uses seed + i (default 0)"),
+    "trajectory": ("trajectory", str, "straight|left|right|stop or a waypoint file (N, 3) m (default straight)"),
+    "device": ("device", str, "auto (default: CUDA when available), cpu or cuda"),
+    "num_samples": ("num_samples", at_least_one, "samples per prompt (default 1)"),
+    "rig": ("rig", str, "camera rig name or YAML (default: the model's training rig)"),
+    "windows": ("rollout.windows", at_least_one, "windows generated after the conditioning frames (default 2)"),
+    "speed": ("rollout.speed_mps", float, "speed of a named trajectory, m/s (default: the clip's)"),
 }
-GENERATE_SHORTCUTS = (*SHORTCUTS, "--num-samples", "--rig")
-ROLLOUT_SHORTCUTS = (*SHORTCUTS, "--windows", "--speed")
-EXTRA = {
-    "--num-samples": ("num_samples", int, "samples per prompt (default 1)"),
-    "--rig": ("rig", str, "camera rig name or YAML (default: the model's training rig)"),
-    "--windows": ("rollout.windows", int, "windows generated after the conditioning frames (default 2)"),
-    "--speed": ("rollout.speed_mps", float, "speed of a named trajectory, m/s (default: the clip's)"),
-}
+COMMON = ("steps", "guidance", "trajectory_guidance", "sampler", "seed", "trajectory", "device")
+GENERATE_SHORTCUTS = (*COMMON, "num_samples", "rig")
+ROLLOUT_SHORTCUTS = (*COMMON, "windows", "speed")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -56,13 +56,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_config_arguments(parser: argparse.ArgumentParser, shortcuts: tuple[str, ...]) -> None:
-    """The shortcut flags, then ``--recipe``, ``--set`` and ``--dry-run`` of the GenerateConfig."""
-    table = {**SHORTCUTS, **EXTRA}
-    for flag in shortcuts:
-        field, kind, text = table[flag]
-        parser.add_argument(
-            flag, type=kind, dest=f"short_{field}", metavar=flag[2:].upper().replace("-", "_"), help=text
-        )
+    """The ``shortcuts`` flags (default None: the config's), then ``--recipe``, ``--set`` and ``--dry-run``."""
+    for dest in shortcuts:
+        _, kind, text = SHORTCUTS[dest]
+        parser.add_argument(f"--{dest.replace('_', '-')}", type=kind, metavar=dest.upper(), help=text)
+    parser.set_defaults(shortcuts=shortcuts)
     add_recipe_arguments(parser, ["default"], "default", resources.names("recipes/generate"))
 
 
@@ -70,8 +68,8 @@ def resolve_config(args: argparse.Namespace):
     """The GenerateConfig of a command line: recipe, then the shortcut flags given, then ``--set``."""
     from drivewm.generate.config import RECIPES
 
-    given = {k[len("short_") :]: v for k, v in vars(args).items() if k.startswith("short_") and v is not None}
-    shortcuts = [f"{field}={json.dumps(value)}" for field, value in given.items()]
+    given = [(SHORTCUTS[d][0], getattr(args, d)) for d in args.shortcuts if getattr(args, d) is not None]
+    shortcuts = [f"{field}={json.dumps(value)}" for field, value in given]
     return RECIPES.resolve(None, args.recipe, [*shortcuts, *args.overrides])
 
 

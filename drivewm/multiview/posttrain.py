@@ -11,7 +11,6 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -73,12 +72,6 @@ class PosttrainConfig:
     """The model's ``dit.rope_spatial_scale`` from this run on (None: the init's). 0.5 takes a model
     trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated
     (docs/quality-vs-compute.md, "The shipped multi-view model at 320x192")."""
-    warp_lr_scale: float = 1.0
-    """Learning-rate multiplier of the reprojected first frame's projection (``multiview.warp_condition``,
-    drivewm.diffusion.warp_encoder). It starts at zero, and AdamW moves a weight by about the
-    learning rate a step, so at the whole model's rate it stays near zero for hundreds of steps
-    (docs/quality-vs-compute.md, "A warp-conditioned fine-tune on the CPU"); ControlNet-style
-    branches are trained faster for the same reason."""
     cache_clips: int = 2048
     """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
@@ -88,7 +81,7 @@ class PosttrainConfig:
     def validate(self) -> None:
         at_least(
             self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
-            "turn_repeat_min_deg", "cache_clips", "warp_lr_scale",
+            "turn_repeat_min_deg", "cache_clips",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
         if self.rope_spatial_scale is not None:
@@ -155,13 +148,10 @@ class PreparedClip:
 
     sample: MultiViewSample
     cond: MultiViewConditioning | None
-    warp: Callable[[torch.Tensor], torch.Tensor] | None
-    """The clip's noise warp (drivewm.multiview.warped_noise); None: plain noise."""
 
     def noise(self, generator: torch.Generator) -> torch.Tensor:
-        """(V, c, t, h, w) standard normal noise from ``generator``, warped along the clip's trajectory."""
-        noise = torch.randn(self.sample.latents.shape, generator=generator)
-        return noise if self.warp is None else self.warp(noise[None])[0]  # sampling's own warp, on a batch of one
+        """(V, c, t, h, w) standard normal noise from ``generator``."""
+        return torch.randn(self.sample.latents.shape, generator=generator)
 
 
 class MultiViewTask(BundleTask):
@@ -188,9 +178,6 @@ class MultiViewTask(BundleTask):
 
     def num_samples(self) -> int:
         return len(self.epoch_order())
-
-    def lr_scales(self) -> dict[str, float]:
-        return {"warp_encoder.": self.cfg.warp_lr_scale} if self.bundle.net.warp_encoder is not None else {}
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
@@ -237,22 +224,12 @@ class MultiViewTask(BundleTask):
             return self._prepared[index]
         s = self.dataset[index]
         cond = build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps)
-        item = PreparedClip(s, cond, self.noise_warp(s))
+        item = PreparedClip(s, cond)
         if self.cfg.cache_clips:
             self._prepared[index] = item
             if len(self._prepared) > self.cfg.cache_clips:
                 self._prepared.popitem(last=False)
         return item
-
-    def clip_noise(self, s: MultiViewSample, generator: torch.Generator) -> torch.Tensor:
-        """(V, c, t, h, w) standard normal noise of one clip, warped along its own trajectory with
-        ``multiview.warped_noise`` (drivewm.multiview.warped_noise) where it has one."""
-        return PreparedClip(s, None, self.noise_warp(s)).noise(generator)
-
-    def noise_warp(self, s: MultiViewSample) -> Callable[[torch.Tensor], torch.Tensor] | None:
-        """The warp of one clip's noise along its trajectory (sampling's own); None without warped noise or
-        a known trajectory."""
-        return self.bundle.noise_warper(s.rig, s.trajectory[None], s.fps) if s.trajectory_known else None
 
     def after_step(self, step: int) -> dict[str, float]:
         """The trajectory probe, in the first metrics row at or after each ``trajectory_probe_every``
@@ -296,8 +273,6 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
             "static_rays",
             "trajectory",
             "frame_motion",
-            "warp_grid",
-            "warp_valid",
             "trajectory_keep",
         )
         if getattr(first, f) is not None
@@ -360,7 +335,7 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
 
 
 #: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
-ADDABLE = ("motion_encoder.", "warp_encoder.")
+ADDABLE = ("motion_encoder.",)
 
 
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
@@ -368,15 +343,9 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
     fresh (zero effect, so the model starts as ``init``); any other structural difference is a
     DrivewmError. A model trained with per-frame motion keeps it, with the rays it was trained with
-    (its trained motion encoder is not dropped because this run's config left the default), one
-    trained with warped noise keeps its correlation unless this run sets another, and one trained
-    on the reprojected first frame keeps it."""
+    (its trained motion encoder is not dropped because this run's config left the default)."""
     if init.cfg.multiview.frame_motion:
         mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
-    if init.cfg.multiview.warped_noise and not mv.warped_noise:  # what its samples' noise means
-        mv = dataclasses.replace(mv, warped_noise=init.cfg.multiview.warped_noise)
-    if init.cfg.multiview.warp_condition:
-        mv = dataclasses.replace(mv, warp_condition=True)
     model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}

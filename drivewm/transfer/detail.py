@@ -33,7 +33,7 @@ far haze for the adherence classifier to read fog as snow at 160x96 (docs/transf
 Given the rig (``drivewm transfer``'s default, ``--no-shared-look`` to skip), the transfer's look,
 ``G(transfer)`` and ``gain``, is shared between cameras: at each pixel it is the feathered mean of
 every camera that sees its point of the flat world (drivewm.views.blend.feathering, the blend of
-``drivewm generate --stitch``), another camera counting only as far as the two coded sources'
+the ``stitch`` post-step), another camera counting only as far as the two coded sources'
 ``G(source_coded)`` agree there (within LOOK_TOLERANCE levels: one surface, not a building the flat
 world puts at infinity), while ``source - G(source_coded)`` stays the view's own. Two cameras then
 give one point one light and bring its structure back at one strength. Measured on the 9 held-out

@@ -42,7 +42,7 @@ def blend_overlaps(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0) ->
 
 def stitch_views(videos: np.ndarray, rig: Rig, max_ground_m: float = 100.0) -> np.ndarray:
     """uint8 (V, T, H, W, 3) generated views of ``rig`` (rig order) -> the same, every frame blended
-    as :func:`blend_overlaps` blends one (``drivewm generate --stitch``): all cameras of a frame are
+    as :func:`blend_overlaps` blends one (the ``stitch`` post-step): all cameras of a frame are
     exposed from one ego pose, so the flat world and the feathering weights are the same in every
     frame and are computed once."""
     check_views(videos, rig)

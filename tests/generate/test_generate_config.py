@@ -7,6 +7,7 @@ import pytest
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
 from drivewm.generate.config import POST_STEPS, RECIPES, GenerateConfig
+from drivewm.generate.registry import GENERATORS, generator_class
 
 
 def test_the_packaged_default_recipe_is_the_codes_defaults_and_draws_the_networks_frames():
@@ -35,3 +36,10 @@ def test_post_steps_are_opt_in_by_name_recorded_in_order_and_checked():
     ):
         with pytest.raises(DrivewmError, match=says):
             RECIPES.resolve(overrides=[bad])
+
+
+def test_every_registered_generator_class_names_its_model_type():
+    for model_type in GENERATORS:
+        assert generator_class(model_type).model_type == model_type
+    with pytest.raises(DrivewmError, match="known: \\['multiview', 'text2world'\\]"):
+        generator_class("ar")

@@ -1,4 +1,4 @@
-"""Reshading the reprojection (drivewm.multiview.reshade): the warp fetches a later frame's road from
+"""Reshading the reprojection (drivewm.views.reshade): the warp fetches a later frame's road from
 further away, and in fog that far road is airlight; with each view's first-frame road profile the
 warped road keeps the look the true frames have at its own distance."""
 
@@ -9,10 +9,10 @@ import pytest
 
 from drivewm.clips import iter_clips
 from drivewm.geometry import invert_T, load_rig
-from drivewm.multiview.reproject import reproject_first_frame_mask
-from drivewm.multiview.reshade import reshade, surface_distances
 from drivewm.multiview.trajectories import poses_from_waypoints
-from drivewm.multiview.warp import flat_world_points
+from drivewm.views.reproject import reproject_first_frame_mask
+from drivewm.views.reshade import reshade, surface_distances
+from drivewm.views.warp import flat_world_points
 
 FPS = 10.0
 
