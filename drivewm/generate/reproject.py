@@ -28,6 +28,7 @@ from drivewm.generate.config import ReprojectConfig
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import encode_views
 from drivewm.multiview.model import MultiView
+from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.views.reproject import reproject_first_frame
 
 
@@ -51,7 +52,8 @@ def refine_reprojected(
     warped road reshaded (drivewm.views.reshade); clips at ``fps`` (default the model's)."""
     fps = fps or model.latent.fps
     mv = model.cfg.multiview
-    warped, _ = reproject_first_frame(videos, rig, waypoints, mv.trajectory_dt_s, fps, mv.warp_ground_m, reshade)
+    poses = poses_from_waypoints(np.asarray(waypoints, dtype=np.float64), videos.shape[1], mv.trajectory_dt_s, fps)
+    warped, _ = reproject_first_frame(videos, rig, poses, mv.warp_ground_m, reshade)
     z = encode_views(tokenizer, warped, videos.shape[2:4], model.device)[None]  # (1, V, c, t, h, w)
     return model.sample_latents(
         rig,

@@ -7,7 +7,6 @@ import torch
 from einops import rearrange
 
 from drivewm.geometry import Rig, invert_T
-from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.views.reshade import reshade as reshade_road
 from drivewm.views.warp import warp_first_frame, warp_grid
 
@@ -15,33 +14,16 @@ from drivewm.views.warp import warp_first_frame, warp_grid
 def reproject_first_frame(
     videos: np.ndarray,
     rig: Rig,
-    waypoints: np.ndarray,
-    dt_s: float,
-    fps: float,
-    max_ground_m: float = 100.0,
-    reshade: bool = False,
-) -> tuple[np.ndarray, float]:
-    """uint8 (V, T, H, W, 3) views of ``rig`` -> the same shape: frame 0 of every view rendered at
-    every frame's ego pose along ``waypoints`` (W, 3) m spaced ``dt_s`` (first at ``dt_s``), frames
-    at ``fps``; pixels no view's first frame sees keep the input's own. Also the fraction rendered.
-    ``reshade``: the road given the first frame's look at its own distance (drivewm.views.reshade)."""
-    out, valid = reproject_first_frame_mask(videos, rig, waypoints, dt_s, fps, max_ground_m, reshade)
-    return out, float(valid.mean())
-
-
-def reproject_first_frame_mask(
-    videos: np.ndarray,
-    rig: Rig,
-    waypoints: np.ndarray,
-    dt_s: float,
-    fps: float,
+    T_world_from_ego: np.ndarray,
     max_ground_m: float = 100.0,
     reshade: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`reproject_first_frame` with the pixels it rendered: bool (V, T, H, W)."""
+    """uint8 (V, T, H, W, 3) views of ``rig`` -> the same shape, frame 0 of every view rendered at every
+    frame's ego pose ``T_world_from_ego`` (T, 4, 4); pixels no view's first frame sees keep the input's
+    own. Also the pixels rendered, bool (V, T, H, W). ``reshade``: the road given the first frame's look
+    at its own distance (drivewm.views.reshade)."""
     v, t, h, w, _ = videos.shape
-    poses = poses_from_waypoints(np.asarray(waypoints, dtype=np.float64), t, dt_s, fps)  # (T, 4, 4)
-    rel = np.einsum("ij,tjk->tik", invert_T(poses[0]), poses)
+    rel = np.einsum("ij,tjk->tik", invert_T(T_world_from_ego[0]), T_world_from_ego)  # (T, 4, 4) in ego frame 0
     grid, valid = warp_grid(rig, (h, w), rel, max_ground_m)
     frames = rearrange(torch.from_numpy(videos).float(), "v t h w c -> v c t h w")
     warped = warp_first_frame(frames, grid, valid, v)[:, :3]  # (V, 3, T, H, W), zero where not valid
