@@ -9,7 +9,9 @@ inside the handlers, so that ``drivewm --help`` imports none.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import math
 from pathlib import Path
 
 from drivewm import resources
@@ -69,8 +71,16 @@ def resolve_config(args: argparse.Namespace):
     from drivewm.generate.config import RECIPES
 
     given = [(SHORTCUTS[d][0], getattr(args, d)) for d in args.shortcuts if getattr(args, d) is not None]
-    shortcuts = [f"{field}={json.dumps(value)}" for field, value in given]
-    return RECIPES.resolve(None, args.recipe, [*shortcuts, *args.overrides])
+    shortcuts = [f"{field}={yaml_scalar(value)}" for field, value in given]
+    book = dataclasses.replace(RECIPES, stage=args.command)  # errors name the command run
+    return book.resolve(None, args.recipe, [*shortcuts, *args.overrides])
+
+
+def yaml_scalar(value: int | float | str) -> str:
+    """``value`` as the YAML scalar ``--set`` parses back to it (NaN and infinities included)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return ".nan" if math.isnan(value) else ("-.inf" if value < 0 else ".inf")
+    return json.dumps(value)
 
 
 def start(args: argparse.Namespace):
