@@ -33,6 +33,7 @@ from drivewm.eval.epipolar import canonical_K
 from drivewm.eval.framing import Framing, input_record
 from drivewm.eval.inputs import EvalItem, load_items
 from drivewm.eval.matching import FrameMatcher, check_threads
+from drivewm.eval.paths_record import ego_paths
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
 from drivewm.eval.trajectory import ego_from_sfm, flow_fallback
@@ -280,6 +281,7 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         _image_poses(item, cfg, metrics, artifacts["sfm"])
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
     reg = ego.registered
+    artifacts["ego_paths"] = ego_paths(item, ego.T_world_from_ego, reg)
     if item.trajectory_ego:
         metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
     if item.T_world_from_ego is not None:
