@@ -32,6 +32,10 @@ BOOTSTRAP = 1000
 """Bootstrap resamples of each interval over clips."""
 PATHS_PER_RUN = 4
 """Clips whose ego paths are plotted per run."""
+LINES_DRAWN = 150
+"""Matches drawn per picture at most (evenly spread over them; the counts are of all)."""
+MEDIAN_SUFFIX = "_median"
+"""Aggregates that are medians over clips (drivewm.eval.suite.MEDIAN_KEYS) end so."""
 
 
 @dataclasses.dataclass
@@ -58,13 +62,15 @@ def load_run(folder: str | Path, name: str) -> Run:
     return Run(name, folder, metrics, dist, traj)
 
 
-def clip_interval(values: list, bootstrap: int = BOOTSTRAP, seed: int = 0) -> tuple[float, float, int]:
-    """95% percentile-bootstrap interval of the mean over clips, and the number of clips with a value."""
+def clip_interval(values: list, bootstrap: int = BOOTSTRAP, seed: int = 0, median=False) -> tuple[float, float, int]:
+    """95% percentile-bootstrap interval of the mean (or ``median``) over clips, and the number of clips
+    with a value."""
     v = np.array([x for x in values if isinstance(x, (int, float)) and math.isfinite(x)], dtype=np.float64)
     if len(v) == 0:
         return math.nan, math.nan, 0
     rng = np.random.default_rng(seed)
-    means = v[rng.integers(0, len(v), (bootstrap, len(v)))].mean(axis=1)
+    stat = np.median if median else np.mean
+    means = stat(v[rng.integers(0, len(v), (bootstrap, len(v)))], axis=1)
     low, high = np.percentile(means, [2.5, 97.5])
     return float(low), float(high), len(v)
 
@@ -76,8 +82,10 @@ def figure_rows(runs: list[Run]) -> list[dict]:
         if not any(key in r.metrics for r in runs):
             continue
         cells = []
+        median = key.endswith(MEDIAN_SUFFIX)  # e.g. path_ratio_median: the median of the clips' path_ratio
+        clip_key = key[: -len(MEDIAN_SUFFIX)] if median else key
         for r in runs:
-            low, high, n = clip_interval([c.get(key) for c in r.metrics["clips"].values()])
+            low, high, n = clip_interval([c.get(clip_key) for c in r.metrics["clips"].values()], median=median)
             cells.append({"value": r.metrics.get(key), "low": low, "high": high, "n": n, "unit": "clips"})
         rows.append({"key": key, "unit": unit, "meaning": meaning, "cells": cells})
     for name in ("fid", "fvd"):
@@ -169,7 +177,8 @@ def draw_matches(image_a: np.ndarray, image_b: np.ndarray, match_cfg) -> tuple[n
     canvas = np.zeros((h, image_a.shape[1] + image_b.shape[1], 3), np.uint8)
     canvas[: image_a.shape[0], : image_a.shape[1]] = image_a
     canvas[: image_b.shape[0], image_a.shape[1] :] = image_b
-    for (ua, va), (ub, vb), ok in zip(m.uv_a, m.uv_b, inliers):
+    shown = np.unique(np.linspace(0, len(m) - 1, min(len(m), LINES_DRAWN)).astype(int))
+    for (ua, va), (ub, vb), ok in zip(m.uv_a[shown], m.uv_b[shown], inliers[shown]):
         colour = (0, 220, 90) if ok else (230, 40, 40)
         cv2.line(canvas, (int(ua), int(va)), (int(ub) + image_a.shape[1], int(vb)), colour, 1, cv2.LINE_AA)
     return canvas, int(inliers.sum()), len(m)
