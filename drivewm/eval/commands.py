@@ -32,8 +32,8 @@ def register(subparsers) -> None:
         "location",
         nargs="+",
         metavar="LOCATION",
-        help="clip shard folder or .tar, a folder of CAMERA.mp4 (or of such folders), or a grid .mp4; "
-        "or 'distribution GENERATED' (FID/FVD against --real); or 'compare RUN_DIR RUN_DIR ...' (eval outputs)",
+        help="clip shards (.tar or folder), a folder of CAMERA.mp4 (or of such folders) or a grid .mp4; "
+        "'distribution GENERATED' (FID/FVD); 'compare EVALDIR ...'",
     )
     p.add_argument("--rig", default=None, help="rig name or YAML (required for mp4 inputs; overrides a clip's own rig)")
     p.add_argument(
@@ -68,16 +68,14 @@ def register(subparsers) -> None:
     )
     p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
-    p.add_argument(
-        "--crop", type=_crop, default=None, help="X,Y,W,H: the pixel box of each frame that holds the view(s)"
-    )
-    p.add_argument("--frames", type=_frames, default=None, help="START:END: the frames scored (END exclusive)")
-    p.add_argument("--grid-border", type=int, default=0, help="pixels cut from every edge of every grid cell")
-    p.add_argument("--real", default=None, help="distribution: the real clips (clip shards or mp4 folder)")
-    p.add_argument("--inception", default=None, help="distribution: local TorchScript Inception (FID)")
-    p.add_argument("--i3d", default=None, help="distribution: local TorchScript I3D (FVD)")
-    p.add_argument("--bootstrap", type=int, default=50, help="distribution: bootstrap resamples per interval")
-    p.add_argument("--fvd-frames", type=at_least_one, default=16, help="distribution: frames per clip for FVD")
+    p.add_argument("--crop", type=_crop, metavar="X,Y,W,H", help="pixel box of each frame holding the view(s)")
+    p.add_argument("--frames", type=_frames, metavar="START:END", help="the frames scored (END exclusive)")
+    p.add_argument("--grid-border", type=int, default=0, metavar="PX", help="pixels cut from each grid cell edge")
+    p.add_argument("--real", metavar="DIR", help="distribution: the real clips (shards or mp4 folder)")
+    p.add_argument("--inception", metavar="FILE", help="distribution: local TorchScript Inception (FID)")
+    p.add_argument("--i3d", metavar="FILE", help="distribution: local TorchScript I3D (FVD)")
+    p.add_argument("--bootstrap", type=int, default=50, metavar="N", help="distribution: resamples per interval")
+    p.add_argument("--fvd-frames", type=at_least_one, default=16, metavar="N", help="distribution: frames per FVD clip")
     p.add_argument("--no-pictures", action="store_true", help="skip the plots and the Rerun recording")
     p.add_argument("--max-clips", type=at_least_one, default=None, help="score N clips spread evenly over the input")
     p.set_defaults(func=run_eval)
