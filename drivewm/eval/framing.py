@@ -54,7 +54,7 @@ class Framing:
         T, H, W, _ = frames.shape
         x, y, w, h = self.box(W, H, where)
         end = T if self.frame_end is None else self.frame_end
-        if end > T:
+        if end > T or self.frame_start >= T:
             raise DrivewmError(f"{where}: --frames {self.frame_start}:{end} but the video has {T} frames")
         return np.ascontiguousarray(frames[self.frame_start : end, y : y + h, x : x + w])
 

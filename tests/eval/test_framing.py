@@ -58,6 +58,7 @@ def test_uneven_cells_follow_the_rounded_boundaries():
         (lambda: Framing((0, 0, 100, 100)).box(64, 48, "v.mp4"), "reaches outside the 64x48 frame"),
         (lambda: Framing(frame_start=5, frame_end=5), "an empty frame range"),
         (lambda: Framing((0, 0, 0, 10)), "positive width and height"),
+        (lambda: Framing(frame_start=9).apply(np.zeros((9, 4, 4, 3), np.uint8), "v.mp4"), "the video has 9 frames"),
     ],
 )
 def test_bad_framing_is_one_clear_error(framing, message):
