@@ -11,6 +11,7 @@ Every check fails as one :class:`DrivewmError` line (exit 2 at the CLI).
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 
@@ -108,10 +109,13 @@ def grid_cells(width: int, height: int, rows: int, cols: int, border_px: int) ->
 
 
 def input_record(location, rig, grid: str | None, cameras: list[str] | None, fit: str, framing: Framing) -> dict:
-    """How an input was read (metrics.json ``input``): enough for ``load_items`` to read the same views again."""
+    """How an input was read (metrics.json ``input``): enough for ``load_items`` to read the same views
+    again, from any working folder (paths made absolute)."""
     rig_value = rig.to_dict() if hasattr(rig, "to_dict") else (None if rig is None else str(rig))
+    if isinstance(rig_value, str) and Path(rig_value).is_file():
+        rig_value = str(Path(rig_value).resolve())
     return {
-        "location": str(location),
+        "location": str(Path(location).resolve()),
         "rig": rig_value,
         "grid": grid,
         "cameras": cameras,

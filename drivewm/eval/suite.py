@@ -30,7 +30,7 @@ from drivewm.eval.adherence import adherence, condition_scores
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, overlapping_pairs, temporal_sampson
 from drivewm.eval.epipolar import canonical_K
-from drivewm.eval.framing import Framing, input_record
+from drivewm.eval.framing import WHOLE_VIDEO, Framing, input_record
 from drivewm.eval.inputs import EvalItem, load_items
 from drivewm.eval.matching import FrameMatcher, check_threads
 from drivewm.eval.paths_record import ego_paths
@@ -458,7 +458,7 @@ def evaluate(
     can read the same views again.
     """
     cfg = cfg or EvalConfig()
-    framing = framing or Framing()
+    framing = framing or WHOLE_VIDEO
     items = spread(load_items(location, rig, grid, cameras, rig_fit, framing), max_clips)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
