@@ -267,6 +267,13 @@ def _plot_clip_paths(ax, t: dict) -> None:
     ax.plot(scale * rec[:, 0], scale * rec[:, 1], "-", color="tab:blue", label=f"recovered (x{scale:.2g})")
 
 
+#: Counts the pictures a browser decoded into ``body[data-figures-loaded]`` (the browser check reads it).
+LOADED_SCRIPT = (
+    "window.addEventListener('load', () => { document.body.dataset.figuresLoaded = "
+    "[...document.images].filter(i => i.complete && i.naturalWidth > 0).length; });"
+)
+
+
 def _cell(c: dict) -> str:
     v = c["value"]
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
@@ -287,13 +294,15 @@ def render_html(runs: list[Run], rows: list[dict], sections: list[str]) -> str:
         "body{font-family:sans-serif;margin:1.5em}table{border-collapse:collapse}"
         "td,th{border:1px solid #bbb;padding:3px 8px;font-size:13px}img{max-width:100%;border:1px solid #ccc}"
     )
+    pictures = sum(section.count("<img") for section in sections)
     return (
         f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>drivewm eval compare</title>"
-        f"<style>{style}</style></head><body><h1>drivewm eval compare</h1>"
+        f"<style>{style}</style></head><body data-figures='{pictures}' data-figures-loaded='0'>"
+        "<h1>drivewm eval compare</h1>"
         "<p>Each figure: the run's aggregate, a 95% bootstrap interval of the mean over its clips, and the "
         "number of clips (FID / FVD: generated and real samples) it rests on.</p>"
         f"<table id='figures'><tr><th>metric</th><th>unit</th>{head}</tr>{body}</table>{''.join(sections)}"
-        "</body></html>\n"
+        f"<script>{LOADED_SCRIPT}</script></body></html>\n"
     )
 
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import subprocess
 
 import cv2
 import numpy as np
@@ -109,3 +111,30 @@ def test_compare_plots_recovered_paths_against_logged_and_conditioned(synth_clip
     page = (tmp_path / "board" / "compare.html").read_text()
     assert "compare_files/run0_paths.png" in page and "no recovered ego path" not in page
     assert cv2.imread(str(tmp_path / "board" / "compare_files" / "run0_paths.png")).shape[0] > 100
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    shutil.which("chromium") is None, reason="Debian's chromium is not installed (scripts/run-tests.sh installs it)"
+)
+def test_compare_page_loads_in_headless_chromium(tmp_path):
+    """The page and its pictures as a real browser shows them: every picture decoded, the table present."""
+    way = [[1.0 * (i + 1), 0.05 * (i + 1) ** 2, 0.0] for i in range(8)]
+    recovered = [[0.0, 0.0, 0.0]] + [[0.5 * w[0], 0.5 * w[1], 0.0] for w in way]  # half scale: monocular
+    trajectories = {"c0": {"fps": 10.0, "recovered_frames": list(range(9)), "recovered": recovered,
+                           "conditioned": way, "conditioned_dt_s": 0.1}}  # fmt: skip
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.json").write_text(json.dumps({"tse": 0.3, "clips": {"c0": {"tse": 0.3}}}))
+    (run / "trajectories.json").write_text(json.dumps(trajectories))
+    assert main(["eval", "compare", str(run), "--out", str(tmp_path / "o")]) == 0
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
+    dom = subprocess.run(
+        ["chromium", *flags, f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000",
+         "--dump-dom", (tmp_path / "o" / "compare.html").as_uri()],
+        capture_output=True, text=True, timeout=120,
+    ).stdout  # fmt: skip
+    body = re.search(r'<body data-figures="(\d+)" data-figures-loaded="(\d+)"', dom)
+    assert body, dom[:500]
+    assert int(body.group(1)) == int(body.group(2)) == 1  # the ego-path plot
+    assert '<table id="figures">' in dom and "run0_paths.png" in dom
