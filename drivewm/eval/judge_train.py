@@ -47,6 +47,9 @@ class JudgeTrainConfig:
     """Every n-th frame of each clip and camera is a training sample (neighbours are near duplicates)."""
     max_class_weight: float = 10.0
     """Cap of a rare class's loss weight."""
+    init: str = ""
+    """A judge model folder whose weights a new run starts from ("" = drawn afresh); its network settings
+    replace ``judge``'s. A run folder holding a train state resumes instead."""
 
     def validate(self) -> None:
         at_least(self, 1, "frame_stride", "max_class_weight")
@@ -206,9 +209,13 @@ def train_judge(
     """Train a judge model folder into ``out_dir`` on the labelled clips of ``data_dirs`` (resuming when
     ``out_dir`` holds a train state). Returns the last metrics row."""
     cfg.validate()
+    if cfg.init:
+        cfg = dataclasses.replace(cfg, judge=Judge.from_pretrained(cfg.init).cfg)
     data = load_labelled(data_dirs, cfg.frame_stride)
     torch.manual_seed(cfg.train.seed)  # the network's initial weights
     task = JudgeTask(cfg, data)
+    if cfg.init:
+        task.model.load_state_dict(Judge.from_pretrained(cfg.init).state_dict())
     record = {**to_dict(cfg), "data": [str(Path(p).resolve()) for p in data_dirs], "frames": len(data)}
     return train(task, cfg.train, out_dir, config_record=record, stop_after=stop_after)
 
