@@ -3,20 +3,24 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 import torch
+from safetensors import safe_open
 
 from drivewm.cli import main
 from drivewm.clips import ClipMeta, ShardWriter
 from drivewm.clips.format import clip_from_arrays
 from drivewm.errors import DrivewmError
 from drivewm.eval.judge import Judge, JudgeConfig, class_iou, confusion, predict, segmentation_scores
+from drivewm.eval.judge_card import ship_judge
 from drivewm.eval.judge_train import RECIPES, augment, class_weights, load_labelled
 from drivewm.geometry import load_rig
 from drivewm.layout.classes import LABEL_CLASSES, LABEL_ID, UNLABELLED
-from drivewm.model_folders import shipped_model
+from drivewm.model_folders import WEIGHTS_DIR, shipped_model
+from drivewm.product.release import check_manifest
 
 ROAD, SKY, CAR, PAINT = (LABEL_ID[n] for n in ("road", "sky", "vehicle", "lane_paint"))
 
@@ -122,3 +126,26 @@ def test_the_debug_recipe_resolves_and_refuses_unknown_fields():
     assert cfg.crop_hw == [32, 48] and cfg.judge.base_channels == 4
     with pytest.raises(DrivewmError, match="nonsense"):
         RECIPES.resolve("debug", None, ["nonsense=1"])
+
+
+def test_ship_judge_writes_fp16_weights_its_card_and_a_manifest_that_checks(tmp_path):
+    """Shipping into a copy of drivewm/weights: fp16 tensors, the judge's card with the held-out figures, every
+    file in MANIFEST.json and its sha256 in the shipped card; shipped again, it is recorded as a fine-tune."""
+    root = tmp_path / "weights"
+    shutil.copytree(WEIGHTS_DIR, root)
+    run = tmp_path / "run"
+    Judge(JudgeConfig(base_channels=4, levels=2, groups=2)).save(run)
+    (run / "metrics.jsonl").write_text(json.dumps({"step": 7, "train_seconds": 3.0}) + "\n")
+    report = {"iou": {"road": 0.91, "vehicle": 0.5}, "miou": 0.705, "pixel_accuracy": 0.95, "frames": 10}
+    report |= {"data": ["heldout"], "by_condition": {"snow:day": {"miou": 0.6, "pixel_accuracy": 0.9}}}
+    assert ship_judge(run, report, "a test judge", root)["training"]["judge"] == {"steps": 7, "train_seconds": 3.0}
+    manifest = ship_judge(run, report, "a test judge", root)
+    assert check_manifest(root) == manifest and manifest["training"]["judge"]["steps"] == 14
+    assert {"judge/config.json", "judge/model.safetensors", "judge/MODEL_CARD.md"} <= set(manifest["files"])
+    with safe_open(str(root / "judge" / "model.safetensors"), "pt") as f:
+        assert {f.get_slice(k).get_dtype() for k in f.keys()} == {"F16"}
+    card = (root / "judge" / "MODEL_CARD.md").read_text()
+    assert "| vehicle | 0.500 |" in card and "| snow:day | 0.600 | 0.900 |" in card and "a test judge" in card
+    shipped_card = (root / "MODEL_CARD.md").read_text()
+    assert all(e["sha256"] in shipped_card for e in manifest["files"].values())
+    assert shipped_card.count("## Layout judge") == 1
