@@ -44,12 +44,12 @@ def card_text(run: Path, report: dict, notes: str) -> str:
             "",
             f"- network: {json.dumps(info['config'])}, {params} parameters, fp16",
             f"- data: {config.get('frames', '?')} labelled frames (every {config.get('frame_stride', '?')}th) of "
-            f"{', '.join(config.get('data', []))}",
+            f"{', '.join(Path(p).name for p in config.get('data', []))}",
             f"- training: {int(saved.get('step', 0))} steps of {config.get('train', {}).get('batch_size', '?')} crops "
             f"{config.get('crop_hw')}, {saved.get('train_seconds', 0.0):.0f} s on the CPU; run config in the card's "
             "run folder (train_state.pt)",
             "",
-            f"## Held-out figures ({report['frames']} frames of {', '.join(report['data'])})",
+            f"## Held-out figures ({report['frames']} frames of {', '.join(Path(p).name for p in report['data'])})",
             "",
             f"mIoU {_fmt(report['miou'])}, pixel accuracy {_fmt(report['pixel_accuracy'])}.",
             "",
