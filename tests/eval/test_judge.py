@@ -132,7 +132,11 @@ def test_ship_judge_writes_fp16_weights_its_card_and_a_manifest_that_checks(tmp_
     """Shipping into a copy of drivewm/weights: fp16 tensors, the judge's card with the held-out figures, every
     file in MANIFEST.json and its sha256 in the shipped card; shipped again, it is recorded as a fine-tune."""
     root = tmp_path / "weights"
-    shutil.copytree(WEIGHTS_DIR, root)
+    shutil.copytree(WEIGHTS_DIR, root, ignore=shutil.ignore_patterns("judge"))  # the weights before any judge
+    manifest = json.loads((root / "MANIFEST.json").read_text())
+    manifest["files"] = {k: v for k, v in manifest["files"].items() if not k.startswith("judge/")}
+    manifest["training"].pop("judge", None)
+    (root / "MANIFEST.json").write_text(json.dumps(manifest))
     run = tmp_path / "run"
     Judge(JudgeConfig(base_channels=4, levels=2, groups=2)).save(run)
     (run / "metrics.jsonl").write_text(json.dumps({"step": 7, "train_seconds": 3.0}) + "\n")
