@@ -116,8 +116,8 @@ def _future(
     drive = copy.deepcopy(at_branch)
     drive.ids = {id(v): (v, track) for v, track in drive.ids.values()}  # the copies' identities
     _hand_over(drive, plan, future_ticks)
-    for p in placed:
-        _place(drive, p)
+    for k, p in enumerate(placed):
+        _place(drive, p, f"placed{k}")
     ticks = []
     for k in range(1, future_ticks + 1):
         drive.step()
@@ -157,7 +157,7 @@ def _poses_vehicle(drive: HighwayDrive, old, plan: EgoPlan, future_ticks: int) -
     return PosesVehicle(drive.env.road, centers * np.array([1.0, -1.0]), -yaw, drive.substeps, 1.0 / drive.cfg.fps)
 
 
-def _place(drive: HighwayDrive, p: PlacedVehicle) -> None:
+def _place(drive: HighwayDrive, p: PlacedVehicle, track_id: str) -> None:
     road, ego = drive.env.road, drive.ego
     lane_index = road.network.get_closest_lane_index(ego.position, ego.heading)
     lane = road.network.get_lane(lane_index)
@@ -165,6 +165,8 @@ def _place(drive: HighwayDrive, p: PlacedVehicle) -> None:
     position, heading = lane.position(s, 0.0), lane.heading_at(s)
     speed = float(ego.speed if p.speed_mps is None else p.speed_mps)
     if speed == 0.0:
-        road.vehicles.append(Vehicle(road, position, heading, 0.0))
+        vehicle = Vehicle(road, position, heading, 0.0)
     else:
-        road.vehicles.append(HoldingIDMVehicle(road, position, heading, speed, lane_index, speed))
+        vehicle = HoldingIDMVehicle(road, position, heading, speed, lane_index, speed)
+    road.vehicles.append(vehicle)
+    drive.ids[id(vehicle)] = (vehicle, track_id)  # named as in SUMO's futures
