@@ -2,7 +2,8 @@
 and ranked (docs/DESIGN.md, section "Multiverse").
 
 - :mod:`drivewm.multiverse.plans`: what the ego does in each future;
-- :mod:`drivewm.multiverse.branch`: the futures' traffic (a forked simulator, or a replayed log);
+- :mod:`drivewm.multiverse.branch`: the futures' traffic, from :mod:`~drivewm.multiverse.simulated` (a forked
+  simulator) or :mod:`~drivewm.multiverse.replay` (a replayed log);
 - :mod:`drivewm.multiverse.cameras`: each future as a drive log with cameras (``--renderer``);
 - :mod:`drivewm.multiverse.scores`, :mod:`drivewm.multiverse.ranking`: scores and the ranking rule;
 - :mod:`drivewm.multiverse.report`, :mod:`drivewm.multiverse.recording`: report.html and the Rerun recording;

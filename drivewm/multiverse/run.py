@@ -19,15 +19,18 @@ from tqdm import tqdm
 
 from drivewm.atomic import atomic_path, write_json
 from drivewm.config import to_dict
-from drivewm.multiverse.branch import Branch, branch
+from drivewm.multiverse.branch import Branch
 from drivewm.multiverse.cameras import check_renderer, make_cameras
 from drivewm.multiverse.config import MultiverseConfig, RankingConfig
 from drivewm.multiverse.outputs import encode_frames, write_camera_videos, write_future_log
 from drivewm.multiverse.plans import check_plan_names
 from drivewm.multiverse.ranking import rank
 from drivewm.multiverse.recording import write_recording
+from drivewm.multiverse.replay import branch_log
 from drivewm.multiverse.report import sheet_frames, write_report
+from drivewm.multiverse.scenario import load_scenario
 from drivewm.multiverse.scores import score_future
+from drivewm.multiverse.simulated import branch_scenario
 from drivewm.multiverse.video_scores import video_scores
 from drivewm.paths import child_path
 
@@ -42,7 +45,7 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
     cfg.validate()
     check_plan_names(cfg.plans)
     check_renderer(cfg.renderer)
-    b = branch(cfg)
+    b = branch_log(cfg) if cfg.log else branch_scenario(cfg, load_scenario(cfg.scenario, cfg))
     cameras = make_cameras(cfg.renderer, b)
     fps = _tick_rate(b)
     with atomic_path(out_dir) as tmp:
