@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from drivewm.config import above, at_least, frame_rate, in_range, require
 from drivewm.errors import DrivewmError
 
 RENDERERS = ("sim", "model")
+#: Longest future (s): minutes of traffic are no longer one manoeuvre's consequence.
+MAX_HORIZON_S = 120.0
 RANKING_KEYS = ("safety", "progress", "comfort")
 
 
@@ -91,6 +94,9 @@ class MultiverseConfig:
             raise DrivewmError(f"multiverse: renderer {self.renderer!r} is not one of {list(RENDERERS)}")
         require(bool(self.plans), "plans", self.plans, "at least one plan")
         above(self, 0, "horizon_s", "waypoint_dt_s")
+        require(self.horizon_s <= MAX_HORIZON_S, "horizon_s", self.horizon_s, f"at most {MAX_HORIZON_S:g} s")
+        if self.at_s is not None:
+            require(math.isfinite(self.at_s), "at_s", self.at_s, "a finite number of seconds")
         at_least(self, 0, "past_s")
         frame_rate(self, "fps")
         in_range(self, "width", 16, 4096)

@@ -21,6 +21,8 @@ def branch_scenario(cfg: MultiverseConfig, scenario: Scenario) -> Branch:
     branch_tick = int(round(scenario.at_s * sim.fps))
     future_ticks = int(round(cfg.horizon_s * sim.fps))
     plans = parse_plans(cfg.plans, np.arange(1, future_ticks + 1) / sim.fps, cfg.waypoint_dt_s)
+    if sim.source == "highway" and any(plan.turn for plan in plans):
+        raise DrivewmError("plans: turns at a junction need a SUMO scenario (grid, spider, random)")
     if sim.source == "highway":
         os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")  # highway-env imports pygame
         from drivewm.sim.fork_highway import fork_highway as fork

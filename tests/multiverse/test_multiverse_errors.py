@@ -60,3 +60,12 @@ def test_the_model_renderer_is_refused_before_any_work(capsys, tmp_path) -> None
 def test_a_log_needs_a_branch_time(capsys, tmp_path) -> None:
     log = write_test_log(tmp_path / "drive.mcap")
     assert "--at" in _run(capsys, tmp_path, "--log", str(log))
+
+
+@pytest.mark.parametrize("flags, message", [(["--at", "inf"], "at_s"), (["--horizon", "nan"], "horizon_s")])
+def test_times_that_are_not_finite(capsys, tmp_path, flags: list[str], message: str) -> None:
+    assert message in _run(capsys, tmp_path, "--scenario", "highway", *flags)
+
+
+def test_a_turn_in_highway_env(capsys, tmp_path) -> None:
+    assert "SUMO" in _run(capsys, tmp_path, "--scenario", "highway", "--plans", "keep,turn")
