@@ -13,7 +13,7 @@ remembered by (path, size, mtime_ns), in this process and in a small file in the
 (:func:`verified_cache_path`), so later loads cost a ``stat`` per file.
 
 This module sits below every stage, the CLI and the product: it imports nothing of drivewm but
-its errors, so the argparse types (drivewm.choices), the checkpoint code and the models all call
+its errors and paths, so the argparse types (drivewm.choices), the checkpoint code and the models all call
 it without importing each other.
 """
 
@@ -26,13 +26,14 @@ import tempfile
 from pathlib import Path
 
 from drivewm.errors import DrivewmError
+from drivewm.paths import SHIPPED_WEIGHTS_DIR
 
 #: The two files of a model folder.
 CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
 
 #: Where the installed shipped model folders are, one per kind.
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+WEIGHTS_DIR = SHIPPED_WEIGHTS_DIR
 #: The kinds of model drivewm ships, each a folder under WEIGHTS_DIR.
 SHIPPED_KINDS = ("tokenizer", "text2world", "multiview", "transfer")
 #: Prefix of a model folder argument that names a shipped model: ``shipped:multiview``.

@@ -8,6 +8,7 @@ import shutil
 import pytest
 
 from drivewm import cli, model_folders
+from drivewm.atomic import write_text
 from drivewm.errors import DrivewmError
 from drivewm.model_folders import WEIGHTS_DIR, WEIGHTS_NAME
 from drivewm.train.checkpoint import load_model_folder
@@ -107,3 +108,17 @@ def test_plain_transfer_refuses_a_replaced_shipped_model_in_one_line(weights_cop
     assert cli.main(["transfer", str(tmp_path / "clips"), "--to", "snow", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {target}: sha256 differs from MANIFEST.json"), err
+
+
+def test_no_write_enters_the_shipped_weights_by_any_path(tmp_path):
+    """Not only --out: every atomic write (a latent cache under a --data folder, say) is refused there, through a
+    symlink too, before anything is made; replacing the shipped weights is drivewm.product.release's alone
+    (test_shipped_weights.py replaces a copy's)."""
+    (tmp_path / "pkg").symlink_to(WEIGHTS_DIR)
+    for path in (WEIGHTS_DIR / "tokenizer" / "config.json", WEIGHTS_DIR / "latents" / "x.json", tmp_path / "pkg" / "n"):
+        with pytest.raises(DrivewmError, match="lies in drivewm's shipped weights"):
+            write_text(path, "{}")
+    assert not (WEIGHTS_DIR / "latents").exists() and not (WEIGHTS_DIR / "n").exists()
+    tok = ["tokenizer", "encode", "--model", "shipped:tokenizer", "--data", str(tmp_path / "pkg"), "--name", "c"]
+    assert cli.main(tok) == 2  # the latent cache folder is not made either
+    assert not (WEIGHTS_DIR / "latents").exists()

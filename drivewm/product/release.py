@@ -21,6 +21,7 @@ import torch
 from drivewm.atomic import write_json
 from drivewm.errors import DrivewmError
 from drivewm.model_folders import SHIPPED_KINDS, WEIGHTS_DIR, file_sha256, resolve_model_folder, resolve_reference
+from drivewm.paths import replacing_shipped
 from drivewm.product.model_card import write_model_card
 from drivewm.train.checkpoint import load_model_folder, save_model_folder
 from drivewm.train.record import training_record
@@ -123,6 +124,12 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
     the sha256). ``device``: what the fine-tune ran on; a GPU's seconds are listed as ``gpu_seconds``,
     apart from the CPU seconds of ``train_seconds``. ``note``: what the record alone does not say (e.g.
     that the folder is a fine-tune mixed with the shipped one, drivewm.product.release.interpolate_folders)."""
+    with replacing_shipped():
+        return _replace_shipped(kind, Path(src), root, device, note)
+
+
+def _replace_shipped(kind: str, src: Path, root: Path, device: str, note: str) -> dict:
+    """:func:`replace_shipped`, its writes let into the shipped weights."""
     if kind not in SHIPPED_KINDS:
         raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(SHIPPED_KINDS)}")
     manifest = check_manifest(root)  # never build on a manifest that no longer matches its files
