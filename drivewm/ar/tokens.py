@@ -55,10 +55,12 @@ def fsq_levels(tokenizer_config: dict, where: str) -> list[int]:
 
 
 def check_cache_tokenizer(cache: LatentCache, tokenizer_dir: Path) -> dict:
-    """The config of the FSQ tokenizer ``tokenizer_dir``, refused unless it encoded ``cache``."""
+    """The config of the FSQ tokenizer ``tokenizer_dir``, refused unless it encoded ``cache`` (the same config
+    and latent statistics, which every training run measures anew)."""
     info = read_model_config(tokenizer_dir, TOKENIZER_TYPE)
     fsq_levels(info["config"], str(tokenizer_dir))
-    if cache.tokenizer.get("config") != info["config"] or cache.tokenizer.get("latent_mean") != info.get("latent_mean"):
+    same = all(cache.tokenizer.get(k) == info.get(k) for k in ("latent_mean", "latent_std"))
+    if cache.tokenizer.get("config") != info["config"] or not same:
         raise DrivewmError(
             f"{cache.dir}: tokens were encoded by another tokenizer ({cache.tokenizer.get('path')}) "
             f"than {tokenizer_dir}"

@@ -134,7 +134,7 @@ class ARTask(TrainTask):
     def loss(self, forward, indices: list[int], seeds: list[int], device: torch.device):
         tokens, cond = batch_of([self.dataset[i] for i in indices], self.text, self.cfg.model)
         loss = next_token_loss(forward, tokens.to(device), cond.to(device), self.model.start_token)
-        return loss, {"bits_per_token": float(loss) / LN2}
+        return loss, {"bits_per_token": float(loss.detach()) / LN2}
 
     def model_config(self) -> ARModelConfig:
         return ARModelConfig(self.cfg.model, self.cfg.text, self.dataset.fps)
