@@ -35,6 +35,7 @@ class ARGenerator:
 
     def __init__(self, model_dir: str | Path, device: str | torch.device = "cpu"):
         self.model, self.cfg, tokenizer_dir = load_ar_folder(model_dir)
+        self.tokenizer_dir = tokenizer_dir
         self.model.to(device)
         self.tokenizer = Tokenizer.from_pretrained(tokenizer_dir).to(device)
         fsq_levels(to_dict(self.tokenizer.config), str(tokenizer_dir))
