@@ -19,7 +19,7 @@ from drivewm.multiview.trajectories import named_poses
 @pytest.mark.slow
 def test_train_resume_eval_and_generate(tmp_path):
     tok = make_tokenizer(tmp_path / "tok")
-    make_token_cache(tmp_path / "clips", tok, clips=64)
+    make_token_cache(tmp_path / "clips", tok, clips=256)
     out = tmp_path / "ar"
     base = ["ar", "train", "--data", str(tmp_path / "clips"), "--tokenizer", str(tok), "--out", str(out)]
     sets = [
