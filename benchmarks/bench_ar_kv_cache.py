@@ -19,7 +19,8 @@ from interleaved import alternate, print_medians
 
 from drivewm.ar.config import ARConfig, ar_preset
 from drivewm.ar.model import ARCondition, ARTransformer
-from drivewm.ar.sampling import SamplingConfig, sample_tokens
+from drivewm.ar.sampling import sample_tokens
+from drivewm.ar.sampling_config import TokenSampling
 
 GRID_HW = [8, 12]  # a 96 x 64 view at 8x spatial compression
 
@@ -52,7 +53,7 @@ def main() -> None:
                 cond,
                 empty,
                 args.tokens,
-                SamplingConfig(top_k=100),
+                TokenSampling(top_k=100),
                 torch.Generator().manual_seed(seed),
                 use_cache=cached,
             )

@@ -25,20 +25,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from drivewm.ar.generator import ARGenerator
-from drivewm.ar.sampling import SamplingConfig
+from drivewm.ar.generator import ARGenerator, clip_video
+from drivewm.ar.sampling_config import TokenSampling
 from drivewm.ar.tokens import TokenDataset
 from drivewm.clips.latents import latent_cache_dir
 from drivewm.eval.config import ConsistencyConfig, EpipolarConfig, MatchConfig
 from drivewm.eval.consistency import temporal_sampson
 from drivewm.eval.matching import FrameMatcher
 from drivewm.multiview.trajectories import named_poses
-from drivewm.tokenizer.data import load_clips, to_model_range
+from drivewm.tokenizer.data import load_clips
 from drivewm.tokenizer.metrics import psnr
-
-
-def video_of(clip) -> torch.Tensor:
-    return torch.stack([to_model_range(clip.video(cam)) for cam in clip.meta.cameras])  # (V, 3, T, H, W)
 
 
 def to_uint8(video: torch.Tensor) -> np.ndarray:
@@ -46,8 +42,8 @@ def to_uint8(video: torch.Tensor) -> np.ndarray:
     return frames
 
 
-def video2world_psnr(gen: ARGenerator, clip, sampling: SamplingConfig, seed: int) -> dict:
-    video = video_of(clip)
+def video2world_psnr(gen: ARGenerator, clip, sampling: TokenSampling, seed: int) -> dict:
+    video = clip_video(clip)
     f = gen.frames_per_latent
     window = gen.window_video_frames()
     out = gen.video2world(
@@ -64,8 +60,8 @@ def matches_per_pair(video: torch.Tensor, rig, poses: np.ndarray) -> float:
     return result["fitted"]["matches_per_pair"]
 
 
-def rollout_drift(gen: ARGenerator, clip, chunks: int, sampling: SamplingConfig, seed: int) -> list[float]:
-    video = video_of(clip)
+def rollout_drift(gen: ARGenerator, clip, chunks: int, sampling: TokenSampling, seed: int) -> list[float]:
+    video = clip_video(clip)
     step = gen.window_video_frames() - 1
     T = clip.T_world_from_ego
     speed = float(np.linalg.norm(T[-1][:3, 3] - T[0][:3, 3])) / max(1e-6, (len(T) - 1) / clip.meta.fps)
@@ -105,7 +101,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.manual_seed(0)
     gen = ARGenerator(args.model)
-    sampling = SamplingConfig(temperature=args.temperature, top_k=args.top_k)
+    sampling = TokenSampling(temperature=args.temperature, top_k=args.top_k)
     clips = load_clips(args.clips, "holdout", args.holdout_percent)[: args.clips_max]
     v2w = [video2world_psnr(gen, c, sampling, args.seed + i) for i, c in enumerate(clips)]
     report = {

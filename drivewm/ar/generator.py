@@ -12,6 +12,7 @@ handed to each window in that window's first ego frame.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -19,7 +20,8 @@ import torch
 from drivewm.ar.folder import ARModelConfig, load_ar_folder
 from drivewm.ar.model import ARCondition, ARTransformer
 from drivewm.ar.order import from_sequence, to_sequence
-from drivewm.ar.sampling import SamplingConfig, sample_tokens
+from drivewm.ar.sampling import sample_tokens
+from drivewm.ar.sampling_config import TokenSampling
 from drivewm.ar.tokens import fsq_levels, latent_frame_poses
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
@@ -76,7 +78,7 @@ class ARGenerator:
         caption: str,
         rig: Rig,
         T_world_from_ego: np.ndarray,
-        sampling: SamplingConfig,
+        sampling: TokenSampling,
         seed: int,
     ) -> torch.Tensor:
         """Continue ``video`` (V, 3, 1 + k*f, H, W) to a full window: (V, 3, window_video_frames, H, W),
@@ -102,7 +104,7 @@ class ARGenerator:
         rig: Rig,
         T_world_from_ego: np.ndarray,
         chunks: int,
-        sampling: SamplingConfig,
+        sampling: TokenSampling,
         seed: int,
     ) -> list[torch.Tensor]:
         """``chunks`` windows from ``first_frame`` (V, 3, 1, H, W): each (V, 3, window_video_frames, H, W),
@@ -146,10 +148,93 @@ def write_sample_grid(
     samples = [dataset[i] for i in range(min(2, len(dataset)))]
     _, cond = batch_of(samples, build_text_encoder(cfg.text), cfg.ar)
     empty = torch.zeros(len(samples), 0, dtype=torch.long)
-    tokens = sample_tokens(model, cond, empty, cfg.ar.frame_tokens, SamplingConfig(), torch.Generator().manual_seed(0))
+    tokens = sample_tokens(model, cond, empty, cfg.ar.frame_tokens, TokenSampling(), torch.Generator().manual_seed(0))
     tokenizer = Tokenizer.from_pretrained(tokenizer_dir)
     video = tokenizer.decode(tokenizer.quantizer.indices_to_codes(from_sequence(tokens, cfg.ar))).clamp(-1, 1)
     image = ((video[:, :, 0].permute(0, 2, 3, 1).flatten(0, 1) + 1) * 127.5).round().byte().numpy()
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         Image.fromarray(image).save(tmp, format="PNG")
+
+
+class ARFolderGenerator:
+    """drivewm.generate.protocol.Generator of AR model folders (``model_type: ar``): Video2World from a
+    condition clip's first frames, and rollouts of ``rollout.windows`` chunks, under ``trajectory``."""
+
+    model_type: ClassVar[str] = "ar"
+    inputs: ClassVar[tuple[str, ...]] = ("condition_clip",)
+
+    def __init__(self, gen: ARGenerator, folder: Path):
+        self.gen, self.folder = gen, folder
+
+    @classmethod
+    def from_pretrained(cls, folder: Path, device: str) -> ARFolderGenerator:
+        from drivewm.device import resolve_device
+
+        return cls(ARGenerator(folder, resolve_device(device)), folder)
+
+    def generate(self, request, cfg) -> list:
+        """Every prompt continued from the condition clip's first 1 + f frames, ``num_samples`` times."""
+        from drivewm.generate.rollout import load_clip
+
+        if request.condition_clip is None:
+            raise DrivewmError(f"{self.folder}: an AR model continues a clip; give --condition-clip CLIP")
+        clip = load_clip(request.condition_clip)
+        f = self.gen.frames_per_latent
+        samples = []
+        for i, prompt in enumerate(p for p in request.prompts for _ in range(cfg.num_samples)):
+            poses = self.poses(clip, cfg, self.gen.window_video_frames())
+            video = self.gen.video2world(
+                clip_video(clip)[:, :, : 1 + f], prompt, clip.meta.get_rig(), poses, cfg.tokens, cfg.sampling.seed + i
+            )
+            samples.append(self.sample(video, clip, prompt, poses, cfg, cfg.sampling.seed + i))
+        return samples
+
+    def rollout(self, clip, cfg, prompt: str = ""):
+        """``clip`` continued from its first frame for ``rollout.windows`` chunks."""
+        step = self.gen.window_video_frames() - 1
+        poses = self.poses(clip, cfg, 1 + cfg.rollout.windows * step)
+        caption = prompt or clip.meta.caption
+        chunks = self.gen.rollout(
+            clip_video(clip)[:, :, :1],
+            caption,
+            clip.meta.get_rig(),
+            poses,
+            cfg.rollout.windows,
+            cfg.tokens,
+            cfg.sampling.seed,
+        )
+        video = torch.cat([chunks[0]] + [c[:, :, 1:] for c in chunks[1:]], dim=2)
+        return self.sample(video, clip, caption, poses, cfg, cfg.sampling.seed, {"rollout_of": clip.key})
+
+    def poses(self, clip, cfg, frames: int) -> np.ndarray:
+        """(frames, 4, 4) T_world_from_ego of ``cfg.trajectory`` at the clip's frame rate and speed."""
+        from drivewm.generate.rollout import initial_speed_mps, rollout_poses
+
+        speed = cfg.rollout.speed_mps or initial_speed_mps(clip)
+        speed = speed if np.isfinite(speed) else 10.0
+        dt_s = 1.0 / clip.meta.fps
+        return rollout_poses(cfg.trajectory, frames, dt_s, speed, (frames - 1) * dt_s)
+
+    def sample(self, video: torch.Tensor, clip, caption: str, poses: np.ndarray, cfg, seed: int, extra=None):
+        from drivewm.generate.writer import GeneratedSample
+        from drivewm.multiview.trajectories import waypoints_from_poses
+
+        frames = ((video.clamp(-1, 1) + 1) * 127.5).round().byte().permute(0, 2, 3, 4, 1).cpu().numpy()
+        rig = clip.meta.get_rig()
+        record = {"model": str(self.folder.resolve()), "prompt": caption, "seed": seed, "trajectory": cfg.trajectory}
+        record.update({"tokens": to_dict(cfg.tokens), "post_processing": [], **(extra or {})})
+        waypoints = waypoints_from_poses(poses, 0, len(poses) - 1)
+        return GeneratedSample(frames, rig, caption, [caption] * len(rig.cameras), waypoints, 1 / clip.meta.fps, record)
+
+    def write(self, samples: list, out_dir: Path, name: str = "generated") -> list[Path]:
+        from drivewm.generate.writer import write_samples
+
+        return write_samples(out_dir, samples, self.gen.cfg.fps, name=name)
+
+
+def clip_video(clip) -> torch.Tensor:
+    """All cameras of a clip as (V, 3, T, H, W) in [-1, 1] (rig order)."""
+    from drivewm.tokenizer.data import to_model_range
+
+    return torch.stack([to_model_range(clip.video(cam)) for cam in clip.meta.cameras])

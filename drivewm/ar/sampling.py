@@ -9,32 +9,13 @@ which tests/ar/test_sampling.py checks and benchmarks/bench_ar_kv_cache.py times
 
 from __future__ import annotations
 
-import dataclasses
-
 import torch
 
 from drivewm.ar.model import ARCondition, ARTransformer
-from drivewm.config import above, at_least, in_range
+from drivewm.ar.sampling_config import TokenSampling
 
 
-@dataclasses.dataclass
-class SamplingConfig:
-    """How the next token is drawn from the logits."""
-
-    temperature: float = 1.0
-    """Logits are divided by this (0 < t; lower is greedier)."""
-    top_k: int = 0
-    """Keep the k most likely tokens (0: all)."""
-    top_p: float = 1.0
-    """Keep the smallest set of most likely tokens whose probability reaches p (1: all)."""
-
-    def validate(self) -> None:
-        above(self, 0, "temperature")
-        at_least(self, 0, "top_k")
-        in_range(self, "top_p", 0, 1)
-
-
-def next_token_probs(logits: torch.Tensor, cfg: SamplingConfig) -> torch.Tensor:
+def next_token_probs(logits: torch.Tensor, cfg: TokenSampling) -> torch.Tensor:
     """(B, vocab) logits -> (B, vocab) probabilities after temperature, top-k and top-p."""
     logits = logits.float() / cfg.temperature
     if 0 < cfg.top_k < logits.shape[-1]:
@@ -63,7 +44,7 @@ def sample_tokens(
     cond: ARCondition,
     prompt: torch.Tensor,
     num_new: int,
-    cfg: SamplingConfig,
+    cfg: TokenSampling,
     generator: torch.Generator,
     use_cache: bool = True,
 ) -> torch.Tensor:

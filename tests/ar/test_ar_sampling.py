@@ -6,11 +6,12 @@ import pytest
 import torch
 from ar_synthetic import tiny_condition, tiny_model
 
-from drivewm.ar.sampling import SamplingConfig, draw, next_token_probs, sample_tokens
+from drivewm.ar.sampling import draw, next_token_probs, sample_tokens
+from drivewm.ar.sampling_config import TokenSampling
 
 
 @pytest.mark.parametrize(
-    "cfg", [SamplingConfig(), SamplingConfig(temperature=0.7, top_k=5), SamplingConfig(temperature=1.3, top_p=0.8)]
+    "cfg", [TokenSampling(), TokenSampling(temperature=0.7, top_k=5), TokenSampling(temperature=1.3, top_p=0.8)]
 )
 def test_cached_sampling_equals_uncached_at_fixed_seed(cfg):
     model, cond = tiny_model(), tiny_condition()
@@ -27,20 +28,20 @@ def test_cached_sampling_equals_uncached_at_fixed_seed(cfg):
 def test_sampling_from_an_empty_prompt_fills_the_context():
     model, cond = tiny_model(), tiny_condition()
     empty = torch.zeros(2, 0, dtype=torch.long)
-    a = sample_tokens(model, cond, empty, 18, SamplingConfig(), torch.Generator().manual_seed(0))
-    b = sample_tokens(model, cond, empty, 18, SamplingConfig(), torch.Generator().manual_seed(0), use_cache=False)
+    a = sample_tokens(model, cond, empty, 18, TokenSampling(), torch.Generator().manual_seed(0))
+    b = sample_tokens(model, cond, empty, 18, TokenSampling(), torch.Generator().manual_seed(0), use_cache=False)
     assert torch.equal(a, b) and int(a.max()) < 40
     with pytest.raises(ValueError, match="exceed the model's context of 18"):
-        sample_tokens(model, cond, empty, 19, SamplingConfig(), torch.Generator().manual_seed(0))
+        sample_tokens(model, cond, empty, 19, TokenSampling(), torch.Generator().manual_seed(0))
 
 
 def test_top_k_and_top_p_keep_the_right_tokens():
     logits = torch.log(torch.tensor([[0.5, 0.2, 0.15, 0.1, 0.05]]))
-    top2 = next_token_probs(logits, SamplingConfig(top_k=2))
+    top2 = next_token_probs(logits, TokenSampling(top_k=2))
     assert torch.allclose(top2, torch.tensor([[5 / 7, 2 / 7, 0, 0, 0]]))
-    nucleus = next_token_probs(logits, SamplingConfig(top_p=0.8))  # 0.5 + 0.2 < 0.8: the third is needed too
+    nucleus = next_token_probs(logits, TokenSampling(top_p=0.8))  # 0.5 + 0.2 < 0.8: the third is needed too
     assert torch.allclose(nucleus, torch.tensor([[0.5, 0.2, 0.15, 0, 0]]) / 0.85)
-    cold = next_token_probs(logits, SamplingConfig(temperature=0.01))
+    cold = next_token_probs(logits, TokenSampling(temperature=0.01))
     assert cold[0, 0] > 0.999
 
 
