@@ -67,8 +67,9 @@ class ARConfig:
             raise DrivewmError(f"ar: block_size {self.block_size} must divide the token grid {self.grid_hw}")
 
 
-#: Named sizes (GPT-style widths). Parameter counts at vocab 1,000 and text_dim 256: debug ~1.2M,
-#: tiny ~4M (CPU), small ~23M, base ~90M, large ~320M, xl ~1.1B (GPU, with FSDP from large).
+#: Named sizes (GPT-style widths). Parameter counts at vocab 1,000 and text_dim 256 (12 D^2 per block plus
+#: embeddings): debug ~1.1M, tiny ~3.1M (CPU), small ~22M, base ~87M, large ~304M, xl ~1.0B (GPU; FSDP from
+#: large, activation checkpointing at xl).
 AR_PRESETS: dict[str, dict] = {
     "debug": dict(hidden_dim=128, depth=4, num_heads=4),
     "tiny": dict(hidden_dim=192, depth=6, num_heads=4),

@@ -17,8 +17,8 @@ from typing import ClassVar
 import numpy as np
 import torch
 
-from drivewm.ar.folder import ARModelConfig, load_ar_folder
-from drivewm.ar.model import ARCondition, ARTransformer
+from drivewm.ar.folder import load_ar_folder
+from drivewm.ar.model import ARCondition
 from drivewm.ar.order import from_sequence, to_sequence
 from drivewm.ar.sampling import sample_tokens
 from drivewm.ar.sampling_config import TokenSampling
@@ -129,32 +129,6 @@ class ARGenerator:
                 f"ar: frames give a {tuple(tokens.shape[2:])} token grid, "
                 f"the model was trained on {self.cfg.ar.grid_hw}"
             )
-
-
-@torch.no_grad()
-def write_sample_grid(
-    cfg: ARModelConfig, state: dict[str, torch.Tensor], tokenizer_dir: Path, dataset, path: Path
-) -> None:
-    """A PNG of one sampled latent frame per caption of the first two dataset samples (training previews)."""
-    from PIL import Image
-
-    from drivewm.ar.train import batch_of
-    from drivewm.atomic import atomic_path
-
-    with torch.random.fork_rng():
-        model = ARTransformer(cfg.ar)
-    model.load_state_dict(state)
-    model.eval()
-    samples = [dataset[i] for i in range(min(2, len(dataset)))]
-    _, cond = batch_of(samples, build_text_encoder(cfg.text), cfg.ar)
-    empty = torch.zeros(len(samples), 0, dtype=torch.long)
-    tokens = sample_tokens(model, cond, empty, cfg.ar.frame_tokens, TokenSampling(), torch.Generator().manual_seed(0))
-    tokenizer = Tokenizer.from_pretrained(tokenizer_dir)
-    video = tokenizer.decode(tokenizer.quantizer.indices_to_codes(from_sequence(tokens, cfg.ar))).clamp(-1, 1)
-    image = ((video[:, :, 0].permute(0, 2, 3, 1).flatten(0, 1) + 1) * 127.5).round().byte().numpy()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        Image.fromarray(image).save(tmp, format="PNG")
 
 
 class ARFolderGenerator:

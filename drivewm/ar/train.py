@@ -16,7 +16,9 @@ import torch.nn.functional as F
 from drivewm.ar.config import AR_PRESETS, ARConfig, ar_preset
 from drivewm.ar.folder import ARModelConfig, save_ar_folder
 from drivewm.ar.model import ARCondition, ARTransformer
-from drivewm.ar.order import to_sequence
+from drivewm.ar.order import from_sequence, to_sequence
+from drivewm.ar.sampling import sample_tokens
+from drivewm.ar.sampling_config import TokenSampling
 from drivewm.ar.tokens import TOKENIZER_TYPE, TokenDataset, TokenSample, check_cache_tokenizer, fsq_levels
 from drivewm.clips.latents import find_latent_cache
 from drivewm.config import at_least, in_range, to_dict
@@ -143,8 +145,6 @@ class ARTask(TrainTask):
         save_ar_folder(out_dir, self.model_config(), ema_state, self.tokenizer_dir)
 
     def sample_grid(self, ema_state: dict[str, torch.Tensor], path: Path) -> None:
-        from drivewm.ar.generator import write_sample_grid
-
         write_sample_grid(self.model_config(), ema_state, self.tokenizer_dir, self.dataset, path)
 
 
@@ -178,3 +178,29 @@ def ar_train(
     torch.manual_seed(cfg.train.seed)  # the transformer's initial weights
     task = ARTask(cfg, dataset, tokenizer_dir)
     return train(task, cfg.train, out_dir, config_record=to_dict(cfg), stop_after=stop_after)
+
+
+@torch.no_grad()
+def write_sample_grid(
+    cfg: ARModelConfig, state: dict[str, torch.Tensor], tokenizer_dir: Path, dataset, path: Path
+) -> None:
+    """A PNG of one sampled latent frame per caption of the first two dataset samples (training previews)."""
+    from PIL import Image
+
+    from drivewm.atomic import atomic_path
+    from drivewm.tokenizer.model import Tokenizer
+
+    with torch.random.fork_rng():
+        model = ARTransformer(cfg.ar)
+    model.load_state_dict(state)
+    model.eval()
+    samples = [dataset[i] for i in range(min(2, len(dataset)))]
+    _, cond = batch_of(samples, build_text_encoder(cfg.text), cfg.ar)
+    empty = torch.zeros(len(samples), 0, dtype=torch.long)
+    tokens = sample_tokens(model, cond, empty, cfg.ar.frame_tokens, TokenSampling(), torch.Generator().manual_seed(0))
+    tokenizer = Tokenizer.from_pretrained(tokenizer_dir)
+    video = tokenizer.decode(tokenizer.quantizer.indices_to_codes(from_sequence(tokens, cfg.ar))).clamp(-1, 1)
+    image = ((video[:, :, 0].permute(0, 2, 3, 1).flatten(0, 1) + 1) * 127.5).round().byte().numpy()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        Image.fromarray(image).save(tmp, format="PNG")
