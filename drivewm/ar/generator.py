@@ -26,9 +26,9 @@ from drivewm.ar.tokens import fsq_levels, latent_frame_poses
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError
 from drivewm.geometry import Rig
-from drivewm.multiview.camera import plucker_rays
 from drivewm.text import build_text_encoder
 from drivewm.tokenizer.model import Tokenizer
+from drivewm.views.rays import plucker_rays
 
 
 class ARGenerator:

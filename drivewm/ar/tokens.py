@@ -22,10 +22,10 @@ import torch
 from drivewm.clips.latents import LatentCache
 from drivewm.errors import DrivewmError
 from drivewm.geometry import invert_T, yaw_of
-from drivewm.multiview.camera import plucker_rays
 from drivewm.tokenizer.data import is_holdout
 from drivewm.tokenizer.fsq import FSQ
 from drivewm.train.checkpoint import read_model_config
+from drivewm.views.rays import plucker_rays
 
 TOKENIZER_TYPE = "drivewm-tokenizer"
 
