@@ -156,6 +156,8 @@ def resolve_for_data(cfg: ARTrainConfig, dataset: TokenDataset) -> ARTrainConfig
             f"ar train: samples of {dataset.frames} latent frames are longer than the model's context of "
             f"{cfg.model.max_frames} (set data.frames or model.max_frames)"
         )
+    if cfg.model.layout:
+        raise DrivewmError("ar train: model.layout needs layout tokens, which the token cache does not hold yet")
     fields = dict(vocab_size=dataset.vocab_size, grid_hw=list(dataset.grid_hw), text_dim=text_dim)
     return dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, **fields))
 
