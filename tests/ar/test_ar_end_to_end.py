@@ -27,6 +27,7 @@ def test_train_resume_eval_and_generate(tmp_path):
     sets = [
         "model.hidden_dim=64",
         "model.depth=2",
+        "model.max_frames=3",
         "train.batch_size=8",
         "train.lr=3e-3",
         "train.ema_decay=0.9",
