@@ -9,8 +9,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drivewm.ar.train import RECIPES
+from drivewm.ar.config import AR_PRESETS
 from drivewm.choices import at_least_one, model_folder, output_folder, whole_number
+from drivewm.recipe import add_recipe_arguments
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="train (or resume) an AR model on the latent cache of an FSQ tokenizer",
         description="A preset is a size (--preset tiny); override any field with --set, e.g. --set train.steps=2000.",
     )
-    RECIPES.add_arguments(t)
+    add_recipe_arguments(t, AR_PRESETS, "debug")
     t.add_argument("--data", required=True, type=Path, help="clip folder holding latents/NAME (or a latent cache)")
     t.add_argument("--tokenizer", required=True, type=model_folder, help="the FSQ tokenizer that encoded the cache")
     t.add_argument("--out", required=True, type=output_folder, help="model folder; rerun with the same --out to resume")
@@ -42,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _train(args: argparse.Namespace) -> int:
     import json
 
-    from drivewm.ar.train import ar_train
+    from drivewm.ar.train import RECIPES, ar_train
     from drivewm.config import to_dict
 
     cfg = RECIPES.from_args(args, [f"train.device={args.device}"])
