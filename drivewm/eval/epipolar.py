@@ -13,7 +13,6 @@ import dataclasses
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from drivewm.eval.config import EpipolarConfig
 from drivewm.eval.matching import Matches
@@ -93,37 +92,38 @@ def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.nd
 CHEIRALITY_DISTANCE_BASELINES = 1e9
 
 
-def relative_pose(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) from E, and the inlier mask.
-
-    The inliers are E's RANSAC inliers: cheirality (cv2.recoverPose, points at any distance) only
-    picks which of E's four (R, t) decompositions is in front of both cameras (H&Z sec. 9.6.3); a far
-    point's triangulated depth sign is noise and says nothing about the match. (None, empty mask)
-    when the fit fails."""
-    E, mask = fit_essential(m, K, cfg)
-    if E is None:
-        return None, mask
-    _, R, t, _, _ = cv2.recoverPose(
-        E, m.uv_a, m.uv_b, K, distanceThresh=CHEIRALITY_DISTANCE_BASELINES, mask=mask.astype(np.uint8)[:, None].copy()
-    )
-    T = refine_relative_pose(make_T(R, t.reshape(3)), Matches(m.uv_a[mask], m.uv_b[mask]), K, cfg)
-    return T, mask
+def normalised(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) of a pinhole with intrinsics K -> normalised image coordinates (N, 2) (K^-1 x)."""
+    return (np.c_[uv, np.ones(len(uv))] @ np.linalg.inv(K).T)[:, :2]
 
 
-def refine_relative_pose(T_b_from_a: np.ndarray, m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> np.ndarray:
-    """Gold-standard style refinement of a minimal-solver pose: minimise the Huber-robust Sampson
-    error (px) of the inliers over rotation (axis-angle) and translation direction (H&Z sec. 11.4.3)."""
-    if len(m) < 8:
-        return T_b_from_a
-    r0 = cv2.Rodrigues(T_b_from_a[:3, :3])[0].reshape(3)
-    t0 = T_b_from_a[:3, 3] / np.linalg.norm(T_b_from_a[:3, 3])
+def relative_pose(
+    m: Matches, K: np.ndarray, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) and the inlier mask, from
+    matches in pixels of a pinhole with intrinsics K (both views).
 
-    def residuals(p: np.ndarray) -> np.ndarray:
-        T = make_T(cv2.Rodrigues(p[:3])[0], p[3:] / np.linalg.norm(p[3:]))
-        return sampson_px(fundamental_from_T(K, K, T), m.uv_a, m.uv_b)
-
-    sol = least_squares(residuals, np.concatenate([r0, t0]), loss="huber", f_scale=cfg.ransac_threshold_px)
-    return make_T(cv2.Rodrigues(sol.x[:3])[0], sol.x[3:] / np.linalg.norm(sol.x[3:]))
+    E is fitted on normalised coordinates by OpenCV's USAC_ACCURATE (graph-cut local optimisation,
+    Barath & Matas 2018, and a final least-squares fit on the inliers) with an inlier threshold of
+    ``pose_threshold_native_px`` native pixels (``native_px_per_px``: native pixels per pixel of K,
+    drivewm.eval.consistency.native_px_per_canonical_px), so a 1600 px and a 320 px camera keep the
+    same matches. Cheirality (cv2.recoverPose, points at any distance) only picks which of E's four
+    (R, t) decompositions is in front of both cameras (H&Z sec. 9.6.3); a far point's triangulated
+    depth sign is noise and says nothing about the match. (None, empty mask) when the fit fails."""
+    if len(m) < max(cfg.min_matches, 5):
+        return None, np.zeros(len(m), bool)
+    x_a, x_b = normalised(m.uv_a, K), normalised(m.uv_b, K)
+    threshold = cfg.pose_threshold_native_px / native_px_per_px / np.sqrt(K[0, 0] * K[1, 1])
+    try:
+        E, mask = cv2.findEssentialMat(
+            x_a, x_b, np.eye(3), cv2.USAC_ACCURATE, cfg.ransac_confidence, threshold, maxIters=cfg.ransac_max_iters
+        )
+    except cv2.error:  # USAC asserts on degenerate samples instead of failing
+        return None, np.zeros(len(m), bool)
+    if E is None or E.shape != (3, 3):
+        return None, np.zeros(len(m), bool)
+    _, R, t, _, _ = cv2.recoverPose(E, x_a, x_b, np.eye(3), distanceThresh=CHEIRALITY_DISTANCE_BASELINES, mask=mask)
+    return make_T(R, t.reshape(3)), mask.reshape(-1).astype(bool)
 
 
 def calibrated_fundamental(K_canonical: np.ndarray, T_b_from_a: np.ndarray) -> np.ndarray:
