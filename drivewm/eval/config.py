@@ -248,6 +248,51 @@ class TrajectoryConfig:
 
 
 @dataclasses.dataclass
+class GuardConfig:
+    """Guards against degenerate videos (drivewm.eval.guards; docs/eval-protocol.md, 'Guards')."""
+
+    parallax_threshold_native_px: float = 1.0
+    """A TSE match shows parallax when it lies farther than this (the camera's own px) from the
+    best homography between the two frames; a pair with fewer than ``epipolar.min_matches`` such
+    matches has no motion evidence (a frozen, static or zoomed frame pair) and counts as failed."""
+    direction_frame_step: int = 2
+    """Travel directions are recovered on every this-many-th TSE frame pair of each camera."""
+    direction_tolerance_deg: float = 30.0
+    """``guard_views``: a camera whose median recovered travel direction is farther than this from
+    the one its extrinsics and the expected ego motion give shows another camera's view."""
+    max_reversed_fraction: float = 0.25
+    """``guard_time``: more than this share of scored frame pairs travelling over 90 degrees off
+    the expected direction is a reversed or shuffled clip."""
+    min_scored_pairs: int = 3
+    """Fewer scored frame pairs than this decide neither direction guard (reported as None)."""
+    duplicate_correlation: float = 0.95
+    """``guard_views``: two cameras whose zero-mean grey thumbnails correlate at least this much
+    (directly or mirrored) are copies of one view."""
+    thumbnail_px: int = 64
+    """Width (px) of the thumbnails compared for duplicate views."""
+    thumbnail_frame_step: int = 4
+    """Duplicate views are compared on every this-many-th frame."""
+    moving_ego_m: float = 1.0
+    """``guard_motion``: an ego (poses or conditioned trajectory) travelling farther than this over
+    the clip must show motion evidence in at least half of the TSE frame pairs."""
+    pose_yaw_tolerance_deg: float = 2.0
+    """``pose_plausible``: structure from motion's yaw change over the clip must lie within this
+    plus ``pose_yaw_tolerance_fraction`` x |flow yaw| of the one dense flow reads (planar model)."""
+    pose_yaw_tolerance_fraction: float = 0.2
+    """See ``pose_yaw_tolerance_deg``."""
+    pose_min_travel_m: float = 0.1
+    """``pose_plausible``: a multi-camera reconstruction (metric scale) of a clip whose flow moves
+    must travel at least this far; less is a rotation-only solution."""
+
+    def validate(self) -> None:
+        above(self, 0, "parallax_threshold_native_px", "direction_tolerance_deg", "duplicate_correlation")
+        at_least(self, 1, "direction_frame_step", "min_scored_pairs", "thumbnail_frame_step")
+        at_least(self, 8, "thumbnail_px")
+        in_range(self, "max_reversed_fraction", 0, 1)
+        at_least(self, 0, "moving_ego_m", "pose_yaw_tolerance_deg", "pose_yaw_tolerance_fraction", "pose_min_travel_m")
+
+
+@dataclasses.dataclass
 class EvalConfig:
     """The whole protocol. ``metrics`` picks what runs."""
 
@@ -263,6 +308,8 @@ class EvalConfig:
     """SfM."""
     trajectory: TrajectoryConfig = dataclasses.field(default_factory=TrajectoryConfig)
     """Trajectory errors."""
+    guard: GuardConfig = dataclasses.field(default_factory=GuardConfig)
+    """Guards against degenerate videos."""
 
     def validate(self) -> None:
         unknown = sorted(set(self.metrics) - set(ALL_METRICS))
@@ -270,6 +317,7 @@ class EvalConfig:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
         require(len(self.metrics) > 0, "metrics", self.metrics, f"a non-empty subset of {list(ALL_METRICS)}")
         self.trajectory.validate()
+        self.guard.validate()
 
 
 EVAL_RECIPES = RecipeBook("eval", EvalConfig, {"default": {}}, "default", recipes="eval")
