@@ -2,7 +2,7 @@
 
 TSE (Cosmos paper, multi-view table; docs/eval-protocol.md): per camera, frames t and t + frame_gap are
 matched, keypoints rectified to the canonical pinhole, an F fitted robustly, and the pair scored by
-the median Sampson error of its verified matches (within ``verify_threshold_px`` of the fitted F)
+the median Sampson error of its verified matches (within ``verify_threshold_native_px`` of the fitted F)
 under (a) that fitted F and (b), when ego poses are known, the F implied by the ego motion and the
 camera's extrinsics, with the ego pose at each image's own exposure time (drivewm.eval.exposure).
 CSE: for every pair of cameras whose frusta overlap (from the rig geometry, not names), the distinct
@@ -101,15 +101,17 @@ def _score_pair(
     cfg: EpipolarConfig,
     min_verified: int,
     parallax_px: float | None,
+    native_px_per_px: float,
 ) -> dict:
     """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated F of
-    each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``), and the verified matches.
+    each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``), and the verified matches;
+    fit and verification thresholds in the cameras' pixels (``native_px_per_px`` per canonical px).
     ``parallax_px`` (TSE): a pair whose verified matches show no motion evidence (fewer than
     ``min_matches`` that moved ``min_parallax_px`` and lie ``parallax_px`` off the best homography,
     drivewm.eval.guards.parallax_count) fails under both F: static points, and a zoomed still,
     satisfy any F through the epipole."""
-    F_fit, _ = fit_fundamental(m, cfg)
-    keep = verified_mask(F_fit, m, cfg)
+    F_fit, _ = fit_fundamental(m, cfg, native_px_per_px)
+    keep = verified_mask(F_fit, m, cfg, native_px_per_px)
     verified, frames = Matches(m.uv_a[keep], m.uv_b[keep]), frame_of[keep]
     fitted = score_matches(F_fit, verified, cfg)
     if F_fit is None and len(m) >= cfg.min_matches:
@@ -173,7 +175,9 @@ def temporal_sampson(
             T_wc = ego @ cam.T_ego_from_cam
             T_rel = [invert_T(T_wc[u]) @ T_wc[t]]
         parallax_px = guard_cfg.parallax_threshold_native_px / scale[cam.name]
-        out = _score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, parallax_px)
+        out = _score_pair(
+            m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, parallax_px, scale[cam.name]
+        )
         if t % guard_cfg.direction_frame_step == 0 and out["fitted"].status == OK:
             out["direction_deg"] = _direction_error(out["verified"], cam, t, u, ego, forward_ego, K_c, epi_cfg, scale)
         return out
@@ -242,7 +246,8 @@ def cross_sampson(
             T_rel = list(invert_T(T_wb) @ T_wa)
         else:
             T_rel = [T_b_from_a] * num_frames
-        return _score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, None), pooled
+        scale = 0.5 * (native_px_per_canonical_px(cam_a, K_c) + native_px_per_canonical_px(cam_b, K_c))
+        return _score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, None, scale), pooled
 
     matcher.prefetch(videos, {c for p in pairs for c in p})
     for (name_a, name_b), (scored, pooled) in zip(pairs, matcher.map(score, pairs)):

@@ -50,40 +50,27 @@ def sampson_px(F: np.ndarray, x_a: np.ndarray, x_b: np.ndarray) -> np.ndarray:
     return np.sqrt(sampson_distance_sq(F, x_a, x_b))
 
 
-def fit_fundamental(m: Matches, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """Robust F (x_b^T F x_a = 0) with cv2.USAC_MAGSAC (Barath et al. 2020); (None, empty) when it fails."""
+def fit_fundamental(
+    m: Matches, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """Robust F (x_b^T F x_a = 0) with cv2.USAC_MAGSAC (Barath et al. 2020) at ``ransac_threshold_native_px``
+    (``native_px_per_px``: the cameras' pixels per pixel of ``m``); (None, empty) when it fails."""
     if len(m) < max(cfg.min_matches, 8):
         return None, np.zeros(len(m), bool)
     try:
         F, mask = cv2.findFundamentalMat(
-            m.uv_a, m.uv_b, cv2.USAC_MAGSAC, cfg.ransac_threshold_px, cfg.ransac_confidence, cfg.ransac_max_iters
+            m.uv_a,
+            m.uv_b,
+            cv2.USAC_MAGSAC,
+            cfg.ransac_threshold_native_px / native_px_per_px,
+            cfg.ransac_confidence,
+            cfg.ransac_max_iters,
         )
     except cv2.error:  # USAC asserts on degenerate samples (e.g. all matches on one plane) instead of failing
         return None, np.zeros(len(m), bool)
     if F is None or F.shape != (3, 3):
         return None, np.zeros(len(m), bool)
     return F / np.linalg.norm(F), mask.reshape(-1).astype(bool)
-
-
-def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """Robust E from matches in pixels of a camera with intrinsics K (both views), USAC_MAGSAC."""
-    if len(m) < max(cfg.min_matches, 5):
-        return None, np.zeros(len(m), bool)
-    try:
-        E, mask = cv2.findEssentialMat(
-            m.uv_a,
-            m.uv_b,
-            K,
-            cv2.USAC_MAGSAC,
-            cfg.ransac_confidence,
-            cfg.ransac_threshold_px,
-            maxIters=cfg.ransac_max_iters,
-        )
-    except cv2.error:
-        return None, np.zeros(len(m), bool)
-    if E is None or E.shape != (3, 3):
-        return None, np.zeros(len(m), bool)
-    return E, mask.reshape(-1).astype(bool)
 
 
 #: recoverPose's triangulation cut-off in baselines. OpenCV's default (50) drops every point farther
@@ -144,11 +131,14 @@ class SampsonResult:
         return {"median_px": self.median_px, "num_matches": self.num_matches, "status": self.status}
 
 
-def verified_mask(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> np.ndarray:
-    """(N,) bool: the matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
+def verified_mask(
+    F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> np.ndarray:
+    """(N,) bool: the matches within ``verify_threshold_native_px`` (``native_px_per_px``: the cameras'
+    pixels per pixel of ``m``) of the fitted F (none when the fit failed)."""
     if F_fit is None or len(m) == 0:
         return np.zeros(len(m), bool)
-    return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+    return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_native_px / native_px_per_px
 
 
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
