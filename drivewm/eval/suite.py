@@ -349,11 +349,14 @@ def _pose_plausibility(item, videos, cfg, sfm, metrics, artifacts) -> bool | Non
     intrinsics are respected by construction. None when SfM or flow registers fewer than 3 frames."""
     camera = cfg.trajectory.camera or forward_camera(item.rig)
     est = ego_from_sfm(sfm, item.rig, camera)
+    t0 = time.perf_counter()
     try:
         flow = artifacts["flow_ego"] = flow_fallback(videos, item.rig, camera)
     except DrivewmError as exc:  # e.g. frames too small or flat for flow
         metrics["status"]["pose_plausible"] = str(exc)
         return None
+    finally:
+        metrics["seconds"]["pose_flow"] = time.perf_counter() - t0  # part of "pose"
     if est.registered.sum() < 3 or flow.registered.sum() < 3:
         metrics["pose_plausible"] = None
         return None
