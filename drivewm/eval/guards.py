@@ -16,6 +16,8 @@ self-consistent as the real one. Each guard tests the evidence those figures tak
   a view of another camera (shifted, swapped, copied, mirrored) reads that camera's mounting angle
   off (``guard_views``).
 - **duplicate views**: two cameras whose frames are (mirror) copies of each other (``guard_views``).
+- **plausible poses**: the yaw structure from motion reconstructs against the one two-view
+  geometry reads, frame to frame (:func:`two_view_rotations`), and the distance it travels.
 """
 
 from __future__ import annotations
@@ -26,9 +28,9 @@ import cv2
 import numpy as np
 
 from drivewm.eval.config import EpipolarConfig, GuardConfig
-from drivewm.eval.epipolar import relative_pose
-from drivewm.eval.matching import Matches
-from drivewm.geometry import Camera, Rig, invert_T
+from drivewm.eval.epipolar import rectify_matches, relative_pose
+from drivewm.eval.matching import FrameMatcher, Matches
+from drivewm.geometry import Camera, Rig, invert_T, nearest_rotation
 
 
 def parallax_count(m: Matches, threshold_px: float) -> int:
@@ -153,3 +155,56 @@ def _correlation(a: np.ndarray, b: np.ndarray) -> float:
     a, b = a[:n].ravel(), b[:n].ravel()
     denom = np.linalg.norm(a) * np.linalg.norm(b)
     return float(a @ b / denom) if denom > 0 else 0.0
+
+
+@dataclasses.dataclass
+class TwoViewMotion:
+    """A camera's frame-to-frame motion from two-view geometry alone: ``R_first_from_t`` (T, 3, 3)
+    chained rotations (camera frame) and ``moved`` (T - 1,) whether each pair showed parallax."""
+
+    R_first_from_t: np.ndarray
+    moved: np.ndarray
+
+
+def two_view_rotations(
+    frames: np.ndarray, camera: Camera, matcher: FrameMatcher, K_c: np.ndarray, epi_cfg: EpipolarConfig, scale: float
+) -> TwoViewMotion:
+    """Chained rotations of one camera over consecutive frames (uint8 (T, H, W, 3)): each pair's
+    rotation from :func:`relative_pose` (USAC_ACCURATE E) on the matcher's (cached) matches
+    rectified to ``K_c``; a pair without parallax (pure rotation, zoom, frozen) from its homography
+    instead (R = K^-1 H K, H&Z sec. 8.4.2), and identity when neither fits. ``scale``: the
+    camera's native px per canonical px."""
+    R = [np.eye(3)]
+    moved = []
+    parallax_px = 1.0 / scale
+    for t in range(len(frames) - 1):
+        m = rectify_matches(
+            matcher.match((camera.name, t), frames[t], (camera.name, t + 1), frames[t + 1]), camera, camera, K_c
+        )
+        has_parallax = parallax_count(m, parallax_px) >= epi_cfg.min_matches
+        R_b_from_a = _pair_rotation(m, K_c, epi_cfg, scale, has_parallax)
+        moved.append(has_parallax)
+        R.append(R[-1] @ R_b_from_a.T)
+    return TwoViewMotion(np.stack(R), np.array(moved, dtype=bool))
+
+
+def _pair_rotation(m: Matches, K_c: np.ndarray, epi_cfg: EpipolarConfig, scale: float, moved: bool) -> np.ndarray:
+    """R_b_from_a of one frame pair: from E with parallax, else from the homography; identity if neither fits."""
+    if moved:
+        T, inliers = relative_pose(m, K_c, epi_cfg, scale)
+        if T is not None and inliers.sum() >= epi_cfg.min_matches:
+            return T[:3, :3]
+    if len(m) < 4:
+        return np.eye(3)
+    H, _ = cv2.findHomography(m.uv_a, m.uv_b, cv2.RANSAC, 1.0 / scale)
+    if H is None:
+        return np.eye(3)
+    return nearest_rotation(np.linalg.inv(K_c) @ H @ K_c)
+
+
+def ego_yaw_deg(R_first_from_last_cam: np.ndarray, camera: Camera) -> float:
+    """The ego's yaw change (degrees, left positive) for a camera rotation R_first_from_last (camera
+    frame), through the camera's extrinsics."""
+    R_ec = camera.T_ego_from_cam[:3, :3]
+    R = R_ec @ R_first_from_last_cam @ R_ec.T
+    return float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))

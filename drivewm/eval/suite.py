@@ -32,7 +32,13 @@ from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, 
 from drivewm.eval.ego import forward_camera
 from drivewm.eval.epipolar import canonical_K
 from drivewm.eval.framing import WHOLE_VIDEO, Framing, input_record
-from drivewm.eval.guards import direction_verdict, duplicate_views, forward_direction_ego
+from drivewm.eval.guards import (
+    direction_verdict,
+    duplicate_views,
+    ego_yaw_deg,
+    forward_direction_ego,
+    two_view_rotations,
+)
 from drivewm.eval.inputs import EvalItem, load_items
 from drivewm.eval.matching import FrameMatcher, check_threads
 from drivewm.eval.paths_record import ego_paths
@@ -150,6 +156,8 @@ def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResu
                 _merge(metrics, artifacts, *pose.result())  # in stage order: the same JSON as one thread
             else:
                 _timed_stage(name, fn, item, videos, cfg, matcher, metrics, artifacts)
+    if "sfm" in artifacts:
+        _pose_plausibility(item, videos, cfg, matcher, metrics, artifacts)
     _void_guarded(metrics)
     return ClipResult(item.key, metrics, artifacts)
 
@@ -334,48 +342,48 @@ def _pose(item, videos, cfg, matcher, metrics, artifacts, database_ready=None) -
     sfm = run_sfm(
         videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs, database_ready=database_ready
     )
-    plausible = _pose_plausibility(item, videos, cfg, sfm, metrics, artifacts)
-    metrics["pose_success"] = float(sfm.all_registered and plausible is not False)
+    metrics["pose_success"] = float(sfm.all_registered)  # and pose_plausible (_pose_plausibility)
     metrics["registered_fraction"] = sfm.registered_fraction
     metrics["seconds"].update({f"pose_{stage}": s for stage, s in sfm.seconds.items()})  # parts of "pose"
     artifacts["sfm"] = sfm
 
 
-def _pose_plausibility(item, videos, cfg, sfm, metrics, artifacts) -> bool | None:
-    """``pose_plausible``: the reconstruction turns as dense flow of the trajectory camera does
-    (yaw change within ``guard.pose_yaw_tolerance_deg`` + ``pose_yaw_tolerance_fraction`` x |flow
-    yaw|), and, on a rig with a metric scale (several cameras), travels ``pose_min_travel_m`` where
-    the flow moves (no rotation-only solution). The calibration is held fixed in COLMAP, so the
-    intrinsics are respected by construction. None when SfM or flow registers fewer than 3 frames."""
-    camera = cfg.trajectory.camera or forward_camera(item.rig)
-    est = ego_from_sfm(sfm, item.rig, camera)
-    t0 = time.perf_counter()
-    try:
-        flow = artifacts["flow_ego"] = flow_fallback(videos, item.rig, camera)
-    except DrivewmError as exc:  # e.g. frames too small or flat for flow
-        metrics["status"]["pose_plausible"] = str(exc)
-        return None
-    finally:
-        metrics["seconds"]["pose_flow"] = time.perf_counter() - t0  # part of "pose"
-    if est.registered.sum() < 3 or flow.registered.sum() < 3:
+def _pose_plausibility(item, videos, cfg, matcher, metrics, artifacts) -> None:
+    """``pose_plausible``: the reconstruction turns as two-view geometry of the trajectory camera
+    does, frame to frame (drivewm.eval.guards.two_view_rotations; yaw change within
+    ``guard.pose_yaw_tolerance_deg`` + ``pose_yaw_tolerance_fraction`` x |two-view yaw|), and, on a
+    rig with a metric scale (several cameras), travels ``pose_min_travel_m`` where half the frame
+    pairs show parallax (no rotation-only solution). The calibration is held fixed in COLMAP, so
+    the intrinsics are respected by construction. Where it fails, ``pose_success`` and
+    ``pose_success_path`` read 0 and ``yaw_change_deg`` is the two-view one. None (undecided) when
+    SfM registers fewer than 3 frames of the camera."""
+    camera = item.rig.camera(cfg.trajectory.camera or forward_camera(item.rig))
+    est = ego_from_sfm(artifacts["sfm"], item.rig, camera.name)
+    if est.registered.sum() < 3:
         metrics["pose_plausible"] = None
-        return None
+        return
+    K_c = canonical_K(cfg.epipolar)
+    scale = native_px_per_canonical_px(camera, K_c)
+    motion = two_view_rotations(videos[camera.name], camera, matcher, K_c, cfg.epipolar, scale)
     sfm_yaw = heading_change_deg(est.T_world_from_ego[est.registered])
-    flow_yaw = heading_change_deg(flow.T_world_from_ego[flow.registered])
-    metrics["pose_yaw_change_deg"], metrics["flow_yaw_change_deg"] = sfm_yaw, flow_yaw
-    g = cfg.guard
-    reasons = []
-    if abs(sfm_yaw - flow_yaw) > g.pose_yaw_tolerance_deg + g.pose_yaw_tolerance_fraction * abs(flow_yaw):
-        reasons.append(f"turns {sfm_yaw:.1f} deg where the flow turns {flow_yaw:.1f}")
+    reg = np.flatnonzero(est.registered)
+    two_view_yaw = ego_yaw_deg(motion.R_first_from_t[reg[0]].T @ motion.R_first_from_t[reg[-1]], camera)
+    metrics["pose_yaw_change_deg"], metrics["two_view_yaw_change_deg"] = sfm_yaw, two_view_yaw
+    g, reasons = cfg.guard, []
+    if abs(sfm_yaw - two_view_yaw) > g.pose_yaw_tolerance_deg + g.pose_yaw_tolerance_fraction * abs(two_view_yaw):
+        reasons.append(f"turns {sfm_yaw:.1f} deg where two-view geometry turns {two_view_yaw:.1f}")
     positions = est.T_world_from_ego[est.registered][:, :3, 3]
     travel_m = float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
-    flow_moves = np.ptp(flow.T_world_from_ego[flow.registered][:, :3, 3], axis=0).max() > 0
-    if len(item.rig.cameras) > 1 and flow_moves and travel_m < g.pose_min_travel_m:
-        reasons.append(f"travels {travel_m:.2f} m where the flow moves (rotation only)")
+    if len(item.rig.cameras) > 1 and motion.moved.mean() >= 0.5 and travel_m < g.pose_min_travel_m:
+        reasons.append(f"travels {travel_m:.2f} m where the frames move (rotation only)")
     metrics["pose_plausible"] = not reasons
     if reasons:
         metrics["status"]["pose_plausible"] = "; ".join(reasons)
-    return not reasons
+        for key in ("pose_success", "pose_success_path"):
+            if key in metrics:
+                metrics[key] = 0.0
+        if metrics.get("yaw_source") == "sfm":
+            metrics["yaw_change_deg"], metrics["yaw_source"] = two_view_yaw, "two_view"
 
 
 def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
@@ -394,19 +402,16 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
     if reg.sum() < 3:
         metrics["status"]["traj"] = "not_registered"
         if tc.yaw_from_flow:
-            _yaw_from_flow(item, videos, tc.camera, metrics, artifacts.get("flow_ego"))
+            _yaw_from_flow(item, videos, tc.camera, metrics)
         return
     est = ego.T_world_from_ego[reg]
     metrics["yaw_change_deg"] = heading_change_deg(est)  # the turn the video shows (first to last registered)
     metrics["yaw_source"] = "sfm"
-    if metrics.get("pose_plausible") is False:  # a reconstruction that turns where the flow does not
-        metrics["yaw_change_deg"], metrics["yaw_source"] = metrics["flow_yaw_change_deg"], "flow"
     if item.T_world_from_ego is not None:
         ref = item.T_world_from_ego[reg]
         metrics["path_ratio"] = ratio = path_ratio(est, ref)
         on_path = 1 / PATH_RATIO_TOLERANCE <= ratio <= PATH_RATIO_TOLERANCE
-        plausible = metrics.get("pose_plausible") is not False
-        metrics["pose_success_path"] = float(artifacts["sfm"].all_registered and on_path and plausible)
+        metrics["pose_success_path"] = float(artifacts["sfm"].all_registered and on_path)
         metrics["ate"], sim = ate(est, ref, alignment=tc.alignment)
         r = relative_pose_errors(
             est, ref, tc.rpe_delta, tc.rpe_delta_unit, tc.rpe_all_pairs, sim.scale, tc.rpe_pairs_from
@@ -436,14 +441,14 @@ PATH_RATIO_TOLERANCE = 2.0
 MOVING_TRAJECTORY_M = 1.0
 
 
-def _yaw_from_flow(item, videos, camera: str, metrics, ego=None) -> None:
+def _yaw_from_flow(item, videos, camera: str, metrics) -> None:
     """The turn a clip shows, from dense optical flow of the trajectory camera, where structure from
     motion registered too few frames (trajectory.yaw_from_flow); frames flow cannot read are left out.
     Frames in which flow finds no motion at all give no yaw when the clip's conditioned trajectory
     moves (``status["yaw"]`` says so): a frozen or black clip would otherwise read as 0 degrees, a
     perfect straight drive."""
     try:
-        ego = ego or flow_fallback(videos, item.rig, camera)  # the pose stage's, when it read the flow
+        ego = flow_fallback(videos, item.rig, camera)
     except DrivewmError as exc:  # e.g. frames too small or flat for flow
         metrics["status"]["yaw"] = str(exc)
         return
