@@ -306,9 +306,10 @@ OVERLAP_WIDTH_PX = 320
 def _overlap_disagreement(rig, videos: dict[str, np.ndarray], step: int) -> float:
     """Mean colour difference (8-bit levels) where two cameras see the same flat-world point, over
     every ``step``-th frame (drivewm.views.blend.overlap_disagreement), every camera at the first
-    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. Real clips read about 8, the parallax of what
-    stands beside the road; views stitched through a flat world read about 2, so a CSE won by
-    stitching shows here (docs/eval-protocol.md)."""
+    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. The simulated drives read about 8, the parallax
+    of what stands beside the road (real nuScenes far more, with exposure differences between
+    cameras); views stitched through a flat world read about 2, so a CSE won by stitching shows
+    here as a value far below the real clips' of the same rig (docs/eval-protocol.md)."""
     from drivewm.multiview.coding import resize_views
     from drivewm.views.blend import overlap_disagreement
 
