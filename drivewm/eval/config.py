@@ -268,7 +268,8 @@ class GuardConfig:
     """``guard_time``: more than this share of scored frame pairs travelling over 90 degrees off
     the expected direction is a reversed or shuffled clip."""
     min_scored_pairs: int = 3
-    """Fewer scored frame pairs than this decide neither direction guard (reported as None)."""
+    """A camera with fewer scored frame pairs than this is not judged by the direction guards (one
+    pair's E can be wrong); with no camera judged both read None."""
     duplicate_correlation: float = 0.95
     """``guard_views``: two cameras whose zero-mean grey thumbnails correlate at least this much
     (directly or mirrored) are copies of one view."""

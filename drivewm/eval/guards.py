@@ -93,7 +93,7 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 @dataclasses.dataclass
 class DirectionVerdict:
     """Per camera, the median angle (degrees) between recovered and expected travel over its
-    scored frame pairs (NaN when none could be scored), and the two guards it decides."""
+    scored frame pairs (NaN when too few could be scored), and the two guards it decides."""
 
     error_deg: dict[str, float]
     reversed_fraction: float
@@ -106,13 +106,15 @@ def direction_verdict(errors: dict[str, list[float]], cfg: GuardConfig) -> Direc
     more than 90 degrees off and either every camera does (reversed) or some camera goes both ways
     (shuffled); ``guard_views`` is False when a camera travels more than ``direction_tolerance_deg``
     off and time does not explain it (its view is another camera's: copied, shifted, mirrored).
-    None: too few pairs scored to say (``min_scored_pairs``), or time already failed (views)."""
-    medians = {c: float(np.median(e)) if e else float("nan") for c, e in errors.items()}
-    every = np.concatenate([np.asarray(e, float) for e in errors.values()]) if errors else np.zeros(0)
-    if len(every) < cfg.min_scored_pairs:
+    Only cameras with at least ``min_scored_pairs`` scored pairs are judged; None: no camera has
+    that many (e.g. a 3-frame clip), or time already failed (views)."""
+    judged = {c: e for c, e in errors.items() if len(e) >= cfg.min_scored_pairs}  # one pair's E can mislead
+    medians = {c: float(np.median(errors[c])) if c in judged else float("nan") for c in errors}
+    if not judged:
         return DirectionVerdict(medians, float("nan"), None, None)
+    every = np.concatenate([np.asarray(e, float) for e in judged.values()])
     reversed_fraction = float(np.mean(every > 90.0))
-    per_camera = [float(np.mean(np.asarray(e) > 90.0)) for e in errors.values() if e]
+    per_camera = [float(np.mean(np.asarray(e) > 90.0)) for e in judged.values()]
     low, high = cfg.max_reversed_fraction, 1.0 - cfg.max_reversed_fraction
     mixed = any(low < f < high for f in per_camera)
     time_ok = not (reversed_fraction > low and (mixed or all(f >= high for f in per_camera)))

@@ -57,14 +57,16 @@ def test_direction_verdicts_tell_reversed_shuffled_and_shifted_apart():
     real = direction_verdict({c: [1.0, 2.0, 3.0] for c in cams}, cfg)
     reversed_ = direction_verdict({c: [178.0, 179.0, 177.0] for c in cams}, cfg)
     shuffled = direction_verdict({c: [2.0, 178.0, 3.0, 176.0] for c in cams}, cfg)
-    shifted = direction_verdict({"F": [52.0, 55.0], "L": [54.0, 53.0], "R": [1.0, 2.0]}, cfg)
-    copied = direction_verdict({"F": [1.0, 2.0], "L": [55.0, 56.0], "R": [178.0, 179.0]}, cfg)
+    shifted = direction_verdict({"F": [52.0, 55.0, 51.0], "L": [54.0, 53.0, 56.0], "R": [1.0, 2.0, 3.0]}, cfg)
+    copied = direction_verdict({"F": [1.0, 2.0, 1.0], "L": [55.0, 56.0, 54.0], "R": [178.0, 179.0, 177.0]}, cfg)
     undecided = direction_verdict({c: [] for c in cams}, cfg)
+    one_pair_each = direction_verdict({"F": [1.0], "L": [93.0], "R": [2.0]}, cfg)  # too few to judge a camera
     assert (real.time_ok, real.views_ok) == (True, True)
     assert reversed_.time_ok is False and shuffled.time_ok is False
     assert (shifted.time_ok, shifted.views_ok) == (True, False)
     assert (copied.time_ok, copied.views_ok) == (True, False)
     assert (undecided.time_ok, undecided.views_ok) == (None, None)
+    assert (one_pair_each.time_ok, one_pair_each.views_ok) == (None, None)
 
 
 def test_duplicate_views_finds_copies_and_mirrors_not_distinct_cameras():
