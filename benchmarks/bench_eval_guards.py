@@ -66,6 +66,7 @@ def main() -> None:
     parser.add_argument("--clip-dir", type=Path, help="score these clips (default: the test suite's cached clips)")
     parser.add_argument("--repeats", type=int, default=2, help="timings per clip, interleaved")
     parser.add_argument("--dashcam", action="store_true", help="also time the 221-frame real dashcam clip")
+    parser.add_argument("--dashcam-path", type=Path, default=DASHCAM, help="where that clip is (../shared/data)")
     args = parser.parse_args()
     print(f"{len(os.sched_getaffinity(0))} cores available to this process ({os.cpu_count()} on the machine)")
     jobs = [
@@ -73,7 +74,7 @@ def main() -> None:
         for item in sim_items(args.clip_dir, args.clips)
     ]
     if args.dashcam:
-        dash = load_items(DASHCAM, "front1", fit="stretch")[0]
+        dash = load_items(args.dashcam_path, "front1", fit="stretch")[0]
         dash.videos()
         jobs.append(("dashcam", dash, EvalConfig(metrics=["tse", "pose"])))
     walls: dict[str, list[float]] = {key: [] for key, _, _ in jobs}
