@@ -157,7 +157,9 @@ def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResu
             else:
                 _timed_stage(name, fn, item, videos, cfg, matcher, metrics, artifacts)
     if "sfm" in artifacts:
+        t0 = time.perf_counter()
         _pose_plausibility(item, videos, cfg, matcher, metrics, artifacts)
+        metrics["seconds"]["pose_plausibility"] = time.perf_counter() - t0
     _void_guarded(metrics)
     return ClipResult(item.key, metrics, artifacts)
 
