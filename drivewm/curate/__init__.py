@@ -1,4 +1,4 @@
-"""Curation (issue 3): drive logs -> synchronized, filtered, captioned multi-view clip shards.
+"""Curation: drive logs -> synchronized, filtered, captioned multi-view clip shards.
 
 ``curate(log_paths, out_dir, cfg, executor="local"|"ray", workers=1, ray_address=None)`` runs
 the per-log stage (:mod:`drivewm.curate.stage`) on an executor and writes shards, manifest.jsonl,

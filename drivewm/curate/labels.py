@@ -4,7 +4,7 @@ Each label map is logged at the time of the image it labels, so a clip frame's l
 one at that frame's image timestamp (the sync table's ``frame_ns``). Maps arrive in log order, not
 necessarily before their window is final; :meth:`LabelFrames.ready` says when every map a window
 needs is in, and a log without label maps is always ready (its clips are made as soon as they are
-final, as before).
+final).
 """
 
 from __future__ import annotations

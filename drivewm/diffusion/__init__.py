@@ -1,4 +1,4 @@
-"""Text2World diffusion (issue 5): separate, narrow pieces.
+"""Text2World diffusion: separate, narrow pieces.
 
 - ``dit.py`` (+ ``dit_config.py``, ``blocks.py``, ``rope.py``): the backbone F, a DiT over
   (latent frame, row, column) patches; sub-layers per block are configurable for multi-view.

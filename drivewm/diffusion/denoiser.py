@@ -34,8 +34,8 @@ class EDMConfig:
     parameterization: Literal["edm", "flow"] = "flow"
     """``flow`` (default): rectified flow with a velocity target (SD3 / Cosmos-Predict2.5 / GAIA-2) written in
     the same form (drivewm.diffusion.flow); ``edm``: EDM's c_skip/c_out/c_in/c_noise and loss weight (Table
-    1). Flow became the default on decoded samples at equal compute (docs/quality-vs-compute.md); folders
-    saved before name ``edm`` or are read as it (dit_config.EDM_SAVED_BEFORE)."""
+    1). Why flow is the default: studies/README.md. A folder whose config names no parameterization is read
+    as ``edm`` (dit_config.EDM_SAVED_BEFORE)."""
     sigma_data: float = 0.5
     """Standard deviation of the (normalised) data, EDM Table 1."""
     p_mean: float | None = None

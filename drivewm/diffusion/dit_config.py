@@ -101,9 +101,8 @@ DIT_PRESETS: dict[str, dict] = {
 }
 
 
-#: EDMConfig fields whose default changed after model folders were first written, with the value those folders
-#: were trained with: the default became rectified flow on measured evidence (docs/quality-vs-compute.md), and a
-#: folder whose config.json names no parameterization was trained as EDM.
+#: EDMConfig fields that a folder's config.json may omit, with the value such a folder was trained with: a folder
+#: whose config.json names no parameterization was trained as EDM (the default is rectified flow).
 EDM_SAVED_BEFORE = {"parameterization": "edm"}
 
 

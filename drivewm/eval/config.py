@@ -140,8 +140,8 @@ class PoseConfig:
     features: str = "shared"
     """'shared' (the protocol): the benchmark's own SIFT keypoints and matches (those TSE and CSE use),
     verified by ``verify``, go into COLMAP's database; COLMAP neither extracts nor matches. 'colmap':
-    COLMAP's own SIFT extraction and sequential matching (the protocol before issue 14's speed goal,
-    2.2x the pose CPU per reference clip; always so for a learned matcher, which has no per-image keypoints)."""
+    COLMAP's own SIFT extraction and sequential matching (2.2x the pose CPU per reference clip;
+    always so for a learned matcher, which has no per-image keypoints)."""
     temporal_gaps: list[int] = dataclasses.field(default_factory=lambda: [1, 2, 4, 8])
     """features='shared': each camera's frame t is matched with t + each gap (and overlapping cameras at t).
     Forward driving at 25 fps needs the long gaps: of the real dashcam video, [1, 2] registered 4 of the

@@ -10,8 +10,8 @@ protocol): the SIFT keypoints and matches that TSE and CSE already computed
 (``verify='drivewm'``), are written into the COLMAP database, so COLMAP neither extracts nor
 matches: pairs are each camera's frame t with t + each of ``temporal_gaps``, the overlapping camera
 pairs at each t and, for the metric scale, across one frame (``cross_gaps``). ``features='colmap'``
-(the protocol before issue 14's speed goal, 2.2x the pose CPU; also what a learned matcher, which has no
-per-image keypoints, needs) writes PNGs and runs COLMAP's SIFT extraction and sequential matching,
+(2.2x the pose CPU; what a learned matcher, which has no per-image keypoints,
+needs) writes PNGs and runs COLMAP's SIFT extraction and sequential matching,
 rig images expanded.
 
 COLMAP puts pixel centres at half-integers (the top-left pixel's centre is (0.5, 0.5)); drivewm at

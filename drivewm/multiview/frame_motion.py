@@ -1,10 +1,9 @@
 """Per-frame ego-motion conditioning: where the ego is at every token frame, kept apart from the rays.
 
 Moving-camera rays (``moving_camera_rays``) carry the trajectory inside the per-token Plucker code
-that also tells a token where in the rig it looks. Measured on the simulated clips, a model reads a
-turned ray as a token further round the rig, and learns the turn mirrored: a road bending left
-shows its content where the straight road shows it further right, so rays turned right (the
-mirrored turn) predict a left bend's frames better (docs/quality-vs-compute.md). With
+that also tells a token where in the rig it looks, so a model can read a turned ray as a token
+further round the rig and learn the turn mirrored (a road bending left shows its content where the
+straight road shows it further right; drivewm.multiview.trajectory_probe measures this). With
 ``frame_motion`` the rays stay the static rig's, so a token's place in the rig is never in doubt,
 and the ego motion comes as one more embedding per token frame, added to every token of that frame
 in every view: the ego pose of the frame in the first frame's ego frame and its motion since the

@@ -7,7 +7,7 @@ minus under their own, with the captions dropped so that only the trajectory can
 apart. A model that ignores the trajectory scores exactly 0; one that follows it, above 0; one
 that learned turns mirrored, below. Post-training logs it (``trajectory_loss_gap`` and its t
 statistic over the clips, drivewm.multiview.posttrain); studies/trajectory_loss_gap.py prints it for
-a model folder. Measured on the shipped model: docs/quality-vs-compute.md.
+a model folder.
 """
 
 from __future__ import annotations
@@ -104,7 +104,7 @@ SPLIT = {"own, mirrored rays": ("own", "mirrored"), "mirrored, own rays": ("mirr
 #: turns, - = against it). A model that reads a ray as a place in the rig, the road's layout there,
 #: rather than as the camera's motion, scores the clips lower under one of these than under the rig's
 #: own rays; turning left, a road bending left shows its content where a straight one shows it
-#: further right (docs/quality-vs-compute.md).
+#: further right.
 TURNED = {"static rays turned with the turn 20 deg": 20.0, "static rays turned against the turn 20 deg": -20.0}
 
 

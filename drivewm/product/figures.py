@@ -1,4 +1,4 @@
-"""The shipped models' figures (issue 12's "what must hold") from a ``drivewm worldmodel train`` run.
+"""The shipped models' must-hold figures from a ``drivewm worldmodel train`` run.
 
 Read from the run's eval outputs, never re-measured here:
 

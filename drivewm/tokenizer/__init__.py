@@ -1,4 +1,4 @@
-"""Video tokenizer: a causal video autoencoder with continuous or FSQ latents (issue 4).
+"""Video tokenizer: a causal video autoencoder with continuous or FSQ latents.
 
 ``Tokenizer`` (model.py) codes video (B, 3, T, H, W) in [-1, 1] to latents (B, c, t, h, w);
 ``preset(size, compression, fsq)`` (config.py) builds a preset's config; ``tiling.py`` codes long or large

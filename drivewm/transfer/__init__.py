@@ -1,4 +1,4 @@
-"""Weather and time-of-day transfer of multi-view clips (issue 18): the same drive, in snow.
+"""Weather and time-of-day transfer of multi-view clips: the same drive, in snow.
 
 - ``retarget.py``: the target condition and a clip's labels retold in it (tags, captions);
 - ``data.py``: paired samples (same ``pair_id``, other condition) from the latent cache;

@@ -3,7 +3,7 @@
 Every clip is resized to the model's image size, coded by the tokenizer, transferred view by view
 (a transfer model folder, or SDEdit with a Text2World folder as the baseline), decoded, brought back
 to the source's size with its detail (drivewm.transfer.resolution; ``model_resolution`` writes the
-model's size instead, as before) and written as a clip (``OUT/transferred-NNNNNN.tar`` +
+model's size instead) and written as a clip (``OUT/transferred-NNNNNN.tar`` +
 ``manifest.jsonl``) that keeps every label of the source: timestamps, rig (the source's, or scaled to
 the model's size), ego poses, trajectory, pair id and the other tags; the weather / time-of-day tags
 and captions are the target's (drivewm.transfer.retarget).
@@ -68,7 +68,7 @@ class TransferOptions:
     (drivewm.transfer.detail); False writes the decoded transfer as it is (upsampled)."""
     detail_band: float = BAND_PX
     """Model pixels: the source's structure finer than a Gaussian of this sigma replaces the transfer's
-    (drivewm.transfer.detail; 0: only the detail the tokenizer dropped, as before the band)."""
+    (drivewm.transfer.detail; 0: only the detail the tokenizer dropped)."""
     shared_look: bool = True
     """Share the transfer's look (its light, colour and haze coarser than the detail band, and its
     contrast gain) between cameras where they see one point of the flat world, so two cameras of one
