@@ -26,9 +26,9 @@ from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.model_folders import resolve_model_folder
-from drivewm.multiview.config import MultiViewConfig
+from drivewm.multiview.config import MultiViewConfig, with_layout_control
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
-from drivewm.multiview.init import from_text2world
+from drivewm.multiview.init import control_copy, from_text2world
 from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
 from drivewm.multiview.trajectory_probe import is_turning, loss_gap, turning_clips
@@ -79,6 +79,10 @@ class PosttrainConfig:
     learning rate a step, so at the whole model's rate it stays near zero for hundreds of steps
     (docs/quality-vs-compute.md, "A warp-conditioned fine-tune on the CPU"); ControlNet-style
     branches are trained faster for the same reason."""
+    layout_lr_scale: float = 10.0
+    """Learning-rate multiplier of the layout's new parts (the layout encoder and the ControlNet
+    branch, multi-view config ``layout``): they start at zero effect, and AdamW moves a weight by
+    about the learning rate a step, as for the warp's projection above."""
     cache_clips: int = 2048
     """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
@@ -88,7 +92,7 @@ class PosttrainConfig:
     def validate(self) -> None:
         at_least(
             self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
-            "turn_repeat_min_deg", "cache_clips", "warp_lr_scale",
+            "turn_repeat_min_deg", "cache_clips", "warp_lr_scale", "layout_lr_scale",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
         if self.rope_spatial_scale is not None:
@@ -190,7 +194,10 @@ class MultiViewTask(BundleTask):
         return len(self.epoch_order())
 
     def lr_scales(self) -> dict[str, float]:
-        return {"warp_encoder.": self.cfg.warp_lr_scale} if self.bundle.net.warp_encoder is not None else {}
+        scales = {"warp_encoder.": self.cfg.warp_lr_scale} if self.bundle.net.warp_encoder is not None else {}
+        if self.bundle.net.layout_encoder is not None:
+            scales.update(dict.fromkeys(LAYOUT_PARTS, self.cfg.layout_lr_scale))
+        return scales
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
@@ -223,6 +230,10 @@ class MultiViewTask(BundleTask):
         edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
         cond = cat_conditioning([c.cond for c in clips])
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
+        if cond.layout_keep is not None:  # drawn only for layout models: other runs keep their random streams
+            p = self.cfg.multiview.layout_dropout
+            keep_layout = torch.cat([(torch.rand(1, generator=g) >= p).expand(v) for g in gens])
+            cond = dataclasses.replace(cond, layout_keep=cond.layout_keep & keep_layout)
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
     def prepared(self, index: int) -> PreparedClip:
@@ -237,6 +248,10 @@ class MultiViewTask(BundleTask):
             return self._prepared[index]
         s = self.dataset[index]
         cond = build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps)
+        if self.bundle.cfg.multiview.layout != "none":  # a clip without layout trains as a layout-dropped one
+            known = torch.full((s.latents.shape[0],), s.layout is not None)
+            layout = s.layout if s.layout is not None else torch.zeros_like(s.latents)
+            cond = dataclasses.replace(cond, layout=layout, layout_keep=known)
         item = PreparedClip(s, cond, self.noise_warp(s))
         if self.cfg.cache_clips:
             self._prepared[index] = item
@@ -299,6 +314,8 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
             "warp_grid",
             "warp_valid",
             "trajectory_keep",
+            "layout",
+            "layout_keep",
         )
         if getattr(first, f) is not None
     }
@@ -359,8 +376,10 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
     return MultiViewTask(cfg, dataset, model)
 
 
+#: The parameters a layout adds (drivewm.multiview.layout_encoder, the DiT's ControlNet branch).
+LAYOUT_PARTS = ("layout_encoder.", "denoiser.backbone.control.")
 #: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
-ADDABLE = ("motion_encoder.", "warp_encoder.")
+ADDABLE = ("motion_encoder.", "warp_encoder.", *LAYOUT_PARTS)
 
 
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
@@ -378,8 +397,11 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     if init.cfg.multiview.warp_condition:
         walls = mv.warp_walls_m or init.cfg.multiview.warp_walls_m
         mv = dataclasses.replace(mv, warp_condition=True, warp_walls_m=walls)
-    model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
+    if init.cfg.multiview.layout != "none" and mv.layout == "none":  # its trained layout path is kept
+        keep = ("layout", "layout_control_depth")
+        mv = dataclasses.replace(mv, **{k: getattr(init.cfg.multiview, k) for k in keep})
+    model = MultiView(with_layout_control(dataclasses.replace(init.cfg, multiview=mv)), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}
-    load_weights(model.net, {**state, **added}, init_dir)
+    load_weights(model.net, {**state, **added, **control_copy(state, added)}, init_dir)
     return model
