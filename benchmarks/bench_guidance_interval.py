@@ -19,8 +19,8 @@ import torch
 from interleaved import add_sampling_arguments, alternate, print_medians
 
 from drivewm.choices import sigma_interval
+from drivewm.generate.captions import view_captions
 from drivewm.model_folders import resolve_model_folder
-from drivewm.multiview.generate import view_captions
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.trajectories import resolve_trajectory
 

@@ -29,8 +29,9 @@ COMMAND_MODULES = (
     "drivewm.layout.commands",  # layout
     "drivewm.curate.commands",  # curate, import-video
     "drivewm.tokenizer.commands",  # tokenizer train|encode|decode|eval
-    "drivewm.diffusion.commands",  # pretrain, generate
-    "drivewm.multiview.commands",  # posttrain, rollout
+    "drivewm.diffusion.commands",  # pretrain
+    "drivewm.multiview.commands",  # posttrain
+    "drivewm.generate.commands",  # generate, rollout
     "drivewm.eval.commands",  # eval
     "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.product.quickstart",  # quickstart

@@ -1,6 +1,6 @@
 """Do generated views agree where their cameras overlap if the first frame is blended there?
 
-Reprojected refinement (drivewm.multiview.reproject) warps every view's own first frame along the
+Reprojected refinement (drivewm.generate.reproject) warps every view's own first frame along the
 trajectory, so where two cameras overlap each keeps the content its own first pass drew, and the
 two need not agree: on the benchmark 19 % of generated camera pairs count towards CSE against the
 held-out clips' 50 %. This blends the first frame of every view across the rig before the warp, as
@@ -29,10 +29,10 @@ from pathlib import Path
 
 from reproject_sigma import VALIDATION
 
-from drivewm.diffusion.generate import GenerateOptions
+from drivewm.generate.config import RECIPES
+from drivewm.generate.protocol import GenerateRequest
+from drivewm.generate.registry import load_generator
 from drivewm.model_folders import resolve_model_folder
-from drivewm.multiview.generate import generate_multiview
-from drivewm.multiview.reproject import Reprojection
 
 
 def main() -> None:
@@ -44,12 +44,13 @@ def main() -> None:
     parser.add_argument("--guidance", type=float, default=7.0, help="caption guidance (the benchmark's)")
     args = parser.parse_args()
     model = resolve_model_folder(args.model)
-    for arm, blend in (("own", False), ("blend", True)):
+    generator = load_generator(model, "cpu")
+    for arm, steps in (("own", "[reproject,reshade]"), ("blend", "[reproject,reshade,blend]")):
         for prompt, turn, seed in VALIDATION:
-            options = GenerateOptions([prompt], args.steps, args.guidance, seed, args.seeds, device="cpu")
-            reprojection = Reprojection(None, blend=blend)  # generate's defaults otherwise
-            out = args.out / arm / f"{turn}_{seed}"
-            generate_multiview(model, options, "nuscenes6", turn, None, out, 1.0, reprojection)
+            settings = [f"sampling.steps={args.steps}", f"sampling.guidance={args.guidance}", f"sampling.seed={seed}"]
+            settings += [f"num_samples={args.seeds}", "rig=nuscenes6", f"trajectory={turn}", f"post_processing={steps}"]
+            cfg = RECIPES.resolve(overrides=settings)
+            generator.write(generator.generate(GenerateRequest([prompt]), cfg), args.out / arm / f"{turn}_{seed}")
 
 
 if __name__ == "__main__":

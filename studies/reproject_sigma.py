@@ -3,7 +3,7 @@
 Six validation prompts (none of them, nor their seeds, the benchmark's), one left or right turn
 each: the model's first pass, its first frame reprojected along the turn (what the warp alone
 shows, before and after the tokenizer), then refined from each SIGMA with the library's own path
-(drivewm.multiview.reproject.refine_reprojected, as ``drivewm generate --reproject`` runs it). The
+(drivewm.generate.reproject.refine_reprojected, as the ``reproject`` post-step runs it). The
 front camera's yaw is read by the eval's dense-flow reader (left positive). The rule, fixed before
 the benchmark was run: the SIGMA whose samples come closest to the asked turn (median absolute
 error against the trajectory's own heading change) is the one documented. With ``--out DIR`` each
@@ -15,7 +15,7 @@ is not taken, however close its turns.
     python studies/reproject_sigma.py MODEL_DIR [--sigmas 0.5,0.75,1,1.5] [--steps 20] [--prompt-template] [--out DIR]
         [--[no-]reproject-reshade]
 
-The warp is reshaded (drivewm.multiview.reshade) unless ``--no-reproject-reshade`` is given, as the library does.
+The warp is reshaded (drivewm.views.reshade) unless ``--no-reproject-reshade`` is given.
 
 About 90 s per prompt with four SIGMAs on 2 CPU cores. Numbers: studies/README.md.
 """
@@ -28,15 +28,17 @@ from pathlib import Path
 import numpy as np
 from rollout_turns import front_yaw
 
+from drivewm.generate.captions import template_view_captions, view_captions
+from drivewm.generate.config import ReprojectConfig
+from drivewm.generate.reproject import refine_reprojected
+from drivewm.generate.writer import GeneratedSample, write_samples
 from drivewm.geometry import yaw_of
 from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.coding import decode_views, encode_views
-from drivewm.multiview.generate import template_view_captions, view_captions
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import Reprojection, refine_reprojected, reproject_first_frame
 from drivewm.multiview.trajectories import poses_from_waypoints, resolve_trajectory
-from drivewm.multiview.writer import GeneratedSample, write_samples
 from drivewm.tokenizer import Tokenizer
+from drivewm.views.reproject import reproject_first_frame
 
 VALIDATION = [
     ("light snow on a country lane, turning left", "left", 900),
@@ -57,11 +59,10 @@ def main() -> None:
     parser.add_argument(
         "--prompt-template", action="store_true", help="prompts in the training captions' template (generate's default)"
     )
-    parser.add_argument("--walls", type=float, default=0.0, help="corridor of the warp, m (--reproject-walls)")
     parser.add_argument(
         "--reproject-reshade",
         action=argparse.BooleanOptionalAction,
-        help="reshade the warp (drivewm.multiview.reshade; default on, as drivewm generate)",
+        help="reshade the warp (drivewm.views.reshade; default on)",
     )
     parser.add_argument("--out", type=Path, help="write each SIGMA's samples to OUT/sigma_S for `drivewm eval`")
     args = parser.parse_args()
@@ -86,7 +87,8 @@ def main() -> None:
         z = model.sample_latents(rig, [caps], wp[None], [seed], args.steps, **sampling)[0]
         first = decode_views(tokenizer, z)
         asked = np.degrees(yaw_of(poses_from_waypoints(wp, first.shape[1], mv.trajectory_dt_s, fps)[-1]))
-        warped, _ = reproject_first_frame(first, rig, wp, mv.trajectory_dt_s, fps, mv.warp_ground_m, args.walls)
+        poses = poses_from_waypoints(wp, first.shape[1], mv.trajectory_dt_s, fps)
+        warped, _ = reproject_first_frame(first, rig, poses, mv.warp_ground_m)
         coded = decode_views(tokenizer, encode_views(tokenizer, warped, first.shape[2:4]))
         row = f"{turn:5s} {seed}: asked {asked:+.1f}, first pass {yaw(first, wp):+.1f}, warp {yaw(warped, wp):+.1f}"
         row += f", coded {yaw(coded, wp):+.1f}"
@@ -94,12 +96,14 @@ def main() -> None:
         written["first"].append(GeneratedSample(first, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         written["warp_coded"].append(GeneratedSample(coded, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
         for s in sigmas:
-            reprojection = Reprojection(s, walls_m=args.walls, reshade=args.reproject_reshade)
-            refined = refine_reprojected(model, tokenizer, rig, caps, wp, seed, first, reprojection, sampling)
+            reshade = args.reproject_reshade is not False
+            refined = refine_reprojected(
+                model, tokenizer, rig, caps, wp, seed, first, ReprojectConfig(s), reshade, sampling
+            )
             videos = decode_views(tokenizer, refined)
             read = yaw(videos, wp)
             errors[s].append(abs(read - asked))
-            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, **reprojection.record()}
+            extra = {"prompt": prompt, "seed": seed, "trajectory": turn, "reproject": {"sigma": s}}
             written[s].append(GeneratedSample(videos, rig, prompt, caps, wp, mv.trajectory_dt_s, extra))
             row += f"; sigma {s:g} {read:+.1f}"
         print(row, flush=True)

@@ -27,10 +27,10 @@ import numpy as np
 from drivewm.clips.shards import iter_clips
 from drivewm.eval.trajectory import flow_fallback
 from drivewm.eval.trajectory_errors import heading_change_deg
+from drivewm.generate.config import RECIPES
+from drivewm.generate.rollout import rollout
 from drivewm.model_folders import resolve_model_folder
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import Reprojection
-from drivewm.multiview.rollout import RolloutOptions, rollout
 from drivewm.tokenizer import Tokenizer
 
 STRAIGHT_DEG = 5.0
@@ -68,7 +68,7 @@ def main() -> None:
     parser.add_argument(
         "--reproject-reshade",
         action=argparse.BooleanOptionalAction,
-        help="reshade the warp (drivewm.multiview.reshade; default on, as drivewm rollout)",
+        help="reshade the warp (drivewm.views.reshade; default on)",
     )
     args = parser.parse_args()
 
@@ -78,9 +78,12 @@ def main() -> None:
     for j, clip in enumerate(straight_clips(args.clips, args.count)):
         row = {}
         for turn in ("left", "right"):
-            reprojection = Reprojection(args.reproject, reshade=args.reproject_reshade)
-            options = RolloutOptions(turn, windows=1, steps=args.steps, seed=args.seed + j, reprojection=reprojection)
-            row[turn] = front_yaw(rollout(model, clip, options, tokenizer))
+            settings = [f"trajectory={turn}", "rollout.windows=1", f"sampling.steps={args.steps}"]
+            settings += [f"sampling.seed={args.seed + j}"]
+            if args.reproject:
+                steps = "[reproject,reshade]" if args.reproject_reshade is not False else "[reproject]"
+                settings += [f"post_processing={steps}", f"reproject.sigma={args.reproject}"]
+            row[turn] = front_yaw(rollout(model, clip, RECIPES.resolve(overrides=settings), tokenizer))
             yaws[turn].append(row[turn])
         diffs.append(row["left"] - row["right"])
         print(f"{clip.key:50s} left {row['left']:+6.1f}  right {row['right']:+6.1f}  difference {diffs[-1]:+6.1f} deg",

@@ -214,7 +214,7 @@ def main() -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="post-training override, e.g. multiview.warp_condition=true",
+        help="post-training override, e.g. multiview.frame_motion=false",
     )
     p.add_argument("--rate", type=float, default=0.25, help="extra yaw rate (rad/s) of the turned copies")
     args = p.parse_args()

@@ -7,9 +7,9 @@ the true frames' ground stays at one luma while the warp of its own first frame 
 levels, and a generated fog sample refined from 0.1 reads snow.
 
 Two corrections, both from the first frame alone (as a generated sample gives it) and both using
-the distances the warp knows (the road plane, the corridor's walls; points at infinity are left):
+the distances the warp knows (the road plane; points at infinity are left):
 
-- ``profile`` (default; drivewm.multiview.reshade, ``--reproject-reshade``): the first frames give
+- ``profile`` (default; drivewm.views.reshade, the ``reshade`` post-step): the first frames give
   the median colour of the road within 3 m of the ego's line against distance, mu(d); a road pixel
   of frame t at distance d_t, fetched from d_0, gets ``I + mu(d_t) - mu(d_0)``. Model-free: haze, a
   wet road's grazing-angle sheen, whatever makes the far road look unlike the near one, and the
@@ -22,7 +22,7 @@ For each clip this prints the fitted beta, the ground luma (bottom third) of the
 last frames, of the warp and of the corrected warp, and the PSNR of the warped later frames
 against the true ones over the pixels the warp renders; then the mean PSNR per weather.
 
-    python studies/warp_haze.py HELDOUT_CLIPS [--weathers fog,clear,snow,rain] [--per-weather 3] [--walls 25]
+    python studies/warp_haze.py HELDOUT_CLIPS [--weathers fog,clear,snow,rain] [--per-weather 3]
         [--method profile|koschmieder]
 
 Numbers: studies/README.md.
@@ -37,9 +37,9 @@ import numpy as np
 
 from drivewm.eval.inputs import load_items
 from drivewm.geometry import invert_T, pixel_rays
-from drivewm.multiview.reproject import reproject_first_frame_mask
-from drivewm.multiview.reshade import PROFILE_M, reshade, surface_distances
 from drivewm.multiview.trajectories import poses_from_waypoints
+from drivewm.views.reproject import reproject_first_frame
+from drivewm.views.reshade import PROFILE_M, reshade, surface_distances
 
 LUMA = np.array([0.299, 0.587, 0.114])
 HORIZON_DEG = (0.0, 3.0)  # rays this far above the horizon, at infinity, give the airlight
@@ -99,7 +99,6 @@ def main(argv=None) -> int:
     p.add_argument("clips", type=Path)
     p.add_argument("--weathers", default="fog,clear,snow,rain")
     p.add_argument("--per-weather", type=int, default=3)
-    p.add_argument("--walls", type=float, default=25.0)
     p.add_argument("--method", default="profile", choices=["profile", "koschmieder"])
     args = p.parse_args(argv)
     counts: dict[str, int] = {}
@@ -115,17 +114,15 @@ def main(argv=None) -> int:
         vids = item.videos()
         videos = np.stack([vids[c.name] for c in item.rig.cameras])
         wp = np.asarray(item.trajectory_ego, dtype=np.float64)
-        warped, valid = reproject_first_frame_mask(
-            videos, item.rig, wp, item.trajectory_dt_s, item.fps, walls_m=args.walls
-        )
         poses = poses_from_waypoints(wp, videos.shape[1], item.trajectory_dt_s, item.fps)
+        warped, valid = reproject_first_frame(videos, item.rig, poses)
         rel = np.einsum("ij,tjk->tik", invert_T(poses[0]), poses)
-        d_t, d_0, _, _ = surface_distances(item.rig, videos.shape[2:4], rel, args.walls)
+        d_t, d_0, _, _ = surface_distances(item.rig, videos.shape[2:4], rel)
         airlight, beta = fit_haze(videos[:, 0], item.rig, d_0[:, 0])
         if args.method == "koschmieder":
             fixed = rehaze(warped, valid, d_t, d_0, airlight, beta)
         else:
-            fixed = reshade(warped, valid, item.rig, rel, args.walls)
+            fixed = reshade(warped, valid, item.rig, rel)
         g = [ground_luma(x) for x in (videos, warped, fixed)]
         row = (psnr_valid(warped, videos, valid), psnr_valid(fixed, videos, valid))
         summary.setdefault(weather, []).append(row)

@@ -124,10 +124,10 @@ def test_text_encoder_folder_with_pickled_weights_is_refused_before_loading(tmp_
 @pytest.mark.parametrize(
     "argv,message",
     [
-        (["rollout", "--clip", "c", "--speed", "nan"], "rollout: --speed must be a finite number >= 0"),
-        (["rollout", "--clip", "c", "--speed", "-5"], "rollout: --speed must be a finite number >= 0"),
-        (["rollout", "--clip", "c", "--speed", "1e30"], "rollout: --speed must be at most 100 m/s, got 1e+30"),
-        (["rollout", "--clip", "c", "--trajectory-guidance", "inf"], "rollout: trajectory guidance must be a finite"),
+        (["rollout", "--clip", "c", "--speed", "nan"], "rollout.rollout.speed_mps: expected a finite number, got nan"),
+        (["rollout", "--clip", "c", "--speed", "-5"], "rollout.speed_mps must be in [0, 100] m/s, got -5.0"),
+        (["rollout", "--clip", "c", "--speed", "1e30"], "rollout.speed_mps must be in [0, 100] m/s, got 1e+30"),
+        (["rollout", "--clip", "c", "--trajectory-guidance", "inf"], "trajectory_guidance: expected a finite number"),
         (["transfer", "c", "--to", "snow", "--guidance", "nan"], "transfer: --guidance must be a finite number >= 0"),
         (["transfer", "c", "--to", "snow", "--start-sigma", "-1"], "transfer: --start-sigma must be a finite number"),
         (["transfer", "c", "--to", "snow", "--detail-band", "nan"], "transfer: --detail-band must be a finite number"),

@@ -105,6 +105,18 @@ def test_drivewm_has_no_import_cycle():
     assert not cycle, "import cycle: " + " -> ".join(cycle)
 
 
+#: Packages that drivewm.views (view geometry shared by eval, transfer and generation) sits below.
+ABOVE_VIEWS = ("diffusion", "multiview", "transfer", "generate", "tokenizer", "eval", "product")
+
+
+def test_view_geometry_sits_below_the_model_packages():
+    graph, _ = import_graph()
+    views = {name: found for name, found in graph.items() if name.startswith("drivewm.views")}
+    assert len(views) >= 6  # rays, warp, blend, reshade, grid, reproject
+    above = {n: sorted(f for f in found if f.split(".")[1] in ABOVE_VIEWS) for n, found in views.items()}
+    assert not any(above.values()), above
+
+
 def test_no_drivewm_module_imports_tests_or_studies():
     _, outside = import_graph()
     offenders = {name: sorted(found) for name, found in outside.items() if found}

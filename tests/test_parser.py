@@ -153,13 +153,8 @@ def test_tokenizer_train_flags_are_frozen_and_its_help_fits_a_screen(monkeypatch
     assert help_lines(train, monkeypatch) <= 60
 
 
-#: Commands whose help is still longer than a screen: generation's flags, which issue 65's
-#: generation stage (branch ``generate``) replaces with one typed config.
-OVER_A_SCREEN = {"generate", "worldmodel benchmark"}
-
-
-def test_every_other_commands_help_fits_a_screen(monkeypatch):
+def test_every_commands_help_fits_a_screen(monkeypatch):
     commands = sub_commands(build_parser())
-    assert len(commands) >= 20 and OVER_A_SCREEN <= set(commands)
+    assert len(commands) >= 20
     long = {name: n for name, p in commands.items() if (n := help_lines(p, monkeypatch)) > 60}
-    assert set(long) <= OVER_A_SCREEN, long
+    assert not long, long

@@ -229,13 +229,30 @@ def test_one_curated_clip_is_transferred_to_snow_by_the_fine_tuned_shipped_trans
     assert f"Transferred: {done.key}" in (out / "report.md").read_text()
 
 
+def test_a_generated_columns_title_names_its_post_processing(tmp_path):
+    """A generated set's column says whether its clips are the network's own frames or which post-steps
+    they went through (from the clips' ``post_processing``), so a stitched CSE never passes for the network's."""
+    from drivewm.clips.shards import write_manifest
+    from drivewm.product.report import post_processing, set_title
+
+    plain = write_manifest(tmp_path / "plain", [{"key": "a", "post_processing": []}])
+    stitched = write_manifest(
+        tmp_path / "stitched", [{"key": "a", "post_processing": ["reproject", "stitch"]}, {"key": "b"}]
+    )
+    facts = {"post_processing": {"shipped": post_processing([plain]), "finetuned": post_processing([plain, stitched])}}
+    assert set_title("real", facts) == "real clips"
+    assert set_title("shipped", facts) == "shipped model, network's own frames"
+    assert set_title("finetuned", facts) == "fine-tuned model, post-processed: reproject, stitch"
+
+
 @pytest.mark.slow
 def test_report_has_real_shipped_and_fine_tuned_columns_with_numbers(quickstart_dir):
     out, _ = quickstart_dir
     md = (out / "report.md").read_text()
     table = [line for line in md.split("## Consistency benchmark")[1].split("\n\n")[1].splitlines()]
     header = [c.strip() for c in table[0].strip("|").split("|")]
-    assert [h.split(" (")[0] for h in header[2:]] == ["real clips", "shipped model", "fine-tuned model"]
+    own = ["shipped model, network's own frames", "fine-tuned model, network's own frames"]
+    assert [h.split(" (")[0] for h in header[2:]] == ["real clips", *own]  # generate's default: no post-steps
     rows = {r.split("|")[1].strip(" `"): [c.strip() for c in r.strip("|").split("|")[2:]] for r in table[2:]}
     for key in ("pose_success", "tse"):
         assert re.fullmatch(r"\d+\.\d{3}", rows[key][0]), rows[key]  # real clips: a number

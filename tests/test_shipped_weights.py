@@ -2,8 +2,9 @@
 generating what they generated when they were exported (fixed seed, stored statistics).
 
 ``tests/shipped_generation.json`` holds per-camera pixel statistics of a small fixed-seed generation
-with the shipped multi-view model, at generate's defaults. Replacing the shipped weights or changing
-those defaults re-records it with ``python tests/test_shipped_weights.py --record`` in the same commit.
+with the shipped multi-view model, at generate's defaults (the network's own frames) and with the
+``reprojected`` recipe's post-steps. Replacing the shipped weights or changing those settings
+re-records it with ``python tests/test_shipped_weights.py --record`` in the same commit.
 """
 
 from __future__ import annotations
@@ -20,16 +21,18 @@ from safetensors import safe_open
 from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.errors import DrivewmError
+from drivewm.generate.config import POST_STEPS
 from drivewm.model_folders import WEIGHTS_DIR, shipped_model
 from drivewm.product.release import MAX_FILE_BYTES, MAX_TOTAL_BYTES, check_manifest, export_run, folder_extra
 
 STATS = Path(__file__).with_name("shipped_generation.json")
-# generate's defaults otherwise: the prompt template, reprojection from DEFAULT_SIGMA
+# generate's defaults otherwise (plain sampling, the prompt template)
 GENERATE = [
     "generate", "--prompt", "a snowy highway at dusk, the car ahead brakes", "--rig", "nuscenes6",
     "--trajectory", "left", "--steps", "3", "--guidance", "3", "--seed", "7", "--num-samples", "1", "--device", "cpu",
-    "--reproject-steps", "3",
 ]  # fmt: skip
+#: The settings recorded: generate's defaults, and the opt-in post-steps of the ``reprojected`` recipe.
+SETTINGS = {"defaults": [], "reprojected": ["--recipe", "reprojected", "--set", "reproject.steps=3"]}
 KINDS = ("tokenizer", "text2world", "multiview", "transfer")
 
 
@@ -222,11 +225,15 @@ def generation_stats(out: Path) -> dict[str, list[float]]:
 
 
 @pytest.mark.slow
-def test_fixed_seed_generation_matches_the_stored_statistics(tmp_path):
-    """No --model: generate uses the shipped multi-view model (and its shipped tokenizer)."""
-    assert main([*GENERATE, "--out", str(tmp_path)]) == 0
+@pytest.mark.parametrize("settings", sorted(SETTINGS))
+def test_fixed_seed_generation_matches_the_stored_statistics(tmp_path, settings):
+    """No --model: generate uses the shipped multi-view model (and its shipped tokenizer). The clip
+    records the post-steps it went through: none at the defaults."""
+    assert main([*GENERATE, *SETTINGS[settings], "--out", str(tmp_path)]) == 0
     got = generation_stats(tmp_path)
-    want = json.loads(STATS.read_text())
+    want = json.loads(STATS.read_text())[settings]
+    (clip,) = iter_clips(tmp_path)
+    assert clip.meta.extra["post_processing"] == ([] if settings == "defaults" else list(POST_STEPS))
     assert sorted(got) == sorted(want) and len(got) == 6  # one mp4 per nuScenes camera
     for cam, values in want.items():
         np.testing.assert_allclose(got[cam], values, atol=2.0, err_msg=cam)  # 8-bit levels
@@ -265,9 +272,12 @@ if __name__ == "__main__":
     import torch
 
     torch.set_num_threads(1)
-    with tempfile.TemporaryDirectory() as tmp:
-        assert main([*GENERATE, "--out", tmp]) == 0
-        STATS.write_text(json.dumps(generation_stats(Path(tmp)), indent=1) + "\n")
+    stats = {}
+    for name, flags in SETTINGS.items():
+        with tempfile.TemporaryDirectory() as tmp:
+            assert main([*GENERATE, *flags, "--out", tmp]) == 0
+            stats[name] = generation_stats(Path(tmp))
+    STATS.write_text(json.dumps(stats, indent=1) + "\n")
     print(f"wrote {STATS}")
 
 

@@ -10,7 +10,8 @@ import pytest
 
 from drivewm import resources
 from drivewm.cli import build_parser, main
-from drivewm.product.worldmodel import SampleFlags, benchmark_stages, load_profile, stage_commands
+from drivewm.errors import DrivewmError
+from drivewm.product.worldmodel import benchmark_stages, generate_recipe, load_profile, stage_commands
 
 
 @pytest.mark.parametrize("profile", ["cpu", "gpu"])
@@ -56,32 +57,29 @@ def test_the_benchmark_of_any_model_is_the_recipes_benchmark_stages(tmp_path):
     parser = build_parser()
     assert all(callable(parser.parse_args(argv).func) for _, argv in mine)
 
-    def generated(**flags) -> list:  # each prompt's generate command, parsed, under the sampling flags given
-        stages = benchmark_stages(p, "m", tmp_path, tmp_path, flags=SampleFlags(**flags))
+    def generated(recipe) -> list:  # each prompt's generate command, parsed, with the generate recipe given
+        stages = benchmark_stages(p, "m", tmp_path, tmp_path, recipe=recipe)
         parsed = [parser.parse_args(a) for n, a in stages if n.startswith("generate-")]
         assert len(parsed) == len(p.benchmarks)
         return parsed
 
-    defaults = generated()  # none given: generate's own defaults
-    assert all(a.trajectory_guidance == 1.0 and a.reproject is None and a.reproject_walls == 0.0 for a in defaults)
-    assert all(
-        a.prompt_template is None and a.reproject_reshade is None and a.reproject_blend is None and a.stitch is None
-        for a in defaults
-    )
-    assert all(a.trajectory_guidance == 4.0 for a in generated(trajectory_guidance=4))
-    assert all(a.reproject == 0.5 for a in generated(reproject=0.5))
-    assert all(a.guidance_interval == (0.3, 5.0) for a in generated(guidance_interval="0.3,5"))
-    assert all(a.guidance_interval is None for a in generated(guidance_interval="all"))
-    assert all(a.reproject_walls == 25.0 for a in generated(reproject_walls=25))
-    for flag in ("prompt_template", "reproject_reshade", "reproject_blend", "stitch"):
-        for asked in (True, False):
-            assert all(getattr(a, flag) is asked for a in generated(**{flag: asked}))
-    # the order earlier runs' stage markers hold: a rerun with the same options resumes
-    every = SampleFlags(4, 0.1, "0.3,5", True, 25, False, True, False)
-    assert every.argv() == [
-        "--trajectory-guidance", "4", "--reproject", "0.1", "--guidance-interval", "0.3,5", "--prompt-template",
-        "--reproject-walls", "25", "--no-reproject-reshade", "--reproject-blend", "--no-stitch",
-    ]  # fmt: skip
+    assert all(a.recipe is None and a.overrides == [] for a in generated(None))  # generate's own defaults
+    assert generate_recipe(tmp_path, None, []) is None
+    written = generate_recipe(tmp_path, "reprojected", ["sampling.trajectory_guidance=4"])
+    assert all(a.recipe == str(written) for a in generated(written))
+    from drivewm.generate.config import RECIPES
+
+    cfg = RECIPES.resolve(recipe=written)  # the recipe written holds the whole resolved config
+    assert cfg.sampling.trajectory_guidance == 4.0 and cfg.post_processing == [
+        "reproject",
+        "reshade",
+        "blend",
+        "stitch",
+    ]
+    assert generate_recipe(tmp_path, "reprojected", ["sampling.trajectory_guidance=4"]) == written  # same: resumes
+    assert generate_recipe(tmp_path, None, ["sampling.trajectory_guidance=2"]) != written  # other settings: rerun
+    with pytest.raises(DrivewmError, match="post_processing"):
+        generate_recipe(tmp_path, None, ["post_processing=[warp]"])  # refused before any stage runs
 
 
 def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
@@ -97,10 +95,10 @@ def test_benchmark_reuses_an_earlier_heldout_eval(tmp_path, monkeypatch):
     )
     run = tmp_path / "run"
     argv = ["worldmodel", "benchmark", "--heldout", str(tmp_path / "earlier.json"), "--out", str(run)]
-    assert main([*argv, "--reproject", "0.2", "--no-reproject-blend"]) == 0
+    assert main([*argv, "--set", "post_processing=[stitch]"]) == 0
     assert json.loads((run / "eval" / "heldout" / "metrics.json").read_text()) == earlier
-    flags = SampleFlags(reproject=0.2, reproject_blend=False)  # the sampling flags reach every generate stage
-    full = benchmark_stages(load_profile("cpu"), "shipped:multiview", run, tmp_path / "earlier.json", flags=flags)
+    recipe = generate_recipe(run, None, ["post_processing=[stitch]"])  # the generate settings reach every stage
+    full = benchmark_stages(load_profile("cpu"), "shipped:multiview", run, tmp_path / "earlier.json", recipe=recipe)
     assert ran == [(n, a) for n, a in full if n != "eval-heldout"] and len(ran) == len(full) - 1
     reference = dict(ran)["eval-generated"]
     assert reference[reference.index("--reference") + 1] == str(run / "eval" / "heldout" / "metrics.json")
@@ -134,8 +132,9 @@ def test_a_rerun_given_the_tokenizer_eval_computes_the_figures_again(tmp_path, m
         (["--tokenizer-eval", "{tmp}/heldout/bad.json"], "bad.json is not a `tokenizer eval` metrics.json"),
         (["--heldout", "{tmp}/heldout/bad.json"], "bad.json is not a `drivewm eval` metrics.json"),
         (["--samples-per-prompt", "0"], "must be in [1, 64], got 0"),
-        (["--trajectory-guidance", "nan"], "--trajectory-guidance must be a finite number >= 1, got nan"),
-        (["--trajectory-guidance", "0.5"], "--trajectory-guidance must be a finite number >= 1, got 0.5"),
+        (["--set", "sampling.trajectory_guidance=nan"], "sampling.trajectory_guidance: expected a number"),
+        (["--set", "post_processing=[warp]"], "post_processing must be a list of"),
+        (["--recipe", "nowhere"], "nowhere"),
     ],
 )
 def test_benchmark_bad_input_is_one_line_and_writes_nothing(tmp_path, capsys, args, message):

@@ -13,8 +13,6 @@ build the conditioning and (de)normalise latents; nothing here knows a tokenizer
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import torch
 from torch import nn
 
@@ -57,7 +55,6 @@ def sample(
     device: torch.device | str = "cpu",
     start: torch.Tensor | None = None,
     start_sigma: float | None = None,
-    noise_fn: Callable[[torch.Tensor], torch.Tensor] | None = None,
     guidance_interval: tuple[float, float] | None = None,
 ) -> torch.Tensor:
     """Normalised latents (B, *shape) float32 on the CPU; sample b starts from noise seeded ``seeds[b]``.
@@ -68,8 +65,7 @@ def sample(
     ``cond_latents`` normalised (Video2World). ``guidance`` / ``trajectory_guidance``: classifier-free
     guidance weights on the caption / the ego trajectory (1 = off). ``start`` (B, *shape) normalised
     latents (None: pure noise at sigma_max 80): sampling starts from them noised to ``start_sigma`` (SDEdit).
-    ``noise_fn`` maps the seeded standard normal noise (B, *shape) to the noise sampling starts from
-    (e.g. drivewm.multiview.warped_noise), on the CPU. ``guidance_interval`` (lo, hi): guide only at
+    ``guidance_interval`` (lo, hi): guide only at
     sigma in (lo, hi], the conditional model alone elsewhere (one network evaluation; None: guide at
     every sigma).
     """
@@ -85,8 +81,6 @@ def sample(
     device = resolve_device(device)
     sigmas = (karras_sigmas(steps, sigma_max=start_sigma) if start is not None else karras_sigmas(steps)).to(device)
     noise = seeded_noise((len(seeds), *shape), seeds)  # on the CPU: the same sample on every device
-    if noise_fn is not None:
-        noise = noise_fn(noise)
     x = noise * sigmas[0].cpu() + (start.float().cpu() if start is not None else 0.0)
     x = x.reshape(-1, *shape[-4:]).to(device)  # (B [V], c, t, h, w)
     model = guided(denoiser, guidance, trajectory_guidance, guidance_interval)

@@ -228,12 +228,12 @@ OVERLAP_WIDTH_PX = 320
 
 def _overlap_disagreement(rig, videos: dict[str, np.ndarray], step: int) -> float:
     """Mean colour difference (8-bit levels) where two cameras see the same flat-world point, over
-    every ``step``-th frame (drivewm.multiview.blend.overlap_disagreement), every camera at the first
+    every ``step``-th frame (drivewm.views.blend.overlap_disagreement), every camera at the first
     one's size, at most :data:`OVERLAP_WIDTH_PX` wide. Real clips read about 8, the parallax of what
     stands beside the road; views stitched through a flat world read about 2, so a CSE won by
     stitching shows here (docs/eval-protocol.md)."""
-    from drivewm.multiview.blend import overlap_disagreement
     from drivewm.multiview.coding import resize_views
+    from drivewm.views.blend import overlap_disagreement
 
     first = rig.cameras[0]
     w = min(first.width, OVERLAP_WIDTH_PX)

@@ -8,6 +8,7 @@ from typing import Literal
 from drivewm.config import above, at_least, in_range, require
 from drivewm.diffusion.denoiser import EDMConfig
 from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.errors import DrivewmError
 from drivewm.text import TextConfig
 
 
@@ -24,33 +25,18 @@ class MultiViewConfig:
     """Add per-token Plucker-ray embeddings computed from K and T_ego_from_cam."""
     camera_width: int = 128
     """Hidden width of the Plucker-ray MLP."""
-    moving_camera_rays: bool = True
+    moving_camera_rays: bool = False
     """With a trajectory, each latent frame's rays are those of the cameras at the ego pose of that
     frame, in the first frame's ego frame (per-frame Plucker camera control as in CameraCtrl, He et al.
     2024), so the trajectory also conditions every token locally, not only through the global MLP."""
-    frame_motion: bool = False
+    frame_motion: bool = True
     """With a trajectory, add an embedding of the ego's pose and step at every token frame to all of
     that frame's tokens (drivewm.multiview.frame_motion): the per-frame motion without moving the
     rays (set ``moving_camera_rays`` false with it, so a token's rays only say where it looks)."""
-    warp_condition: bool = False
-    """Video2World: also give every later latent frame the first frame of the rig warped into its
-    cameras along the trajectory (drivewm.multiview.warp; road-plane + plane-at-infinity
-    reprojection, as GEN3C renders its 3D cache). Off by default: at the debug scale measured so far
-    it predicts the simulated clips' later frames no better than copying the first frame (see
-    studies/turned_following.py)."""
-    warped_noise: float = 0.0
-    """Correlation a of the diffusion noise along the trajectory (drivewm.multiview.warped_noise): each
-    later latent frame's noise is a * the first frame's warped along the ego trajectory plus
-    sqrt(1 - a^2) * its own, in training (the clip's own trajectory) and in sampling (the one asked
-    for), so the motion is in the noise as well as in the conditioning. 0 = independent noise."""
     warp_ground_m: float = 100.0
-    """The warp follows rays that meet the road within this distance (m) to the road plane and all
-    others to infinity; 0 = every ray at infinity (a pure-rotation warp)."""
-    warp_walls_m: float = 0.0
-    """The training warp's corridor (``warp_condition``, ``warped_noise``): vertical planes this far (m)
-    left and right of the first ego frame, so what stands beside the road passes by with parallax
-    (drivewm.multiview.warp.warp_grid ``walls_m``; sampling's own is ``--reproject-walls``). 0 = road
-    and infinity only. docs/quality-vs-compute.md, "The flat-world warp stands still"."""
+    """The flat-world warp of the opt-in post-steps (drivewm.views.warp) follows rays that meet the road
+    within this distance (m) to the road plane and all others to infinity; 0 = every ray at infinity
+    (a pure-rotation warp)."""
     ray_scale_m: float = 10.0
     """Ray moments (o x d, metres) are divided by this before the ray MLP."""
     temporal_compression: int = 4
@@ -61,7 +47,7 @@ class MultiViewConfig:
     """Waypoints are divided by this (m) before the trajectory MLP, so its inputs are O(1)."""
     trajectory_dt_s: float = 0.1
     """Spacing of the waypoints (s), from the training clips (ClipMeta.trajectory_dt_s)."""
-    speed_mps: float = 15.0
+    speed_mps: float = 20.49
     """Default speed of the named trajectories (set to the training clips' median initial speed)."""
     trajectory_width: int = 256
     """Hidden width of the trajectory MLP."""
@@ -84,15 +70,27 @@ class MultiViewConfig:
 
     def validate(self) -> None:
         require(self.cross_view in ("joint", "neighbors"), "cross_view", self.cross_view, "'joint' or 'neighbors'")
-        at_least(self, 0, "neighbors", "trajectory_waypoints", "warp_ground_m", "warp_walls_m", "speed_mps")
+        at_least(self, 0, "neighbors", "trajectory_waypoints", "warp_ground_m", "speed_mps")
         at_least(self, 1, "camera_width", "trajectory_width", "temporal_compression")
         above(self, 0, "trajectory_scale_m", "trajectory_dt_s", "ray_scale_m")
         in_range(self, "video2world_prob", 0, 1)
-        in_range(self, "warped_noise", 0, 1, high_open=True)
         in_range(self, "trajectory_dropout", 0, 1, high_open=True)
         in_range(self, "layout_dropout", 0, 1, high_open=True)
         require(self.layout in ("none", "tokens", "controlnet"), "layout", self.layout, "none, tokens or controlnet")
         at_least(self, 1, "layout_control_depth")
+
+
+#: Fields of experiments that did not ship, read from saved folders only when they are off.
+RETIRED_FIELDS = {"warp_condition": False, "warped_noise": 0.0, "warp_walls_m": 0.0}
+
+
+def retire_saved_fields(multiview: dict, where: str) -> dict:
+    """A saved ``multiview`` section without :data:`RETIRED_FIELDS` (a DrivewmError when one is on: the
+    folder's network needs a part drivewm no longer has)."""
+    on = [k for k, off in RETIRED_FIELDS.items() if k in multiview and multiview[k] != off]
+    if on:
+        raise DrivewmError(f"{where}: trained with {on}, which drivewm no longer supports")
+    return {k: v for k, v in multiview.items() if k not in RETIRED_FIELDS}
 
 
 @dataclasses.dataclass

@@ -18,6 +18,7 @@ from einops import rearrange
 
 from drivewm.diffusion.blocks import BlockContext, SelfAttention, attend
 from drivewm.geometry import Rig
+from drivewm.views.grid import viewing_azimuth_rad
 
 SUBLAYER_NAME = "cross_view_attn"
 
@@ -46,12 +47,6 @@ def gather_views(t: torch.Tensor, neighbors: torch.Tensor) -> torch.Tensor:
 def all_views(num_views: int, device: torch.device | str = "cpu") -> torch.Tensor:
     """(V, V) long: every view reads every view ("joint")."""
     return torch.arange(num_views, device=device).expand(num_views, num_views).contiguous()
-
-
-def viewing_azimuth_rad(rig: Rig) -> np.ndarray:
-    """(V,) azimuth in the ego x-y plane of each camera's optical axis (OpenCV +z), 0 = ego +x, + = left."""
-    axes = np.stack([c.T_ego_from_cam[:3, 2] for c in rig.cameras])  # (V, 3) camera z axes in ego
-    return np.arctan2(axes[:, 1], axes[:, 0])
 
 
 def view_neighbors(rig: Rig, mode: str, neighbors: int) -> torch.Tensor:

@@ -10,7 +10,6 @@ calls the EDM denoiser. :class:`MultiView` is the inference bundle and model fol
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -28,18 +27,17 @@ from drivewm.diffusion.dit_config import upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
 from drivewm.errors import DrivewmError
-from drivewm.geometry import Rig, invert_T, rig_from_dict
-from drivewm.multiview.camera import CameraEncoder, moving_token_rays, plucker_rays, token_rays
-from drivewm.multiview.config import MultiViewModelConfig
+from drivewm.geometry import Rig, rig_from_dict
+from drivewm.multiview.camera import CameraEncoder
+from drivewm.multiview.config import MultiViewModelConfig, retire_saved_fields
 from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
 from drivewm.multiview.frame_motion import FrameMotionEncoder, frame_motion_features
 from drivewm.multiview.layout_encoder import LayoutEncoder
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
-from drivewm.multiview.warp import WarpEncoder, warp_first_frame, warp_grid
-from drivewm.multiview.warped_noise import warp_noise
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
+from drivewm.views.rays import moving_token_rays, plucker_rays, token_rays
 
 MODEL_TYPE = "multiview"
 
@@ -58,11 +56,6 @@ class MultiViewConditioning(Conditioning):
     frame_motion: torch.Tensor | None = None
     """(B V, t, F) the ego's pose and step at every token frame (drivewm.multiview.frame_motion);
     None = no per-frame motion conditioning."""
-    warp_grid: torch.Tensor | None = None
-    """(B V, T, h, w, 2) where every latent pixel's ray lies in the rig's first latent frame
-    (drivewm.multiview.warp.warp_grid); None = no reprojected conditioning."""
-    warp_valid: torch.Tensor | None = None
-    """(B V, T, h, w) bool: some view's first frame sees that ray."""
     trajectory_keep: torch.Tensor | None = None
     """(B V,) bool: False = this view's trajectory is dropped (training dropout, or the trajectory-free
     branch of trajectory guidance); None = every trajectory kept."""
@@ -97,9 +90,6 @@ class MultiViewNet(nn.Module):
         mv, dim = cfg.multiview, cfg.dit.hidden_dim
         self.camera_encoder = CameraEncoder(dim, mv.camera_width, mv.ray_scale_m) if mv.camera_cond else None
         self.motion_encoder = FrameMotionEncoder(dim, mv.camera_width) if mv.frame_motion else None
-        self.warp_encoder = (
-            WarpEncoder(cfg.dit.in_channels, dim, cfg.dit.patch_size, cfg.dit.patch_t) if mv.warp_condition else None
-        )
         self.trajectory_encoder = (
             TrajectoryEncoder(mv.trajectory_waypoints, dim, mv.trajectory_width, mv.trajectory_scale_m)
             if mv.trajectory_waypoints
@@ -134,20 +124,6 @@ class MultiViewNet(nn.Module):
             tokens_per_frame = x.shape[-2] * x.shape[-1] // self.cfg.dit.patch_size**2  # tokens are (t, h, w)
             motion = motion.repeat_interleave(tokens_per_frame, dim=1)
             token_cond = motion if token_cond is None else token_cond + motion
-        if (
-            self.warp_encoder is not None
-            and cond.warp_grid is not None
-            and cond.cond_latents is not None
-            and cond.cond_frames > 0
-        ):
-            valid = (
-                cond.warp_valid if keep is None else cond.warp_valid & keep[:, None, None, None]
-            )  # dropped trajectory: no warp
-            warped = warp_first_frame(
-                cond.cond_latents.to(x.dtype) / self.cfg.edm.sigma_data, cond.warp_grid, valid, cond.num_views
-            )
-            warp_cond = self.warp_encoder(warped)
-            token_cond = warp_cond if token_cond is None else token_cond + warp_cond
         if self.trajectory_encoder is not None and cond.trajectory is not None:
             global_cond = self.trajectory_encoder(cond.trajectory.to(x.dtype))  # (B V, D)
             if keep is not None:
@@ -193,7 +169,10 @@ class MultiView:
     def from_pretrained(cls, path: str | Path) -> MultiView:
         info, state = load_model_folder(path, MODEL_TYPE)
         where = f"{Path(path) / 'config.json'}"
-        config = from_dict(MultiViewModelConfig, upgrade_saved_config(info["config"]), where)
+        saved = upgrade_saved_config(info["config"])
+        if isinstance(saved.get("multiview"), dict):
+            saved["multiview"] = retire_saved_fields(saved["multiview"], where)
+        config = from_dict(MultiViewModelConfig, saved, where)
         model = cls(config, read_latent_info(info, path, config.dit))
         load_weights(model.net, state, path)
         return model
@@ -241,7 +220,7 @@ class MultiView:
         are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
         trajectory's effect w times (drivewm.diffusion.sampling.guided; twice the network evaluations).
         ``start_latents`` (B, V, c, t, h, w) raw: sample from them noised to ``start_sigma`` (SDEdit;
-        drivewm.multiview.reproject), not from pure noise. ``guidance_interval`` (lo, hi): both guidances
+        drivewm.generate.reproject), not from pure noise. ``guidance_interval`` (lo, hi): both guidances
         only at sigma in (lo, hi] (drivewm.diffusion.sampling; None: at every sigma).
         """
         v = len(rig.cameras)
@@ -259,7 +238,6 @@ class MultiView:
         )
         shape = (v, *self.latent.latent_shape)  # the views of a clip share its seed, folded as (B V)
         trajectory_guidance = trajectory_guidance if trajectories is not None else 1.0
-        noise_fn = self.noise_warper(rig, trajectories, fps or self.latent.fps)
         x = sample(
             self.net,
             cond,
@@ -272,27 +250,9 @@ class MultiView:
             self.device,
             start=start,
             start_sigma=start_sigma,
-            noise_fn=noise_fn,
             guidance_interval=guidance_interval,
         )
         return denormalize_latents(x, mean, std, self.cfg.edm.sigma_data)  # (B, V, c, t, h, w)
-
-    def noise_warper(
-        self, rig: Rig, trajectories: np.ndarray | None, fps: float
-    ) -> Callable[[torch.Tensor], torch.Tensor] | None:
-        """With ``multiview.warped_noise`` and trajectories, the map of seeded noise (B, V, c, t, h, w)
-        to noise warped along each clip's trajectory (drivewm.multiview.warped_noise); else None."""
-        a = self.cfg.multiview.warped_noise
-        if not a or trajectories is None:
-            return None
-        grid, valid = clip_warp_grids(self, rig, trajectories, fps)
-        v = len(rig.cameras)
-
-        def warp(noise: torch.Tensor) -> torch.Tensor:
-            folded = rearrange(noise, "b v c t h w -> (b v) c t h w")
-            return rearrange(warp_noise(folded, grid, valid, v, a), "(b v) c t h w -> b v c t h w", v=v)
-
-        return warp
 
     def _normalized(self, latents: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
         """Raw (B, V, c, t, h, w) -> normalised (B V, c, t, h, w), as the network sees them."""
@@ -316,9 +276,6 @@ def build_conditioning(
     traj = None
     if trajectories is not None:
         traj = repeat(torch.as_tensor(np.asarray(trajectories), dtype=torch.float32), "b w c -> (b v) w c", v=v)
-    grid = valid = None
-    if mv.warp_condition and trajectories is not None:
-        grid, valid = clip_warp_grids(model, rig, trajectories, fps)
     static_rays = clip_rays(model, rig, b, None, fps)
     rays = (
         static_rays
@@ -338,8 +295,6 @@ def build_conditioning(
         static_rays=static_rays,
         trajectory=traj,
         frame_motion=motion,
-        warp_grid=grid,
-        warp_valid=valid,
     )
 
 
@@ -357,24 +312,6 @@ def clip_frame_motion(model: MultiView, trajectories: np.ndarray, fps: float) ->
 def token_fps(model: MultiView, fps: float) -> float:
     """Token frames per second of a clip at ``fps``: token frame i shows video frame i * tc * patch_t."""
     return fps / (model.cfg.multiview.temporal_compression * model.cfg.dit.patch_t)
-
-
-def clip_warp_grids(
-    model: MultiView, rig: Rig, trajectories: np.ndarray, fps: float
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """(B V, T, h, w, 2) warp grids and (B V, T, h, w) validity of B clips: latent frame i at the
-    ego pose of video frame i * temporal_compression along each clip's waypoints."""
-    _, t, h, w = model.latent.latent_shape
-    mv = model.cfg.multiview
-    grids = []
-    for wp in np.asarray(trajectories):
-        poses = poses_from_waypoints(wp, t, mv.trajectory_dt_s, fps / mv.temporal_compression)
-        grids.append(
-            warp_grid(
-                rig, (h, w), np.einsum("ij,tjk->tik", invert_T(poses[0]), poses), mv.warp_ground_m, mv.warp_walls_m
-            )
-        )  # frame 0 is the ego frame itself
-    return torch.cat([g for g, _ in grids]), torch.cat([m for _, m in grids])
 
 
 def clip_rays(model: MultiView, rig: Rig, b: int, trajectories: np.ndarray | None, fps: float) -> torch.Tensor:

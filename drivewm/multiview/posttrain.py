@@ -11,7 +11,6 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -73,16 +72,11 @@ class PosttrainConfig:
     """The model's ``dit.rope_spatial_scale`` from this run on (None: the init's). 0.5 takes a model
     trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated
     (docs/quality-vs-compute.md, "The shipped multi-view model at 320x192")."""
-    warp_lr_scale: float = 1.0
-    """Learning-rate multiplier of the reprojected first frame's projection (``multiview.warp_condition``,
-    drivewm.multiview.warp.WarpEncoder). It starts at zero, and AdamW moves a weight by about the
-    learning rate a step, so at the whole model's rate it stays near zero for hundreds of steps
-    (docs/quality-vs-compute.md, "A warp-conditioned fine-tune on the CPU"); ControlNet-style
-    branches are trained faster for the same reason."""
     layout_lr_scale: float = 10.0
     """Learning-rate multiplier of the layout's new parts (the layout encoder and the ControlNet
     branch, multi-view config ``layout``): they start at zero effect, and AdamW moves a weight by
-    about the learning rate a step, as for the warp's projection above."""
+    about the learning rate a step, so at the whole model's rate they would stay near zero for hundreds
+    of steps (ControlNet-style branches are trained faster for this reason)."""
     cache_clips: int = 2048
     """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
@@ -92,7 +86,7 @@ class PosttrainConfig:
     def validate(self) -> None:
         at_least(
             self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
-            "turn_repeat_min_deg", "cache_clips", "warp_lr_scale", "layout_lr_scale",
+            "turn_repeat_min_deg", "cache_clips", "layout_lr_scale",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
         if self.rope_spatial_scale is not None:
@@ -159,13 +153,10 @@ class PreparedClip:
 
     sample: MultiViewSample
     cond: MultiViewConditioning | None
-    warp: Callable[[torch.Tensor], torch.Tensor] | None
-    """The clip's noise warp (drivewm.multiview.warped_noise); None: plain noise."""
 
     def noise(self, generator: torch.Generator) -> torch.Tensor:
-        """(V, c, t, h, w) standard normal noise from ``generator``, warped along the clip's trajectory."""
-        noise = torch.randn(self.sample.latents.shape, generator=generator)
-        return noise if self.warp is None else self.warp(noise[None])[0]  # sampling's own warp, on a batch of one
+        """(V, c, t, h, w) standard normal noise from ``generator``."""
+        return torch.randn(self.sample.latents.shape, generator=generator)
 
 
 class MultiViewTask(BundleTask):
@@ -194,10 +185,9 @@ class MultiViewTask(BundleTask):
         return len(self.epoch_order())
 
     def lr_scales(self) -> dict[str, float]:
-        scales = {"warp_encoder.": self.cfg.warp_lr_scale} if self.bundle.net.warp_encoder is not None else {}
-        if self.bundle.net.layout_encoder is not None:
-            scales.update(dict.fromkeys(LAYOUT_PARTS, self.cfg.layout_lr_scale))
-        return scales
+        if self.bundle.net.layout_encoder is None:
+            return {}
+        return dict.fromkeys(LAYOUT_PARTS, self.cfg.layout_lr_scale)
 
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
@@ -252,22 +242,12 @@ class MultiViewTask(BundleTask):
             known = torch.full((s.latents.shape[0],), s.layout is not None)
             layout = s.layout if s.layout is not None else torch.zeros_like(s.latents)
             cond = dataclasses.replace(cond, layout=layout, layout_keep=known)
-        item = PreparedClip(s, cond, self.noise_warp(s))
+        item = PreparedClip(s, cond)
         if self.cfg.cache_clips:
             self._prepared[index] = item
             if len(self._prepared) > self.cfg.cache_clips:
                 self._prepared.popitem(last=False)
         return item
-
-    def clip_noise(self, s: MultiViewSample, generator: torch.Generator) -> torch.Tensor:
-        """(V, c, t, h, w) standard normal noise of one clip, warped along its own trajectory with
-        ``multiview.warped_noise`` (drivewm.multiview.warped_noise) where it has one."""
-        return PreparedClip(s, None, self.noise_warp(s)).noise(generator)
-
-    def noise_warp(self, s: MultiViewSample) -> Callable[[torch.Tensor], torch.Tensor] | None:
-        """The warp of one clip's noise along its trajectory (sampling's own); None without warped noise or
-        a known trajectory."""
-        return self.bundle.noise_warper(s.rig, s.trajectory[None], s.fps) if s.trajectory_known else None
 
     def after_step(self, step: int) -> dict[str, float]:
         """The trajectory probe, in the first metrics row at or after each ``trajectory_probe_every``
@@ -311,8 +291,6 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
             "static_rays",
             "trajectory",
             "frame_motion",
-            "warp_grid",
-            "warp_valid",
             "trajectory_keep",
             "layout",
             "layout_keep",
@@ -379,7 +357,7 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
 #: The parameters a layout adds (drivewm.multiview.layout_encoder, the DiT's ControlNet branch).
 LAYOUT_PARTS = ("layout_encoder.", "denoiser.backbone.control.")
 #: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
-ADDABLE = ("motion_encoder.", "warp_encoder.", *LAYOUT_PARTS)
+ADDABLE = ("motion_encoder.", *LAYOUT_PARTS)
 
 
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
@@ -387,16 +365,9 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     probabilities, the data's trajectory spacing). Parts in :data:`ADDABLE` that ``init`` lacks start
     fresh (zero effect, so the model starts as ``init``); any other structural difference is a
     DrivewmError. A model trained with per-frame motion keeps it, with the rays it was trained with
-    (its trained motion encoder is not dropped because this run's config left the default), one
-    trained with warped noise keeps its correlation unless this run sets another, and one trained
-    on the reprojected first frame keeps it, with its corridor unless this run sets one."""
+    (its trained motion encoder is not dropped because this run's config left the default)."""
     if init.cfg.multiview.frame_motion:
         mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
-    if init.cfg.multiview.warped_noise and not mv.warped_noise:  # what its samples' noise means
-        mv = dataclasses.replace(mv, warped_noise=init.cfg.multiview.warped_noise)
-    if init.cfg.multiview.warp_condition:
-        walls = mv.warp_walls_m or init.cfg.multiview.warp_walls_m
-        mv = dataclasses.replace(mv, warp_condition=True, warp_walls_m=walls)
     if init.cfg.multiview.layout != "none" and mv.layout == "none":  # its trained layout path is kept
         keep = ("layout", "layout_control_depth")
         mv = dataclasses.replace(mv, **{k: getattr(init.cfg.multiview, k) for k in keep})

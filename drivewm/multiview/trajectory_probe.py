@@ -21,9 +21,9 @@ import torch
 from drivewm.diffusion.denoiser import edm_loss
 from drivewm.eval.trajectory_errors import waypoint_heading_deg
 from drivewm.geometry import T_from_xyz_yaw
-from drivewm.multiview.camera import moving_token_rays
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
 from drivewm.multiview.model import MultiView, build_conditioning
+from drivewm.views.rays import moving_token_rays
 
 #: Clips whose waypoints turn by more than this (degrees) are probed.
 MIN_TURN_DEG = 15.0
@@ -63,17 +63,14 @@ def clip_losses(
     cond_frames: int = 0,
 ) -> list[float]:
     """EDM loss of clip ``index`` under each of ``trajectories`` (its own waypoints, the mirrored
-    ones, none, or one of :data:`SPLIT` or :data:`TURNED`), with the same noise (warped along the
-    clip's own waypoints for a model trained with ``multiview.warped_noise``, as its training noise
-    was). ``net``: the denoiser to call (``bundle.net`` or a training wrapper of it); ``bundle``: the
+    ones, none, or one of :data:`SPLIT` or :data:`TURNED`), with the same noise. ``net``: the denoiser
+    to call (``bundle.net`` or a training wrapper of it); ``bundle``: the
     :class:`~drivewm.multiview.model.MultiView` whose text encoder and camera geometry build the
     conditioning; ``cond_frames``: latent frames given (Video2World), 0 = Text2World."""
     s = ds[index]
     views = s.latents.shape[0]
     device = next(net.parameters()).device
-    noise = torch.randn(s.latents.shape, generator=torch.Generator().manual_seed(seed))
-    warp = bundle.noise_warper(s.rig, s.trajectory[None], s.fps)  # a model trained on warped noise: as in training
-    noise = (noise if warp is None else warp(noise[None])[0]).to(device)
+    noise = torch.randn(s.latents.shape, generator=torch.Generator().manual_seed(seed)).to(device)
     edm = dataclasses.replace(bundle.cfg.edm, cond_frames=cond_frames)
     sigmas, keep = torch.full((views,), sigma, device=device), torch.full((views,), captions, device=device)
     waypoints = {"own": s.trajectory, "mirrored": s.trajectory * MIRROR, "none": None}

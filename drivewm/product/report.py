@@ -4,7 +4,9 @@ It reads only the files the stages wrote (curation report.json, tokenizer metric
 metrics.jsonl, eval metrics.json, contact sheets), so it can be rebuilt at any time. Real clips, the
 shipped model's and the fine-tuned model's samples stand side by side: one metrics column each (a
 metric eval could not compute is a dash with a footnote saying why) and their contact sheets in
-one row per prompt. The first curated clip transferred to snow (``drivewm transfer``) is a figure,
+one row per prompt. A generated set's column names the post-steps its clips went through (their
+metadata's ``post_processing``): "network's own frames" when none did, so post-processed samples never
+pass for the network's. The first curated clip transferred to snow (``drivewm transfer``) is a figure,
 and the transfer model's training curve sits beside the fine-tuning one. "Commands run" is a block
 a user pastes into a shell in the output folder: shlex-quoted, paths relative to that folder,
 shipped models spelled ``shipped:KIND``. Figures are linked relatively; the page counts its own
@@ -85,6 +87,25 @@ def pooled_metrics(paths: list[Path]) -> dict:
     return {**aggregate([ClipResult(k, c, {}) for k, c in clips.items()]), "clips": clips} if clips else {}
 
 
+def post_processing(manifests: list[Path]) -> list[str]:
+    """Every post-step named in the ``post_processing`` of the clips in ``manifests`` (generate's
+    manifest.jsonl files), in first-seen order; [] when none was applied."""
+    steps: list[str] = []
+    for path in (m for m in manifests if m.is_file()):
+        for row in read_jsonl(path):
+            steps += [s for s in row.get("post_processing") or [] if s not in steps]
+    return steps
+
+
+def set_title(name: str, facts: dict) -> str:
+    """Column title of an evaluated set: a generated set's says whether it is the network's own frames."""
+    title = SET_TITLES.get(name, name)
+    if name not in facts.get("post_processing", {}):
+        return title
+    steps = facts["post_processing"][name]
+    return f"{title}, post-processed: {', '.join(steps)}" if steps else f"{title}, network's own frames"
+
+
 def gather(out: Path, rig: str, generations: list[str], models: list[str]) -> dict:
     """Every number and figure the report shows, from the stage outputs in ``out``; ``models`` are
     the generating models (folders under OUT/generated/ and OUT/eval/)."""
@@ -112,6 +133,9 @@ def gather(out: Path, rig: str, generations: list[str], models: list[str]) -> di
         "curate": _read_json(out / "clips" / "report.json"),
         "tokenizer": _read_json(out / "tokenizer_eval" / "metrics.json"),
         "eval": {name: with_turn_sign(metrics) for name, metrics in sets.items()},
+        "post_processing": {
+            m: post_processing([out / "generated" / m / g / "manifest.jsonl" for g in generations]) for m in models
+        },
         "figures": {k: v for k, v in figures.items() if v.is_file()},
         "sheets": {g: {m: p for m, p in row.items() if p.is_file()} for g, row in sheets.items()},
         "recording": out / "drive.rrd",
@@ -166,7 +190,7 @@ def _eval_table(facts: dict) -> tuple[list[str], list[list[str]], list[str]]:
     header = [
         "metric",
         "meaning",
-        *[f"{SET_TITLES.get(n, n)} ({m.get('num_clips', 0)} clips)" for n, m in sets.items()],
+        *[f"{set_title(n, facts)} ({m.get('num_clips', 0)} clips)" for n, m in sets.items()],
     ]
     notes: list[str] = []
     rows = []
@@ -210,7 +234,7 @@ def _sheet_rows(facts: dict) -> tuple[list[str], list[tuple[str, list[Path | Non
     """Header (prompt, then real / shipped / fine-tuned) and one row of contact sheets per prompt."""
     sets = list(facts["eval"])
     rows = [(name, [sheets.get(s) for s in sets]) for name, sheets in facts["sheets"].items()]
-    return ["prompt", *[SET_TITLES.get(s, s) for s in sets]], rows
+    return ["prompt", *[set_title(s, facts) for s in sets]], rows
 
 
 def to_markdown(facts: dict, stages: list[tuple[str, list[str]]], out: Path) -> str:

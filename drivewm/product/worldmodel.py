@@ -37,9 +37,7 @@ from pathlib import Path
 
 from drivewm import resources
 from drivewm.choices import output_folder, whole_number
-from drivewm.config import finite_at_least
 from drivewm.errors import DrivewmError
-from drivewm.multiview.defaults import DEFAULT_SIGMA
 
 PROFILES = resources.package_dir("recipes") / "worldmodel.yaml"
 
@@ -174,55 +172,25 @@ def stage_commands(p: WorldModelProfile, run: Path) -> list[tuple[str, list[str]
     return stages
 
 
-@dataclasses.dataclass(frozen=True)
-class SampleFlags:
-    """How every benchmark sample is drawn: ``drivewm generate``'s sampling options, each None for
-    generate's default (as the model card's figures)."""
+def generate_recipe(run: Path, recipe: str | None, overrides: list[str]) -> Path | None:
+    """The generate recipe every benchmark sample is drawn with: ``recipe`` and ``overrides`` resolved
+    (drivewm.generate.config.RECIPES, so a bad value fails before the first stage) and written in full to
+    ``RUN/generate-HASH.yaml``, named by its content so that a rerun with other settings runs the generate
+    stages again; None (generate's defaults, the network's own frames) when neither is given."""
+    if recipe is None and not overrides:
+        return None
+    import hashlib
 
-    trajectory_guidance: float | None = None
-    """Guidance on the ego trajectory (``--trajectory-guidance``; generate's default: none)."""
-    reproject: float | None = None
-    """Reprojected refinement from this noise level (``--reproject``; 0 = off)."""
-    guidance_interval: str | None = None
-    """Guidance only at noise levels in (LO, HI], "LO,HI", or "all" (``--guidance-interval``)."""
-    prompt_template: bool | None = None
-    """Prompts rewritten into the training captions' template (``--[no-]prompt-template``)."""
-    reproject_walls: float | None = None
-    """The reprojection's corridor, m (``--reproject-walls``)."""
-    reproject_reshade: bool | None = None
-    """``--[no-]reproject-reshade``."""
-    reproject_blend: bool | None = None
-    """``--[no-]reproject-blend``."""
-    stitch: bool | None = None
-    """``--[no-]stitch``."""
+    import yaml
 
-    def __post_init__(self) -> None:
-        if self.trajectory_guidance is not None:
-            finite_at_least("worldmodel benchmark", 1, **{"--trajectory-guidance": self.trajectory_guidance})
-        if self.reproject is not None:
-            finite_at_least("worldmodel benchmark", 0, **{"--reproject": self.reproject})
-        if self.reproject_walls is not None:
-            finite_at_least("worldmodel benchmark", 0, **{"--reproject-walls": self.reproject_walls})
+    from drivewm.atomic import write_bytes
+    from drivewm.config import to_dict
+    from drivewm.generate.config import RECIPES
 
-    def argv(self) -> list[str]:
-        """The generate flags of the options given, in the order a run folder's stage markers hold
-        them (a rerun of an earlier benchmark resumes only if its commands are the same)."""
-        argv = []
-        if self.trajectory_guidance is not None:
-            argv += ["--trajectory-guidance", f"{self.trajectory_guidance:g}"]
-        if self.reproject is not None:
-            argv += ["--reproject", f"{self.reproject:g}"]
-        if self.guidance_interval is not None:
-            argv += ["--guidance-interval", self.guidance_interval]
-        if self.prompt_template is not None:
-            argv += ["--prompt-template" if self.prompt_template else "--no-prompt-template"]
-        if self.reproject_walls is not None:
-            argv += ["--reproject-walls", f"{self.reproject_walls:g}"]
-        switches = ("--reproject-reshade", self.reproject_reshade), ("--reproject-blend", self.reproject_blend)
-        for flag, on in (*switches, ("--stitch", self.stitch)):
-            if on is not None:
-                argv += [flag if on else f"--no-{flag[2:]}"]
-        return argv
+    text = yaml.safe_dump({"config": to_dict(RECIPES.resolve(None, recipe, overrides))}, sort_keys=True)
+    path = run / f"generate-{hashlib.sha256(text.encode()).hexdigest()[:12]}.yaml"
+    write_bytes(path, text.encode())
+    return path
 
 
 def benchmark_stages(
@@ -231,20 +199,21 @@ def benchmark_stages(
     run: Path,
     heldout: Path,
     samples: int | None = None,
-    flags: SampleFlags = SampleFlags(),
+    recipe: Path | None = None,
 ) -> list[tuple[str, list[str]]]:
     """The benchmark of multi-view model ``model`` as (stage name, drivewm argv): the profile's prompts
     generated into ``RUN/generated/NAME`` (``samples`` seeds each from the prompt's first, default the
-    profile's; seeds are per sample, so more samples keep the first ones' bytes; drawn as ``flags``
-    say), the held-out clips ``heldout`` and the generated ones scored into ``RUN/eval``, and the
-    must-hold figures."""
+    profile's; seeds are per sample, so more samples keep the first ones' bytes; drawn with the generate
+    ``recipe``, default generate's own), the held-out clips ``heldout`` and the generated ones scored into
+    ``RUN/eval``, and the must-hold figures."""
     gen, ev = run / "generated", run / "eval"
     samples = samples or p.samples_per_benchmark
     stages = []
     for b in p.benchmarks:
         argv = ["generate", "--model", model, "--rig", p.rig, "--prompt", b.prompt, "--trajectory", b.trajectory]
         argv += ["--seed", str(b.seed), "--num-samples", str(samples), "--out", str(gen / b.name)]
-        stages.append((f"generate-{b.name}", [*argv, *flags.argv(), *p.generate]))
+        argv += ["--recipe", str(recipe)] if recipe is not None else []
+        stages.append((f"generate-{b.name}", [*argv, *p.generate]))
     stages.append(
         ("eval-heldout", ["eval", str(heldout), "--rig", p.rig, "--out", str(ev / "heldout"), *p.eval, *p.eval_heldout])
     )
@@ -263,7 +232,8 @@ def benchmark_worldmodel(
     profile_name: str,
     samples: int | None,
     tokenizer_eval: Path | None,
-    flags: SampleFlags = SampleFlags(),
+    recipe: str | None = None,
+    overrides: list[str] = (),
 ) -> None:
     """Run (or resume) the benchmark of ``model`` into ``run``: the shipped models' figures for any
     multi-view model folder (a fleet fine-tune, a GPU run), against ``heldout`` clips of its rig, or
@@ -289,20 +259,12 @@ def benchmark_worldmodel(
         write_json(run / "eval" / "tokenizer" / "metrics.json", tokenizer)
         # a rerun that brings the tokenizer's eval must read it: the figures stage's command is unchanged
         stage_marker(run, "figures").unlink(missing_ok=True)
-    stages = benchmark_stages(profile, model, run, heldout, samples, flags)
+    stages = benchmark_stages(profile, model, run, heldout, samples, generate_recipe(run, recipe, list(overrides)))
     if reference is not None:
         stages = [(name, argv) for name, argv in stages if name != "eval-heldout"]
     print(f"[worldmodel] benchmark of {model}, profile {profile_name}: {len(stages)} stages into {run}", flush=True)
     for name, argv in stages:
         run_stage(name, argv, run, "worldmodel")
-
-
-def _interval_text(value: str) -> str:
-    """argparse ``type`` of the benchmark's ``--guidance-interval``: checked as generate checks it, passed on."""
-    from drivewm.choices import sigma_interval
-
-    sigma_interval(value)
-    return value
 
 
 def _read_metrics(path: Path, flag: str, what: str, key: str) -> dict:
@@ -381,54 +343,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument("--tokenizer-eval", type=Path, help="a `tokenizer eval` metrics.json for the PSNR figure")
     b.add_argument(
-        "--trajectory-guidance",
-        type=float,
-        help="guidance on the ego trajectory for every sample (drivewm generate --trajectory-guidance; "
-        "default none, as the shipped figures)",
+        "--recipe",
+        help="generate recipe every sample is drawn with (drivewm generate --recipe; a packaged name, e.g. "
+        "reprojected, or a YAML file; default generate's: the network's own frames)",
     )
     b.add_argument(
-        "--reproject",
-        type=float,
-        metavar="SIGMA",
-        help="reprojected refinement of every sample from noise level SIGMA (drivewm generate --reproject; "
-        f"default generate's, {DEFAULT_SIGMA:g}, as the model card's figures; 0 = off)",
-    )
-    b.add_argument(
-        "--reproject-walls",
-        type=float,
-        metavar="M",
-        help="the reprojection's corridor for every sample, m (drivewm generate --reproject-walls; default generate's)",
-    )
-    b.add_argument(
-        "--reproject-reshade",
-        action=argparse.BooleanOptionalAction,
-        help="every sample's warped road reshaded to the first frame's look at its own distance "
-        "(drivewm generate --reproject-reshade; default generate's, on, as the model card's figures)",
-    )
-    b.add_argument(
-        "--reproject-blend",
-        action=argparse.BooleanOptionalAction,
-        help="every sample's first frame blended where the cameras overlap before the reprojection "
-        "(drivewm generate --reproject-blend; default generate's, on, as the model card's figures)",
-    )
-    b.add_argument(
-        "--stitch",
-        action=argparse.BooleanOptionalAction,
-        help="every frame of every sample blended where the cameras overlap (drivewm generate --stitch; default "
-        "generate's, on, as the model card's figures)",
-    )
-    b.add_argument(
-        "--guidance-interval",
-        type=_interval_text,
-        metavar="LO,HI",
-        help="guide every sample only at noise levels in (LO, HI], or 'all' (drivewm generate --guidance-interval; "
-        "default generate's)",
-    )
-    b.add_argument(
-        "--prompt-template",
-        action=argparse.BooleanOptionalAction,
-        help="rewrite every prompt into the training captions' template (drivewm generate --prompt-template; "
-        "default generate's, on, as the model card's figures)",
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="override a generate field"
     )
     b.set_defaults(
         func=lambda args: benchmark_worldmodel(
@@ -438,7 +358,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             args.profile,
             args.samples_per_prompt,
             args.tokenizer_eval,
-            SampleFlags(**{f.name: getattr(args, f.name) for f in dataclasses.fields(SampleFlags)}),
+            args.recipe,
+            args.overrides,
         )
     )
     m = wsub.add_parser(

@@ -32,11 +32,11 @@ from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import BatchError, DrivewmError
 from drivewm.logs.types import TIMES_OF_DAY
 from drivewm.multiview.coding import decode_views, encode_views, resize_views
-from drivewm.multiview.writer import grid_layout, tile_views
 from drivewm.train.checkpoint import read_model_config
 from drivewm.transfer.detail import BAND_PX
 from drivewm.transfer.resolution import output_size_hw, rig_at_size, to_output_size
 from drivewm.transfer.retarget import TargetCondition, retarget_meta, target_captions
+from drivewm.views.grid import grid_layout, tile_views
 
 SHEET_CLIPS = 3  # clips shown in contact_sheet.png
 

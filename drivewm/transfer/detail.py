@@ -32,8 +32,8 @@ far haze for the adherence classifier to read fog as snow at 160x96 (docs/transf
 
 Given the rig (``drivewm transfer``'s default, ``--no-shared-look`` to skip), the transfer's look,
 ``G(transfer)`` and ``gain``, is shared between cameras: at each pixel it is the feathered mean of
-every camera that sees its point of the flat world (drivewm.multiview.blend.feathering, the blend of
-``drivewm generate --stitch``), another camera counting only as far as the two coded sources'
+every camera that sees its point of the flat world (drivewm.views.blend.feathering, the blend of
+the ``stitch`` post-step), another camera counting only as far as the two coded sources'
 ``G(source_coded)`` agree there (within LOOK_TOLERANCE levels: one surface, not a building the flat
 world puts at infinity), while ``source - G(source_coded)`` stays the view's own. Two cameras then
 give one point one light and bring its structure back at one strength. Measured on the 9 held-out
@@ -50,8 +50,8 @@ import cv2
 import numpy as np
 
 from drivewm.geometry import Rig
-from drivewm.multiview.blend import check_views, feathered_mean, feathering
 from drivewm.multiview.coding import resize_views
+from drivewm.views.blend import check_views, feathered_mean, feathering
 
 WINDOW_PX = 17  # local-contrast window at the model's size: about two tokenizer cells (measured: docs/transfer.md)
 BAND_PX = 8.0  # default band at the model's size: one tokenizer cell (measured: docs/transfer.md)
@@ -142,7 +142,7 @@ def share_look(
 ) -> np.ndarray:
     """float32 (V, H, W, C) of one frame's views (:func:`restore_detail`: the transfer's colour coarser
     than the band and its gain) -> the same with ``shared_channels`` the feathered mean of every camera
-    that sees each pixel's flat-world point (drivewm.multiview.blend.feathered_mean of a ``plan`` made
+    that sees each pixel's flat-world point (drivewm.views.blend.feathered_mean of a ``plan`` made
     at :func:`look_size`), a camera counting only where ``guide`` (V, H, W, C', the coded source's
     colour there) agrees with the view's own within LOOK_TOLERANCE levels. At a smaller size only the
     change is upsampled and added, so a pixel no other camera sees keeps its own value (exactly at the

@@ -2,7 +2,7 @@
 
 :class:`TransferNet` is the trainable module ``forward(x, sigma, cond) -> denoised``: it turns the
 source latents into per-token offsets (``extra_token_cond``, a zero-initialised patch projection,
-drivewm.multiview.warp.WarpEncoder) and the target's weather / time of day into a global offset
+drivewm.diffusion.warp_encoder) and the target's weather / time of day into a global offset
 (``extra_global_cond``, :class:`ConditionEncoder`), then calls the parent's EDM denoiser. Views are
 folded into the batch and transferred each on its own, so any rig works; each view keeps its own
 source's geometry, hence the views stay consistent with each other. :class:`Transfer` is the
@@ -25,8 +25,8 @@ from drivewm.diffusion.dit import DiT
 from drivewm.diffusion.dit_config import upgrade_saved_config
 from drivewm.diffusion.sampling import sample
 from drivewm.diffusion.text2world import LatentInfo, read_latent_info
+from drivewm.diffusion.warp_encoder import WarpEncoder
 from drivewm.model_folders import resolve_model_folder, resolve_reference
-from drivewm.multiview.warp import WarpEncoder
 from drivewm.text import build_text_encoder
 from drivewm.train.checkpoint import load_model_folder, load_weights, save_model_folder
 from drivewm.transfer.condition_encoder import ConditionEncoder, condition_indices

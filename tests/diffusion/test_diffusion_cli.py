@@ -106,8 +106,8 @@ def test_pretrain_then_generate_writes_clips_mp4_and_contact_sheet(clipdir, tmp_
         "2",
         "--num-samples",
         "2",
-        "--guidance-interval",
-        "0.5,3",
+        "--set",
+        "sampling.guidance_interval=[0.5,3]",
         "--out",
         tmp_path / "gen",
     )
@@ -122,11 +122,13 @@ def test_pretrain_then_generate_writes_clips_mp4_and_contact_sheet(clipdir, tmp_
     ).is_file()
 
 
-@pytest.mark.parametrize("value", ["5,1", "-1,2", "nan,2", "1", "a,b"])
+@pytest.mark.parametrize("value", ["[5,1]", "[-1,2]", "[.nan,2]", "[1]", "[a,b]", "1"])
 def test_a_bad_guidance_interval_is_one_line_before_any_model_loads(tmp_path, capsys, value):
     out = tmp_path / "gen"
-    code, _, err = _run(capsys, "generate", "--prompt", "fog", "--out", out, f"--guidance-interval={value}")
-    assert code == 2 and "0 <= LO < HI" in err and len(err.strip().splitlines()) == 1
+    code, _, err = _run(
+        capsys, "generate", "--prompt", "fog", "--out", out, f"--set=sampling.guidance_interval={value}"
+    )
+    assert code == 2 and "guidance_interval" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
 
 

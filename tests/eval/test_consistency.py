@@ -111,14 +111,14 @@ def test_simulated_clip_scores_low_tse_and_cse(sim_clip_dir):
 
 
 def test_overlap_disagreement_beside_cse_shows_views_stitched_through_a_flat_world(sim_clip_dir, tmp_path):
-    """A simulated clip as it is and stitched (drivewm.multiview.blend.stitch_views): where two of its
+    """A simulated clip as it is and stitched (drivewm.views.blend.stitch_views): where two of its
     cameras see one flat-world point the real views differ by the parallax of what stands beside the
     road (about 12 levels on the test clip), the stitched ones by about 1; and the stitch lowers the
     calibrated CSE too, which is why the eval reports the first beside the second."""
     from drivewm.eval.inputs import load_items
     from drivewm.eval.suite import evaluate_item
-    from drivewm.multiview.blend import stitch_views
-    from drivewm.multiview.writer import GeneratedSample, write_samples
+    from drivewm.generate.writer import GeneratedSample, write_samples
+    from drivewm.views.blend import stitch_views
 
     item = next(i for i in load_items(sim_clip_dir) if i.tags.get("weather") == "clear")
     videos = item.videos()

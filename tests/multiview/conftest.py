@@ -58,7 +58,7 @@ def mv_parent_dir(tmp_path_factory):
 @pytest.fixture(scope="session")
 def mv_with_tokenizer(tmp_path_factory) -> Path:
     """An (untrained) multi-view model whose folder records a real debug tokenizer (4x8x8), front camera
-    only, with the reprojected first frame (multiview.warp_condition) on."""
+    only."""
     import dataclasses
 
     from drivewm.multiview.config import MultiViewConfig
@@ -73,7 +73,7 @@ def mv_with_tokenizer(tmp_path_factory) -> Path:
         Text2WorldConfig(DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)),
         LatentInfo([16, 5, 24, 40], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {}),
     )
-    mv = from_text2world(parent, MultiViewConfig(warp_condition=True))
+    mv = from_text2world(parent, MultiViewConfig())
     mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
     mv.save_pretrained(root / "mv")
     return root / "mv"

@@ -13,16 +13,14 @@ from mv_standin import PoolTokenizer
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
-from drivewm.multiview.defaults import DEFAULT_SIGMA
+from drivewm.generate.config import RECIPES
+from drivewm.generate.rollout import load_clip, rollout
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import Reprojection
-from drivewm.multiview.rollout import RolloutOptions, load_clip, rollout
 from drivewm.multiview.trajectories import resolve_trajectory
 
 pytestmark = pytest.mark.slow  # post-trains a multi-view model
 
 FRONT3 = ["CAM_FRONT_LEFT", "CAM_FRONT", "CAM_FRONT_RIGHT"]
-OFF = Reprojection()  # the pooling stand-in tokenizer's rollouts: no reprojected refinement
 
 
 @pytest.fixture(scope="module")
@@ -46,6 +44,10 @@ def trained_mv(mv_latents: Path, mv_parent_dir: Path, tmp_path_factory) -> tuple
         "train.checkpoint_every=1000",
         "--set",
         "sample_steps=2",
+        "--set",  # without per-frame motion, so a fine-tune can add it
+        "multiview.frame_motion=false",
+        "--set",
+        "multiview.moving_camera_rays=true",
     ]
     assert main(args) == 0
     return root, cache
@@ -64,8 +66,7 @@ def test_posttrain_writes_a_multiview_folder(trained_mv):
 def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     """--init a multi-view folder (the fleet fine-tuning path): its weights start the run, none
     re-initialised; a structurally different config is refused in one line; per-frame motion
-    conditioning, warped noise and the reprojected first frame can be added (each encoder starts at
-    zero), and a model with them keeps them."""
+    conditioning can be added (its encoder starts at zero), and a model with it keeps it."""
     root, cache = trained_mv
     args = ["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--rig", "front3"]
     assert main([*args, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
@@ -78,20 +79,15 @@ def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     bad = [*args, "--out", str(tmp_path / "bad"), "--set", "multiview.camera_width=64"]
     assert main(bad) == 2
     motion = ["--set", "multiview.frame_motion=true", "--set", "multiview.moving_camera_rays=false"]
-    motion += ["--set", "multiview.warped_noise=0.8", "--set", "multiview.warp_condition=true"]
-    motion += ["--set", "multiview.warp_walls_m=25"]
     two_steps = ["--set", "train.steps=2", "--set", "sample_steps=2"]
     assert main([*args, "--out", str(tmp_path / "motion"), *two_steps, *motion]) == 0
     added = MultiView.from_pretrained(tmp_path / "motion").net.state_dict()  # a fine-tune may add per-frame motion
-    fresh = ("motion_encoder.", "warp_encoder.")
-    assert sorted(set(added) - set(start)) == sorted(k for k in added if k.startswith(fresh))
-    assert float(added["motion_encoder.net.2.weight"].abs().max()) < 0.01  # fresh: zero, two steps ago
-    assert 0 < float(added["warp_encoder.proj.weight"].abs().max()) < 0.01  # fresh, and it trains
+    assert sorted(set(added) - set(start)) == sorted(k for k in added if k.startswith("motion_encoder."))
+    assert 0 < float(added["motion_encoder.net.2.weight"].abs().max()) < 0.01  # fresh: zero, two steps ago
     again = ["posttrain", "--init", str(tmp_path / "motion"), "--data", str(cache), "--rig", "front3"]
     assert main([*again, "--out", str(tmp_path / "again"), *two_steps]) == 0  # no settings repeated: it keeps them
     kept = MultiView.from_pretrained(tmp_path / "again").cfg.multiview
-    assert kept.frame_motion and not kept.moving_camera_rays and kept.warped_noise == 0.8
-    assert kept.warp_condition and kept.warp_walls_m == 25
+    assert kept.frame_motion and not kept.moving_camera_rays
 
 
 @pytest.mark.parametrize("rig,views", [("front3", 3), ("nuscenes6", 6)])
@@ -112,7 +108,8 @@ def test_generate_writes_clips_for_any_rig(trained_mv, rig, views):
                 "left",
                 "--steps",
                 "2",
-                "--no-prompt-template",
+                "--set",
+                "prompt_template=false",
                 "--out",
                 str(out),
             ]
@@ -144,8 +141,9 @@ def test_rollout_continues_a_real_clip_and_keeps_its_frames(trained_mv, sim_clip
     root, _ = trained_mv
     model = MultiView.from_pretrained(root / "mv")
     clip = load_clip(sim_clip_dir)
-    options = RolloutOptions("stop", windows=2, steps=2, guidance=1.0, reprojection=OFF)
-    sample = rollout(model, clip, options, PoolTokenizer(32))
+    cfg = RECIPES.resolve(overrides=["trajectory=stop", "rollout.windows=2", "sampling.steps=2", "sampling.guidance=1"])
+    sample = rollout(model, clip, cfg, PoolTokenizer(32))
+    assert sample.extra["post_processing"] == []  # the network's own frames
     assert sample.videos.shape[:2] == (3, 1 + 2 * 16)  # 1 conditioning frame + 2 windows of 16
     real = torch.from_numpy(clip.video("CAM_FRONT")[:1]).float()
     kept = torch.from_numpy(sample.videos[1, :1]).float()  # the first frame: the real one, at the tokenizer's size
@@ -164,8 +162,8 @@ def test_rollout_of_a_one_camera_dashcam_clip_on_a_three_camera_model(trained_mv
     root, _ = trained_mv
     model = MultiView.from_pretrained(root / "mv")
     clip = load_clip(dashcam_clips)
-    options = RolloutOptions("straight", windows=1, steps=2, guidance=1.0, reprojection=OFF)
-    sample = rollout(model, clip, options, PoolTokenizer(32))
+    cfg = RECIPES.resolve(overrides=["rollout.windows=1", "sampling.steps=2", "sampling.guidance=1"])
+    sample = rollout(model, clip, cfg, PoolTokenizer(32))
     assert sample.rig.names == ["CAM_FRONT"] and sample.videos.shape[:2] == (1, 17)
     np.testing.assert_allclose(sample.rig.cameras[0].K, clip.meta.get_rig().cameras[0].K)  # the clip's calibration
     assert sample.extra["speed_mps"] == model.cfg.multiview.speed_mps > 1.0
@@ -213,7 +211,8 @@ def test_bad_inputs_give_one_line_errors(trained_mv, tmp_path, capsys):
     for weight in ("nan", "-1"):  # NaN guidance had decoded to a black clip, written without a word
         command = ["generate", "--model", str(root / "mv"), "--prompt", "x", "--steps", "1"]
         assert main([*command, "--trajectory-guidance", weight, "--out", str(tmp_path / "tg")]) == 2
-        assert f"trajectory guidance must be a finite number >= 0, got {float(weight)}" in capsys.readouterr().err
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and "trajectory_guidance" in err and len(err.strip().splitlines()) == 1
         assert not (tmp_path / "tg").exists()
 
 
@@ -263,7 +262,7 @@ def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_token
     real, kept = first.video("CAM_FRONT")[0].astype(float), clip.video("CAM_FRONT")[0].astype(float)
     assert np.abs(real - kept).mean() < 4.0  # the conditioning frame is the real one (through H.264 at crf 18)
     assert clip.meta.trajectory_ego[-1][1] < -0.05  # turning right: the ego ends to the right (y < 0)
-    assert clip.meta.extra["reproject_sigma"] == DEFAULT_SIGMA  # rollout's default: reprojected refinement
+    assert clip.meta.extra["post_processing"] == [] and "reproject" not in clip.meta.extra  # plain by default
 
     assert (
         main(
@@ -287,4 +286,8 @@ def test_rollout_and_condition_clip_commands_with_a_real_tokenizer(mv_with_token
     )
     (gen,) = list(iter_clips(tmp_path / "gen"))
     assert gen.meta.num_frames == 17 and gen.meta.extra["condition_clip"] == str(sim_clip_dir)
-    assert gen.meta.extra["trajectory_guidance"] == 3.0
+    assert gen.meta.extra["trajectory_guidance"] == 3.0 and gen.meta.extra["post_processing"] == []
+    stitched = ["--set", "post_processing=[stitch]", "--out", str(tmp_path / "refused")]
+    command = ["generate", "--model", str(mv_with_tokenizer), "--prompt", "x", "--condition-clip", str(sim_clip_dir)]
+    assert main([*command, "--steps", "1", *stitched]) == 2  # a real clip's frames are never blended
+    assert not (tmp_path / "refused").exists()

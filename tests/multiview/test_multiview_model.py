@@ -3,7 +3,6 @@ trajectory / camera / Video2World conditioning reach the output."""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import subprocess
 import sys
@@ -160,7 +159,7 @@ def test_plucker_rays_are_the_camera_rays_and_move_with_the_ego():
     import dataclasses as dc
 
     from drivewm.geometry import T_from_xyz_yaw, transform_points
-    from drivewm.multiview.camera import moving_token_rays, plucker_rays
+    from drivewm.views.rays import moving_token_rays, plucker_rays
 
     rig = load_rig("front3")
     rays = plucker_rays(rig, (6, 10)).double()  # (V, 60, 6)
@@ -219,25 +218,3 @@ def test_waypoint_files_out_of_reason_are_refused_by_name(tmp_path, name, conten
     with pytest.raises(DrivewmError) as info:
         resolve_trajectory(str(path), 16, 0.1)
     assert str(info.value).startswith(str(path)) and message in str(info.value)
-
-
-def test_warped_noise_reaches_sampling_only_with_a_trajectory(parent):
-    """A model trained with warped noise starts sampling from the seed's noise warped along the
-    trajectory asked for (the first latent frame's noise is the seed's own); without a trajectory,
-    or without the setting, from the seed's noise."""
-    rig = load_rig("front3")
-    plain = from_text2world(parent)
-    warped = copy.copy(plain)  # the same network; only the noise setting differs
-    warped.cfg = dataclasses.replace(plain.cfg, multiview=dataclasses.replace(plain.cfg.multiview, warped_noise=0.9))
-    traj = resolve_trajectory("left", 16, 0.1)[None]
-    assert plain.noise_warper(rig, traj, 10.0) is None and warped.noise_warper(rig, None, 10.0) is None
-    noise = torch.randn(1, 3, *plain.latent.latent_shape)
-    moved = warped.noise_warper(rig, traj, 10.0)(noise)
-    torch.testing.assert_close(moved[:, :, :, 0], noise[:, :, :, 0])
-    assert (moved[:, :, :, 1:] - noise[:, :, :, 1:]).abs().mean() > 0.1
-
-    def draw(model, trajectories):
-        return model.sample_latents(rig, [CAPTIONS[:3]], trajectories, [5], steps=2, guidance=1.0)
-
-    torch.testing.assert_close(draw(plain, None), draw(warped, None))
-    assert (draw(plain, traj) - draw(warped, traj)).abs().mean() > 0.01

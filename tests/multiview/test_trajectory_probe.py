@@ -111,28 +111,3 @@ def test_posttrain_logs_the_gap_of_the_weights_it_trains(mv_latents, mv_parent_d
     gap, t = loss_gap(model.net, model, ds, turning_clips(ds, 3, min_turn_deg=0.0))
     assert rows[1]["trajectory_loss_gap"] == pytest.approx(gap, rel=1e-4, abs=1e-9)
     assert rows[1]["trajectory_loss_gap_t"] == pytest.approx(t, rel=1e-3)
-
-
-def test_probe_noise_is_warped_as_the_model_was_trained(mv_latents, mv_parent_dir):
-    """A model trained with warped noise is probed with its training noise: the seeded noise warped along
-    the clip's own waypoints (MultiViewTask.clip_noise), not independent noise."""
-    from drivewm.diffusion.denoiser import edm_loss
-    from drivewm.multiview.model import build_conditioning
-    from drivewm.multiview.posttrain import MultiViewTask
-
-    warped = _model(mv_parent_dir, open_trajectory=True, warped_noise=0.9)
-    plain = _model(mv_parent_dir, open_trajectory=True)
-    ds = _dataset(mv_latents, warped)
-    i = turning_clips(ds, 1, min_turn_deg=0.0)[0]
-    s = ds[i]
-    task = MultiViewTask(posttrain_config("debug", ["rig=front3"]), ds, warped)
-    noise = task.clip_noise(s, torch.Generator().manual_seed(7))
-    assert not torch.equal(noise, torch.randn(s.latents.shape, generator=torch.Generator().manual_seed(7)))
-    cond = build_conditioning(warped, s.rig, [s.view_captions], s.trajectory[None], s.fps)
-    views, edm = s.latents.shape[0], dataclasses.replace(warped.cfg.edm, cond_frames=0)  # the probe's Text2World
-    with torch.no_grad():
-        expected = float(edm_loss(warped.net, edm, s.latents, cond, torch.ones(views), noise, torch.ones(views) > 0))
-    (own,) = clip_losses(warped.net, warped, ds, i, 1.0, True, 7, ("own",))
-    (own_plain,) = clip_losses(plain.net, plain, ds, i, 1.0, True, 7, ("own",))
-    assert own == pytest.approx(expected, rel=1e-6)
-    assert abs(own - own_plain) > 1e-6  # the same weights, independent noise

@@ -9,11 +9,11 @@ import torch
 
 from drivewm.clips import iter_clips
 from drivewm.diffusion.text2world import Text2World
+from drivewm.generate.rollout import initial_speed_mps
 from drivewm.multiview.data import MultiViewDataset
 from drivewm.multiview.init import from_text2world
 from drivewm.multiview.model import MultiView
 from drivewm.multiview.posttrain import MultiViewTask, posttrain_config
-from drivewm.multiview.rollout import initial_speed_mps
 
 
 def _front_cache(clip_dirs, out):
@@ -81,26 +81,3 @@ def test_fine_tuning_on_clips_without_ego_poses_keeps_the_models_speed(dashcam_c
 def test_rollouts_from_a_clip_without_ego_poses_use_the_models_speed(sim_clip_dir, dashcam_clips):
     assert all(math.isnan(initial_speed_mps(c)) for c in iter_clips(dashcam_clips))  # was 0.0 m/s
     assert all(initial_speed_mps(c) > 1.0 for c in iter_clips(sim_clip_dir))
-
-
-def test_training_noise_is_warped_along_the_clips_own_trajectory_only_where_it_is_known(mixed_cache, mv_parent_dir):
-    """``multiview.warped_noise``: a clip with ego poses trains on its seeded noise warped along its
-    own waypoints; a clip without (identity placeholders) on the seeded noise itself."""
-    from drivewm.multiview.model import clip_warp_grids
-    from drivewm.multiview.warped_noise import warp_noise
-
-    ds = MultiViewDataset(mixed_cache, ["CAM_FRONT"], 16)
-    known, unknown = _split(ds)
-    cfg = posttrain_config("debug", ["multiview.warped_noise=0.7"])
-    model = from_text2world(Text2World.from_pretrained(mv_parent_dir), cfg.multiview, cfg.cond_frames)
-    task = MultiViewTask(cfg, ds, model)
-    for i in (known[0], unknown[0]):
-        s = ds[i]
-        seeded = torch.randn(s.latents.shape, generator=torch.Generator().manual_seed(11))
-        got = task.clip_noise(s, torch.Generator().manual_seed(11))
-        if i in unknown:
-            torch.testing.assert_close(got, seeded)
-            continue
-        grid, valid = clip_warp_grids(model, s.rig, s.trajectory[None], s.fps)
-        torch.testing.assert_close(got, warp_noise(seeded, grid, valid, 1, 0.7))
-        assert valid[:, 1:].float().mean() > 0.5 and (got - seeded).abs().mean() > 0.1

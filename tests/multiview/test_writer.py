@@ -11,8 +11,8 @@ import pytest
 
 from drivewm.clips import iter_clips
 from drivewm.curate.contact_sheet import thumb_width
+from drivewm.generate.writer import GeneratedSample, sample_clip, write_samples
 from drivewm.geometry import load_rig
-from drivewm.multiview.writer import GeneratedSample, sample_clip, write_samples
 from drivewm.text.conditions import caption_conditions
 
 
@@ -76,7 +76,7 @@ def test_sample_tags_are_the_conditions_its_prompt_asks_for(prompt, tags):
 def test_a_prompt_naming_no_time_of_day_asks_for_daylight(prompt, caption):
     """Every training caption names its time of day; a prompt without one had left the models between
     day, dusk and night (rain came out night-dark), so it is completed with the captions' daylight phrase."""
-    from drivewm.multiview.generate import view_captions
+    from drivewm.generate.captions import view_captions
 
     caps = view_captions(prompt, load_rig("nuscenes6"))  # CAM_FRONT, CAM_FRONT_RIGHT, ...
     verbatim = "camera view" in prompt
@@ -87,8 +87,8 @@ def test_a_prompt_naming_no_time_of_day_asks_for_daylight(prompt, caption):
     "turn, phrase", [("left", "turning left"), ("right", "turning right"), ("straight", "driving straight")]
 )
 def test_template_captions_take_the_manoeuvre_and_speed_of_the_trajectory(turn, phrase):
+    from drivewm.generate.captions import template_view_captions
     from drivewm.geometry import load_rig
-    from drivewm.multiview.generate import template_view_captions
     from drivewm.multiview.trajectories import resolve_trajectory
 
     rig = load_rig("nuscenes6")

@@ -190,8 +190,8 @@ def test_the_shared_look_makes_overlapping_cameras_agree_and_keeps_each_views_st
     each view's own source's (SIFT positions). A pixel no other camera sees is left as it was."""
     from transfer_metrics import cross_view_error
 
-    from drivewm.multiview.blend import feathering, overlap_disagreement
     from drivewm.transfer.detail import look_size
+    from drivewm.views.blend import feathering, overlap_disagreement
 
     src, coded, transfer = _per_view_look(clip)
     rig = clip.meta.get_rig()
@@ -217,8 +217,8 @@ def test_the_shared_look_of_large_frames_is_blended_small_and_a_lone_camera_is_l
     """Fleet cameras (1600x900) would cost 25x a 320x192 frame to blend; the look is smooth, so it is
     blended at most LOOK_MAX_WIDTH wide and only the change is upsampled: the overlaps agree as they
     do at 320x192. A rig of one camera has nothing to share with."""
-    from drivewm.multiview.blend import overlap_disagreement
     from drivewm.transfer.detail import LOOK_MAX_WIDTH, look_size
+    from drivewm.views.blend import overlap_disagreement
 
     src, coded, transfer = _per_view_look(clip)
     big_hw = (384, 640)

@@ -1,5 +1,6 @@
-"""Writing multi-view samples: clips in the clip format (so ``drivewm eval`` scores them directly),
-a grid mp4 of all views per sample, and a contact sheet laid out as curation's (a row per camera in
+"""Writing generated samples (multi-view: :func:`write_samples`; Text2World: :func:`write_single_view`):
+clips in the clip format (so ``drivewm eval`` scores them directly), a grid mp4 of all views per
+sample, and a contact sheet laid out as curation's (a row per camera in
 rig order, first/middle/last frame, the caption above), so generated and real sheets compare row for row.
 
 Each generated clip carries its rig (at the decoded image size), per-view captions, the
@@ -15,18 +16,17 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-from einops import rearrange
 
 from drivewm.atomic import write_bytes
 from drivewm.clips.format import clip_from_arrays
 from drivewm.clips.shards import ShardWriter, write_manifest
 from drivewm.clips.video import encode_mp4
 from drivewm.curate.contact_sheet import write_clips_sheet
-from drivewm.diffusion.generate import clip_meta
+from drivewm.diffusion.generate import clip_meta, write_grid_png
 from drivewm.geometry import Rig
-from drivewm.multiview.cross_view import viewing_azimuth_rad
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.text.conditions import caption_conditions
+from drivewm.views.grid import grid_layout, tile_views
 
 
 @dataclasses.dataclass
@@ -37,32 +37,11 @@ class GeneratedSample:
     rig: Rig
     caption: str
     view_captions: list[str]
-    trajectory_ego: np.ndarray
+    trajectory_ego: np.ndarray | None
+    """(W, 3) m waypoints the sample was conditioned on (None: no trajectory, Text2World)."""
     trajectory_dt_s: float
     extra: dict
-
-
-def grid_layout(rig: Rig) -> list[list[int]]:
-    """View indices per row of the grid video: one row for up to 3 cameras; otherwise the forward-
-    facing cameras on top (left to right as a driver sees them) and the others below (as seen looking back)."""
-    az = viewing_azimuth_rad(rig)
-    order = sorted(range(len(az)), key=lambda i: -az[i])
-    if len(az) <= 3:
-        return [order]
-    front = [i for i in order if abs(az[i]) <= np.pi / 2]
-    back = sorted((i for i in range(len(az)) if abs(az[i]) > np.pi / 2), key=lambda i: az[i] % (2 * np.pi))
-    return [row for row in (front, back) if row]
-
-
-def tile_views(videos: np.ndarray, layout: list[list[int]]) -> np.ndarray:
-    """uint8 (V, T, H, W, 3) -> (T, rows*H, cols*W, 3), views placed by ``layout`` (black where empty)."""
-    v, t, h, w, _ = videos.shape
-    cols = max(len(row) for row in layout)
-    grid = np.zeros((len(layout), cols, t, h, w, 3), dtype=np.uint8)
-    for r, row in enumerate(layout):
-        for c, view in enumerate(row):
-            grid[r, c] = videos[view]
-    return rearrange(grid, "r c t h w x -> t (r h) (c w) x")
+    """What the clip's metadata records (model, prompt, seed, sampling, ``post_processing``)."""
 
 
 def write_samples(
@@ -102,3 +81,28 @@ def sample_clip(key: str, s: GeneratedSample, fps: float):
     )
     poses = poses_from_waypoints(s.trajectory_ego, t, s.trajectory_dt_s, fps)
     return clip_from_arrays(meta, dict(zip(rig.names, s.videos)), poses)
+
+
+def write_single_view(out_dir: str | Path, samples: list[GeneratedSample], fps: float) -> list[Path]:
+    """Text2World samples (one view each, no trajectory): clips (shards + manifest), one mp4 per sample
+    and a contact sheet of a row per sample; returns the written files."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rows, files = [], []
+    videos = np.stack([s.videos[0] for s in samples])
+    prompts = [s.caption for s in samples]
+    with ShardWriter(out_dir, "generated") as writer:
+        for i, s in enumerate(samples):
+            video, camera, (h, w) = s.videos[0], s.rig.cameras[0], s.videos.shape[2:4]
+            rig_i = s.rig.to_dict()
+            rig_i["cameras"] = [{**rig_i["cameras"][0], "width": w, "height": h}]
+            meta = clip_meta(f"sample_{i:03d}", rig_i, fps, len(video), s.caption, s.extra)
+            writer.write(clip_from_arrays(meta, {camera.name: video}, np.tile(np.eye(4), (len(video), 1, 1))))
+            write_bytes(out_dir / f"sample_{i:03d}.mp4", encode_mp4(video, fps))
+            files.append(out_dir / f"sample_{i:03d}.mp4")
+            rows.append({"key": meta.key, "caption": s.caption, **s.extra})
+    for (shard, _key), row in zip(writer.written, rows):
+        row["shard"] = Path(shard).name
+    files.append(write_manifest(out_dir, rows))
+    files.append(write_grid_png(videos, out_dir / "contact_sheet.png", prompts))
+    return files

@@ -1,4 +1,4 @@
-"""Reshading the reprojection (drivewm.multiview.reshade): the warp fetches a later frame's road from
+"""Reshading the reprojection (drivewm.views.reshade): the warp fetches a later frame's road from
 further away, and in fog that far road is airlight; with each view's first-frame road profile the
 warped road keeps the look the true frames have at its own distance."""
 
@@ -9,10 +9,10 @@ import pytest
 
 from drivewm.clips import iter_clips
 from drivewm.geometry import invert_T, load_rig
-from drivewm.multiview.reproject import reproject_first_frame_mask
-from drivewm.multiview.reshade import reshade, surface_distances
 from drivewm.multiview.trajectories import poses_from_waypoints
-from drivewm.multiview.warp import flat_world_points
+from drivewm.views.reproject import reproject_first_frame
+from drivewm.views.reshade import reshade, surface_distances
+from drivewm.views.warp import flat_world_points
 
 FPS = 10.0
 
@@ -56,7 +56,7 @@ def test_the_reshading_reads_distances_along_the_warps_own_rays(size):
     d_t, _, road, _ = surface_distances(rig, (h, w), rel)
     for v, cam in enumerate(rig.cameras):
         for t in (0, 8):
-            ground, point, d = flat_world_points(cam, (h, w), rel[t], np.inf, 0.0)
+            ground, point, d = flat_world_points(cam, (h, w), rel[t], np.inf)
             o = (rel[t] @ cam.T_ego_from_cam)[:3, 3]
             assert np.array_equal(ground, road[v, t].ravel())
             distance = np.linalg.norm(point[ground] - o, axis=1)
@@ -82,8 +82,9 @@ def test_reshading_keeps_a_fog_drives_warped_road_as_the_true_frames_show_it(tmp
     rig = clip.meta.get_rig()
     videos = np.stack([clip.video(n) for n in rig.names])
     wp, dt = np.asarray(clip.meta.trajectory_ego), clip.meta.trajectory_dt_s
-    plain, valid = reproject_first_frame_mask(videos, rig, wp, dt, FPS)
-    fixed, _ = reproject_first_frame_mask(videos, rig, wp, dt, FPS, reshade=True)
+    poses = poses_from_waypoints(wp, videos.shape[1], dt, FPS)
+    plain, valid = reproject_first_frame(videos, rig, poses)
+    fixed, _ = reproject_first_frame(videos, rig, poses, reshade=True)
     assert np.array_equal(fixed[:, 0], plain[:, 0])  # the first frame is its own
     truth, drifted, kept = (ground_luma(v)[-1] for v in (videos, plain, fixed))
     print(f"ground luma of the last frame: true {truth:.0f}, warped {drifted:.0f}, reshaded {kept:.0f}")

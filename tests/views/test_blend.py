@@ -1,5 +1,5 @@
-"""Overlap blending (drivewm.multiview.blend): generated views that disagree where their cameras
-overlap are made to agree there before the reprojection, and nothing else of them moves."""
+"""Overlap blending (drivewm.views.blend, the opt-in ``blend`` and ``stitch`` post-steps): generated views
+that disagree where their cameras overlap are made to agree there, and nothing else of them moves."""
 
 from __future__ import annotations
 
@@ -8,11 +8,8 @@ import pytest
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
-from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
-from drivewm.multiview.blend import blend_overlaps, feathered_mean, feathering, overlap_disagreement, stitch_views
-from drivewm.multiview.reproject import Reprojection
-from drivewm.multiview.rollout import RolloutOptions
+from drivewm.views.blend import blend_overlaps, feathered_mean, feathering, overlap_disagreement, stitch_views
 
 
 def first_frames(sim_clip_dir) -> tuple[np.ndarray, object]:
@@ -69,44 +66,29 @@ def test_blending_keeps_views_that_agree_everywhere_and_refuses_a_mismatched_rig
     assert overlap_disagreement(uniform, rig) < 1e-6
     with pytest.raises(ValueError, match="5 views for a rig of 6"):
         blend_overlaps(uniform[:5], rig)
-    with pytest.raises(DrivewmError):
-        blend_overlaps(uniform, rig, walls_m=0.1)  # a corridor narrower than the rig
     plan, values = feathering(rig, (96, 160)), uniform[:, None].astype(np.float32)
     with pytest.raises(ValueError, match="a guide needs a tolerance > 0, got None"):
         feathered_mean(values, plan, guide=values)  # the tolerance is the guide's scale: no default fits all
     assert np.allclose(feathered_mean(values, plan, guide=values, tolerance=30.0), values)
 
 
-def test_blending_is_recorded_on_by_default_and_never_in_a_rollout(tmp_path, capsys):
-    assert Reprojection(0.1).record()["reproject_blend"] is True
-    assert "reproject_blend" not in Reprojection(0.1, blend=False).record()
-    assert "reproject_blend" not in Reprojection(0.0).record()  # off: no first frame is reprojected
-    assert RolloutOptions("left").reprojection.blend is False  # a rollout's first frames are the clip's own
-    argv = ["generate", "--prompt", "snow", "--condition-clip", str(tmp_path / "c.tar"), "--out", str(tmp_path / "o")]
-    for flag in ("--reproject-blend", "--stitch"):
-        assert main([*argv, flag]) == 2  # asked for on a real clip's frames: refused before any model loads
-        assert f"{flag} blends generated frames" in capsys.readouterr().err and not (tmp_path / "o").exists()
-
-
 @pytest.mark.slow
 def test_a_generated_clips_cameras_agree_where_they_overlap_with_the_blend_and_the_stitch(tmp_path):
-    """The shipped model, one prompt and seed with and without ``--reproject-blend`` (unstitched):
-    the first frames of the blended sample disagree across the overlaps by a fraction of the
-    unblended ones' (measured 40 -> 5 levels on validation prompts), the refined frames after it
-    too. Stitched (generate's default), the last frame disagrees by a fraction of the unstitched
-    one's. Each clip records what was done to it."""
+    """The shipped model, one prompt and seed, reprojected with and without the ``blend`` post-step
+    (unstitched): the first frames of the blended sample disagree across the overlaps by a fraction
+    of the unblended ones', the refined frames after it too. With ``stitch`` as well, the last frame
+    disagrees by a fraction of the unstitched one's. Each clip names the post-steps done to it."""
     got = {}
-    for flags in (["--reproject-blend", "--no-stitch"], ["--no-reproject-blend", "--no-stitch"], []):
-        out = tmp_path / "_".join(flags or ["defaults"])
+    for steps in ("reproject,blend", "reproject", "reproject,blend,stitch"):
+        out = tmp_path / steps.replace(",", "_")
         argv = ["generate", "--prompt", "a clear day on a suburban road", "--trajectory", "left", "--seed", "5"]
-        argv += ["--steps", "3", "--guidance", "1", "--device", "cpu", "--reproject-steps", "3", "--out", str(out)]
-        assert main([*argv, *flags]) == 0
+        argv += ["--steps", "3", "--guidance", "1", "--device", "cpu", "--set", "reproject.steps=3", "--out", str(out)]
+        assert main([*argv, "--set", f"post_processing=[{steps}]"]) == 0
         clip = next(iter_clips(sorted(out.glob("*.tar"))[0]))
         rig = clip.meta.get_rig()
         videos = np.stack([clip.video(n) for n in rig.names])
-        got[" ".join(flags)] = [overlap_disagreement(videos[:, t], rig) for t in (0, videos.shape[1] - 1)]
-        assert clip.meta.extra.get("reproject_blend", False) is ("--no-reproject-blend" not in flags)
-        assert clip.meta.extra.get("stitched", False) is ("--no-stitch" not in flags)
-    blended, plain = got["--reproject-blend --no-stitch"], got["--no-reproject-blend --no-stitch"]
+        got[steps] = [overlap_disagreement(videos[:, t], rig) for t in (0, videos.shape[1] - 1)]
+        assert clip.meta.extra["post_processing"] == steps.split(",")
+    blended, plain = got["reproject,blend"], got["reproject"]
     assert blended[0] < 0.5 * plain[0] and blended[1] < plain[1], got
-    assert got[""][1] < 0.5 * blended[1], got
+    assert got["reproject,blend,stitch"][1] < 0.5 * blended[1], got

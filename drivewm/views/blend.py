@@ -1,20 +1,20 @@
 """Overlap blending: generated views made to agree where cameras overlap, the first frame before the
 reprojection and every frame after it.
 
-Reprojected refinement (drivewm.multiview.reproject) warps each view's own first frame along the
+Reprojected refinement (drivewm.generate.reproject) warps each view's own first frame along the
 trajectory, so where two cameras overlap each keeps what its own first pass drew, and the two need
 not show the same road or scenery: the eval's cross-view matches (CSE) fail there. Before the
 warp, every view's first frame is blended across the rig as a panorama is: each pixel's ray is
-followed into the warp's flat world (the road, the corridor's walls, or infinity:
-:func:`drivewm.multiview.warp.flat_world_points`), looked up in every camera that sees that point,
+followed into the warp's flat world (the road or infinity:
+:func:`drivewm.views.warp.flat_world_points`), looked up in every camera that sees that point,
 and the colours are averaged, each camera weighted by the point's distance to its image border
 (feathering, Szeliski 2006, "Image alignment and stitching", section 6.2). A camera's edge thus
 fades into its neighbour, and two cameras that see the same point get the same colour for it.
 Road and distant scenery are exact; what stands closer than infinity above the road is doubled
 by its parallax, as in any flat-world panorama.
 
-The refinement then redraws each view on its own, so :func:`stitch_views` (``drivewm generate
---stitch``) blends every decoded frame the same way. Neither is for a real clip's frames: those
+The refinement then redraws each view on its own, so :func:`stitch_views` (the ``stitch`` post-step)
+blends every decoded frame the same way. Neither is for a real clip's frames: those
 agree already, and blending them would double their roadside (generate with ``--condition-clip``
 and rollouts leave them as they are; a transfer keeps its source's geometry and is not stitched,
 but shares its look through the same :func:`feathering`, drivewm.transfer.detail.share_look).
@@ -29,36 +29,35 @@ import torch
 import torch.nn.functional as F
 
 from drivewm.geometry import Rig
-from drivewm.multiview.warp import check_corridor, flat_world_points, source_pixels
+from drivewm.views.warp import flat_world_points, source_pixels
 
 
-def blend_overlaps(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0, walls_m: float = 0.0) -> np.ndarray:
+def blend_overlaps(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0) -> np.ndarray:
     """uint8 (V, H, W, 3) first frames of ``rig`` (rig order) -> the same, each pixel the feathered
     mean of every camera that sees its flat-world point, its own camera among them. A pixel no
-    other camera sees keeps its colour; ``max_ground_m`` and ``walls_m`` as in
-    :func:`drivewm.multiview.warp.warp_grid`."""
-    return stitch_views(frames[:, None], rig, max_ground_m, walls_m)[:, 0]
+    other camera sees keeps its colour; ``max_ground_m`` as in
+    :func:`drivewm.views.warp.warp_grid`."""
+    return stitch_views(frames[:, None], rig, max_ground_m)[:, 0]
 
 
-def stitch_views(videos: np.ndarray, rig: Rig, max_ground_m: float = 100.0, walls_m: float = 0.0) -> np.ndarray:
+def stitch_views(videos: np.ndarray, rig: Rig, max_ground_m: float = 100.0) -> np.ndarray:
     """uint8 (V, T, H, W, 3) generated views of ``rig`` (rig order) -> the same, every frame blended
-    as :func:`blend_overlaps` blends one (``drivewm generate --stitch``): all cameras of a frame are
+    as :func:`blend_overlaps` blends one (the ``stitch`` post-step): all cameras of a frame are
     exposed from one ego pose, so the flat world and the feathering weights are the same in every
     frame and are computed once."""
     check_views(videos, rig)
-    check_corridor(rig, walls_m)
-    plan = feathering(rig, videos.shape[2:4], max_ground_m, walls_m)
+    plan = feathering(rig, videos.shape[2:4], max_ground_m)
     return feathered_mean(videos, plan).round().clip(0, 255).astype(np.uint8)
 
 
-def feathering(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float = 100.0, walls_m: float = 0.0) -> list:
+def feathering(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float = 100.0) -> list:
     """How :func:`feathered_mean` blends views of ``rig`` of ``grid_hw`` (H, W): per view, in rig
     order, one term per camera that sees some of its pixels' flat-world points, (camera, those
     pixels' flat indices, where that camera sees them (x, y), their weights: px to its nearest image
     border). Computed once for any number of frames and channels."""
     h, w = grid_hw
     plan = []
-    for seen_from in lookups(rig, (h, w), max_ground_m, walls_m):
+    for seen_from in lookups(rig, (h, w), max_ground_m):
         terms = []
         for s, (x, y) in enumerate(seen_from):
             with np.errstate(invalid="ignore"):  # NaN: behind camera s
@@ -101,7 +100,7 @@ def feathered_mean(
     return out
 
 
-def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0, walls_m: float = 0.0) -> float:
+def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100.0) -> float:
     """Mean absolute colour difference (8-bit levels) between a pixel of one view and where another
     camera sees its flat-world point, over every such pair of ``frames`` (uint8 (V, H, W, 3), rig
     order; or (V, T, H, W, 3): pooled over the T frames, the geometry computed once) at least one
@@ -111,7 +110,7 @@ def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100
     videos = frames if frames.ndim == 5 else frames[:, None]
     h, w = videos.shape[2:4]
     total, count = 0.0, 0
-    for v, seen_from in enumerate(lookups(rig, (h, w), max_ground_m, walls_m)):
+    for v, seen_from in enumerate(lookups(rig, (h, w), max_ground_m)):
         own = videos[v].reshape(len(videos[v]), -1, 3).astype(np.float64)
         for s, (x, y) in enumerate(seen_from):
             if s == v:
@@ -124,12 +123,12 @@ def overlap_disagreement(frames: np.ndarray, rig: Rig, max_ground_m: float = 100
     return total / count if count else float("nan")
 
 
-def lookups(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float, walls_m: float):
+def lookups(rig: Rig, grid_hw: tuple[int, int], max_ground_m: float):
     """Per view of ``rig``, in rig order: where every camera (the view's own among them) sees the
     flat-world points of the view's pixels, an (x, y) pair of (N,) arrays per camera
-    (:func:`drivewm.multiview.warp.source_pixels`; NaN behind it)."""
+    (:func:`drivewm.views.warp.source_pixels`; NaN behind it)."""
     for cam in rig.cameras:
-        ground, point, d = flat_world_points(cam, grid_hw, np.eye(4), max_ground_m, walls_m)
+        ground, point, d = flat_world_points(cam, grid_hw, np.eye(4), max_ground_m)
         yield [source_pixels(src, grid_hw, ground, point, d) for src in rig.cameras]
 
 

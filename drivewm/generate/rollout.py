@@ -20,13 +20,13 @@ from tqdm import tqdm
 
 from drivewm.clips.format import Clip
 from drivewm.clips.shards import iter_clips
-from drivewm.config import check_guidance_interval, finite_at_least
 from drivewm.errors import DrivewmError
+from drivewm.generate.config import GenerateConfig
+from drivewm.generate.reproject import refine_reprojected
+from drivewm.generate.writer import GeneratedSample
 from drivewm.geometry import Rig
 from drivewm.multiview.coding import decode_views, encode_views, frames_to_video
-from drivewm.multiview.defaults import DEFAULT_SIGMA
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.reproject import Reprojection, refine_reprojected
 from drivewm.multiview.trajectories import (
     NAMED,
     load_waypoints,
@@ -34,51 +34,6 @@ from drivewm.multiview.trajectories import (
     poses_from_waypoints,
     waypoints_from_poses,
 )
-from drivewm.multiview.writer import GeneratedSample
-
-#: Fastest named-trajectory speed a rollout takes (m/s): beyond any road vehicle (100 m/s = 360 km/h).
-MAX_SPEED_MPS = 100.0
-
-
-@dataclasses.dataclass
-class RolloutOptions:
-    """Settings of ``drivewm rollout``."""
-
-    trajectory: str = "straight"
-    """straight|left|right|stop or a waypoint file (N, 3) in the clip's first ego frame."""
-    windows: int = 2
-    """Generated windows; each adds (latent frames - cond_frames) * temporal compression frames."""
-    steps: int = 35
-    """Sampler steps per window."""
-    guidance: float = 7.0
-    """Classifier-free guidance scale."""
-    trajectory_guidance: float = 1.0
-    """Guidance on the trajectory (drivewm.diffusion.sampling.guided; 1 = none)."""
-    sampler: str = "heun"
-    """``heun`` or ``euler``."""
-    seed: int = 0
-    """Window w uses seed + w."""
-    prompt: str = ""
-    """Caption for every view ('' = the clip's own per-view captions)."""
-    speed_mps: float = 0.0
-    """Speed of a named trajectory (0 = the clip's own initial speed)."""
-    reprojection: Reprojection = dataclasses.field(default_factory=lambda: Reprojection(DEFAULT_SIGMA))
-    """Each window's first frame reprojected along the trajectory and refined (drivewm.multiview.reproject;
-    ``Reprojection()`` is off; never blended, drivewm.multiview.blend: the first frames are the clip's own)."""
-    guidance_interval: tuple[float, float] | None = None
-    """Guide only at sigma in (lo, hi] (drivewm.diffusion.sampling); None: at every sigma."""
-
-    def __post_init__(self) -> None:
-        if self.windows < 1 or self.steps < 1:
-            raise DrivewmError("rollout: windows and steps must be >= 1")
-        # a rollout decodes pixels: sigma None is the default; its first frames are the clip's own, never blended
-        self.reprojection = dataclasses.replace(self.reprojection.resolved(True), blend=False)
-        weights = {"guidance": self.guidance, "trajectory guidance": self.trajectory_guidance}
-        # a NaN speed had made NaN waypoints, a blank clip
-        finite_at_least("rollout", 0, **weights, **{"--speed": self.speed_mps})
-        if self.speed_mps > MAX_SPEED_MPS:  # 1e30 m/s had written waypoints of 1e29 m into the clip
-            raise DrivewmError(f"rollout: --speed must be at most {MAX_SPEED_MPS:g} m/s, got {self.speed_mps:g}")
-        self.guidance_interval = check_guidance_interval("rollout", self.guidance_interval)
 
 
 def load_clip(path: str | Path, key: str | None = None) -> Clip:
@@ -127,9 +82,11 @@ class _Windows:
     steps_per_frame: float
 
 
-def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) -> GeneratedSample:
-    """Continue ``clip`` for ``options.windows`` windows on ``model.device`` (the tokenizer must be there
-    too); returns the whole video (real conditioning frames first) with the trajectory it was conditioned on."""
+def rollout(model: MultiView, clip: Clip, cfg: GenerateConfig, tokenizer, prompt: str = "") -> GeneratedSample:
+    """Continue ``clip`` for ``cfg.rollout.windows`` windows on ``model.device`` (the tokenizer must be there
+    too), every view captioned ``prompt`` ('' = the clip's own per-view captions); returns the whole video
+    (real conditioning frames first) with the trajectory it was conditioned on. The ``reproject`` post-step
+    (with ``reshade``), when asked for, refines each window from its first frame warped along the trajectory."""
     rig, mv = clip_rig(model, clip), model.cfg.multiview
     c, t, h, w = model.latent.latent_shape
     tc, sc = tokenizer.config.temporal_compression, tokenizer.config.spatial_compression
@@ -139,14 +96,14 @@ def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) ->
         raise DrivewmError(
             f"clip {clip.key}: needs at least {win.n_cond} frames to condition on, has {clip.meta.num_frames}"
         )
-    speed = options.speed_mps or initial_speed_mps(clip)
+    speed = cfg.rollout.speed_mps or initial_speed_mps(clip)
     speed = speed if np.isfinite(speed) else mv.speed_mps
-    total = win.n_cond + options.windows * (win.n_win - win.n_cond)
+    total = win.n_cond + cfg.rollout.windows * (win.n_win - win.n_cond)
     num_poses = int(np.ceil(total * win.steps_per_frame)) + mv.trajectory_waypoints + 1
-    poses = rollout_poses(options.trajectory, num_poses, mv.trajectory_dt_s, speed, (total - 1) / clip.meta.fps)
+    poses = rollout_poses(cfg.trajectory, num_poses, mv.trajectory_dt_s, speed, (total - 1) / clip.meta.fps)
     captions = (
-        [options.prompt] * len(rig.cameras)
-        if options.prompt
+        [prompt] * len(rig.cameras)
+        if prompt
         else [clip.meta.view_captions.get(n) or clip.meta.caption for n in rig.names]
     )
     size = (h * sc, w * sc)
@@ -154,22 +111,19 @@ def rollout(model: MultiView, clip: Clip, options: RolloutOptions, tokenizer) ->
         np.stack([clip.video(n)[: win.n_cond] for n in rig.names]), size
     )  # (V, 3, n_cond, h*sc, w*sc)
     video = rearrange(first, "v c t h w -> v t h w c").add(1).mul(127.5).round().byte().numpy()
-    for window in tqdm(range(options.windows), desc="rollout"):
-        new = _next_window(model, tokenizer, rig, captions, video, poses, win, size, options, window, clip.meta.fps)
+    for window in tqdm(range(cfg.rollout.windows), desc="rollout"):
+        new = _next_window(model, tokenizer, rig, captions, video, poses, win, size, cfg, window, clip.meta.fps)
         video = np.concatenate([video, new], axis=1)
     traj = waypoints_from_poses(poses, 0, int(round((video.shape[1] - 1) * win.steps_per_frame)))
     extra = {
         "rollout_of": clip.key,
         "source_log": clip.meta.source_log,
-        "trajectory": options.trajectory,
-        "windows": options.windows,
+        "trajectory": cfg.trajectory,
+        "windows": cfg.rollout.windows,
         "speed_mps": speed,
-        "seed": options.seed,
-        "steps": options.steps,
-        "guidance": options.guidance,
-        "guidance_interval": list(options.guidance_interval) if options.guidance_interval else None,
+        "seed": cfg.sampling.seed,
+        **cfg.record(),
         "cond_video_frames": win.n_cond,
-        **options.reprojection.record(),
     }
     return GeneratedSample(video, rig, captions[0], captions, traj, mv.trajectory_dt_s, extra)
 
@@ -183,7 +137,7 @@ def _next_window(
     poses: np.ndarray,
     win: _Windows,
     size: tuple[int, int],
-    options: RolloutOptions,
+    cfg: GenerateConfig,
     window: int,
     fps: float,
 ) -> np.ndarray:
@@ -196,19 +150,15 @@ def _next_window(
     waypoints = waypoints_from_poses(
         poses, int(round(start * win.steps_per_frame)), model.cfg.multiview.trajectory_waypoints
     )
-    sampling = {
-        "guidance": options.guidance,
-        "sampler": options.sampler,
-        "trajectory_guidance": options.trajectory_guidance,
-        "guidance_interval": options.guidance_interval,
-    }
-    seed = options.seed + window
+    s = cfg.sampling
+    sampling = s.sample_kwargs()
+    seed = s.seed + window
     z = model.sample_latents(
-        rig, [captions], waypoints[None], [seed], options.steps, cond_latents=cond[None], fps=fps, **sampling
+        rig, [captions], waypoints[None], [seed], s.steps, cond_latents=cond[None], fps=fps, **sampling
     )[0]
-    if options.reprojection.sigma:
+    if cfg.post("reproject"):
         first = decode_views(tokenizer, z, model.device)
         z = refine_reprojected(
-            model, tokenizer, rig, captions, waypoints, seed, first, options.reprojection, sampling, fps
+            model, tokenizer, rig, captions, waypoints, seed, first, cfg.reproject, cfg.post("reshade"), sampling, fps
         )
     return decode_views(tokenizer, z, model.device)[:, win.n_cond :]

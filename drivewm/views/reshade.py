@@ -1,6 +1,6 @@
 """Reshading the reprojection: the road at frame t looks as the first frame's road looks at that distance.
 
-The reprojection (drivewm.multiview.warp, ``--reproject``) fetches a later frame's road from where
+The reprojection (drivewm.views.warp, the ``reproject`` post-step) fetches a later frame's road from where
 the first frame saw it, further away. Whatever makes the far road look unlike the near one comes
 along: in fog the far road is mostly airlight, so a straight fog drive's warped road brightens frame
 by frame (held-out: ground luma 118 -> 191 over 1.6 s, where the true frames stay at 118), and a
@@ -14,11 +14,7 @@ d_0, becomes
     I + mu(d_t) - mu(d_0)
 
 (model-free; the identity where the road looks alike at every distance). Both distances are the
-warp's own: the road plane, with the corridor's walls in front of it (walls and infinity are left
-as warped). Measured (studies/warp_haze.py, 3 held-out drives per weather, 160x96, flat warp): PSNR
-of the warped later frames against the true ones, fog 16.66 -> 24.08 dB, rain 19.98 -> 22.66,
-clear 14.85 -> 14.83, snow 16.09 -> 15.96; on the benchmark at ``--reproject 0.1`` every fog sample
-reads fog again (docs/quality-vs-compute.md, "Fog reads snow at --reproject 0.1").
+warp's own: the road plane (infinity is left as warped).
 """
 
 from __future__ import annotations
@@ -26,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from drivewm.geometry import Rig, pixel_rays
-from drivewm.multiview.camera import patch_centres_px
-from drivewm.multiview.warp import ray_depths
+from drivewm.views.rays import patch_centres_px
+from drivewm.views.warp import ray_depths
 
 PROFILE_M = (3.0, 150.0)  # road distances the profile is read over (nearer or further: its ends)
 PROFILE_BINS = 14  # log-spaced over PROFILE_M
@@ -37,10 +33,10 @@ LANE_M = 3.0  # the profile's strip: road this far (m) left and right of the fir
 
 
 def surface_distances(
-    rig: Rig, hw: tuple[int, int], T_ego0_from_ego: np.ndarray, walls_m: float = 0.0
+    rig: Rig, hw: tuple[int, int], T_ego0_from_ego: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per view, frame and pixel of images ``hw`` (H, W) of ``rig``: the distance (m) from the camera
-    at frame t to the surface its ray meets (road or wall; inf at infinity), from the same camera at
+    at frame t to the road point its ray meets (inf at infinity), from the same camera at
     frame 0 to that point, whether the surface is the road, and the point's lateral position (m, y of
     the first ego frame; NaN at infinity); each (V, T, H, W)."""
     h, w = hw
@@ -54,12 +50,12 @@ def surface_distances(
         for t, T in enumerate(T_ego0_from_ego):
             T_cam = T @ cam.T_ego_from_cam
             d, o = rays @ T_cam[:3, :3].T, T_cam[:3, 3]
-            s = ray_depths(o, d, walls_m)
+            s = ray_depths(o, d)
             hit = np.isfinite(s)
             point = o + np.where(hit, s, 0.0)[:, None] * d
             d_t[v, t] = s.reshape(h, w)
             d_0[v, t] = np.where(hit, np.linalg.norm(point - c0, axis=1), np.inf).reshape(h, w)
-            road[v, t] = (hit & (ray_depths(o, d) <= s + 1e-6)).reshape(h, w)
+            road[v, t] = hit.reshape(h, w)
             lateral[v, t] = np.where(hit, point[:, 1], np.nan).reshape(h, w)
     return d_t, d_0, road, lateral
 
@@ -86,11 +82,11 @@ def road_profile(
     return centres, colours
 
 
-def reshade(warped: np.ndarray, valid: np.ndarray, rig: Rig, T_ego0_from_ego: np.ndarray, walls_m: float = 0.0):
+def reshade(warped: np.ndarray, valid: np.ndarray, rig: Rig, T_ego0_from_ego: np.ndarray):
     """``warped`` uint8 (V, T, H, W, 3), frame 0 the first frames themselves, with every rendered
     (``valid`` (V, T, H, W)) road pixel given ``mu(d_t) - mu(d_0)`` of the road profile
     (:func:`road_profile`; left as warped where fewer than two bins saw road)."""
-    d_t, d_0, road, lateral = surface_distances(rig, warped.shape[2:4], T_ego0_from_ego, walls_m)
+    d_t, d_0, road, lateral = surface_distances(rig, warped.shape[2:4], T_ego0_from_ego)
     centres, colours = road_profile(warped[:, 0], d_0[:, 0], road[:, 0], lateral[:, 0])
     seen = np.isfinite(centres)
     if seen.sum() < PROFILE_DEGREE + 2:

@@ -1,0 +1,176 @@
+"""The multi-view generator: prompts, a rig and a trajectory -> clips of all cameras (clip format),
+grid videos and a contact sheet, for model folders of ``model_type: multiview``.
+
+The generator builds every conditioning input (per-view captions, rig, waypoints, a condition
+clip's latents) and hands them to :meth:`drivewm.multiview.model.MultiView.sample_latents`. With a
+``condition_clip`` the first frames of every view come from a real clip (Video2World) and the
+clip's rig calibration is used; without it, everything is generated. The opt-in post-steps
+(:data:`drivewm.generate.config.POST_STEPS`) run after the network's sampling and are recorded
+in every clip's ``post_processing``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from drivewm.clips.format import Clip
+from drivewm.diffusion.generate import warn_if_preview
+from drivewm.errors import DrivewmError
+from drivewm.generate.captions import template_view_captions, view_captions
+from drivewm.generate.config import GenerateConfig
+from drivewm.generate.protocol import GenerateRequest
+from drivewm.generate.reproject import refine_reprojected
+from drivewm.generate.rollout import clip_rig, initial_speed_mps, load_clip, rollout
+from drivewm.generate.writer import GeneratedSample, write_samples
+from drivewm.geometry import Rig, load_rig
+from drivewm.multiview.coding import decode_views, encode_views
+from drivewm.multiview.model import MultiView
+from drivewm.multiview.trajectories import resolve_trajectory
+from drivewm.tokenizer import Tokenizer
+from drivewm.views.blend import blend_overlaps, stitch_views
+
+
+@dataclasses.dataclass
+class Conditions:
+    """What conditions every sample of one ``generate`` run."""
+
+    rig: Rig
+    waypoints: np.ndarray
+    """(W, 3) m in the first ego frame, spaced ``trajectory_dt_s``."""
+    speed_mps: float
+    cond_latents: torch.Tensor | None
+    """(1, V, c, t, h, w) raw latents of a condition clip's first frames (Video2World); None: none."""
+
+
+class MultiViewGenerator:
+    """Samples a multi-view model folder: :meth:`generate` from prompts, :meth:`rollout` of a clip."""
+
+    model_type: ClassVar[str] = "multiview"
+    inputs: ClassVar[tuple[str, ...]] = ("condition_clip",)
+
+    def __init__(self, model: MultiView, folder: Path):
+        self.model, self.folder = model, folder
+        self._tokenizer: Tokenizer | None = None
+
+    @classmethod
+    def from_pretrained(cls, folder: Path, device: str) -> MultiViewGenerator:
+        return cls(MultiView.from_pretrained(folder).to(device), folder)
+
+    @property
+    def tokenizer(self) -> Tokenizer:
+        """The model's tokenizer on its device (loaded once; a DrivewmError when none is recorded)."""
+        if self._tokenizer is None:
+            if not self.model.latent.tokenizer:
+                raise DrivewmError(f"{self.folder}: no tokenizer recorded in the model folder; this needs one")
+            self._tokenizer = Tokenizer.from_pretrained(self.model.latent.tokenizer).to(self.model.device)
+        return self._tokenizer
+
+    def conditions(self, request: GenerateRequest, cfg: GenerateConfig) -> Conditions:
+        """Rig, trajectory, speed and condition latents of a run (a condition clip brings its rig and speed)."""
+        mv = self.model.cfg.multiview
+        rig = load_rig(cfg.rig) if cfg.rig else None
+        cond, speed = None, mv.speed_mps
+        if request.condition_clip is not None:
+            cond, rig, clip_speed = self.condition_latents(Path(request.condition_clip), rig)
+            speed = clip_speed if np.isfinite(clip_speed) else speed
+        rig = rig or self.model.training_rig
+        waypoints = resolve_trajectory(cfg.trajectory, mv.trajectory_waypoints, mv.trajectory_dt_s, speed)
+        return Conditions(rig, waypoints, speed, cond)
+
+    def condition_latents(self, clip_path: Path, rig: Rig | None) -> tuple[torch.Tensor, Rig, float]:
+        """Raw latents (1, V, c, t, h, w) of a real clip's first frames (Video2World), its rig, its speed."""
+        clip = load_clip(clip_path)
+        rig = clip_rig(self.model, clip) if rig is None else clip.meta.get_rig().subset(rig.names)
+        c, t, h, w = self.model.latent.latent_shape
+        tc = self.tokenizer.config.temporal_compression
+        sc = self.tokenizer.config.spatial_compression
+        frames = np.stack([clip.video(n)[: 1 + (t - 1) * tc] for n in rig.names])
+        z = encode_views(self.tokenizer, frames, (h * sc, w * sc), self.model.device)
+        return z[None], rig, initial_speed_mps(clip)
+
+    def generate(self, request: GenerateRequest, cfg: GenerateConfig) -> list[GeneratedSample]:
+        """``cfg.num_samples`` clips per prompt of ``request``; sample i draws its noise from seed + i."""
+        check_post_steps(request, cfg)
+        warn_if_preview(self.folder, self.model.latent.tokenizer)
+        cond = self.conditions(request, cfg)
+        prompts = [p for p in request.prompts for _ in range(cfg.num_samples)]
+        jobs = [(p, cfg.sampling.seed + i) for i, p in enumerate(prompts)]
+        return [self.sample(prompt, seed, cond, request, cfg) for prompt, seed in tqdm(jobs, desc="generate")]
+
+    def sample(
+        self, prompt: str, seed: int, cond: Conditions, request: GenerateRequest, cfg: GenerateConfig
+    ) -> GeneratedSample:
+        """One clip: the network's sampling, then the post-steps ``cfg`` asks for."""
+        dt_s = self.model.cfg.multiview.trajectory_dt_s
+        if cfg.prompt_template:
+            caps = template_view_captions(prompt, cond.rig, cond.waypoints, dt_s)
+        else:
+            caps = view_captions(prompt, cond.rig)
+        z = self.model.sample_latents(
+            cond.rig, [caps], cond.waypoints[None], [seed], cfg.sampling.steps, cond_latents=cond.cond_latents,
+            **cfg.sampling.sample_kwargs(),
+        )[0]  # fmt: skip
+        videos = self.decode(z)
+        if cfg.post("reproject"):
+            videos = self.reproject(videos, caps, cond, seed, cfg)
+        if cfg.post("stitch"):
+            videos = stitch_views(videos, cond.rig, self.model.cfg.multiview.warp_ground_m)
+        extra = {
+            "model": str(self.folder.resolve()),
+            "prompt": prompt,
+            "seed": seed,
+            **cfg.record(),
+            "trajectory": cfg.trajectory,
+            "speed_mps": float(cond.speed_mps),
+            "condition_clip": str(request.condition_clip or ""),
+            "prompt_template": cfg.prompt_template,
+        }
+        return GeneratedSample(videos, cond.rig, prompt, caps, cond.waypoints, dt_s, extra)
+
+    def decode(self, z: torch.Tensor) -> np.ndarray:
+        """Raw latents (V, c, t, h, w) -> uint8 (V, T, H, W, 3) (a latent preview without a tokenizer)."""
+        if not self.model.latent.tokenizer:
+            from drivewm.diffusion.generate import latents_preview
+
+            return latents_preview(z)
+        return decode_views(self.tokenizer, z, self.model.device)
+
+    def reproject(
+        self, videos: np.ndarray, caps: list[str], cond: Conditions, seed: int, cfg: GenerateConfig
+    ) -> np.ndarray:
+        """The ``reproject`` post-step (drivewm.generate.reproject), the first frame blended first with ``blend``."""
+        if cfg.post("blend"):
+            videos = videos.copy()
+            videos[:, 0] = blend_overlaps(videos[:, 0], cond.rig, self.model.cfg.multiview.warp_ground_m)
+        z = refine_reprojected(
+            self.model, self.tokenizer, cond.rig, caps, cond.waypoints, seed, videos, cfg.reproject,
+            cfg.post("reshade"), cfg.sampling.sample_kwargs(),
+        )  # fmt: skip
+        return self.decode(z)
+
+    def rollout(self, clip: Clip, cfg: GenerateConfig, prompt: str = "") -> GeneratedSample:
+        """``clip`` continued for ``cfg.rollout.windows`` windows (drivewm.generate.rollout)."""
+        if cfg.post("blend") or cfg.post("stitch"):
+            raise DrivewmError(
+                "rollout: a rollout's first frames are the clip's own; post_processing takes no blend/stitch"
+            )
+        return rollout(self.model, clip, cfg, self.tokenizer, prompt)
+
+    def write(self, samples: list[GeneratedSample], out_dir: Path, name: str = "generated") -> list[Path]:
+        return write_samples(out_dir, samples, self.model.latent.fps, name=name)
+
+
+def check_post_steps(request: GenerateRequest, cfg: GenerateConfig) -> None:
+    """DrivewmError for blending a condition clip's frames (they are the clip's own and agree already)."""
+    blended = [s for s in ("blend", "stitch") if cfg.post(s)]
+    if blended and request.condition_clip is not None:
+        raise DrivewmError(
+            f"{request.condition_clip}: post_processing {blended} blends generated frames; a condition clip's "
+            "frames are the clip's own and are never blended"
+        )
