@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "drivewm.multiview.commands",  # posttrain
     "drivewm.generate.commands",  # generate, rollout
     "drivewm.eval.commands",  # eval
+    "drivewm.eval.judge_commands",  # judge train|eval|score
     "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.product.quickstart",  # quickstart
     "drivewm.product.worldmodel",  # worldmodel train|figures|export

@@ -338,7 +338,7 @@ def load_rig(name_or_path: str | Path) -> Rig:
 RIG_KEYS = ("name", "defaults", "cameras")
 CAMERA_KEYS = (
     "name", "width", "height", "K", "distortion", "T_ego_from_cam",
-    "hfov_deg", "xyz", "roll_deg", "pitch_deg", "yaw_deg",
+    "hfov_deg", "xyz", "roll_deg", "pitch_deg", "yaw_deg", "rotation_wxyz",
 )  # fmt: skip
 
 
@@ -379,6 +379,9 @@ def _camera_from_dict(d: dict, rig_where: str, index: int) -> Camera:
         raise DrivewmError(f"{where}: give K or hfov_deg")
     if "T_ego_from_cam" in d:
         T = _numbers(d["T_ego_from_cam"], (4, 4), f"{where} T_ego_from_cam")
+    elif "xyz" in d and "rotation_wxyz" in d:  # a calibration record: the OpenCV camera's rotation into ego
+        w, x, y, z = _numbers(d["rotation_wxyz"], (4,), f"{where} rotation_wxyz")
+        T = make_T(quat_xyzw_to_R(np.array([x, y, z, w])), _numbers(d["xyz"], (3,), f"{where} xyz"))
     elif "xyz" in d:
         angles = [float(_numbers(d.get(k, 0.0), (), f"{where} {k}")) for k in ("roll_deg", "pitch_deg", "yaw_deg")]
         R_ego_from_body = euler_to_R(*np.radians(angles))

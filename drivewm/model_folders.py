@@ -25,13 +25,13 @@ WEIGHTS_NAME = "model.safetensors"
 #: Where the installed shipped model folders are, one per kind.
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 #: The kinds of model drivewm ships, each a folder under WEIGHTS_DIR.
-SHIPPED_KINDS = ("tokenizer", "text2world", "multiview", "transfer")
+SHIPPED_KINDS = ("tokenizer", "text2world", "multiview", "transfer", "judge")
 #: Prefix of a model folder argument that names a shipped model: ``shipped:multiview``.
 SHIPPED_PREFIX = "shipped:"
 
 
 def shipped_model(kind: str) -> Path:
-    """The installed model folder ``kind`` (tokenizer, text2world, multiview or transfer)."""
+    """The installed model folder ``kind`` (tokenizer, text2world, multiview, transfer or judge)."""
     if kind not in SHIPPED_KINDS:
         raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(SHIPPED_KINDS)}")
     path = WEIGHTS_DIR / kind

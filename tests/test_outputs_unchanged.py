@@ -139,7 +139,7 @@ def metrics_digest(eval_dir: Path) -> dict:
 
     def clean(obj):
         if isinstance(obj, dict):
-            dropped = ("config", "location")
+            dropped = ("config", "location", "input")
             return {k: clean(v) for k, v in obj.items() if not k.startswith("seconds") and k not in dropped}
         if isinstance(obj, list):
             return [clean(v) for v in obj]

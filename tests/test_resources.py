@@ -20,8 +20,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_every_packaged_file_loads():
-    assert resources.names("rigs") == ["front1", "front3", "nuscenes6"]
-    assert [len(load_rig(n).cameras) for n in resources.names("rigs")] == [1, 3, 6]
+    assert resources.names("rigs") == ["cosmos7", "front1", "front3", "nuscenes6", "nuscenes6_calib"]
+    assert [len(load_rig(n).cameras) for n in resources.names("rigs")] == [7, 1, 3, 6, 6]
     assert {load_topic_map(n).source for n in resources.names("topicmaps")} == {
         str(resources.package_dir("topicmaps") / f"{n}.yaml") for n in resources.names("topicmaps")
     }
@@ -42,7 +42,9 @@ def test_user_folders_come_first_and_paths_work(tmp_path, monkeypatch):
     assert load_rig("nuscenes6").names == ["C"]  # the user's rig of that name wins
     assert load_rig("front3").names[1] == "CAM_FRONT"  # names the user lacks still come from the package
     assert load_rig(mine / "nuscenes6.yaml").name == "mine"
-    with pytest.raises(DrivewmError, match=r"rig 'nope': no such file .*packaged: front1, front3, nuscenes6"):
+    with pytest.raises(
+        DrivewmError, match=r"rig 'nope': no such file .*packaged: cosmos7, front1, front3, nuscenes6, nuscenes6_calib"
+    ):
         load_rig("nope")
 
 

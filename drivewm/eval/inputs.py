@@ -16,6 +16,7 @@ from drivewm.clips.format import Clip
 from drivewm.clips.shards import BadClip, list_shards, read_shard, shard_folders
 from drivewm.clips.video import decode_mp4
 from drivewm.errors import DrivewmError
+from drivewm.eval.framing import WHOLE_VIDEO, Framing, grid_cells
 from drivewm.geometry import Rig, load_rig
 from drivewm.paths import visible_entries
 
@@ -61,6 +62,8 @@ class EvalItem:
     """Per camera, its frames' own exposure times (ns) when they differ from ``timestamps_ns``."""
     error: str = ""
     """Set when the input could not be read (e.g. a corrupt shard): the item is reported, not scored."""
+    framing: Framing = dataclasses.field(default_factory=Framing)
+    """mp4 inputs: the crop box and frame range scored, and the grid cells' borders."""
 
     def videos(self) -> dict[str, np.ndarray]:
         """uint8 RGB (T, H, W, 3) per camera of ``rig``, all with the same frame count."""
@@ -69,8 +72,9 @@ class EvalItem:
         if self.clip is not None:
             return {c: self.clip.video(c) for c in self.rig.names}
         if self.grid is not None:
-            return split_grid(_decode_file(self.grid_path), self.grid, self.grid_path)
-        videos = {c: _decode_file(p) for c, p in self.mp4_paths.items()}
+            frames = self.framing.apply(_decode_file(self.grid_path), self.grid_path)
+            return split_grid(frames, self.grid, self.grid_path, self.framing.cell_border_px)
+        videos = {c: self.framing.apply(_decode_file(p), p) for c, p in self.mp4_paths.items()}
         counts = {c: len(v) for c, v in videos.items()}
         if len(set(counts.values())) > 1:  # cutting all to the shortest would score a different clip
             raise DrivewmError(f"{self.key}: the cameras' videos have different frame counts {counts}")
@@ -84,18 +88,17 @@ def _decode_file(path: str) -> np.ndarray:
     return decode_mp4(p.read_bytes(), None, str(p))
 
 
-def split_grid(frames: np.ndarray, grid: GridLayout, where: str) -> dict[str, np.ndarray]:
-    """Cut (T, H, W, 3) frames of a grid video into per-camera (T, H/rows, W/cols, 3) views."""
+def split_grid(frames: np.ndarray, grid: GridLayout, where: str, border_px: int = 0) -> dict[str, np.ndarray]:
+    """Cut (T, H, W, 3) frames of a grid video into per-camera views: cells at the rounded boundaries
+    ``i W / cols`` (a size that does not divide gives cells one pixel apart in size), ``border_px``
+    cut from every cell edge (drivewm.eval.framing.grid_cells)."""
     T, H, W, _ = frames.shape
-    if H % grid.rows or W % grid.cols:
-        raise DrivewmError(f"{where}: frame size {W}x{H} does not split into a {grid.rows}x{grid.cols} grid")
-    h, w = H // grid.rows, W // grid.cols
-    out = {}
-    for i, name in enumerate(grid.cameras):
-        if name != "-":
-            r, c = divmod(i, grid.cols)
-            out[name] = np.ascontiguousarray(frames[:, r * h : (r + 1) * h, c * w : (c + 1) * w])
-    return out
+    cells = grid_cells(W, H, grid.rows, grid.cols, border_px)
+    return {
+        name: np.ascontiguousarray(frames[:, y : y + h, x : x + w])
+        for name, (x, y, w, h) in zip(grid.cameras, cells)
+        if name != "-"
+    }
 
 
 def _rig_for(rig: Rig, names: list[str], width: int, height: int, fit: str = "same") -> Rig:
@@ -168,36 +171,41 @@ def _clip_item(clip: Clip | BadClip, rig: Rig | None, fit: str) -> EvalItem:
     )
 
 
-def items_from_mp4_folder(location: Path, rig: Rig, fit: str = "same") -> list[EvalItem]:
+def items_from_mp4_folder(location: Path, rig: Rig, fit: str = "same", framing: Framing = WHOLE_VIDEO) -> list:
     """A folder of ``CAMERA.mp4`` (one clip), or a folder of such folders (one clip each)."""
     folders = [location] if visible_entries(location, "*.mp4") else [p for p in visible_entries(location) if p.is_dir()]
     items = []
     for folder in folders:
         try:
-            items.append(_folder_item(folder, rig, fit))
+            items.append(_folder_item(folder, rig, fit, framing))
         except DrivewmError as exc:  # one bad folder is one failed item
             items.append(EvalItem(folder.name, rig, 0.0, error=str(exc)))
     return items
 
 
-def _folder_item(folder: Path, rig: Rig, fit: str) -> EvalItem:
+def _folder_item(folder: Path, rig: Rig, fit: str, framing: Framing) -> EvalItem:
     paths = {c: folder / f"{c}.mp4" for c in rig.names if (folder / f"{c}.mp4").is_file()}
     if not paths:
         raise DrivewmError(f"{folder}: no mp4 named after the rig's cameras {rig.names}")
-    w, h, fps = _video_size(next(iter(paths.values())))
+    first = next(iter(paths.values()))
+    W, H, fps = _video_size(first)
+    _, _, w, h = framing.box(W, H, str(first))
     mp4_paths = {c: str(p) for c, p in paths.items()}
-    return EvalItem(folder.name, _rig_for(rig, list(paths), w, h, fit), fps, mp4_paths=mp4_paths)
+    return EvalItem(folder.name, _rig_for(rig, list(paths), w, h, fit), fps, mp4_paths=mp4_paths, framing=framing)
 
 
-def items_from_grid(path: Path, rig: Rig, grid: GridLayout, fit: str = "same") -> list[EvalItem]:
-    """One mp4 holding a grid of views."""
-    w, h, fps = _video_size(path)
-    names = [n for n in grid.cameras if n != "-"]
-    return [
-        EvalItem(
-            path.stem, _rig_for(rig, names, w // grid.cols, h // grid.rows, fit), fps, grid_path=str(path), grid=grid
-        )
-    ]
+def items_from_grid(path: Path, rig: Rig, grid: GridLayout, fit: str = "same", framing: Framing = WHOLE_VIDEO) -> list:
+    """One mp4 holding a grid of views (inside ``framing``'s crop box); each camera is fitted to its own cell."""
+    W, H, fps = _video_size(path)
+    _, _, w, h = framing.box(W, H, str(path))
+    cells = grid_cells(w, h, grid.rows, grid.cols, framing.cell_border_px)
+    named = [(n, cell) for n, cell in zip(grid.cameras, cells) if n != "-"]
+    try:
+        cameras = [rig.camera(n).scaled(cw, ch, fit) for n, (_, _, cw, ch) in named]
+    except DrivewmError as exc:
+        raise DrivewmError(f"{path}: {exc} (eval: --rig-fit stretch|crop)") from None
+    item_rig = Rig(rig.name, cameras)
+    return [EvalItem(path.stem, item_rig, fps, grid_path=str(path), grid=grid, framing=framing)]
 
 
 def load_items(
@@ -206,14 +214,19 @@ def load_items(
     grid: str | None = None,
     cameras: list[str] | None = None,
     fit: str = "same",
+    framing: Framing = WHOLE_VIDEO,
 ) -> list[EvalItem]:
     """Items of any supported input. ``grid`` ('2x3') and ``cameras`` (row-major order, default the
     rig's) describe a grid video; mp4 folders and grid videos need ``rig``. ``fit`` ('same',
-    'stretch', 'crop'): how videos of another aspect ratio than ``rig`` were resized from it."""
+    'stretch', 'crop'): how videos of another aspect ratio than ``rig`` were resized from it.
+    ``framing``: mp4 inputs' crop box, frame range and grid cell borders (drivewm.eval.framing)."""
     location = Path(location)
     rig_obj = load_rig(rig) if isinstance(rig, (str, Path)) else rig
     if not location.exists():
         raise DrivewmError(f"{location}: no such file or folder")
+    is_clips = location.suffix == ".tar" or (location.is_dir() and (list_shards(location) or shard_folders(location)))
+    if is_clips and not framing.is_default:  # a clip's frames carry poses and times: cut them at curation
+        raise DrivewmError(f"{location}: --crop, --frames and --grid-border apply to mp4 inputs, not clip shards")
     if location.suffix == ".tar" or (location.is_dir() and list_shards(location)):
         return items_from_clips(location, rig_obj, fit)
     if location.is_dir() and shard_folders(location):
@@ -227,7 +240,7 @@ def load_items(
                     f"{location}: a single mp4 with a {len(rig_obj.cameras)}-camera rig needs --grid ROWSxCOLS"
                 )
             grid = "1x1"
-        return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names), fit)
+        return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names), fit, framing)
     if location.is_dir():
-        return items_from_mp4_folder(location, rig_obj, fit)
+        return items_from_mp4_folder(location, rig_obj, fit, framing)
     raise DrivewmError(f"{location}: expected clip shards, a folder of per-camera mp4, or a grid mp4")

@@ -64,13 +64,19 @@ def load_reference(path: str | Path | None) -> dict:
     if path is None:
         return {}
     path = resources.find("references", path, "reference metrics", suffix=".json")
+    data = read_json_object(path, "reference metrics")
+    return {"name": data.get("name", path.stem), "metrics": data.get("metrics", data)}
+
+
+def read_json_object(path: Path, what: str) -> dict:
+    """A JSON object from ``path``; an unreadable file or another JSON value is one DrivewmError naming ``what``."""
     try:
         data = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
-        raise DrivewmError(f"{path}: cannot read reference metrics ({exc.__class__.__name__})") from None
+        raise DrivewmError(f"{path}: cannot read {what} ({exc.__class__.__name__})") from None
     if not isinstance(data, dict):
-        raise DrivewmError(f"{path}: reference metrics must be a JSON object")
-    return {"name": data.get("name", path.stem), "metrics": data.get("metrics", data)}
+        raise DrivewmError(f"{path}: {what} must be a JSON object")
+    return data
 
 
 def _fmt(v) -> str:
@@ -169,11 +175,15 @@ def _log_clip(rec, rr, result) -> None:
 def write_report(
     out_dir: Path, metrics: dict, results: list, reference: str | Path | None, pictures: bool = True
 ) -> None:
-    """metrics.json (NaN written as null), metrics.md, error_distributions.png and eval.rrd."""
+    """metrics.json (NaN written as null), metrics.md, trajectories.json (per clip: recovered, logged and
+    conditioned ego paths; drivewm.eval.paths_record), error_distributions.png and eval.rrd."""
     ref = load_reference(reference)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "metrics.json", metrics)
     write_text(out_dir / "metrics.md", markdown_table(metrics, ref))
+    paths = {r.key: r.artifacts["ego_paths"] for r in results if "ego_paths" in r.artifacts}
+    if paths:
+        write_json(out_dir / "trajectories.json", paths)
     if pictures:
         plot_distributions(out_dir / "error_distributions.png", metrics)
         write_rerun(out_dir / "eval.rrd", results)

@@ -30,8 +30,10 @@ from drivewm.eval.adherence import adherence, condition_scores
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, overlapping_pairs, temporal_sampson
 from drivewm.eval.epipolar import canonical_K
+from drivewm.eval.framing import WHOLE_VIDEO, Framing, input_record
 from drivewm.eval.inputs import EvalItem, load_items
 from drivewm.eval.matching import FrameMatcher, check_threads
+from drivewm.eval.paths_record import ego_paths
 from drivewm.eval.report import write_report
 from drivewm.eval.sfm import run_sfm
 from drivewm.eval.trajectory import ego_from_sfm, flow_fallback
@@ -279,6 +281,7 @@ def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
         _image_poses(item, cfg, metrics, artifacts["sfm"])
     ego = ego_from_sfm(artifacts["sfm"], item.rig, cfg.trajectory.camera)
     reg = ego.registered
+    artifacts["ego_paths"] = ego_paths(item, ego.T_world_from_ego, reg)
     if item.trajectory_ego:
         metrics["conditioned_yaw_change_deg"] = waypoint_heading_deg(np.asarray(item.trajectory_ego))
     if item.T_world_from_ego is not None:
@@ -440,6 +443,7 @@ def evaluate(
     rig_fit: str = "same",
     max_clips: int | None = None,
     threads: int | None = None,
+    framing: Framing | None = None,
 ) -> dict:
     """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
 
@@ -449,10 +453,13 @@ def evaluate(
     were resized from it ('same' refuses them, 'stretch', 'crop'; drivewm.geometry.Camera.scaled).
     ``max_clips``: score that many clips spread evenly over the (sorted) input, e.g. a reference
     subset of a large held-out set. ``threads``: per clip (:func:`clip_threads` when None); the
-    figures are the same for any number.
+    figures are the same for any number. ``framing``: mp4 inputs' crop box, frame range and grid cell
+    borders (drivewm.eval.framing), recorded with the input under ``input`` so that ``eval compare``
+    can read the same views again.
     """
     cfg = cfg or EvalConfig()
-    items = spread(load_items(location, rig, grid, cameras, rig_fit), max_clips)
+    framing = framing or WHOLE_VIDEO
+    items = spread(load_items(location, rig, grid, cameras, rig_fit, framing), max_clips)
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
     results = run_items(items, cfg, workers, progress, threads)
@@ -460,6 +467,7 @@ def evaluate(
     metrics["clips"] = {r.key: r.metrics for r in results}
     metrics["config"] = to_dict(cfg)
     metrics["location"] = str(location)
+    metrics["input"] = input_record(location, rig, grid, cameras, rig_fit, framing)
     if out_dir is not None:
         write_report(Path(out_dir), metrics, results, reference, pictures)
     return metrics

@@ -27,9 +27,9 @@ from drivewm.train.checkpoint import load_model_folder, save_model_folder
 from drivewm.train.record import training_record
 
 #: Run folders an export may lack (a run without paired drives trains no transfer model).
-OPTIONAL_FOLDERS = ("transfer",)
+OPTIONAL_FOLDERS = ("transfer", "judge")
 #: The model types a shipped folder may hold.
-MODEL_TYPES = ("drivewm-tokenizer", "text2world", "multiview", "transfer")
+MODEL_TYPES = ("drivewm-tokenizer", "text2world", "multiview", "transfer", "judge")
 MAX_FILE_BYTES = 16 * 1000 * 1000
 MAX_TOTAL_BYTES = 40 * 1000 * 1000
 
@@ -127,7 +127,8 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
     """Replace the shipped folder ``kind`` by ``src``, a fine-tune of it (``drivewm posttrain --init
     shipped:multiview``), exported as :func:`export_run` exports a run's folders; rewrites
     ``MANIFEST.json``: every file's sha256 and bytes, and ``kind``'s training record with the fine-tune's
-    steps and seconds added to the folder's own and listed under ``fine_tunes``. Returns the manifest;
+    steps and seconds added to the folder's own and listed under ``fine_tunes`` (a kind not shipped yet
+    is shipped with ``src``'s record as its own). Returns the manifest;
     the model card's figures and sha256 are the caller's to update (tests/test_shipped_weights.py checks
     the sha256). ``device``: what the fine-tune ran on; a GPU's seconds are listed as ``gpu_seconds``,
     apart from the CPU seconds of ``train_seconds``. ``note``: what the record alone does not say (e.g.
@@ -144,7 +145,7 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
         record["device"] = device
     if note:
         record["note"] = note
-    before = manifest["training"][kind]
+    before = manifest["training"].get(kind)  # None: a kind shipped the first time (the judge)
     staged = root / f".{kind}.new"  # exported beside the shipped folder, which is replaced only once it fits
     shipped = {n: root / n for n in SHIPPED_KINDS if (root / n).is_dir()}
     shutil.rmtree(staged, ignore_errors=True)
@@ -154,19 +155,24 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
     except BaseException:
         shutil.rmtree(staged, ignore_errors=True)
         raise
-    shutil.rmtree(root / kind)
+    shutil.rmtree(root / kind, ignore_errors=True)
     staged.rename(root / kind)
+    manifest["files"] = manifest_files(root, folder_files(root, {**shipped, kind: root / kind}))
+    manifest["training"][kind] = record if before is None else _add_fine_tune(before, record, device)
+    write_json(root / "MANIFEST.json", manifest)
+    return manifest
+
+
+def _add_fine_tune(before: dict, record: dict, device: str) -> dict:
+    """A shipped folder's training record ``before`` with the fine-tune's ``record`` added."""
     clock = "train_seconds" if device == "cpu" else "gpu_seconds"
     seconds = [before.get(clock, 0.0 if clock == "gpu_seconds" else None), record["train_seconds"]]
-    manifest["files"] = manifest_files(root, folder_files(root, shipped))
-    manifest["training"][kind] = {
+    return {
         **before,
         "steps": before["steps"] + record["steps"],
         clock: None if None in seconds else sum(seconds),
         "fine_tunes": [*before.get("fine_tunes", []), record],
     }
-    write_json(root / "MANIFEST.json", manifest)
-    return manifest
 
 
 def check_manifest(root: Path = WEIGHTS_DIR) -> dict:

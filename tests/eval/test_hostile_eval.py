@@ -49,12 +49,12 @@ def _eval(capsys, location: Path, out: Path, *extra: str) -> tuple[int, str, dic
 
 def test_every_input_failed_exits_2_with_a_line_per_input(tmp_path, capsys):
     grid = tmp_path / "grid.mp4"
-    grid.write_bytes(encode_mp4(_video(9, W=242), 10.0))  # 242 px do not split into 3 columns (80 px: front3's 5:3)
-    rc, err, metrics = _eval(capsys, grid, tmp_path / "e1", "--rig", "front3", "--grid", "1x3")
+    grid.write_bytes(encode_mp4(_video(9, W=240), 10.0))  # 3 columns of 80 px: front3's 5:3
+    rc, err, metrics = _eval(capsys, grid, tmp_path / "e1", "--rig", "front3", "--grid", "1x3", "--frames", "2:12")
     assert rc == 2 and metrics["num_failed_clips"] == 1
     assert _error_lines(err) == [
         "error: eval: every input failed (1 of 1)",
-        f"  {grid}: frame size 242x48 does not split into a 1x3 grid",
+        f"  {grid}: --frames 2:12 but the video has 9 frames",
     ]
     data = _faststart_mp4(_video(30), tmp_path / "whole.mp4")
     cut = tmp_path / "cut"

@@ -55,8 +55,10 @@ def test_grid_split_skips_dash_cells():
     frames[:, :2, 2:4] = 7  # row 0, col 1
     views = split_grid(frames, GridLayout.parse("2x3", ["A", "B", "-", "C", "D", "E"]), "grid.mp4")
     assert list(views) == ["A", "B", "C", "D", "E"] and views["B"].shape == (2, 2, 2, 3) and views["B"].max() == 7
-    with pytest.raises(DrivewmError, match="does not split"):
-        split_grid(np.zeros((1, 5, 6, 3), np.uint8), GridLayout.parse("2x3", list("ABCDEF")), "grid.mp4")
+    uneven = split_grid(np.zeros((1, 5, 7, 3), np.uint8), GridLayout.parse("2x3", list("ABCDEF")), "grid.mp4")
+    assert [v.shape[1:3] for v in uneven.values()] == [(2, 2), (2, 3), (2, 2), (3, 2), (3, 3), (3, 2)]
+    with pytest.raises(DrivewmError, match="leaves no pixel"):
+        split_grid(np.zeros((1, 4, 6, 3), np.uint8), GridLayout.parse("2x3", list("ABCDEF")), "grid.mp4", 1)
 
 
 def test_match_indices_equal_opencv_brute_force_ratio_and_mutual_checks():
