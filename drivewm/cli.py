@@ -34,6 +34,7 @@ COMMAND_MODULES = (
     "drivewm.generate.commands",  # generate, rollout
     "drivewm.eval.commands",  # eval
     "drivewm.eval.judge_commands",  # judge train|eval|score
+    "drivewm.multiverse.commands",  # multiverse
     "drivewm.transfer.commands",  # transfer, transfer-train
     "drivewm.product.quickstart",  # quickstart
     "drivewm.product.worldmodel",  # worldmodel train|figures|export

@@ -11,14 +11,17 @@ unambiguously) and checks that the result stays inside its folder. Names derived
 The other direction too: readers list a folder of data with :func:`visible_entries`, which leaves out
 hidden names (a writer's temporary holds a half-written file under its final name), and an output
 folder, resolved once where ``--out`` is parsed (:func:`confine_to`), is never left through a symlink
-inside it (:func:`check_confined`, called by every atomic write).
+inside it (:func:`check_confined`, called by every atomic write). Nor does any write enter the installed
+shipped weights (:data:`SHIPPED_WEIGHTS_DIR`), except inside :func:`replacing_shipped` (drivewm.product.release).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 from drivewm.errors import DrivewmError
@@ -58,6 +61,11 @@ def visible_entries(folder: str | Path, pattern: str = "*") -> list[Path]:
     return sorted(p for p in Path(folder).glob(pattern) if not p.name.startswith("."))
 
 
+#: The installed shipped model folders (drivewm.model_folders): read-only to every command.
+SHIPPED_WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+#: Whether this process is replacing the shipped weights now (:func:`replacing_shipped`).
+_REPLACING_SHIPPED = [False]
+
 #: The output folders of this process's commands: the path as given (absolute) -> where it resolved when the
 #: command line was parsed (:func:`confine_to`).
 _OUTPUT_FOLDERS: dict[str, str] = {}
@@ -70,10 +78,24 @@ def confine_to(folder: str | Path) -> None:
     _OUTPUT_FOLDERS[given] = os.path.realpath(given)
 
 
+@contextlib.contextmanager
+def replacing_shipped() -> Iterator[None]:
+    """Let writes enter the shipped weights for the ``with`` block: drivewm.product.release replacing them."""
+    _REPLACING_SHIPPED[0] = True
+    try:
+        yield
+    finally:
+        _REPLACING_SHIPPED[0] = False
+
+
 def check_confined(path: str | Path) -> None:
     """Refuse (DrivewmError) a write to ``path`` under an output folder (:func:`confine_to`) whose folder resolves
-    outside it: a symlink inside the run folder (``RUN/samples -> /elsewhere``) is never followed out of it."""
+    outside it: a symlink inside the run folder (``RUN/samples -> /elsewhere``) is never followed out of it; and
+    a write that resolves into the shipped weights (outside :func:`replacing_shipped`)."""
     target = os.path.abspath(path)
+    shipped = os.path.realpath(SHIPPED_WEIGHTS_DIR)
+    if not _REPLACING_SHIPPED[0] and os.path.realpath(target).startswith(shipped + os.sep):
+        raise DrivewmError(f"{path}: lies in drivewm's shipped weights ({shipped}), which no command writes")
     for given, real in _OUTPUT_FOLDERS.items():
         if target.startswith(given + os.sep):
             parent = os.path.realpath(os.path.dirname(target))

@@ -197,8 +197,8 @@ def test_a_fine_tune_mixed_with_the_shipped_model_is_the_weighted_mean_and_keeps
     assert not (tmp_path / "bad").exists()
 
 
-def test_the_model_cards_figures_at_the_defaults_are_the_committed_benchmark_outputs():
-    """The card's "at generate's defaults" column is ``docs/benchmark/shipped/figures.json`` (what
+def test_the_model_cards_reprojected_figures_are_the_committed_benchmark_outputs():
+    """The card's first column (the ``reprojected`` recipe) is ``docs/benchmark/shipped/figures.json`` (what
     ``drivewm worldmodel benchmark`` wrote), figure for figure, value and verdict."""
     figures = json.loads((Path(__file__).parents[1] / "docs/benchmark/shipped/figures.json").read_text())
     card = (WEIGHTS_DIR / "MODEL_CARD.md").read_text()

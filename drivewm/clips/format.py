@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import numbers
 
 import numpy as np
 
@@ -208,12 +209,25 @@ def validate_meta(meta: ClipMeta, where: str = "") -> None:
     if not meta.fps > 0 or not np.isfinite(meta.fps) or meta.num_frames == 0:
         raise DrivewmError(f"{prefix}clip {meta.key}: needs a finite fps > 0 and at least one timestamp")
     _check_rig(meta)
+    _check_trajectory(meta, prefix)
     for camera, times in meta.camera_timestamps_ns.items():
         if camera not in meta.cameras or len(times) != meta.num_frames:
             raise DrivewmError(
                 f"clip {meta.key}: camera_timestamps_ns[{camera!r}] must name a rig camera and have "
                 f"{meta.num_frames} times, got {len(times)}"
             )
+
+
+def _check_trajectory(meta: ClipMeta, prefix: str) -> None:
+    """``trajectory_ego`` is empty or finite (N, 3) waypoints, ``trajectory_dt_s`` finite and >= 0: the multi-view
+    data and eval read them as arrays, where a ragged or NaN row would fail late or train on NaN."""
+    waypoints = np.asarray(meta.trajectory_ego, dtype=object)
+    ok = waypoints.size == 0 or (waypoints.ndim == 2 and waypoints.shape[1] == 3)
+    ok = ok and all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in waypoints.ravel())
+    if not ok or not np.isfinite(np.asarray(waypoints, dtype=np.float64)).all():
+        raise DrivewmError(f"{prefix}clip {meta.key}: trajectory_ego must be finite [[x, y, z], ...] waypoints (m)")
+    if not (np.isfinite(meta.trajectory_dt_s) and meta.trajectory_dt_s >= 0):
+        raise DrivewmError(f"{prefix}clip {meta.key}: trajectory_dt_s must be finite and >= 0 s")
 
 
 #: Rigs (canonical JSON) that loaded: a log's clips, or a shard's, share one rig, and checking its cameras

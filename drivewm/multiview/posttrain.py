@@ -70,15 +70,14 @@ class PosttrainConfig:
     turn_repeat_min_deg: float = 15.0
     rope_spatial_scale: float | None = None
     """The model's ``dit.rope_spatial_scale`` from this run on (None: the init's). 0.5 takes a model
-    trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated
-    (docs/quality-vs-compute.md, "The shipped multi-view model at 320x192")."""
+    trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated."""
     layout_lr_scale: float = 10.0
     """Learning-rate multiplier of the layout's new parts (the layout encoder and the ControlNet
     branch, multi-view config ``layout``): they start at zero effect, and AdamW moves a weight by
     about the learning rate a step, so at the whole model's rate they would stay near zero for hundreds
     of steps (ControlNet-style branches are trained faster for this reason)."""
     cache_clips: int = 2048
-    """Clips whose latents and conditioning (text, rays, waypoints, warp grids) stay in memory from one
+    """Clips whose latents and conditioning (text, rays, waypoints) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
     0 = none). Building them is CPU work on the training thread: measured by
     benchmarks/bench_posttrain_batch.py at batch 32 as long as a whole GPU step."""

@@ -62,7 +62,7 @@ def _stages(run: Path) -> list[str]:
     for marker in sorted((run / ".stages").glob("*.json"), key=lambda p: p.stat().st_mtime):
         m = read_json(marker)
         seconds = "" if m.get("seconds") is None else f"{m['seconds']:.0f}"
-        # paste-able for another run folder: the run's path when the stage ran (recorded since 2026-11-30) as RUN
+        # paste-able for another run folder: the run's path when the stage ran as RUN
         command = shlex.join(in_run(m.get("argv", []), m.get("run") or run, "RUN"))
         rows.append(f"| {marker.stem} | {seconds} | `drivewm {command}` |")
     return rows

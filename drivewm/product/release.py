@@ -12,7 +12,6 @@ installed folder; where the installed folders are (``shipped:KIND``) is drivewm.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -21,7 +20,8 @@ import torch
 
 from drivewm.atomic import write_json
 from drivewm.errors import DrivewmError
-from drivewm.model_folders import SHIPPED_KINDS, WEIGHTS_DIR, resolve_model_folder, resolve_reference
+from drivewm.model_folders import SHIPPED_KINDS, WEIGHTS_DIR, file_sha256, resolve_model_folder, resolve_reference
+from drivewm.paths import replacing_shipped
 from drivewm.product.model_card import write_model_card
 from drivewm.train.checkpoint import load_model_folder, save_model_folder
 from drivewm.train.record import training_record
@@ -32,14 +32,6 @@ OPTIONAL_FOLDERS = ("transfer", "judge")
 MODEL_TYPES = ("drivewm-tokenizer", "text2world", "multiview", "transfer", "judge")
 MAX_FILE_BYTES = 16 * 1000 * 1000
 MAX_TOTAL_BYTES = 40 * 1000 * 1000
-
-
-def sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def export_folder(src: Path, dst: Path) -> dict:
@@ -120,7 +112,7 @@ def folder_files(root: Path, folders: dict[str, Path]) -> list[Path]:
 
 def manifest_files(root: Path, files: list[Path]) -> dict:
     """``MANIFEST.json``'s ``files``: path under ``root`` -> sha256 and bytes."""
-    return {str(p.relative_to(root)): {"sha256": sha256(p), "bytes": p.stat().st_size} for p in files}
+    return {str(p.relative_to(root)): {"sha256": file_sha256(p), "bytes": p.stat().st_size} for p in files}
 
 
 def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device: str = "cpu", note: str = "") -> dict:
@@ -133,6 +125,12 @@ def replace_shipped(kind: str, src: str | Path, root: Path = WEIGHTS_DIR, device
     the sha256). ``device``: what the fine-tune ran on; a GPU's seconds are listed as ``gpu_seconds``,
     apart from the CPU seconds of ``train_seconds``. ``note``: what the record alone does not say (e.g.
     that the folder is a fine-tune mixed with the shipped one, drivewm.product.release.interpolate_folders)."""
+    with replacing_shipped():
+        return _replace_shipped(kind, Path(src), root, device, note)
+
+
+def _replace_shipped(kind: str, src: Path, root: Path, device: str, note: str) -> dict:
+    """:func:`replace_shipped`, its writes let into the shipped weights."""
     if kind not in SHIPPED_KINDS:
         raise DrivewmError(f"no shipped model {kind!r}: drivewm ships {', '.join(SHIPPED_KINDS)}")
     manifest = check_manifest(root)  # never build on a manifest that no longer matches its files
@@ -179,7 +177,7 @@ def check_manifest(root: Path = WEIGHTS_DIR) -> dict:
     """The shipped manifest, after checking every file's sha256 against it (DrivewmError on a mismatch)."""
     manifest = json.loads((root / "MANIFEST.json").read_text())
     for name, entry in manifest["files"].items():
-        if sha256(root / name) != entry["sha256"]:
+        if file_sha256(root / name) != entry["sha256"]:
             raise DrivewmError(f"{root / name}: sha256 differs from MANIFEST.json (a corrupt or replaced file)")
     return manifest
 

@@ -104,34 +104,56 @@ class HoldingIDMVehicle(IDMVehicle):
         super().step(dt)
 
 
+class HighwayDrive:
+    """A highway-env drive being stepped: the environment, its ego and the track ids handed out so far.
+    :func:`record_highway` runs one to the end; drivewm.sim.fork_highway copies one at a branch point."""
+
+    def __init__(self, cfg: SimConfig, sim_seed: int):
+        self.cfg = cfg
+        self.env = make_env(cfg.scenario, cfg.traffic_density, sim_seed)
+        old = self.env.vehicle
+        self.ego = HoldingIDMVehicle.create_from(old)
+        self.env.road.vehicles[self.env.road.vehicles.index(old)] = self.ego
+        self.env.controlled_vehicles = [self.ego]
+        self.substeps = max(1, math.ceil((1.0 / cfg.fps) / MAX_SUBSTEP_S))
+        self.dt = 1.0 / cfg.fps / self.substeps
+        # id(vehicle) -> (vehicle, track id): holding every vehicle keeps its id() from going to a later one (the
+        # intersection removes cars that left and spawns new ones, which CPython may place at a freed address)
+        self.ids: dict[int, tuple[object, str]] = {}
+
+    def tick(self, i: int) -> SceneTick:
+        """The scene at logged tick ``i`` (the simulator's present state)."""
+        return _tick(self.env, self.ego, int(round(i * 1e9 / self.cfg.fps)), self.ids, self.cfg.seed)
+
+    def step(self) -> float:
+        """Advance the traffic by one logged tick; returns the CPU seconds it took."""
+        t0 = time.process_time()
+        for _ in range(self.substeps):
+            self.env.road.act()
+            self.env.road.step(self.dt)
+        if self.cfg.scenario == "intersection":
+            self.env._clear_vehicles()
+            self.env._spawn_vehicle(spawn_probability=self.env.config["spawn_probability"])
+        return time.process_time() - t0
+
+    def road_map(self, ticks: list[SceneTick]) -> RoadMap:
+        """The road network around the ego's path over ``ticks``."""
+        xy = np.array([t.T_world_from_ego[:2, 3] for t in ticks])
+        lo, hi = xy.min(axis=0) - self.cfg.max_range_m, xy.max(axis=0) + self.cfg.max_range_m
+        return road_map_from_network(self.env.road.network, lo, hi)
+
+
 def _run_once(cfg: SimConfig, sim_seed: int, allow_crash: bool = False) -> SceneRecording | None:
-    env = make_env(cfg.scenario, cfg.traffic_density, sim_seed)
-    old = env.vehicle
-    ego = HoldingIDMVehicle.create_from(old)
-    env.road.vehicles[env.road.vehicles.index(old)] = ego
-    env.controlled_vehicles = [ego]
-    substeps = max(1, math.ceil((1.0 / cfg.fps) / MAX_SUBSTEP_S))
-    dt = 1.0 / cfg.fps / substeps
-    # id(vehicle) -> (vehicle, track id): holding every vehicle keeps its id() from going to a later one (the
-    # intersection removes cars that left and spawns new ones, which CPython may place at a freed address)
-    ids: dict[int, tuple[object, str]] = {}
+    drive = HighwayDrive(cfg, sim_seed)
     ticks = []
     step_cpu_s = 0.0
     for i in range(cfg.simulated_ticks):
-        ticks.append(_tick(env, ego, int(round(i * 1e9 / cfg.fps)), ids, cfg.seed))
-        t0 = time.process_time()
-        for _ in range(substeps):
-            env.road.act()
-            env.road.step(dt)
-        if cfg.scenario == "intersection":
-            env._clear_vehicles()
-            env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
-        step_cpu_s += time.process_time() - t0
-        if ego.crashed and not allow_crash:
+        ticks.append(drive.tick(i))
+        step_cpu_s += drive.step()
+        if drive.ego.crashed and not allow_crash:
             return None
-    env.close()
-    xy = np.array([t.T_world_from_ego[:2, 3] for t in ticks])
-    road = road_map_from_network(env.road.network, xy.min(axis=0) - cfg.max_range_m, xy.max(axis=0) + cfg.max_range_m)
+    drive.env.close()
+    road = drive.road_map(ticks)
     tags = {"road_type": cfg.road_type, "source": "highway-env"}
     return SceneRecording(road, ticks, tags, step_cpu_s=step_cpu_s)
 

@@ -139,25 +139,7 @@ def record_sumo(cfg: SimConfig) -> SceneRecording:
         net_path, routes = generate_network(
             cfg.scenario, cfg.seed, cfg.traffic_density, WARMUP_S + cfg.duration_s + 60, Path(tmp)
         )
-        libsumo.start(
-            [
-                "sumo",
-                "-n",
-                str(net_path),
-                "-r",
-                str(routes),
-                "--step-length",
-                f"{dt}",
-                "--seed",
-                str(cfg.seed),
-                "--no-step-log",
-                "true",
-                "--no-warnings",
-                "true",
-                "--collision.action",
-                "none",
-            ]
-        )
+        start_sumo(net_path, routes, dt, cfg.seed)
         try:
             ticks, step_cpu_s = _drive(libsumo, cfg, dt)
         finally:
@@ -165,6 +147,30 @@ def record_sumo(cfg: SimConfig) -> SceneRecording:
         xy = np.array([t.T_world_from_ego[:2, 3] for t in ticks])
         road = road_map_from_net(net_path, xy.min(axis=0) - cfg.max_range_m, xy.max(axis=0) + cfg.max_range_m)
     return SceneRecording(road, ticks, {"road_type": cfg.road_type, "source": "sumo"}, step_cpu_s=step_cpu_s)
+
+
+def start_sumo(net_path: Path, routes: Path, dt: float, seed: int, extra: tuple[str, ...] = ()) -> None:
+    """Start libsumo on the network and routes (``extra``: more sumo options)."""
+    libsumo.start(
+        [
+            "sumo",
+            "-n",
+            str(net_path),
+            "-r",
+            str(routes),
+            "--step-length",
+            f"{dt}",
+            "--seed",
+            str(seed),
+            "--no-step-log",
+            "true",
+            "--no-warnings",
+            "true",
+            "--collision.action",
+            "none",
+            *extra,
+        ]
+    )
 
 
 def _drive(traci, cfg: SimConfig, dt: float) -> tuple[list[SceneTick], float]:

@@ -28,6 +28,7 @@ from drivewm.config import to_dict
 from drivewm.errors import BatchError, DrivewmError
 from drivewm.layout.render import render_layout
 from drivewm.model_folders import portable_reference
+from drivewm.paths import check_confined
 from drivewm.tokenizer.data import to_model_range
 from drivewm.tokenizer.model import Tokenizer
 from drivewm.tokenizer.tiling import TilingConfig, encode_tiled
@@ -66,6 +67,7 @@ def encode_clips(
     """
     tok = Tokenizer.from_pretrained(model_dir)
     cache_dir = latent_cache_dir(clip_dir, name, model_dir)
+    check_confined(cache_dir)  # made here, before any atomic write checks it
     cache_dir.mkdir(parents=True, exist_ok=True)
     remove_dead_temporaries(cache_dir)  # a killed encode's unfinished latent files
     tiling = tiling or TilingConfig(chunk_latent_frames=None, tile_latent=None)

@@ -3,9 +3,8 @@
 Each latent position codes one block of ``temporal_compression x spatial_compression^2`` pixels of
 3 colours (768 values at 4x8x8). The best *linear* code of such blocks into c numbers is their
 principal components (Karhunen-Loeve), and it is a strong baseline: on held-out simulated drives
-PCA with the tokenizer's 16 channels scores 30.1 dB where the 1.4M-parameter network shipped
-until 2026-11-29 (3,500 steps) scores 29.1 (docs/quality-vs-compute.md, "The tokenizer never
-trained on the frames it codes most", part 2). So the network is given that code as a path of its
+PCA with the tokenizer's 16 channels scores 30.1 dB where a 1.4M-parameter network trained
+3,500 steps scores 29.1 (docs/results.md). So the network is given that code as a path of its
 own and learns only what the linear code misses:
 
     z = P (fold(patch(x)) - mu) + encoder(patch(x))          (c, t, h, w)

@@ -38,7 +38,13 @@ from safetensors.torch import save_file
 from drivewm import __version__
 from drivewm.atomic import atomic_path, write_json
 from drivewm.errors import DrivewmError
-from drivewm.model_folders import CONFIG_NAME, WEIGHTS_NAME, portable_reference, resolve_model_folder
+from drivewm.model_folders import (
+    CONFIG_NAME,
+    WEIGHTS_NAME,
+    portable_reference,
+    resolve_model_folder,
+    verify_shipped,
+)
 
 TRAIN_STATE_NAME = "train_state.pt"
 PREVIOUS_STATE_NAME = "train_state.prev.pt"
@@ -144,11 +150,13 @@ def load_model_folder(path: str | Path, model_type: str | tuple[str, ...]) -> tu
 
     ``path`` may name a shipped model, ``shipped:KIND`` (drivewm.model_folders), as config fields such as
     a tokenizer run's ``init`` do. A missing folder/file or another ``model_type`` raises
-    DrivewmError naming the folder.
+    DrivewmError naming the folder; so does a shipped folder whose files differ from its manifest
+    (drivewm.model_folders.verify_shipped), however it is named.
     """
     path = resolve_model_folder(path)
     if not (path / WEIGHTS_NAME).is_file():
         raise DrivewmError(f"{path}: not a drivewm model folder (needs {CONFIG_NAME} and {WEIGHTS_NAME})")
+    verify_shipped(path)
     for _ in range(READ_ATTEMPTS):
         info = read_model_config(path, model_type)
         state, revision = _read_weights(path / WEIGHTS_NAME)

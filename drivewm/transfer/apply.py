@@ -30,6 +30,7 @@ from drivewm.curate.stage import manifest_row
 from drivewm.diffusion.generate import write_grid_png
 from drivewm.diffusion.text2world import LatentInfo
 from drivewm.errors import BatchError, DrivewmError
+from drivewm.generate.config import SamplingConfig
 from drivewm.logs.types import TIMES_OF_DAY
 from drivewm.multiview.coding import decode_views, encode_views, resize_views
 from drivewm.train.checkpoint import read_model_config
@@ -49,14 +50,10 @@ class TransferOptions:
     """Target weather (clear | overcast | rain | snow | fog)."""
     time_of_day: str | None = None
     """Target time of day (day | dusk | night); None keeps each clip's own (day when unknown)."""
-    steps: int = 8
-    """Sampler steps."""
-    guidance: float = 1.0
-    """Classifier-free guidance on the target condition (1 = none; 2x the network evaluations otherwise)."""
-    sampler: str = "euler"
-    """``euler`` or ``heun`` (drivewm.diffusion.samplers)."""
-    seed: int = 0
-    """View v of every clip draws its noise from seed + v."""
+    sampling: SamplingConfig = dataclasses.field(default_factory=lambda: SamplingConfig(8, "euler", 1.0))
+    """Sampler steps, sampler and classifier-free guidance on the target condition (generation's
+    SamplingConfig; here 8 Euler steps, guidance 1 = none); view v of every clip draws its noise
+    from seed + v. Its trajectory settings have no use in a transfer."""
     start_sigma: float | None = None
     """Transfer model: start from the source noised to this sigma (None: from pure noise). SDEdit
     (a Text2World model): the noise level the source is lifted to (required)."""
@@ -76,16 +73,21 @@ class TransferOptions:
     """Share the transfer's look (its light, colour and haze coarser than the detail band, and its
     contrast gain) between cameras where they see one point of the flat world, so two cameras of one
     scene get one look where they overlap (drivewm.transfer.detail.share_look); the source's structure
-    stays each view's own. False: each view on its own, as before 2026-12-01."""
+    stays each view's own. False: each view on its own."""
     model_resolution: bool = False
     """Write clips at the model's image size, the rig scaled to it; False (default) keeps the source's
     size and rig when the source is larger (drivewm.transfer.resolution)."""
 
     def validate(self) -> None:
-        if self.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
-            raise DrivewmError(f"transfer: --steps ({self.steps}) and --max-clips ({self.max_clips}) must be >= 1")
+        s = self.sampling
+        if s.steps < 1 or (self.max_clips is not None and self.max_clips < 1):
+            raise DrivewmError(f"transfer: --steps ({s.steps}) and --max-clips ({self.max_clips}) must be >= 1")
         # checked here, not per clip: a bad value would fail every clip of every shard, one after another
-        finite_at_least("transfer", 0, **{"--guidance": self.guidance, "--detail-band": self.detail_band})
+        finite_at_least("transfer", 0, **{"--guidance": s.guidance, "--detail-band": self.detail_band})
+        try:
+            s.validate()
+        except DrivewmError as exc:
+            raise DrivewmError(f"transfer: {exc}") from None
         if self.start_sigma is not None and not (math.isfinite(self.start_sigma) and self.start_sigma > 0):
             raise DrivewmError(f"transfer: --start-sigma must be a finite number > 0, got {self.start_sigma}")
 
@@ -115,9 +117,9 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
     """A transfer model folder, or a Text2World folder run as SDEdit (needs ``options.start_sigma``)."""
     model_dir = Path(model_dir)
     model_type = read_model_config(model_dir).get("model_type")
-    o = options
-    record = {"model": str(model_dir.resolve()), "steps": o.steps, "guidance": o.guidance, "sampler": o.sampler}
-    record |= {"seed": o.seed, "start_sigma": o.start_sigma, "detail": o.detail, "detail_band": o.detail_band}
+    o, s = options, options.sampling
+    record = {"model": str(model_dir.resolve()), "steps": s.steps, "guidance": s.guidance, "sampler": s.sampler}
+    record |= {"seed": s.seed, "start_sigma": o.start_sigma, "detail": o.detail, "detail_band": o.detail_band}
     record |= {"model_resolution": o.model_resolution, "shared_look": o.detail and o.shared_look}
     if model_type == "transfer":
         from drivewm.transfer.model import Transfer
@@ -125,7 +127,7 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
         model = Transfer.from_pretrained(model_dir).to(o.device)
 
         def fn(src, captions, targets, seeds):
-            return model.transfer_latents(src, captions, targets, seeds, o.steps, o.guidance, o.sampler, o.start_sigma)
+            return model.transfer_latents(src, captions, targets, seeds, s.steps, s.guidance, s.sampler, o.start_sigma)
 
         return Transferer(fn, model.latent, {**record, "method": "transfer"}, model.device)
     if model_type == "text2world":
@@ -137,7 +139,7 @@ def load_transferer(model_dir: str | Path, options: TransferOptions) -> Transfer
         t2w = Text2World.from_pretrained(model_dir).to(o.device)
 
         def fn(src, captions, targets, seeds):
-            return sdedit_latents(t2w, src, captions, seeds, o.start_sigma, o.steps, o.guidance, o.sampler)
+            return sdedit_latents(t2w, src, captions, seeds, o.start_sigma, s.steps, s.guidance, s.sampler)
 
         return Transferer(fn, t2w.latent, {**record, "method": "sdedit"}, t2w.device)
     raise DrivewmError(f"{model_dir}: cannot transfer with model_type {model_type!r} (transfer or text2world)")
@@ -170,7 +172,7 @@ def transfer_clip(clip: Clip, transferer: Transferer, tokenizer, options: Transf
     source = encode_views(tokenizer, small, model_hw, transferer.device)  # (V, c, t, h, w) on the CPU
     _, views = target_captions(clip.meta, target)
     captions = [views[name] for name in clip.meta.cameras]
-    seeds = [options.seed + v for v in range(len(captions))]
+    seeds = [options.sampling.seed + v for v in range(len(captions))]
     out = decode_views(tokenizer, transferer.fn(source, captions, [target] * len(captions), seeds), transferer.device)
     shown = resize_views(full, out_hw)  # the source at the output size: the detail's reference and the sheet's
     coded = decode_views(tokenizer, source, transferer.device) if options.detail else None

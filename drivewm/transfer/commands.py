@@ -93,15 +93,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def transfer_command(args: argparse.Namespace) -> int:
+    from drivewm.generate.config import SamplingConfig
     from drivewm.transfer.apply import TransferOptions, transfer_clips
 
     options = TransferOptions(
         args.weather,
         args.time_of_day,
-        args.steps,
-        args.guidance,
-        args.sampler,
-        args.seed,
+        SamplingConfig(args.steps, args.sampler, args.guidance, seed=args.seed),
         args.start_sigma,
         args.tokenizer,
         args.device,

@@ -18,8 +18,7 @@ blends every decoded frame the same way. Neither is for a real clip's frames: th
 agree already, and blending them would double their roadside (generate with ``--condition-clip``
 and rollouts leave them as they are; a transfer keeps its source's geometry and is not stitched,
 but shares its look through the same :func:`feathering`, drivewm.transfer.detail.share_look).
-Measured: docs/quality-vs-compute.md, "Cameras that disagree where they overlap" and "Stitched:
-every frame blended where the cameras overlap".
+Figures with and without the blend: docs/results.md.
 """
 
 from __future__ import annotations

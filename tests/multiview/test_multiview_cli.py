@@ -69,7 +69,8 @@ def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     conditioning can be added (its encoder starts at zero), and a model with it keeps it."""
     root, cache = trained_mv
     args = ["posttrain", "--init", str(root / "mv"), "--data", str(cache), "--rig", "front3"]
-    assert main([*args, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
+    own = ["--set", "multiview.frame_motion=false", "--set", "multiview.moving_camera_rays=true"]  # the init's
+    assert main([*args, *own, "--out", str(tmp_path / "ft"), "--set", "train.steps=2", "--set", "sample_steps=2"]) == 0
     state = torch.load(tmp_path / "ft" / "train_state.pt", weights_only=True)
     start = MultiView.from_pretrained(root / "mv").net.state_dict()
     tuned = MultiView.from_pretrained(tmp_path / "ft").net.state_dict()
@@ -78,10 +79,10 @@ def test_posttrain_fine_tunes_a_multiview_folder(trained_mv, tmp_path):
     assert 0 < max(deltas) < 0.05  # two small steps away from the multi-view model, not a fresh init
     bad = [*args, "--out", str(tmp_path / "bad"), "--set", "multiview.camera_width=64"]
     assert main(bad) == 2
-    motion = ["--set", "multiview.frame_motion=true", "--set", "multiview.moving_camera_rays=false"]
+    motion = []  # the defaults (the shipped model's settings): per-frame motion, static rays
     two_steps = ["--set", "train.steps=2", "--set", "sample_steps=2"]
     assert main([*args, "--out", str(tmp_path / "motion"), *two_steps, *motion]) == 0
-    added = MultiView.from_pretrained(tmp_path / "motion").net.state_dict()  # a fine-tune may add per-frame motion
+    added = MultiView.from_pretrained(tmp_path / "motion").net.state_dict()  # a fine-tune adds per-frame motion
     assert sorted(set(added) - set(start)) == sorted(k for k in added if k.startswith("motion_encoder."))
     assert 0 < float(added["motion_encoder.net.2.weight"].abs().max()) < 0.01  # fresh: zero, two steps ago
     again = ["posttrain", "--init", str(tmp_path / "motion"), "--data", str(cache), "--rig", "front3"]

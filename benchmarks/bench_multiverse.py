@@ -1,0 +1,77 @@
+"""Time of ``drivewm multiverse``: five 8-second futures of a nuscenes6 drive at 320x192, scoring included.
+
+The must-hold limit: at most 10 minutes on 2 cores. Measured here with the simulator's renderer as the
+cameras (``--renderer sim``); the world-model renderer (``--renderer model``, generation from each
+future's layout) is not in this version, so its share is not measured.
+
+Two sources, interleaved ``--repeats`` times (medians): a recorded nuscenes6 drive (simulated once, then
+branched as a log: road users replayed) and the same scenario forked in highway-env (reactive). Each run
+can also run without ``drivewm eval`` (``--no-eval-runs``) to split the video scores' cost off. Prints wall and CPU
+seconds and the ratio of the wall time to the 600 s limit.
+
+    python benchmarks/bench_multiverse.py                          # 8 s horizon, 1 repeat, both sources
+    python benchmarks/bench_multiverse.py --horizon 2 --no-eval-runs  # a quick look, eval's share split off
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
+
+from drivewm.multiverse import MultiverseConfig, run_multiverse  # noqa: E402
+from drivewm.sim import SimConfig, simulate  # noqa: E402
+
+LIMIT_S = 600.0
+PLANS = ["keep", "left", "right", "brake", "accelerate"]
+
+
+def timed(cfg: MultiverseConfig, out: Path) -> tuple[float, float]:
+    """(wall s, CPU s of this process) of one run into a fresh folder."""
+    shutil.rmtree(out, ignore_errors=True)
+    w0, c0 = time.perf_counter(), time.process_time()
+    run_multiverse(cfg, out, progress=False)
+    return time.perf_counter() - w0, time.process_time() - c0
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--horizon", type=float, default=8.0)
+    p.add_argument("--repeats", type=int, default=1)
+    p.add_argument("--at", type=float, default=2.0)
+    p.add_argument("--sources", default="log,highway-env", help="which of log, highway-env to time")
+    p.add_argument("--no-eval-runs", action="store_true", help="also time each source without drivewm eval")
+    args = p.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bench-multiverse-") as tmp:
+        tmp = Path(tmp)
+        drive = SimConfig(source="highway", scenario="highway", rig="nuscenes6", width=320, height=192, seed=7)
+        drive.duration_s = args.at + args.horizon + 0.5
+        log = simulate(drive, tmp / "drive.mcap", progress=False)
+        common = dict(at_s=args.at, horizon_s=args.horizon, plans=PLANS, width=320, height=192, seed=7)
+        runs = {
+            "log": MultiverseConfig(log=str(log), **common),
+            "highway-env": MultiverseConfig(scenario="highway", **common),
+        }
+        runs = {k: v for k, v in runs.items() if k in args.sources.split(",")}
+        if args.no_eval_runs:
+            runs |= {f"{k} (no eval)": dataclasses.replace(v, eval_metrics=[]) for k, v in list(runs.items())}
+        times: dict[str, list[tuple[float, float]]] = {k: [] for k in runs}
+        for _ in range(args.repeats):  # interleaved: the machine's load falls on every variant alike
+            for name, cfg in runs.items():
+                times[name].append(timed(cfg, tmp / "out"))
+    print(f"five {args.horizon:g} s futures, nuscenes6 at 320x192, renderer sim, {args.repeats} repeat(s), medians:")
+    for name, ts in times.items():
+        wall, cpu = statistics.median(t[0] for t in ts), statistics.median(t[1] for t in ts)
+        print(f"  {name:24s} wall {wall:7.1f} s  cpu {cpu:7.1f} s  wall / limit {wall / LIMIT_S:.2f}")
+    print("  renderer model: not measured (layout-conditioned generation is not in this version)")
+
+
+if __name__ == "__main__":
+    main()
