@@ -30,6 +30,7 @@ COMMAND_MODULES = (
     "drivewm.curate.commands",  # curate, import-video
     "drivewm.tokenizer.commands",  # tokenizer train|encode|decode|eval
     "drivewm.diffusion.commands",  # pretrain
+    "drivewm.ar.commands",  # ar train|eval
     "drivewm.multiview.commands",  # posttrain
     "drivewm.generate.commands",  # generate, rollout
     "drivewm.eval.commands",  # eval

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Literal
 
+from drivewm.ar.sampling_config import TokenSampling
 from drivewm.config import MAX_SEED, at_least, check_guidance_interval, require
 from drivewm.recipe import RecipeBook
 
@@ -129,6 +130,8 @@ class GenerateConfig:
     """Settings of the ``reproject`` post-step."""
     rollout: RolloutConfig = dataclasses.field(default_factory=RolloutConfig)
     """Settings only rollouts read."""
+    tokens: TokenSampling = dataclasses.field(default_factory=TokenSampling)
+    """Autoregressive models: temperature, top-k and top-p of each token (drivewm.ar.sampling)."""
 
     def validate(self) -> None:
         at_least(self, 1, "num_samples", "batch_size")

@@ -16,6 +16,7 @@ from drivewm.generate.protocol import Generator
 GENERATORS: dict[str, str] = {
     "text2world": "drivewm.generate.text2world:Text2WorldGenerator",
     "multiview": "drivewm.generate.multiview:MultiViewGenerator",
+    "ar": "drivewm.ar.generator:ARFolderGenerator",
 }
 
 

@@ -41,5 +41,5 @@ def test_post_steps_are_opt_in_by_name_recorded_in_order_and_checked():
 def test_every_registered_generator_class_names_its_model_type():
     for model_type in GENERATORS:
         assert generator_class(model_type).model_type == model_type
-    with pytest.raises(DrivewmError, match="known: \\['multiview', 'text2world'\\]"):
-        generator_class("ar")
+    with pytest.raises(DrivewmError, match="known: \\['ar', 'multiview', 'text2world'\\]"):
+        generator_class("gan")
