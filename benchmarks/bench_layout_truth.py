@@ -81,7 +81,7 @@ def run(args: list[str]) -> None:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--model", required=True)
-    p.add_argument("--baseline", default="shipped:multiview")
+    p.add_argument("--baseline", default="shipped:multiview", help="'' = no baseline")
     p.add_argument("--heldout", required=True, type=Path)
     p.add_argument("--out", required=True, type=Path)
     p.add_argument("--windows", type=int, default=3)
@@ -91,10 +91,9 @@ def main() -> None:
     args = p.parse_args()
     prompts = args.prompt or PROMPTS
     sources = pick_windows(args.heldout, args.out, args.windows, ("clear", "day"))
-    runs = {
-        "layout": generate(args.model, sources, args.out / "layout", prompts, args.steps, True),
-        "baseline": generate(args.baseline, sources, args.out / "baseline", prompts, args.steps, False),
-    }
+    runs = {"layout": generate(args.model, sources, args.out / "layout", prompts, args.steps, True)}
+    if args.baseline:  # "" skips it (e.g. scored already by an earlier run on the same windows)
+        runs["baseline"] = generate(args.baseline, sources, args.out / "baseline", prompts, args.steps, False)
     summary = {}
     for name, folder in runs.items():
         run(
