@@ -34,7 +34,7 @@ def heldout_losses(model: MultiView, ds: MultiViewDataset, clips: int, draws: in
     """(clips * draws,) post-training losses of ``clips`` clips spread evenly over ``ds`` (every drive
     and condition of a held-out cache), draw j of the k-th seeded ``mix_seed(777, k, j)``: the same
     noise for every model of one latent shape."""
-    cfg = RECIPES.resolve("debug", None, ["multiview.trajectory_dropout=0"])
+    cfg = RECIPES.resolve("debug", None, ["multiview.trajectory_dropout=0", "multiview.layout_dropout=0"])
     task = MultiViewTask(cfg, ds, model)
     device = next(model.net.parameters()).device
     net = model.net.eval()

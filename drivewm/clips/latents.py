@@ -3,7 +3,8 @@
 Layout, next to the clips: ``CLIPDIR/latents/NAME/`` (NAME defaults to the tokenizer folder's
 name) holding ``index.json`` and one ``KEY.safetensors`` per clip with tensors
 ``latents`` ((V, c, t, h, w) float32, raw tokenizer output, *not* normalised) and
-``T_world_from_ego`` ((T, 4, 4) float64), and in the file's metadata ``source``: a fingerprint of
+``T_world_from_ego`` ((T, 4, 4) float64), for a clip with layout ``layout_latents`` (the same
+tokenizer's code of its layout video, shaped as ``latents``), and in the file's metadata ``source``: a fingerprint of
 what made it (the clip's meta, pixels and poses, the tokenizer's files, the tiling), so that
 ``drivewm tokenizer encode`` keeps a file it would write again byte for byte. ``index.json``::
 
@@ -45,30 +46,46 @@ def latent_cache_dir(clip_dir: str | Path, name: str | None = None, model_dir: s
 
 @dataclasses.dataclass
 class LatentClip:
-    """One cached clip: ``latents`` (V, c, t, h, w) float32, ``T_world_from_ego`` (T, 4, 4)."""
+    """One cached clip: ``latents`` (V, c, t, h, w) float32, ``T_world_from_ego`` (T, 4, 4), and
+    ``layout_latents`` (V, c, t, h, w): the tokenizer's code of the clip's layout video
+    (drivewm.layout.render), None for a clip without layout."""
 
     meta: ClipMeta
     latents: torch.Tensor
     T_world_from_ego: np.ndarray
+    layout_latents: torch.Tensor | None = None
 
 
 def write_latent_clip(
-    cache_dir: str | Path, meta: ClipMeta, latents: torch.Tensor, T_world_from_ego: np.ndarray, source: str = ""
+    cache_dir: str | Path,
+    meta: ClipMeta,
+    latents: torch.Tensor,
+    T_world_from_ego: np.ndarray,
+    source: str = "",
+    layout_latents: torch.Tensor | None = None,
 ) -> dict:
-    """Atomically write one clip's latents, with ``source`` (see the module docstring) in the file's
-    metadata; returns its index row."""
-    if latents.ndim != 5:
-        raise DrivewmError(f"clip {meta.key}: latents must be (V, c, t, h, w), got {tuple(latents.shape)}")
-    if not torch.isfinite(latents).all():  # read back, one NaN turns every weight of a training run NaN
-        raise DrivewmError(f"clip {meta.key}: the tokenizer coded NaN or infinite latents; not cached")
-    path = child_path(cache_dir, meta.key, ext="safetensors", what="clip key")
+    """Atomically write one clip's latents (and its layout video's, when given), with ``source`` (see
+    the module docstring) in the file's metadata; returns its index row."""
     tensors = {
-        "latents": latents.detach().to(torch.float32).contiguous().cpu(),
+        "latents": _checked(latents, meta.key, "latents", None),
         "T_world_from_ego": torch.as_tensor(np.asarray(T_world_from_ego, dtype=np.float64)),
     }
+    if layout_latents is not None:
+        tensors["layout_latents"] = _checked(layout_latents, meta.key, "layout_latents", latents.shape)
+    path = child_path(cache_dir, meta.key, ext="safetensors", what="clip key")
     with atomic_path(path) as tmp:
         save_file(tensors, str(tmp), metadata={"source": source})
     return {"key": meta.key, "file": path.name, "meta": meta.to_json()}
+
+
+def _checked(latents: torch.Tensor, key: str, field: str, shape: torch.Size | None) -> torch.Tensor:
+    """``latents`` as contiguous float32 on the CPU, refused unless (V, c, t, h, w), finite and ``shape``."""
+    if latents.ndim != 5 or (shape is not None and latents.shape != shape):
+        want = "(V, c, t, h, w)" if shape is None else f"the clip's {tuple(shape)}"
+        raise DrivewmError(f"clip {key}: {field} must be {want}, got {tuple(latents.shape)}")
+    if not torch.isfinite(latents).all():  # read back, one NaN turns every weight of a training run NaN
+        raise DrivewmError(f"clip {key}: the tokenizer coded NaN or infinite {field}; not cached")
+    return latents.detach().to(torch.float32).contiguous().cpu()
 
 
 def cached_latent_row(cache_dir: str | Path, meta: ClipMeta, source: str) -> dict | None:
@@ -148,16 +165,21 @@ class LatentCache:
         except Exception as exc:  # safetensors raises several types for bad files
             raise DrivewmError(f"{path}: cannot read latents ({exc.__class__.__name__})") from None
         meta = ClipMeta.from_json(row["meta"], str(path))
-        if set(tensors) != {"latents", "T_world_from_ego"} or tensors["latents"].ndim != 5:
+        names = set(tensors) - {"layout_latents"}
+        if names != {"latents", "T_world_from_ego"} or tensors["latents"].ndim != 5:
             raise DrivewmError(f"{path}: expected tensors latents (V, c, t, h, w) and T_world_from_ego")
         channels = len(self.tokenizer["latent_mean"])
         if tensors["latents"].shape[1] != channels:
             raise DrivewmError(
                 f"{path}: latents have {tensors['latents'].shape[1]} channels, the index's stats {channels}"
             )
-        if not torch.isfinite(tensors["latents"]).all():  # one NaN in a batch turns every weight of a run NaN
-            raise DrivewmError(f"{path}: latents hold NaN or inf (a damaged file); re-encode the clip")
-        return LatentClip(meta, tensors["latents"], tensors["T_world_from_ego"].numpy())
+        layout = tensors.get("layout_latents")
+        if layout is not None and layout.shape != tensors["latents"].shape:
+            raise DrivewmError(f"{path}: layout_latents {tuple(layout.shape)} differ from the latents' shape")
+        for name in ("latents", "layout_latents"):  # one NaN in a batch turns every weight of a run NaN
+            if name in tensors and not torch.isfinite(tensors[name]).all():
+                raise DrivewmError(f"{path}: {name} hold NaN or inf (a damaged file); re-encode the clip")
+        return LatentClip(meta, tensors["latents"], tensors["T_world_from_ego"].numpy(), layout)
 
 
 def _check_stats(tokenizer: dict, index_path: Path) -> None:

@@ -93,6 +93,8 @@ class Conditioning:
     """Views folded into B (multi-view models)."""
     view_neighbors: torch.Tensor | None = None
     """(V, K) long: the views each view attends to in cross-view sub-layers (None = all)."""
+    control_tokens: torch.Tensor | None = None
+    """(B, N, D) input of the DiT's ControlNet branch (drivewm.diffusion.dit.ControlBranch); None = none."""
 
     def drop_text(self, keep: torch.Tensor) -> Conditioning:
         """A copy where samples with ``keep`` (B,) False have their caption masked out."""
@@ -189,6 +191,7 @@ class EDMDenoiser(nn.Module):
             extra_global_cond=cond.extra_global_cond,
             num_views=cond.num_views,
             view_neighbors=cond.view_neighbors,
+            control_tokens=cond.control_tokens,
         )
         denoised = c_skip * x + c_out * out.to(x.dtype)
         if mask is not None:

@@ -74,6 +74,30 @@ class FinalLayer(nn.Module):
         return self.proj(torch.addcmul(shift, self.norm(x), 1 + scale))
 
 
+class ControlBranch(nn.Module):
+    """ControlNet branch of a DiT (Zhang et al. 2023; PixArt-delta, Chen et al. 2024, sec. 3): a copy of
+    the first blocks runs on the patch tokens plus the control input, and each block's output reaches
+    the main path through a zero-initialised projection, so a new branch changes nothing until trained."""
+
+    def __init__(self, cfg: DiTConfig):
+        super().__init__()
+        self.blocks = nn.ModuleList(DiTBlock(cfg, cfg.frame_local(i)) for i in range(cfg.control_depth))
+        self.outs = nn.ModuleList(nn.Linear(cfg.hidden_dim, cfg.hidden_dim) for _ in range(cfg.control_depth))
+        for out in self.outs:
+            nn.init.zeros_(out.weight)
+            nn.init.zeros_(out.bias)
+
+    def forward(
+        self, tokens: torch.Tensor, control: torch.Tensor, emb: torch.Tensor, lora: torch.Tensor, ctx: BlockContext
+    ) -> list[torch.Tensor]:
+        """(B, N, D) tokens and control input -> one (B, N, D) residual per branch block."""
+        h, residuals = tokens + control, []
+        for block, out in zip(self.blocks, self.outs):
+            h = block(h, emb, lora, ctx)  # (B, N, D)
+            residuals.append(out(h))
+        return residuals
+
+
 class DiT(nn.Module):
     """Text-conditioned video DiT: ``forward(x, noise_level, text_emb, text_mask, fps) -> (B, C, T, H, W)``."""
 
@@ -93,6 +117,7 @@ class DiT(nn.Module):
         self.null_text = nn.Parameter(torch.zeros(1, 1, cfg.hidden_dim))
         self.blocks = nn.ModuleList(DiTBlock(cfg, cfg.frame_local(i)) for i in range(cfg.depth))
         self.final = FinalLayer(cfg)
+        self.control = ControlBranch(cfg) if cfg.control_depth else None
         self._rope_cache: dict[tuple, torch.Tensor] = {}
 
     def rope(self, grid: tuple[int, int, int], fps: torch.Tensor) -> torch.Tensor:
@@ -134,6 +159,7 @@ class DiT(nn.Module):
         extra_global_cond: torch.Tensor | None = None,
         num_views: int = 1,
         view_neighbors: torch.Tensor | None = None,
+        control_tokens: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Predict (B, C, T, H, W) from latents ``x`` (B, C(+1 mask), T, H, W).
 
@@ -143,6 +169,8 @@ class DiT(nn.Module):
         ``extra_global_cond`` (B, D): added to the timestep embedding (e.g. an ego trajectory).
         ``num_views``: views folded into B as (B V), read by cross-view sub-layers.
         ``view_neighbors`` (V, K) long: the views each view attends to across views (None = all).
+        ``control_tokens`` (B, N, D): the ControlNet branch's input (:class:`ControlBranch`; None = the
+        branch is skipped, as with no control).
         """
         cfg = self.cfg
         _, _, t, h, w = x.shape
@@ -153,8 +181,13 @@ class DiT(nn.Module):
         emb, adaln_lora = self.time_embed(noise_level, extra_global_cond)  # (B, D), (B, 3D)
         text, mask = self.embed_text(text_emb, text_mask)  # (B, 1+L, D), (B, 1+L)
         ctx = BlockContext(self.rope(grid, fps), text, mask, grid, num_views, view_neighbors)
-        for block in self.blocks:
+        residuals = []
+        if self.control is not None and control_tokens is not None:
+            residuals = self.control(tokens, control_tokens, emb, adaln_lora, ctx)  # control_depth x (B, N, D)
+        for i, block in enumerate(self.blocks):
             tokens = block(tokens, emb, adaln_lora, ctx)  # (B, N, D)
+            if i < len(residuals):
+                tokens = tokens + residuals[i]
         return unpatchify(self.final(tokens, emb), grid, cfg.patch_size, cfg.patch_t)  # (B, C, T, H, W)
 
 

@@ -62,6 +62,11 @@ class DiTConfig:
     of a full block's attention FLOPs with the same parameters, so a model trained either way loads
     the other way. 1 = every block full (Cosmos, CogVideoX; the layout of folders written before this
     field). One latent frame (images): every layout is the same network."""
+    control_depth: int = 0
+    """Blocks of a ControlNet branch (Zhang et al. 2023, applied to a DiT as in PixArt-delta, Chen et al.
+    2024): a trainable copy of the first ``control_depth`` blocks reads the patch tokens plus a control
+    input (``control_tokens``) and adds each block's output, through a zero-initialised projection, to
+    the matching main block's. 0 = no branch."""
 
     @property
     def head_dim(self) -> int:
@@ -74,6 +79,9 @@ class DiTConfig:
     def validate(self) -> None:
         at_least(self, 1, "in_channels", "patch_size", "patch_t", "hidden_dim", "depth", "num_heads", "text_dim")
         at_least(self, 1, "adaln_lora_dim", "full_attn_every")
+        at_least(self, 0, "control_depth")
+        if self.control_depth > self.depth:
+            raise DrivewmError(f"dit: control_depth {self.control_depth} exceeds the {self.depth} blocks it copies")
         above(self, 0, "mlp_ratio", "rope_theta", "rope_base_fps", "rope_spatial_scale")
         if self.hidden_dim % self.num_heads or self.head_dim % 2:
             raise DrivewmError(

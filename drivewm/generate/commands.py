@@ -44,6 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--prompt", required=True, action="append", help="caption (repeat for several)")
     g.add_argument("--out", required=True, type=output_folder, help="output folder: clip shards, mp4s, contact sheet")
     g.add_argument("--condition-clip", type=Path, help="clip whose first frames condition every sample (Video2World)")
+    g.add_argument("--layout", type=Path, help="clip folder: regenerate its clips' drives from their layouts")
+    g.add_argument("--scenario", help="highway|merge|roundabout|intersection|grid|spider|random or a simulate YAML")
     add_config_arguments(g, GENERATE_SHORTCUTS)
     g.set_defaults(func=generate_command, lock_out="generate")
 
@@ -104,7 +106,7 @@ def generate_command(args: argparse.Namespace) -> int:
     cfg = start(args)
     if cfg is None:
         return 0
-    request = GenerateRequest(args.prompt, args.condition_clip)
+    request = GenerateRequest(args.prompt, args.condition_clip, args.layout, args.scenario)
     generator = load_generator(args.model, cfg.device)
     refused = [name for name in request.given() if name not in generator.inputs]
     if refused:

@@ -121,6 +121,9 @@ class GenerateConfig:
     prompt_template: bool = True
     """Multi-view: rewrite each prompt into the training captions' template (weather, time of day,
     road, traffic, the trajectory's manoeuvre and speed); False samples the prompt as given."""
+    layout_clips: int = 0
+    """Layout generation: windows generated (``--layout``: the first this many clips, 0 = all; ``--scenario``:
+    consecutive windows of the simulated drive, 0 = one)."""
     post_processing: list[str] = dataclasses.field(default_factory=list)
     """Opt-in post-steps by name (:data:`POST_STEPS`); [] = the network's own frames."""
     reproject: ReprojectConfig = dataclasses.field(default_factory=ReprojectConfig)
@@ -132,6 +135,7 @@ class GenerateConfig:
 
     def validate(self) -> None:
         at_least(self, 1, "num_samples", "batch_size")
+        at_least(self, 0, "layout_clips")
         unknown = [s for s in self.post_processing if s not in POST_STEPS]
         require(not unknown, "post_processing", self.post_processing, f"a list of {list(POST_STEPS)}")
         require(

@@ -29,9 +29,16 @@ from drivewm.generate.reproject import refine_reprojected
 from drivewm.generate.rollout import clip_rig, initial_speed_mps, load_clip, rollout
 from drivewm.generate.writer import GeneratedSample, write_samples
 from drivewm.geometry import Rig, load_rig
+from drivewm.layout.sources import (
+    LayoutSource,
+    layout_frames,
+    layouts_from_clips,
+    layouts_from_scenario,
+    scenario_config,
+)
 from drivewm.multiview.coding import decode_views, encode_views
 from drivewm.multiview.model import MultiView
-from drivewm.multiview.trajectories import resolve_trajectory
+from drivewm.multiview.trajectories import resample_waypoints, resolve_trajectory
 from drivewm.tokenizer import Tokenizer
 from drivewm.views.blend import blend_overlaps, stitch_views
 
@@ -46,13 +53,15 @@ class Conditions:
     speed_mps: float
     cond_latents: torch.Tensor | None
     """(1, V, c, t, h, w) raw latents of a condition clip's first frames (Video2World); None: none."""
+    layout_latents: torch.Tensor | None = None
+    """(1, V, c, t, h, w) raw latents of the window's layout video in the rig (drivewm.layout); None: none."""
 
 
 class MultiViewGenerator:
     """Samples a multi-view model folder: :meth:`generate` from prompts, :meth:`rollout` of a clip."""
 
     model_type: ClassVar[str] = "multiview"
-    inputs: ClassVar[tuple[str, ...]] = ("condition_clip",)
+    inputs: ClassVar[tuple[str, ...]] = ("condition_clip", "layout", "scenario")
 
     def __init__(self, model: MultiView, folder: Path):
         self.model, self.folder = model, folder
@@ -95,13 +104,60 @@ class MultiViewGenerator:
         return z[None], rig, initial_speed_mps(clip)
 
     def generate(self, request: GenerateRequest, cfg: GenerateConfig) -> list[GeneratedSample]:
-        """``cfg.num_samples`` clips per prompt of ``request``; sample i draws its noise from seed + i."""
+        """``cfg.num_samples`` clips per prompt of ``request`` (and per layout window, with a layout);
+        sample i draws its noise from seed + i."""
         check_post_steps(request, cfg)
         warn_if_preview(self.folder, self.model.latent.tokenizer)
-        cond = self.conditions(request, cfg)
         prompts = [p for p in request.prompts for _ in range(cfg.num_samples)]
+        if request.layout is not None or request.scenario is not None:
+            return self.generate_from_layouts(request, cfg, prompts)
+        cond = self.conditions(request, cfg)
         jobs = [(p, cfg.sampling.seed + i) for i, p in enumerate(prompts)]
         return [self.sample(prompt, seed, cond, request, cfg) for prompt, seed in tqdm(jobs, desc="generate")]
+
+    def generate_from_layouts(
+        self, request: GenerateRequest, cfg: GenerateConfig, prompts: list[str]
+    ) -> list[GeneratedSample]:
+        """Every layout window of ``request`` in every prompt's condition, along the window's own ego path
+        (the layout is drawn along it), each clip keeping the window's pair id for the truth benchmark."""
+        if self.model.cfg.multiview.layout == "none":
+            raise DrivewmError(f"{self.folder}: this multi-view model was not trained with a layout (multiview.layout)")
+        if request.condition_clip is not None:
+            raise DrivewmError("generate: --layout/--scenario regenerate whole drives; give no --condition-clip")
+        sources = self.layout_sources(request, cfg)
+        rig = load_rig(cfg.rig) if cfg.rig else self.model.training_rig
+        jobs = [(s, p) for s in sources for p in prompts]
+        out = []
+        for i, (source, prompt) in enumerate(tqdm(jobs, desc="generate from layouts")):
+            cond, seed = self.layout_conditions(rig, source), cfg.sampling.seed + i
+            sample = self.sample(prompt, seed, cond, request, cfg)
+            sample.extra.update(layout=source.key, pair_id=source.pair_id, trajectory="layout", **source.tags)
+            sample.layout = source.layout
+            out.append(sample)
+        return out
+
+    def layout_sources(self, request: GenerateRequest, cfg: GenerateConfig) -> list[LayoutSource]:
+        """The windows to generate: the ``--layout`` clips', or a ``--scenario`` simulated without pixels."""
+        if request.layout is not None:
+            if request.scenario is not None:
+                raise DrivewmError("generate: give --layout or --scenario, not both")
+            return layouts_from_clips(request.layout, cfg.layout_clips or None)
+        t = self.model.latent.latent_shape[1]
+        frames = 1 + (t - 1) * self.model.cfg.multiview.temporal_compression
+        windows = cfg.layout_clips or 1
+        sim = scenario_config(request.scenario, cfg.sampling.seed, windows * frames / self.model.latent.fps + 0.5, 10.0)
+        return layouts_from_scenario(sim, frames, windows, self.model.cfg.multiview.trajectory_waypoints)
+
+    def layout_conditions(self, rig: Rig, source: LayoutSource) -> Conditions:
+        """The conditions of one layout window: its waypoints, speed and layout video's latents in ``rig``."""
+        mv = self.model.cfg.multiview
+        c, t, h, w = self.model.latent.latent_shape
+        sc, tc = self.tokenizer.config.spatial_compression, self.tokenizer.config.temporal_compression
+        frames = layout_frames(rig, source, (w * sc, h * sc), 1 + (t - 1) * tc)
+        layout = encode_views(self.tokenizer, frames, (h * sc, w * sc), self.model.device)[None]
+        waypoints = resample_waypoints(source.waypoints, mv.trajectory_waypoints)
+        speed = float(np.linalg.norm(waypoints[0, :2]) / mv.trajectory_dt_s)
+        return Conditions(rig, waypoints, speed, None, layout)
 
     def sample(
         self, prompt: str, seed: int, cond: Conditions, request: GenerateRequest, cfg: GenerateConfig
@@ -114,7 +170,7 @@ class MultiViewGenerator:
             caps = view_captions(prompt, cond.rig)
         z = self.model.sample_latents(
             cond.rig, [caps], cond.waypoints[None], [seed], cfg.sampling.steps, cond_latents=cond.cond_latents,
-            **cfg.sampling.sample_kwargs(),
+            layout_latents=cond.layout_latents, **cfg.sampling.sample_kwargs(),
         )[0]  # fmt: skip
         videos = self.decode(z)
         if cfg.post("reproject"):

@@ -26,6 +26,12 @@ class GenerateRequest:
     """Captions; each is sampled ``num_samples`` times."""
     condition_clip: Path | None = None
     """A clip whose first frames condition every sample (Video2World); None: everything generated."""
+    layout: Path | None = None
+    """A clip folder whose clips' layouts (boxes and road lines) are regenerated, each along its own ego
+    path, in the prompts' conditions (drivewm.layout.sources); None: no layout."""
+    scenario: str | None = None
+    """A scenario name or simulate recipe YAML whose traffic is simulated without pixels and generated
+    from its layout; None: none."""
 
     def given(self) -> list[str]:
         """Names of the optional inputs set (the fields after ``prompts`` that are not None)."""

@@ -24,6 +24,7 @@ from drivewm.clips.video import encode_mp4
 from drivewm.curate.contact_sheet import write_clips_sheet
 from drivewm.diffusion.generate import clip_meta, write_grid_png
 from drivewm.geometry import Rig
+from drivewm.layout.clip_layout import ClipLayout, layout_to_npz
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.text.conditions import caption_conditions
 from drivewm.views.grid import grid_layout, tile_views
@@ -41,7 +42,10 @@ class GeneratedSample:
     """(W, 3) m waypoints the sample was conditioned on (None: no trajectory, Text2World)."""
     trajectory_dt_s: float
     extra: dict
-    """What the clip's metadata records (model, prompt, seed, sampling, ``post_processing``)."""
+    """What the clip's metadata records (model, prompt, seed, sampling, ``post_processing``; a layout
+    window's ``pair_id``)."""
+    layout: ClipLayout | None = None
+    """The layout it was generated from (kept in the clip, ``KEY.layout.npz``); None: none."""
 
 
 def write_samples(
@@ -78,9 +82,13 @@ def sample_clip(key: str, s: GeneratedSample, fps: float):
         trajectory_ego=np.asarray(s.trajectory_ego).tolist(),
         trajectory_dt_s=s.trajectory_dt_s,
         tags={**meta.tags, **caption_conditions(s.caption)},  # what was asked for, for eval's adherence
+        pair_id=str(s.extra.get("pair_id", "")),  # a layout window's: the simulator's truth in any condition
     )
     poses = poses_from_waypoints(s.trajectory_ego, t, s.trajectory_dt_s, fps)
-    return clip_from_arrays(meta, dict(zip(rig.names, s.videos)), poses)
+    clip = clip_from_arrays(meta, dict(zip(rig.names, s.videos)), poses)
+    if s.layout is not None:
+        clip = dataclasses.replace(clip, layout_npz=layout_to_npz(s.layout))
+    return clip
 
 
 def write_single_view(out_dir: str | Path, samples: list[GeneratedSample], fps: float) -> list[Path]:

@@ -57,6 +57,16 @@ class MultiViewConfig:
     video2world_prob: float = 0.5
     """Fraction of training steps conditioned on the first ``edm.cond_frames`` clean latent frames
     (the rest are plain text-to-multi-view steps, so one model does both)."""
+    layout: Literal["none", "tokens", "controlnet"] = "none"
+    """How the drive's layout (its boxes and road lines drawn into every camera, drivewm.layout.render,
+    coded by the tokenizer) steers the model (drivewm.multiview.layout_encoder): not at all, its
+    embedding added to the patch tokens (``tokens``), or fed to a ControlNet branch of the DiT's first
+    ``layout_control_depth`` blocks (``controlnet``, drivewm.diffusion.dit.ControlBranch)."""
+    layout_control_depth: int = 2
+    """Blocks the ControlNet branch copies (``layout: controlnet``)."""
+    layout_dropout: float = 0.1
+    """Fraction of training clips whose layout is dropped (all views together), so the model also
+    generates from text and trajectory alone."""
 
     def validate(self) -> None:
         require(self.cross_view in ("joint", "neighbors"), "cross_view", self.cross_view, "'joint' or 'neighbors'")
@@ -65,6 +75,9 @@ class MultiViewConfig:
         above(self, 0, "trajectory_scale_m", "trajectory_dt_s", "ray_scale_m")
         in_range(self, "video2world_prob", 0, 1)
         in_range(self, "trajectory_dropout", 0, 1, high_open=True)
+        in_range(self, "layout_dropout", 0, 1, high_open=True)
+        require(self.layout in ("none", "tokens", "controlnet"), "layout", self.layout, "none, tokens or controlnet")
+        at_least(self, 1, "layout_control_depth")
 
 
 #: Fields of experiments that did not ship, read from saved folders only when they are off.
@@ -92,3 +105,11 @@ class MultiViewModelConfig:
     """Caption encoder (frozen), the parent's."""
     multiview: MultiViewConfig = dataclasses.field(default_factory=MultiViewConfig)
     """Cross-view attention, camera and trajectory conditioning."""
+
+
+def with_layout_control(cfg: MultiViewModelConfig) -> MultiViewModelConfig:
+    """``cfg`` with the DiT's ControlNet branch as deep as its multi-view config asks (``layout:
+    controlnet``), or without one."""
+    mv = cfg.multiview
+    depth = min(mv.layout_control_depth, cfg.dit.depth) if mv.layout == "controlnet" else 0
+    return dataclasses.replace(cfg, dit=dataclasses.replace(cfg.dit, control_depth=depth))

@@ -23,7 +23,7 @@ from drivewm.multiview.trajectories import resample_waypoints, waypoints_from_po
 
 @dataclasses.dataclass
 class MultiViewSample:
-    """One clip: ``latents`` (V, c, t, h, w) normalised, captions per view, waypoints (W, 3) m, rig, fps;
+    """One clip: ``latents`` (V, c, t, h, w) normalised, captions per view, waypoints (W, 3) m, rig, fps, layout;
     ``trajectory_known`` False for a clip without ego poses (its waypoints are zeros: post-training
     treats it as a trajectory-dropped clip)."""
 
@@ -33,6 +33,8 @@ class MultiViewSample:
     rig: Rig
     fps: float
     trajectory_known: bool = True
+    layout: torch.Tensor | None = None
+    """(V, c, t, h, w) the clip's layout video latents, normalised as ``latents``; None = no layout."""
 
 
 class MultiViewDataset:
@@ -76,12 +78,16 @@ class MultiViewDataset:
                 f"{where}: latents {tuple(clip.latents.shape[1:])} differ from the first clip's {self.latent_shape}"
             )
         views = [clip.meta.cameras.index(c) for c in self.camera_names]
-        z = normalize_latents(clip.latents[views], self.cache.latent_mean, self.cache.latent_std, self.sigma_data)
+        z = self._normalized(clip.latents[views])
+        layout = None if clip.layout_latents is None else self._normalized(clip.layout_latents[views])
         captions = [clip.meta.view_captions.get(c) or clip.meta.caption for c in self.camera_names]
         rig = clip.meta.get_rig().subset(self.camera_names)
         known = clip.meta.ego_motion_known
         trajectory = self._trajectory(clip, where) if known else np.zeros((self.num_waypoints, 3))
-        return MultiViewSample(z, captions, trajectory, rig, float(clip.meta.fps), known)
+        return MultiViewSample(z, captions, trajectory, rig, float(clip.meta.fps), known, layout)
+
+    def _normalized(self, latents: torch.Tensor) -> torch.Tensor:
+        return normalize_latents(latents, self.cache.latent_mean, self.cache.latent_std, self.sigma_data)
 
     def _trajectory(self, clip, where: str) -> np.ndarray:
         """(W, 3) ClipMeta.trajectory_ego resampled to W; from the ego poses when the clip has none."""

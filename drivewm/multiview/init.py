@@ -15,7 +15,7 @@ import torch
 
 from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
-from drivewm.multiview.config import MultiViewConfig, MultiViewModelConfig
+from drivewm.multiview.config import MultiViewConfig, MultiViewModelConfig, with_layout_control
 from drivewm.multiview.cross_view import SUBLAYER_NAME
 from drivewm.multiview.model import MultiView
 
@@ -31,7 +31,7 @@ def multiview_config(parent: Text2World, mv: MultiViewConfig, cond_frames: int) 
         parent.cfg.dit, block_layers=layers, cond_mask_channel=parent.cfg.dit.cond_mask_channel or cond_frames > 0
     )
     edm = dataclasses.replace(parent.cfg.edm, cond_frames=cond_frames)
-    return MultiViewModelConfig(dit, edm, parent.cfg.text, mv)
+    return with_layout_control(MultiViewModelConfig(dit, edm, parent.cfg.text, mv))
 
 
 def widen_patch_embed(weight: torch.Tensor, target: torch.Tensor, patch_volume: int) -> torch.Tensor:
@@ -61,5 +61,13 @@ def from_text2world(parent: Text2World, mv: MultiViewConfig | None = None, cond_
                 f"init: parent parameter {name} {tuple(value.shape)} != multi-view {tuple(state[key].shape)}"
             )
         state[key] = value.clone()
+    state.update(control_copy(state, state))
     model.net.load_state_dict(state)
     return model
+
+
+def control_copy(state: dict[str, torch.Tensor], added: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """A new ControlNet branch's blocks start as copies of the main blocks they shadow (Zhang et al.
+    2023, sec. 3.1); their zero-initialised output projections keep the model as it was."""
+    prefix, main = "denoiser.backbone.control.blocks.", "denoiser.backbone.blocks."
+    return {k: state[main + k[len(prefix) :]].clone() for k in added if k.startswith(prefix)}

@@ -32,6 +32,7 @@ from drivewm.multiview.camera import CameraEncoder
 from drivewm.multiview.config import MultiViewModelConfig, retire_saved_fields
 from drivewm.multiview.cross_view import SUBLAYER_NAME, CrossViewAttention, view_neighbors
 from drivewm.multiview.frame_motion import FrameMotionEncoder, frame_motion_features
+from drivewm.multiview.layout_encoder import LayoutEncoder
 from drivewm.multiview.trajectories import poses_from_waypoints
 from drivewm.multiview.trajectory_encoder import TrajectoryEncoder
 from drivewm.text import build_text_encoder
@@ -58,6 +59,11 @@ class MultiViewConditioning(Conditioning):
     trajectory_keep: torch.Tensor | None = None
     """(B V,) bool: False = this view's trajectory is dropped (training dropout, or the trajectory-free
     branch of trajectory guidance); None = every trajectory kept."""
+    layout: torch.Tensor | None = None
+    """(B V, c, t, h, w) the layout video's latents (drivewm.layout.render, coded by the clip's
+    tokenizer), normalised as the clip's; None = no layout (drivewm.multiview.layout_encoder)."""
+    layout_keep: torch.Tensor | None = None
+    """(B V,) bool: False = this view's layout is dropped; None = every layout kept."""
 
     def drop_trajectory(self, keep: torch.Tensor) -> MultiViewConditioning:
         """A copy where views with ``keep`` (B V,) False see no trajectory."""
@@ -89,6 +95,15 @@ class MultiViewNet(nn.Module):
             if mv.trajectory_waypoints
             else None
         )
+        if (mv.layout == "controlnet") != (cfg.dit.control_depth > 0):
+            raise DrivewmError(
+                f"multiview.layout {mv.layout!r} with dit.control_depth {cfg.dit.control_depth}: "
+                "build the config with drivewm.multiview.config.with_layout_control"
+            )
+        d = cfg.dit
+        self.layout_encoder = (
+            LayoutEncoder(d.in_channels, dim, d.patch_size, d.patch_t) if mv.layout != "none" else None
+        )
 
     @property
     def dit(self) -> DiT:
@@ -113,8 +128,19 @@ class MultiViewNet(nn.Module):
             global_cond = self.trajectory_encoder(cond.trajectory.to(x.dtype))  # (B V, D)
             if keep is not None:
                 global_cond = global_cond * keep[:, None].to(global_cond.dtype)
+        control = None
+        if self.layout_encoder is not None:
+            layout = self.layout_encoder(cond.layout, cond.layout_keep, x)  # (B V, N, D)
+            if self.cfg.multiview.layout == "tokens":
+                token_cond = layout if token_cond is None else token_cond + layout
+            else:
+                control = layout
         return self.denoiser(
-            x, sigma, dataclasses.replace(cond, extra_token_cond=token_cond, extra_global_cond=global_cond)
+            x,
+            sigma,
+            dataclasses.replace(
+                cond, extra_token_cond=token_cond, extra_global_cond=global_cond, control_tokens=control
+            ),
         )
 
 
@@ -183,8 +209,12 @@ class MultiView:
         start_latents: torch.Tensor | None = None,
         start_sigma: float | None = None,
         guidance_interval: tuple[float, float] | None = None,
+        layout_latents: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Raw (denormalised) latents (B, V, c, t, h, w) of B clips; clip b's noise from ``seeds[b]``.
+
+        ``layout_latents`` (B, V, c, t, h, w) raw: the tokenizer's code of each clip's layout video in
+        the rig's cameras (a model trained with ``multiview.layout``; None = no layout).
 
         ``cond_latents`` (B, V, c, t, h, w) raw latents whose first ``edm.cond_frames`` latent frames
         are kept (Video2World); None = generate every frame. ``trajectory_guidance`` w > 1 weighs the
@@ -199,6 +229,10 @@ class MultiView:
         if cond_latents is not None:
             z = self._normalized(cond_latents, mean, std)
             cond = dataclasses.replace(cond, cond_latents=z, cond_frames=max(1, self.cfg.edm.cond_frames))
+        if layout_latents is not None:
+            if self.cfg.multiview.layout == "none":
+                raise DrivewmError("this multi-view model was not trained with a layout (multiview.layout: none)")
+            cond = dataclasses.replace(cond, layout=self._normalized(layout_latents, mean, std))
         start = (
             None if start_latents is None else self._normalized(start_latents, mean, std).reshape(start_latents.shape)
         )

@@ -25,9 +25,9 @@ from drivewm.diffusion.text2world import Text2World
 from drivewm.errors import DrivewmError
 from drivewm.geometry import load_rig
 from drivewm.model_folders import resolve_model_folder
-from drivewm.multiview.config import MultiViewConfig
+from drivewm.multiview.config import MultiViewConfig, with_layout_control
 from drivewm.multiview.data import MultiViewDataset, MultiViewSample
-from drivewm.multiview.init import from_text2world
+from drivewm.multiview.init import control_copy, from_text2world
 from drivewm.multiview.model import MODEL_TYPE as MV_MODEL_TYPE
 from drivewm.multiview.model import MultiView, MultiViewConditioning, build_conditioning
 from drivewm.multiview.trajectory_probe import is_turning, loss_gap, turning_clips
@@ -71,6 +71,11 @@ class PosttrainConfig:
     rope_spatial_scale: float | None = None
     """The model's ``dit.rope_spatial_scale`` from this run on (None: the init's). 0.5 takes a model
     trained at 160x96 to 320x192 with its row and column positions interpolated, not extrapolated."""
+    layout_lr_scale: float = 10.0
+    """Learning-rate multiplier of the layout's new parts (the layout encoder and the ControlNet
+    branch, multi-view config ``layout``): they start at zero effect, and AdamW moves a weight by
+    about the learning rate a step, so at the whole model's rate they would stay near zero for hundreds
+    of steps (ControlNet-style branches are trained faster for this reason)."""
     cache_clips: int = 2048
     """Clips whose latents and conditioning (text, rays, waypoints) stay in memory from one
     epoch to the next, least recently used dropped first (about 0.5 MB a clip of six views at 160x96;
@@ -80,7 +85,7 @@ class PosttrainConfig:
     def validate(self) -> None:
         at_least(
             self, 0, "cond_frames", "trajectory_probe_every", "trajectory_probe_min_turn_deg", "turn_repeat",
-            "turn_repeat_min_deg", "cache_clips",
+            "turn_repeat_min_deg", "cache_clips", "layout_lr_scale",
         )  # fmt: skip
         at_least(self, 1, "sample_steps", "trajectory_probe_clips")
         if self.rope_spatial_scale is not None:
@@ -178,6 +183,11 @@ class MultiViewTask(BundleTask):
     def num_samples(self) -> int:
         return len(self.epoch_order())
 
+    def lr_scales(self) -> dict[str, float]:
+        if self.bundle.net.layout_encoder is None:
+            return {}
+        return dict.fromkeys(LAYOUT_PARTS, self.cfg.layout_lr_scale)
+
     def tokens_per_sample(self) -> int:
         t, h, w = self.bundle.token_grid()
         return len(self.dataset.camera_names) * t * h * w
@@ -209,6 +219,10 @@ class MultiViewTask(BundleTask):
         edm = dataclasses.replace(self.bundle.cfg.edm, cond_frames=self.cfg.cond_frames if video2world else 0)
         cond = cat_conditioning([c.cond for c in clips])
         cond = cond.drop_trajectory(keep_traj)  # one draw per clip: all its views lose the trajectory together
+        if cond.layout_keep is not None:  # drawn only for layout models: other runs keep their random streams
+            p = self.cfg.multiview.layout_dropout
+            keep_layout = torch.cat([(torch.rand(1, generator=g) >= p).expand(v) for g in gens])
+            cond = dataclasses.replace(cond, layout_keep=cond.layout_keep & keep_layout)
         return edm_loss(forward, edm, x0, cond.to(device), sigma.to(device), noise, keep.to(device))
 
     def prepared(self, index: int) -> PreparedClip:
@@ -223,6 +237,10 @@ class MultiViewTask(BundleTask):
             return self._prepared[index]
         s = self.dataset[index]
         cond = build_conditioning(self.bundle, s.rig, [s.view_captions], s.trajectory[None], s.fps)
+        if self.bundle.cfg.multiview.layout != "none":  # a clip without layout trains as a layout-dropped one
+            known = torch.full((s.latents.shape[0],), s.layout is not None)
+            layout = s.layout if s.layout is not None else torch.zeros_like(s.latents)
+            cond = dataclasses.replace(cond, layout=layout, layout_keep=known)
         item = PreparedClip(s, cond)
         if self.cfg.cache_clips:
             self._prepared[index] = item
@@ -273,6 +291,8 @@ def cat_conditioning(conds: list[MultiViewConditioning]) -> MultiViewConditionin
             "trajectory",
             "frame_motion",
             "trajectory_keep",
+            "layout",
+            "layout_keep",
         )
         if getattr(first, f) is not None
     }
@@ -333,8 +353,10 @@ def posttrain_task(cfg: PosttrainConfig, init_dir: str | Path, data_dir: str | P
     return MultiViewTask(cfg, dataset, model)
 
 
+#: The parameters a layout adds (drivewm.multiview.layout_encoder, the DiT's ControlNet branch).
+LAYOUT_PARTS = ("layout_encoder.", "denoiser.backbone.control.")
 #: Zero-initialised parts a fine-tune may add to a multi-view model trained without them.
-ADDABLE = ("motion_encoder.",)
+ADDABLE = ("motion_encoder.", *LAYOUT_PARTS)
 
 
 def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> MultiView:
@@ -345,8 +367,11 @@ def continue_from(init: MultiView, mv: MultiViewConfig, init_dir: Path) -> Multi
     (its trained motion encoder is not dropped because this run's config left the default)."""
     if init.cfg.multiview.frame_motion:
         mv = dataclasses.replace(mv, frame_motion=True, moving_camera_rays=init.cfg.multiview.moving_camera_rays)
-    model = MultiView(dataclasses.replace(init.cfg, multiview=mv), init.latent)
+    if init.cfg.multiview.layout != "none" and mv.layout == "none":  # its trained layout path is kept
+        keep = ("layout", "layout_control_depth")
+        mv = dataclasses.replace(mv, **{k: getattr(init.cfg.multiview, k) for k in keep})
+    model = MultiView(with_layout_control(dataclasses.replace(init.cfg, multiview=mv)), init.latent)
     state = init.net.state_dict()
     added = {k: v for k, v in model.net.state_dict().items() if k.startswith(ADDABLE) and k not in state}
-    load_weights(model.net, {**state, **added}, init_dir)
+    load_weights(model.net, {**state, **added, **control_copy(state, added)}, init_dir)
     return model

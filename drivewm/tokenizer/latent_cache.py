@@ -26,6 +26,7 @@ from drivewm.clips.latents import (
 from drivewm.clips.shards import BadClip, read_clips
 from drivewm.config import to_dict
 from drivewm.errors import BatchError, DrivewmError
+from drivewm.layout.render import render_layout
 from drivewm.model_folders import portable_reference
 from drivewm.paths import check_confined
 from drivewm.tokenizer.data import to_model_range
@@ -36,6 +37,16 @@ from drivewm.tokenizer.tiling import TilingConfig, encode_tiled
 def clip_video(clip: Clip) -> torch.Tensor:
     """All cameras of a clip as (V, 3, T, H, W) in [-1, 1] (rig order; V is the batch)."""
     return torch.stack([to_model_range(clip.video(cam)) for cam in clip.meta.cameras])
+
+
+def clip_layout_video(clip: Clip) -> torch.Tensor | None:
+    """The clip's layout drawn into its own cameras (drivewm.layout.render) as (V, 3, T, H, W) in
+    [-1, 1], or None for a clip whose log had no layout."""
+    layout = clip.layout()
+    if layout is None:
+        return None
+    frames = render_layout(clip.meta.get_rig().subset(clip.meta.cameras), layout)  # (V, T, H, W, 3) uint8
+    return torch.stack([to_model_range(v) for v in frames])
 
 
 def encode_clips(
@@ -108,10 +119,15 @@ def _encode_one(
     digest = hashlib.sha256(maker.encode())
     digest.update(json.dumps(clip.meta.to_json(), sort_keys=True).encode())
     digest.update(video.numpy().tobytes())
+    if clip.has_layout:  # the layout video is drawn from it: a clip without layout keeps its old fingerprint
+        digest.update(clip.layout_npz)
     digest.update(np.ascontiguousarray(clip.T_world_from_ego, dtype=np.float64).tobytes())
     source = digest.hexdigest()
     row = cached_latent_row(cache_dir, clip.meta, source)
     if row is not None:
         return {**row, "reused": 1}
     latents = encode_tiled(tok, video, tiling)  # (V, c, t, h, w)
-    return {**write_latent_clip(cache_dir, clip.meta, latents, clip.T_world_from_ego, source), "reused": 0}
+    layout_video = clip_layout_video(clip)
+    layout = None if layout_video is None else encode_tiled(tok, layout_video, tiling)
+    row = write_latent_clip(cache_dir, clip.meta, latents, clip.T_world_from_ego, source, layout)
+    return {**row, "reused": 0}

@@ -1,0 +1,71 @@
+"""``drivewm generate --layout CLIPS`` and ``--scenario NAME``: a layout model regenerates each window of
+a drive in the asked condition along its own ego path, and each clip keeps its window's pair id and
+layout, so the simulator's truth of that window scores it."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import torch
+
+from drivewm.cli import main
+from drivewm.clips import iter_clips
+from drivewm.clips.shards import read_clips
+from drivewm.diffusion.dit_config import DiTConfig
+from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+from drivewm.geometry import load_rig
+from drivewm.multiview.config import MultiViewConfig
+from drivewm.multiview.init import from_text2world
+from drivewm.tokenizer import Tokenizer, preset
+
+
+@pytest.fixture(scope="module")
+def layout_model(tmp_path_factory):
+    """An untrained layout multi-view model (tokens) of CAM_FRONT at 80x48 with a real debug tokenizer."""
+    root = tmp_path_factory.mktemp("layout_mv")
+    torch.manual_seed(0)
+    tok = Tokenizer(preset("debug"))
+    tok.save_pretrained(root / "tok")
+    latent = LatentInfo([16, 5, 6, 10], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {})
+    dit = DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)
+    models = {}
+    for layout in ("tokens", "none"):
+        mv = from_text2world(Text2World(Text2WorldConfig(dit), latent), MultiViewConfig(layout=layout))
+        mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
+        mv.save_pretrained(root / layout)
+        models[layout] = root / layout
+    return models
+
+
+@pytest.mark.slow
+def test_layout_clips_are_regenerated_with_their_pair_and_layout(layout_model, sim_clip_dir, tmp_path):
+    command = ["generate", "--model", str(layout_model["tokens"]), "--prompt", "heavy snow at night", "--steps", "2"]
+    assert main([*command, "--layout", str(sim_clip_dir), "--set", "layout_clips=2", "--out", str(tmp_path / "g")]) == 0
+    sources = {c.key: c for c in read_clips(sim_clip_dir)}
+    generated = list(iter_clips(tmp_path / "g"))
+    assert len(generated) == 2
+    for gen in generated:
+        source = sources[gen.meta.extra["layout"]]
+        assert gen.meta.pair_id == source.meta.pair_id != ""
+        assert gen.meta.tags["weather"] == "snow" and gen.meta.tags["time_of_day"] == "night"
+        assert gen.meta.extra["post_processing"] == [] and gen.meta.extra["trajectory"] == "layout"
+        assert gen.layout().num_boxes == source.layout().num_boxes
+        assert gen.meta.trajectory_ego[-1][0] > 1.0  # along the source's own path, not straight by default
+    assert main([*command, "--scenario", "merge", "--out", str(tmp_path / "s")]) == 0
+    (scenario,) = list(iter_clips(tmp_path / "s"))
+    assert scenario.meta.pair_id.startswith("highway-merge-s0000-") and scenario.meta.extra["scenario"] == "merge"
+
+
+def test_layout_generation_refuses_what_it_cannot_do(layout_model, sim_clip_dir, tmp_path, capsys):
+    plain = ["generate", "--model", str(layout_model["none"]), "--prompt", "x", "--steps", "1"]
+    assert main([*plain, "--layout", str(sim_clip_dir), "--out", str(tmp_path / "a")]) == 2
+    assert "not trained with a layout" in capsys.readouterr().err
+    empty = tmp_path / "no_clips"
+    empty.mkdir()
+    layout = ["generate", "--model", str(layout_model["tokens"]), "--prompt", "x", "--steps", "1"]
+    assert main([*layout, "--layout", str(empty), "--out", str(tmp_path / "b")]) == 2
+    assert "no clips found" in capsys.readouterr().err
+    assert main([*layout, "--scenario", "moon", "--out", str(tmp_path / "c")]) == 2
+    assert "--scenario 'moon'" in capsys.readouterr().err
+    assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "abc")
