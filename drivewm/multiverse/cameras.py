@@ -49,10 +49,10 @@ class SimCameras:
         return {c: np.stack([s[c] for s in shots]) for c in self.rig.names}
 
 
-def make_cameras(cfg: MultiverseConfig, branch: Branch, generator=None) -> FutureCameras:
+def make_cameras(cfg: MultiverseConfig, branch: Branch, generator=None, progress: bool = True) -> FutureCameras:
     """The renderer ``cfg.renderer`` for ``branch`` (``model``: ``generator``, drivewm.multiverse.model_cameras)."""
     if cfg.renderer == "model":
         from drivewm.multiverse.model_cameras import ModelCameras
 
-        return ModelCameras(branch, generator, cfg.prompt, cfg.seed, cfg.model_steps)
+        return ModelCameras(branch, generator, cfg.prompt, cfg.seed, cfg.model_steps, progress)
     return SimCameras(branch)

@@ -2,12 +2,13 @@
 (drivewm.generate.multiview, ``multiview.layout`` != none) generates each stretch of ticks from its layout.
 
 Ticks are cut into consecutive windows of the model's frame count (1 + (latent t - 1) x temporal
-compression), generated one after another, each from its own first ego pose: the window's layout
-(road users' boxes, props and road lines, drivewm.layout.build) drawn into the rig at the model's
-frame size, and its ego waypoints at the model's spacing. A window shorter than the model's frame count
-(the last) is padded with ticks extrapolated at the ego's last velocity (road users kept where they
-were last) and only its own frames are kept. Window k of every call draws its noise from seed + k, so
-futures differ by their layouts, not by their noise. One tick is one generated frame.
+compression), generated one after another, each from its own first ego pose: the window's layout (road
+users' boxes, the props the simulator's renderer would place, road lines; drivewm.layout.build) drawn
+into the rig at the model's frame size, and its ego waypoints at the model's spacing. A window shorter
+than the model's frame count (the last) is padded with ticks extrapolated at the ego's last velocity
+(road users kept where they were last) and only its own frames are kept. Window k of every call draws
+its noise from seed + k, so futures differ by their layouts, not by their noise. One tick is one
+generated frame.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from drivewm.layout.build import layout_from_world, thin_road
 from drivewm.layout.sources import LayoutSource
 from drivewm.multiverse.branch import Branch
 from drivewm.multiview.trajectories import waypoints_from_poses
-from drivewm.sim.scene import SceneTick
+from drivewm.sim.scene import SceneRecording, SceneTick
+from drivewm.sim.world import place_world_props
 
 
 def load_layout_model(folder: str, device: str = "auto"):
@@ -45,8 +47,8 @@ class ModelCameras:
 
     name = "model"
 
-    def __init__(self, branch: Branch, generator, prompt: str, seed: int, steps: int):
-        self.gen, self.prompt, self.seed = generator, prompt, seed
+    def __init__(self, branch: Branch, generator, prompt: str, seed: int, steps: int, progress: bool = True):
+        self.gen, self.prompt, self.seed, self.progress = generator, prompt, seed, progress
         self.request = GenerateRequest([prompt])
         self.cfg = GenerateConfig(sampling=SamplingConfig(steps=steps, seed=seed))
         c, t, h, w = generator.model.latent.latent_shape
@@ -54,6 +56,9 @@ class ModelCameras:
         self.num_frames = 1 + (t - 1) * generator.model.cfg.multiview.temporal_compression
         self.rig = branch.rig.scaled(w * sc, h * sc, fit="crop")
         """The branch's cameras at the model's frame size (the size of every generated frame)."""
+        if branch.source != "log" and not branch.road.props:  # the props the sim renderer would draw
+            ticks = branch.past + [t for f in branch.futures for t in f]
+            place_world_props(branch.sim, SceneRecording(branch.road, ticks, branch.tags))
         self.static, self.road = branch.road.props, thin_road(branch.road.road_lines())
 
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
@@ -61,7 +66,8 @@ class ModelCameras:
         if not ticks:
             return {c.name: np.zeros((0, c.height, c.width, 3), np.uint8) for c in self.rig.cameras}
         starts = range(0, len(ticks), self.num_frames)
-        videos = [self.window(ticks, s, k) for k, s in enumerate(tqdm(starts, desc="model windows", leave=False))]
+        starts = tqdm(starts, desc="model windows", leave=False, disable=not self.progress)
+        videos = [self.window(ticks, s, k) for k, s in enumerate(starts)]
         joined = np.concatenate(videos, axis=1)  # (V, T, H, W, 3)
         return {c: joined[v] for v, c in enumerate(self.rig.names)}
 
@@ -75,7 +81,8 @@ class ModelCameras:
             where, thin=False,
         )  # fmt: skip
         mv = self.gen.model.cfg.multiview
-        tick_s = (window[1].timestamp_ns - window[0].timestamp_ns) / 1e9
+        first, second = padded(ticks[start:], 2)
+        tick_s = (second.timestamp_ns - first.timestamp_ns) / 1e9
         stride = max(1, int(round(mv.trajectory_dt_s / tick_s)))
         following = np.stack([t.T_world_from_ego for t in padded(ticks[start:], stride * mv.trajectory_waypoints + 1)])
         waypoints = waypoints_from_poses(following[::stride], 0, mv.trajectory_waypoints)

@@ -48,7 +48,7 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
     check_plan_names(cfg.plans)
     generator = load_layout_model(cfg.model) if cfg.renderer == "model" else None
     b = branch_log(cfg) if cfg.log else branch_scenario(cfg, load_scenario(cfg.scenario, cfg))
-    cameras = make_cameras(cfg, b, generator)
+    cameras = make_cameras(cfg, b, generator, progress)
     b = dataclasses.replace(b, rig=cameras.rig)  # the logs' calibration is the frames' size
     fps = _tick_rate(b)
     with atomic_path(out_dir) as tmp:

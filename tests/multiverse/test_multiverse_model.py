@@ -35,6 +35,7 @@ def test_the_model_renders_every_future_from_its_layout(layout_model, tmp_path) 
         log = read_log(tmp_path / "out/futures" / plan / "drive.mcap")
         cam = log.rig.camera("CAM_FRONT")
         assert (cam.width, cam.height) == (80, 48)  # the calibration of the model's frames
+        assert len(log.static) > 10  # the props the layouts were drawn with
         # past 0 .. 0.5 s (one window) and 2 s of future (two windows, the second padded): 6 + 20 frames
         assert len(log.pose_timestamps_ns) == 26 and len(log.images["CAM_FRONT"]) == 26
         futures[plan] = log.T_world_from_ego[-1, :3, 3]
