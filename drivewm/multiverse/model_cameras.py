@@ -7,8 +7,8 @@ users' boxes, the props the simulator's renderer would place, road lines; drivew
 into the rig at the model's frame size, and its ego waypoints at the model's spacing. A window shorter
 than the model's frame count (the last) is padded with ticks extrapolated at the ego's last velocity
 (road users kept where they were last) and only its own frames are kept. Window k of every call draws
-its noise from seed + k, so futures differ by their layouts, not by their noise. One tick is one
-generated frame.
+its noise from seed + k, so futures differ by their layouts, not by their noise. The prompt is the
+run's, with the branch's weather and time of day where it names none. One tick is one generated frame.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from drivewm.generate.protocol import GenerateRequest
 from drivewm.layout.build import layout_from_world, thin_road
 from drivewm.layout.sources import LayoutSource
 from drivewm.multiverse.branch import Branch
+from drivewm.multiverse.scenario import conditions_from_prompt
 from drivewm.multiview.trajectories import waypoints_from_poses
 from drivewm.sim.scene import SceneRecording, SceneTick
 from drivewm.sim.world import place_world_props
@@ -48,8 +49,9 @@ class ModelCameras:
     name = "model"
 
     def __init__(self, branch: Branch, generator, prompt: str, seed: int, steps: int, progress: bool = True):
-        self.gen, self.prompt, self.seed, self.progress = generator, prompt, seed, progress
-        self.request = GenerateRequest([prompt])
+        self.gen, self.seed, self.progress = generator, seed, progress
+        self.prompt = model_prompt(prompt, branch.tags)
+        self.request = GenerateRequest([self.prompt])
         self.cfg = GenerateConfig(sampling=SamplingConfig(steps=steps, seed=seed))
         c, t, h, w = generator.model.latent.latent_shape
         sc = generator.tokenizer.config.spatial_compression
@@ -90,6 +92,14 @@ class ModelCameras:
         cond = self.gen.layout_conditions(self.rig, source)
         sample = self.gen.sample(self.prompt, self.seed + index, cond, self.request, self.cfg)
         return sample.videos[:, : min(self.num_frames, len(ticks) - start)]
+
+
+def model_prompt(prompt: str, tags: dict[str, str]) -> str:
+    """The run's prompt with the branch's weather and time of day added where it names none, so the model
+    draws the conditions the scenario or log has ("" in rain at dusk -> "rain, dusk")."""
+    named = conditions_from_prompt(prompt)
+    missing = [tags[f] for f in ("weather", "time_of_day") if f not in named and tags.get(f)]
+    return ", ".join(p for p in [prompt.strip(), *missing] if p)
 
 
 def padded(ticks: list[SceneTick], num: int) -> list[SceneTick]:

@@ -11,7 +11,7 @@ import pytest
 from drivewm.cli import main
 from drivewm.clips.video import decode_mp4
 from drivewm.logs.reader import read_log
-from drivewm.multiverse.model_cameras import padded
+from drivewm.multiverse.model_cameras import model_prompt, padded
 from drivewm.sim.scene import SceneTick
 
 
@@ -60,3 +60,10 @@ def test_a_short_window_is_padded_at_the_last_velocity() -> None:
     assert [t.timestamp_ns for t in out] == [0, 100_000_000, 200_000_000, 300_000_000]
     assert np.allclose(out[3].T_world_from_ego[:3, 3], [4.5, 0.6, 0.0]) and out[:2] == ticks
     assert padded(ticks, 1) == ticks[:1]
+
+
+def test_the_model_prompt_carries_the_branch_conditions_it_does_not_name() -> None:
+    tags = {"weather": "rain", "time_of_day": "dusk", "road_type": "highway"}
+    assert model_prompt("", tags) == "rain, dusk"
+    assert model_prompt("fog", {**tags, "weather": "fog"}) == "fog, dusk"
+    assert model_prompt("snow at night", {**tags, "weather": "snow", "time_of_day": "night"}) == "snow at night"
