@@ -170,3 +170,33 @@ def fake_shipped_weights(tmp_path, monkeypatch) -> Path:
         (root / kind / WEIGHTS_NAME).write_bytes(b"weights")
     monkeypatch.setattr(model_folders, "WEIGHTS_DIR", root)
     return root
+
+
+@pytest.fixture(scope="session")
+def layout_model(tmp_path_factory) -> dict[str, Path]:
+    """Untrained multi-view models (tokens) of CAM_FRONT at 80x48, 17 frames, with a real debug tokenizer:
+    ``tokens`` trained with layout tokens, ``none`` without a layout."""
+    import dataclasses
+
+    import torch
+
+    from drivewm.diffusion.dit_config import DiTConfig
+    from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
+    from drivewm.geometry import load_rig
+    from drivewm.multiview.config import MultiViewConfig
+    from drivewm.multiview.init import from_text2world
+    from drivewm.tokenizer import Tokenizer, preset
+
+    root = tmp_path_factory.mktemp("layout_mv")
+    torch.manual_seed(0)
+    tok = Tokenizer(preset("debug"))
+    tok.save_pretrained(root / "tok")
+    latent = LatentInfo([16, 5, 6, 10], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {})
+    dit = DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)
+    models = {}
+    for layout in ("tokens", "none"):
+        mv = from_text2world(Text2World(Text2WorldConfig(dit), latent), MultiViewConfig(layout=layout))
+        mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
+        mv.save_pretrained(root / layout)
+        models[layout] = root / layout
+    return models

@@ -2,9 +2,8 @@
 boxes, the road) into one video per camera.
 
 - ``sim``: the simulator's own renderer (drivewm.sim.render), the stand-in for the world model;
-- ``model``: the world model generating each future from its layout. It plugs in here as another
-  :class:`FutureCameras` (the same ``frames`` call); layout-conditioned generation is not in this
-  version, so choosing it is refused before anything runs.
+- ``model``: a layout-conditioned world model generating each future from its layout
+  (drivewm.multiverse.model_cameras), at the model's frame size.
 """
 
 from __future__ import annotations
@@ -13,8 +12,9 @@ from typing import Protocol
 
 import numpy as np
 
-from drivewm.errors import DrivewmError
+from drivewm.geometry import Rig
 from drivewm.multiverse.branch import Branch
+from drivewm.multiverse.config import MultiverseConfig
 from drivewm.sim.scene import SceneRecording, SceneTick
 
 
@@ -23,6 +23,8 @@ class FutureCameras(Protocol):
 
     name: str
     """What the reports call it."""
+    rig: Rig
+    """The cameras the frames are of (at the size of the frames)."""
 
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
         """uint8 RGB (T, H, W, 3) per camera of the branch's rig, one frame per tick."""
@@ -40,23 +42,17 @@ class SimCameras:
 
         ticks = branch.past + [t for f in branch.futures for t in f]
         self.renderer = build_renderer(branch.sim, SceneRecording(branch.road, ticks, branch.tags), branch.rig)
-        self.cameras = branch.rig.names
+        self.rig = branch.rig
 
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
         shots = [self.renderer.render(t.T_world_from_ego, t.agents, t.timestamp_ns) for t in ticks]
-        return {c: np.stack([s[c] for s in shots]) for c in self.cameras}
+        return {c: np.stack([s[c] for s in shots]) for c in self.rig.names}
 
 
-def check_renderer(name: str) -> None:
-    """Refuse a renderer this version cannot run, before any simulation."""
-    if name == "model":
-        raise DrivewmError(
-            "renderer model: generating cameras from a future's layout needs a layout-conditioned world model, "
-            "which this version does not have; use --renderer sim"
-        )
+def make_cameras(cfg: MultiverseConfig, branch: Branch, generator=None, progress: bool = True) -> FutureCameras:
+    """The renderer ``cfg.renderer`` for ``branch`` (``model``: ``generator``, drivewm.multiverse.model_cameras)."""
+    if cfg.renderer == "model":
+        from drivewm.multiverse.model_cameras import ModelCameras
 
-
-def make_cameras(name: str, branch: Branch) -> FutureCameras:
-    """The renderer called ``name`` for ``branch``."""
-    check_renderer(name)
+        return ModelCameras(branch, generator, cfg.prompt, cfg.seed, cfg.model_steps, progress)
     return SimCameras(branch)

@@ -28,6 +28,8 @@ def register(subparsers) -> None:
     p.add_argument("--horizon", type=float, default=8.0, help="seconds of each future (default 8)")
     p.add_argument("--prompt", default="", help='conditions to render, e.g. "snow at night"')
     p.add_argument("--renderer", default="sim", choices=["sim", "model"], help="camera renderer (default sim)")
+    p.add_argument("--model", default="", help="--renderer model: a multi-view model folder trained with a layout")
+    p.add_argument("--steps", type=int, default=35, help="--renderer model: sampler steps per window (default 35)")
     p.add_argument("--width", type=int, default=320, help="image width (default 320)")
     p.add_argument("--height", type=int, default=192, help="image height (default 192)")
     p.add_argument("--rig", default="nuscenes6", help="rig of simulated scenarios (default nuscenes6)")
@@ -48,6 +50,8 @@ def run_multiverse_command(args: argparse.Namespace) -> int:
         horizon_s=args.horizon,
         prompt=args.prompt,
         renderer=args.renderer,
+        model=args.model,
+        model_steps=args.steps,
         rig=args.rig,
         width=args.width,
         height=args.height,

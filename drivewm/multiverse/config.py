@@ -66,7 +66,11 @@ class MultiverseConfig:
     prompt: str = ""
     """Conditions to render, e.g. "snow at night" (weather and time-of-day words; the model renderer gets it whole)."""
     renderer: str = "sim"
-    """sim: the simulator's renderer; model: the world model from each future's layout."""
+    """sim: the simulator's renderer; model: the world model ``model`` from each future's layout."""
+    model: str = ""
+    """Model folder of ``renderer: model``: a multi-view model trained with a layout (multiview.layout)."""
+    model_steps: int = 35
+    """Sampler steps per generated window of ``renderer: model``."""
     rig: str = "nuscenes6"
     """Camera rig of simulated scenarios (a log keeps its own)."""
     width: int = 320
@@ -92,6 +96,9 @@ class MultiverseConfig:
             raise DrivewmError("multiverse: --log needs --at SECONDS (the branch time)")
         if self.renderer not in RENDERERS:
             raise DrivewmError(f"multiverse: renderer {self.renderer!r} is not one of {list(RENDERERS)}")
+        if (self.renderer == "model") != bool(self.model):
+            raise DrivewmError("multiverse: --renderer model needs --model DIR (a layout multi-view model), only it")
+        at_least(self, 1, "model_steps")
         require(bool(self.plans), "plans", self.plans, "at least one plan")
         above(self, 0, "horizon_s", "waypoint_dt_s")
         require(self.horizon_s <= MAX_HORIZON_S, "horizon_s", self.horizon_s, f"at most {MAX_HORIZON_S:g} s")

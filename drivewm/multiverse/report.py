@@ -126,6 +126,8 @@ def render_html(ranking: dict) -> str:
     head = "".join(f"<th>{html.escape(t)}</th>" for _, t in COLUMNS + VIDEO_COLUMNS)
     users = "reactive road users" if ranking["reactive"] else "road users replayed from the log"
     cams = ", ".join(html.escape(c) for c in ranking["cameras"])
+    renderer = html.escape(ranking["renderer_description"])
+    model = f" (model {html.escape(ranking['model'])})" if ranking["model"] else ""
     return f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>drivewm multiverse</title>
 <style>body{{font-family:sans-serif;margin:1.5em}} table{{border-collapse:collapse}}
@@ -133,7 +135,7 @@ td,th{{border:1px solid #bbb;padding:3px 7px;text-align:right}} td:nth-child(2){
 img{{max-width:100%}}</style></head><body>
 <h1>Multiverse: {len(ranking["futures"])} futures</h1>
 <p>Source: {html.escape(ranking["source"])} ({users}), branch at {ranking["branch_time_s"]:.2f} s,
-horizon {ranking["horizon_s"]:.2f} s. Cameras rendered by: <b>{html.escape(ranking["renderer_description"])}</b>.</p>
+horizon {ranking["horizon_s"]:.2f} s. Cameras rendered by: <b>{renderer}</b>{model}.</p>
 <p>Ranking rule: {html.escape(ranking["rule"]["description"])}</p>
 <h2>Bird's-eye view</h2><img src="report/birds_eye.png" alt="bird's-eye view of all futures">
 <h2>Scores, best first</h2>

@@ -12,6 +12,7 @@ Output folder (written whole or not at all, drivewm.atomic)::
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +21,9 @@ from tqdm import tqdm
 from drivewm.atomic import atomic_path, write_json
 from drivewm.config import to_dict
 from drivewm.multiverse.branch import Branch
-from drivewm.multiverse.cameras import check_renderer, make_cameras
+from drivewm.multiverse.cameras import make_cameras
 from drivewm.multiverse.config import MultiverseConfig, RankingConfig
+from drivewm.multiverse.model_cameras import load_layout_model
 from drivewm.multiverse.outputs import encode_frames, write_camera_videos, write_future_log
 from drivewm.multiverse.plans import check_plan_names
 from drivewm.multiverse.ranking import rank
@@ -36,7 +38,7 @@ from drivewm.paths import child_path
 
 RENDERER_DESCRIPTIONS = {
     "sim": "the simulator's renderer (drivewm.sim.render), standing in for the world model",
-    "model": "the world model, generated from each future's layout",
+    "model": "a layout-conditioned world model, generating each future from its layout",
 }
 
 
@@ -44,9 +46,10 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
     """Every future of ``cfg`` into ``out_dir``; returns the ranking (as in ranking.json)."""
     cfg.validate()
     check_plan_names(cfg.plans)
-    check_renderer(cfg.renderer)
+    generator = load_layout_model(cfg.model) if cfg.renderer == "model" else None
     b = branch_log(cfg) if cfg.log else branch_scenario(cfg, load_scenario(cfg.scenario, cfg))
-    cameras = make_cameras(cfg.renderer, b)
+    cameras = make_cameras(cfg, b, generator, progress)
+    b = dataclasses.replace(b, rig=cameras.rig)  # the logs' calibration is the frames' size
     fps = _tick_rate(b)
     with atomic_path(out_dir) as tmp:
         tmp.mkdir(parents=True)
@@ -88,6 +91,7 @@ def _ranking(cfg: MultiverseConfig, b: Branch, renderer: str, results: list[dict
         "horizon_s": horizon,
         "renderer": renderer,
         "renderer_description": RENDERER_DESCRIPTIONS[renderer],
+        "model": str(Path(cfg.model).resolve()) if cfg.model else "",
         "cameras": list(b.rig.names),
         "prompt": cfg.prompt,
         "rule": {**to_dict(cfg.ranking), "description": describe_rule(cfg.ranking)},

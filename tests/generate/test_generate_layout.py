@@ -4,38 +4,11 @@ layout, so the simulator's truth of that window scores it."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import pytest
-import torch
 
 from drivewm.cli import main
 from drivewm.clips import iter_clips
 from drivewm.clips.shards import read_clips
-from drivewm.diffusion.dit_config import DiTConfig
-from drivewm.diffusion.text2world import LatentInfo, Text2World, Text2WorldConfig
-from drivewm.geometry import load_rig
-from drivewm.multiview.config import MultiViewConfig
-from drivewm.multiview.init import from_text2world
-from drivewm.tokenizer import Tokenizer, preset
-
-
-@pytest.fixture(scope="module")
-def layout_model(tmp_path_factory):
-    """An untrained layout multi-view model (tokens) of CAM_FRONT at 80x48 with a real debug tokenizer."""
-    root = tmp_path_factory.mktemp("layout_mv")
-    torch.manual_seed(0)
-    tok = Tokenizer(preset("debug"))
-    tok.save_pretrained(root / "tok")
-    latent = LatentInfo([16, 5, 6, 10], tok.latent_mean.tolist(), tok.latent_std.tolist(), 10.0, str(root / "tok"), {})
-    dit = DiTConfig(in_channels=16, hidden_dim=32, depth=1, num_heads=2, adaln_lora_dim=8)
-    models = {}
-    for layout in ("tokens", "none"):
-        mv = from_text2world(Text2World(Text2WorldConfig(dit), latent), MultiViewConfig(layout=layout))
-        mv.latent = dataclasses.replace(mv.latent, rig=load_rig("nuscenes6").subset(["CAM_FRONT"]).to_dict())
-        mv.save_pretrained(root / layout)
-        models[layout] = root / layout
-    return models
 
 
 @pytest.mark.slow

@@ -53,8 +53,9 @@ def test_a_turn_on_a_recorded_log(capsys, tmp_path) -> None:
     assert "SUMO" in _run(capsys, tmp_path, "--log", str(log), "--at", "1", "--plans", "turn")
 
 
-def test_the_model_renderer_is_refused_before_any_work(capsys, tmp_path) -> None:
-    assert "--renderer sim" in _run(capsys, tmp_path, "--scenario", "highway", "--renderer", "model")
+def test_the_model_renderer_needs_a_model_folder(capsys, tmp_path) -> None:
+    assert "--model DIR" in _run(capsys, tmp_path, "--scenario", "highway", "--renderer", "model")
+    assert "--model DIR" in _run(capsys, tmp_path, "--scenario", "highway", "--model", str(tmp_path))
 
 
 def test_a_log_needs_a_branch_time(capsys, tmp_path) -> None:

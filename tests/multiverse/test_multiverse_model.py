@@ -1,0 +1,69 @@
+"""``drivewm multiverse --renderer model``: a layout multi-view model generates every future's cameras
+from its layout, window after window, at the model's frame size; a model without a layout is refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from drivewm.cli import main
+from drivewm.clips.video import decode_mp4
+from drivewm.logs.reader import read_log
+from drivewm.multiverse.model_cameras import model_prompt, padded
+from drivewm.sim.scene import SceneTick
+
+
+def _command(model, out) -> list[str]:
+    return [
+        "multiverse", "--scenario", "highway", "--at", "0.5", "--plans", "keep,brake", "--horizon", "2",
+        "--rig", "front1", "--width", "160", "--height", "96", "--renderer", "model", "--model", str(model),
+        "--steps", "1", "--prompt", "snow at night", "--out", str(out),
+    ]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_the_model_renders_every_future_from_its_layout(layout_model, tmp_path) -> None:
+    assert main(_command(layout_model["tokens"], tmp_path / "out")) == 0
+    ranking = json.loads((tmp_path / "out/ranking.json").read_text())
+    assert ranking["renderer"] == "model" and ranking["model"] == str((layout_model["tokens"]).resolve())
+    assert json.loads((tmp_path / "out/config.json").read_text())["model_steps"] == 1
+    assert "(model " in (tmp_path / "out/report.html").read_text()
+    futures = {}
+    for plan in ("keep", "brake"):
+        log = read_log(tmp_path / "out/futures" / plan / "drive.mcap")
+        cam = log.rig.camera("CAM_FRONT")
+        assert (cam.width, cam.height) == (80, 48)  # the calibration of the model's frames
+        assert len(log.static) > 10  # the props the layouts were drawn with
+        # past 0 .. 0.5 s (one window) and 2 s of future (two windows, the second padded): 6 + 20 frames
+        assert len(log.pose_timestamps_ns) == 26 and len(log.images["CAM_FRONT"]) == 26
+        futures[plan] = log.T_world_from_ego[-1, :3, 3]
+        video = decode_mp4((tmp_path / "out/futures" / plan / "cameras/CAM_FRONT.mp4").read_bytes())
+        assert video.shape == (20, 48, 80, 3) and video.std() > 1.0
+    assert futures["brake"][0] < futures["keep"][0] - 1.0  # two different futures were generated
+
+
+def test_a_model_without_layout_is_refused_before_any_work(layout_model, tmp_path, capsys) -> None:
+    for model, message in [(layout_model["none"], "trained with a layout"), ("", "needs --model")]:
+        assert main(_command(model, tmp_path / "out")) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error: ") and message in err[0], err
+        assert not (tmp_path / "out").exists()
+
+
+def test_a_short_window_is_padded_at_the_last_velocity() -> None:
+    T = [np.eye(4) for _ in range(2)]
+    T[1][:3, 3] = [1.5, 0.2, 0.0]
+    ticks = [SceneTick(k * 100_000_000, T[k], [], 15.0) for k in range(2)]
+    out = padded(ticks, 4)
+    assert [t.timestamp_ns for t in out] == [0, 100_000_000, 200_000_000, 300_000_000]
+    assert np.allclose(out[3].T_world_from_ego[:3, 3], [4.5, 0.6, 0.0]) and out[:2] == ticks
+    assert padded(ticks, 1) == ticks[:1]
+
+
+def test_the_model_prompt_carries_the_branch_conditions_it_does_not_name() -> None:
+    tags = {"weather": "rain", "time_of_day": "dusk", "road_type": "highway"}
+    assert model_prompt("", tags) == "rain, dusk"
+    assert model_prompt("fog", {**tags, "weather": "fog"}) == "fog, dusk"
+    assert model_prompt("snow at night", {**tags, "weather": "snow", "time_of_day": "night"}) == "snow at night"
