@@ -10,8 +10,8 @@ from drivewm.cli import build_parser, main
 
 #: Every flag of ``drivewm generate``: a new setting is a GenerateConfig field (``--set``), not a flag.
 GENERATE_FLAGS = {
-    "-h", "--help", "--model", "--prompt", "--out", "--condition-clip", "--layout", "--scenario", "--steps", "--guidance",
-    "--trajectory-guidance", "--sampler", "--seed", "--trajectory", "--device", "--num-samples", "--rig",
+    "-h", "--help", "--model", "--prompt", "--out", "--condition-clip", "--layout", "--scenario", "--steps",
+    "--guidance", "--trajectory-guidance", "--sampler", "--seed", "--trajectory", "--device", "--num-samples", "--rig",
     "--recipe", "--set", "--dry-run",
 }  # fmt: skip
 ROLLOUT_FLAGS = {
