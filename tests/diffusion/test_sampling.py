@@ -60,7 +60,8 @@ def tiny(seed: int, cond_frames: int = 0) -> Text2World:
 
 
 def tiny_multiview():
-    mv = from_text2world(tiny(2), MultiViewConfig(), cond_frames=1)
+    # the recorded samples' model: moving rays, no per-frame motion (the shipped model's are the defaults)
+    mv = from_text2world(tiny(2), MultiViewConfig(frame_motion=False, moving_camera_rays=True), cond_frames=1)
     with torch.no_grad():
         for p in mv.net.parameters():
             p.add_(0.05 * torch.randn_like(p))

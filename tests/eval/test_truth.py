@@ -9,6 +9,7 @@ import json
 import cv2
 import numpy as np
 import pytest
+import torch
 
 from drivewm.cli import main
 from drivewm.clips import ClipMeta, ShardWriter, iter_clips
@@ -65,6 +66,7 @@ def write_clips(folder, clips) -> None:
 @pytest.fixture(scope="module")
 def judge_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("judge")
+    torch.manual_seed(0)  # an untrained judge: its guesses must not depend on the tests run before it
     Judge(JudgeConfig(base_channels=4, levels=2, groups=2)).save(folder)
     return folder
 

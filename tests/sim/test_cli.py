@@ -103,6 +103,8 @@ def test_bad_input_is_one_clear_error(tmp_path, capsys, argv) -> None:
 def test_recipes_are_valid() -> None:
     assert resources.names(RECIPES) == [
         "default",
+        "layout",
+        "layout_heldout",
         "quickstart",
         "smoke",
         "transfer",
