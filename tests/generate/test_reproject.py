@@ -31,6 +31,7 @@ def named_waypoints(name: str, speed_mps: float) -> np.ndarray:
     return resolve_trajectory(name, mv.trajectory_waypoints, mv.trajectory_dt_s, speed_mps)
 
 
+@pytest.mark.slow
 def test_a_clip_rendered_along_a_turn_reads_as_that_turn(sim_clip_dir):
     """Frame 0 of a simulated six-camera clip, rendered along the named left and right turns at 15 m/s
     for 0.8 s (14.6 degrees): the eval's flow reader recovers each turn to within 2 degrees, and a

@@ -217,6 +217,7 @@ def test_empty_conditions_are_an_error_not_ignored(tmp_path, capsys) -> None:
         assert capsys.readouterr().err.strip().endswith("conditions '': name at least one WEATHER:TIME")
 
 
+@pytest.mark.slow
 def test_a_recipe_is_one_batch_of_drives_and_a_drive_named_twice_is_simulated_once(tmp_path, capsys) -> None:
     """Every entry of a recipe goes into one pool of --workers processes (entries of one drive each
     had run one after another), and two entries naming the same drive write it once."""

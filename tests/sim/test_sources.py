@@ -75,6 +75,7 @@ def test_intersection_ego_waits_without_rolling_back() -> None:
     assert speed.min() < 3.0 < speed.max()  # it slowed down for the junction and drove on
 
 
+@pytest.mark.slow
 def test_intersection_traffic_waits_without_rolling_back() -> None:
     """Seed 1540: with highway-env's IDM other cars backed up for 59 of their 3,066 ticks (down to
     -1.8 m/s); the intersection's traffic is drivewm's brake-holding driver too, so no car moves

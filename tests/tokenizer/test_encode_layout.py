@@ -1,6 +1,7 @@
 """``drivewm tokenizer encode`` also codes each clip's layout video (its boxes and road lines drawn into
 its own cameras) into the latent cache, beside the clip's latents and with the same tokenizer."""
 
+import pytest
 import torch
 
 from drivewm.clips.latents import LatentCache
@@ -9,6 +10,7 @@ from drivewm.tokenizer import Tokenizer, preset
 from drivewm.tokenizer.latent_cache import clip_layout_video, encode_clips
 
 
+@pytest.mark.slow
 def test_encode_writes_the_layout_videos_code_beside_the_clips(sim_clip_dir, tmp_path):
     clips = tmp_path / "clips"
     clips.mkdir()

@@ -2,6 +2,7 @@
 wrote (an interrupted encode resumes; a clip folder that grew encodes only its new clips), and
 writes again every file whose clip, tokenizer or tiling changed or that is damaged."""
 
+import pytest
 import torch
 
 from drivewm.clips.latents import LatentCache
@@ -14,6 +15,7 @@ def _files(cache):
     return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in cache.glob("*.safetensors")}
 
 
+@pytest.mark.slow
 def test_encode_keeps_what_it_would_write_again(sim_clip_dir, tmp_path):
     clips = tmp_path / "clips"
     clips.mkdir()

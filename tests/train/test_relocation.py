@@ -83,6 +83,7 @@ def test_a_tokenizer_outside_the_run_keeps_its_absolute_path(tmp_path):
     assert resolve_reference(str(elsewhere), tmp_path / "x") == elsewhere
 
 
+@pytest.mark.slow
 def test_a_latent_cache_moved_with_its_tokenizer_still_names_it(sim_clip_dir, tmp_path):
     from drivewm.clips.latents import LatentCache
     from drivewm.diffusion.pretrain import encoding_tokenizer

@@ -45,6 +45,7 @@ def test_output_size_is_the_sources_when_larger():
     assert detail_window_px((192, 320), MODEL_HW, 9) == 19
 
 
+@pytest.mark.slow
 def test_identity_transfer_at_full_resolution_gives_the_source_back(clip) -> None:
     """Through transfer_clip: the source's size, rig, timestamps, poses and frames come back (gain 1
     where the transfer is the round trip, so upsample(coded) + (source - upsample(coded)) = source);
@@ -125,6 +126,7 @@ def _per_view_transfer(clip, contrast: float) -> tuple[np.ndarray, np.ndarray, n
     return src, coded, np.clip(coded * contrast + pattern[:, None, :, :, None], 0, 255).astype(np.uint8)
 
 
+@pytest.mark.slow
 def test_the_detail_band_keeps_cross_view_matches_a_view_by_view_transfer_loses(clip) -> None:
     """Each view is transferred on its own, so what the transfer makes at the scale SIFT describes (snow,
     texture) differs between two cameras' overlap. Stand-in: the coded clip darkened, each view with its
@@ -146,6 +148,7 @@ def test_the_detail_band_keeps_cross_view_matches_a_view_by_view_transfer_loses(
     assert cse[0.0]["cse"] > 2 * cse[BAND_PX]["cse"]
 
 
+@pytest.mark.slow
 def test_a_wide_gain_window_keeps_the_matches_a_per_view_texture_would_modulate_away(clip) -> None:
     """The detail's gain is the transfer's local contrast over the source's. Over one tokenizer cell it
     reads each view's own texture as contrast, so the source structure comes back at different strengths
@@ -182,6 +185,7 @@ def _per_view_look(clip) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return src, coded.astype(np.uint8), np.clip(dim, 0, 255).astype(np.uint8)
 
 
+@pytest.mark.slow
 def test_the_shared_look_makes_overlapping_cameras_agree_and_keeps_each_views_structure(clip) -> None:
     """Each view is transferred on its own, so two cameras give one point of the road another light and
     colour. Shared (the default of drivewm transfer), the transfer's look coarser than the detail band
@@ -213,6 +217,7 @@ def test_the_shared_look_makes_overlapping_cameras_agree_and_keeps_each_views_st
                                               shared[v].reshape(len(own[v]), -1, 3)[:, alone])  # fmt: skip
 
 
+@pytest.mark.slow
 def test_the_shared_look_of_large_frames_is_blended_small_and_a_lone_camera_is_left_alone(clip) -> None:
     """Fleet cameras (1600x900) would cost 25x a 320x192 frame to blend; the look is smooth, so it is
     blended at most LOOK_MAX_WIDTH wide and only the change is upsampled: the overlaps agree as they

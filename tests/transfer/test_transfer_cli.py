@@ -58,6 +58,7 @@ def inputs(sim_clip_dir, tmp_path_factory) -> Path:
     return root
 
 
+@pytest.mark.slow
 def test_transfer_keeps_every_label(models, inputs, tmp_path) -> None:
     out = tmp_path / "out"
     argv = ["transfer", str(inputs), "--model", str(models["transfer"]), "--to", "snow", "--time-of-day", "night"]
@@ -102,12 +103,14 @@ def test_model_resolution_writes_the_models_size_with_the_rig_scaled(models, inp
         np.testing.assert_array_equal(cam.T_ego_from_cam, src_cam.T_ego_from_cam)
 
 
+@pytest.mark.slow
 def test_transfer_keeps_each_clips_time_of_day_unless_told(models, inputs, tmp_path) -> None:
     argv = ["transfer", str(inputs / "one"), "--model", str(models["transfer"]), "--to", "fog"]
     assert main([*argv, "--steps", "1", "--out", str(tmp_path)]) == 0
     assert {c.meta.tags["time_of_day"] for c in iter_clips(tmp_path)} == {"day"}
 
 
+@pytest.mark.slow
 def test_max_clips_transfers_only_the_first_clips(models, inputs, tmp_path, capsys) -> None:
     argv = ["transfer", str(inputs / "good-000000.tar"), "--model", str(models["transfer"]), "--to", "rain"]
     assert main([*argv, "--steps", "1", "--max-clips", "1", "--out", str(tmp_path / "a")]) == 0
@@ -117,6 +120,7 @@ def test_max_clips_transfers_only_the_first_clips(models, inputs, tmp_path, caps
     assert "max-clips" in capsys.readouterr().err and not (tmp_path / "b").exists()
 
 
+@pytest.mark.slow
 def test_sdedit_baseline_through_the_same_command(models, inputs, tmp_path, capsys) -> None:
     argv = ["transfer", str(inputs / "one"), "--model", str(models["t2w"]), "--to", "snow", "--steps", "1"]
     assert main([*argv, "--out", str(tmp_path / "x")]) == 2
@@ -193,6 +197,7 @@ def test_transfer_of_a_real_dashcam_video(models, shared_data, tmp_path) -> None
         assert clip.meta.rig == src.meta.rig
 
 
+@pytest.mark.slow
 def test_no_shared_look_restores_each_view_on_its_own_and_says_so(models, inputs, tmp_path) -> None:
     """``--no-shared-look``: the same network output, each view's look its own; recorded in every clip.
     Only pixels in the cameras' overlaps may differ from the default's."""

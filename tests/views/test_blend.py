@@ -40,6 +40,7 @@ def test_views_that_disagree_where_their_cameras_overlap_agree_once_blended(sim_
     assert np.array_equal(blended[front, :, centre], disagreeing[front, :, centre])  # only its own camera sees it
 
 
+@pytest.mark.slow
 def test_stitching_makes_every_frame_agree_and_mixes_no_frame_into_another(sim_clip_dir):
     """A simulated drive, each view brightened or darkened by a shift that changes from frame to
     frame (as views refined each on its own can be): stitched, every frame's overlaps agree within a
