@@ -41,6 +41,7 @@ def _model(mv_parent_dir, open_trajectory: bool, **multiview) -> MultiView:
     zero-initialised output layer would make every loss the same), the waypoint encoder's last
     layer too when ``open_trajectory`` (else it stays zero, as initialised)."""
     torch.manual_seed(0)
+    multiview = {"frame_motion": False, "moving_camera_rays": True, **multiview}  # the pathways these tests isolate
     model = from_text2world(Text2World.from_pretrained(mv_parent_dir), MultiViewConfig(**multiview))
     closed = {id(p) for p in model.net.trajectory_encoder.net[-1].parameters()}
     with torch.no_grad():
