@@ -145,7 +145,8 @@ class MultiViewGenerator:
         t = self.model.latent.latent_shape[1]
         frames = 1 + (t - 1) * self.model.cfg.multiview.temporal_compression
         windows = cfg.layout_clips or 1
-        sim = scenario_config(request.scenario, cfg.sampling.seed, windows * frames / self.model.latent.fps + 0.5, 10.0)
+        fps = self.model.latent.fps  # one simulator tick per generated frame
+        sim = scenario_config(request.scenario, cfg.sampling.seed, windows * frames / fps + 0.5, fps)
         return layouts_from_scenario(sim, frames, windows, self.model.cfg.multiview.trajectory_waypoints)
 
     def layout_conditions(self, rig: Rig, source: LayoutSource) -> Conditions:
