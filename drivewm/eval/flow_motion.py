@@ -131,7 +131,15 @@ def relative_pose(p0: np.ndarray, p1: np.ndarray, K: np.ndarray, cfg: FlowMotion
         return None
     if np.median(np.linalg.norm(p1 - p0, axis=1)) < cfg.min_flow_px:
         return np.eye(4)
-    E, inliers = cv2.findEssentialMat(p0, p1, K, method=cv2.RANSAC, prob=0.999, threshold=cfg.ransac_threshold_px)
+    try:
+        E, inliers = cv2.findEssentialMat(p0, p1, K, method=cv2.RANSAC, prob=0.999, threshold=cfg.ransac_threshold_px)
+    except cv2.error:
+        # OpenCV's RANSAC five-point solver asserts on a sample whose polynomial degenerates instead of
+        # skipping it; USAC's samples the same matches with its own minimal solver.
+        try:
+            E, inliers = cv2.findEssentialMat(p0, p1, K, cv2.USAC_ACCURATE, 0.999, cfg.ransac_threshold_px)
+        except cv2.error:
+            return None
     if E is None or E.shape != (3, 3):
         return None
     _, R, t, _ = cv2.recoverPose(E, p0, p1, K, mask=inliers)
