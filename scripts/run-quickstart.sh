@@ -6,5 +6,5 @@ python3 -m venv .venv
 . .venv/bin/activate
 python -m pip install -q --upgrade pip
 python -m pip install -q torch==2.13.0
-python -m pip install -q -e ".[ray]"
+python -m pip install -q -c constraints.txt -e ".[ray]"
 drivewm quickstart --out "${1:-quickstart}"

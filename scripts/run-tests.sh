@@ -8,7 +8,7 @@ python3 -m venv .venv
 . .venv/bin/activate
 python -m pip install -q --upgrade pip
 python -m pip install -q --no-compile torch==2.13.0
-python -m pip install -q --no-compile -e ".[test]"
+python -m pip install -q --no-compile -c constraints.txt -e ".[test]"
 if ! command -v chromium >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
   (apt-get update -qq && apt-get install -y -qq chromium >/dev/null) || echo "chromium not installed: the report browser test will say so"
 fi
