@@ -93,6 +93,28 @@ def test_export_of_a_run_writes_fp16_folders_manifest_and_card(tmp_path):
         ).read_bytes()
 
 
+def test_the_card_says_how_the_scored_clips_were_sampled_and_which_were_post_processed(tmp_path):
+    """The evaluation section names each generated clip's sampler settings and post-steps as generate
+    recorded them: the network's own frames apart from post-processed ones, each with its clip count."""
+    from drivewm.clips.shards import write_manifest
+    from drivewm.generate.config import RECIPES
+    from drivewm.product.model_card import write_model_card
+
+    run, out = tmp_path / "run", tmp_path / "out"
+    plain = RECIPES.resolve(None, None, ["sampling.steps=20"]).record()
+    post = RECIPES.resolve(None, "reprojected", ["sampling.steps=20"]).record()
+    write_manifest(run / "generated" / "snow_left", [{"key": "a", **plain}, {"key": "b", **plain}])
+    write_manifest(run / "generated" / "fog_left", [{"key": "c", **post}])
+    out.mkdir()
+    card = write_model_card(run, out, {"files": {}}).read_text()
+    evaluation = card.split("## Evaluation")[1].split("## Files")[0]
+    assert "- 2 generated clips: steps 20, sampler heun, guidance 7.0," in evaluation
+    assert "no post-steps (the network's own frames)" in evaluation
+    assert "- 1 generated clip: steps 20" in evaluation
+    assert "post-processed by reproject, reshade, blend, stitch (reproject sigma 0.1, steps 10)" in evaluation
+    assert "## Intended use and licence" in card and "Apache-2.0" in card
+
+
 def test_a_fine_tune_replaces_one_folder_and_its_record_adds_up(tmp_path):
     """`replace_shipped` swaps one folder for its fine-tune: fp16, a manifest that checks against the new
     bytes, the other folders untouched, and steps and seconds added to the folder's record."""

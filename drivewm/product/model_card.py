@@ -1,19 +1,23 @@
 """MODEL_CARD.md of exported weights, written from the run itself (nothing typed by hand but notes).
 
-Sections: the models (type, shape, parameters), the data (curation reports of the training and
-held-out clips), the recipe (every stage's exact command from ``RUN/.stages/``, with its wall time),
-steps and compute of every trained folder of the run (its training states), the must-hold figures
-(``RUN/eval/figures.md`` of :mod:`drivewm.product.figures`), the sha256 of every file, and the
-author's notes (deviations from the recipe, what a figure predicts), given as a Markdown file.
+Sections, as a model card has them (Mitchell et al. 2019): the models (type, shape, parameters),
+intended use and licence, the data (curation reports of the training and held-out clips), the recipe
+(every stage's exact command from ``RUN/.stages/``, with its wall time), steps and compute of every
+trained folder of the run (its training states), the evaluation: how the scored clips were sampled
+(each generated clip's recorded sampler settings and ``post_processing``, so no post-processed figure
+passes for the network's own frames) and the must-hold figures (``RUN/eval/figures.md`` of
+:mod:`drivewm.product.figures`), the sha256 of every file, and the author's notes (deviations from the
+recipe, limitations, what a figure predicts), given as a Markdown file.
 """
 
 from __future__ import annotations
 
 import math
 import shlex
+from collections import Counter
 from pathlib import Path
 
-from drivewm.atomic import write_text
+from drivewm.atomic import read_jsonl, write_text
 from drivewm.product.figures import read_json
 from drivewm.product.quickstart import in_run
 from drivewm.train.record import training_record
@@ -27,6 +31,15 @@ SHAPE_KEYS = (
     "latent_channels",
     "temporal_compression",
     "spatial_compression",
+)
+
+#: What a generated clip's manifest row records of its sampling (drivewm.generate.config.GenerateConfig.record).
+SAMPLING_KEYS = ("steps", "sampler", "guidance", "trajectory_guidance", "guidance_interval", "prompt_template")
+#: The card's intended use and licence: every export is trained on simulated drives only.
+INTENDED_USE = (
+    "Research on multi-camera driving world models and tests of the drivewm pipeline: generating, transferring "
+    "and scoring simulated drives. Trained on simulated drives only: not a model of real roads, "
+    "and not for decisions in or about real vehicles. Licence: Apache-2.0, as drivewm's code."
 )
 
 
@@ -68,6 +81,32 @@ def _stages(run: Path) -> list[str]:
     return rows
 
 
+def _sampling(run: Path) -> list[str]:
+    """How the generated clips the figures score were drawn: one line per distinct setting recorded in
+    ``RUN/generated/*/manifest.jsonl`` (sampler settings, then the post-steps), with its clip count."""
+    settings = Counter(
+        _setting(row) for path in sorted((run / "generated").glob("*/manifest.jsonl")) for row in read_jsonl(path)
+    )
+    return [f"- {n} generated clip{'' if n == 1 else 's'}: {s}" for s, n in settings.items()] or [
+        "- no generated clips"
+    ]
+
+
+def _setting(row: dict) -> str:
+    """A generated clip's sampling and post-steps (its manifest row), in words."""
+    sampling = ", ".join(f"{k} {row[k]}" for k in SAMPLING_KEYS if k in row) or "sampling not recorded"
+    if "post_processing" not in row:
+        return f"{sampling}; post-steps not recorded"
+    steps = row["post_processing"]
+    if not steps:
+        return f"{sampling}; no post-steps (the network's own frames)"
+    refine = ", ".join(f"{k} {v}" for k, v in (row.get("reproject") or {}).items())
+    refine = f" (reproject {refine})" if refine else ""
+    return (
+        f"{sampling}; post-processed by {', '.join(steps)}{refine}: figures of the post-steps as much as of the network"
+    )
+
+
 def _compute(run: Path) -> list[str]:
     """Steps and wall seconds of every trained folder of the run (intermediate stages included:
     the image-pretrained Text2World model is compute the shipped one was built on)."""
@@ -98,6 +137,10 @@ def write_model_card(run: Path, out: Path, manifest: dict, notes: str = "") -> P
             "",
             *_models(out),
             "",
+            "## Intended use and licence",
+            "",
+            INTENDED_USE,
+            "",
             "## Data",
             "",
             *_data(run),
@@ -112,7 +155,12 @@ def write_model_card(run: Path, out: Path, manifest: dict, notes: str = "") -> P
             "",
             *compute,
             "",
-            "## Figures",
+            "## Evaluation",
+            "",
+            "`drivewm eval` of the generated clips against the held-out clips' (docs/eval-protocol.md), as "
+            "must-hold figures (drivewm.product.figures). The generated clips were sampled with:",
+            "",
+            *_sampling(run),
             "",
             figures,
             "## Files",
