@@ -62,6 +62,7 @@ def run_multiverse_command(args: argparse.Namespace) -> int:
     for f in ranking["futures"]:
         s = f["scores"]
         hit = f" collision with {s['collision_with']['track_id']}" if s["collision"] else ""
+        hit += "" if f["feasible"] else f" (infeasible: {f['infeasible']})"
         print(f"#{f['rank']} {f['plan']}: progress {s['progress_m']:.1f} m{hit}")
     print(f"{args.out}/report.html")
     return 0

@@ -55,8 +55,9 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
         tmp.mkdir(parents=True)
         past_jpeg = encode_frames(cameras.frames(b.past))
         results, sheets, front = [], {}, {}
-        bar = tqdm(list(zip(b.plans, b.futures)), desc="futures", unit="future", disable=not progress)
-        for plan, future in bar:
+        todo = list(zip(b.plans, b.futures, b.infeasible))
+        bar = tqdm(todo, desc="futures", unit="future", disable=not progress)
+        for plan, future, infeasible in bar:
             bar.set_postfix_str(plan.name)
             folder = child_path(tmp / "futures", plan.name, what="plan")
             frames = cameras.frames(future)
@@ -64,7 +65,8 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
             videos = write_camera_videos(folder / "cameras", frames, fps)
             scores = score_future(b.past, future, b.road)
             scores["video"] = video_scores(plan.name, b.rig, fps, future, videos, b.tags, cfg.eval_metrics)
-            results.append({"plan": plan.name, "log": f"futures/{plan.name}/drive.mcap", "scores": scores})
+            feasible = {"feasible": not infeasible, "infeasible": infeasible or None}
+            results.append({"plan": plan.name, **feasible, "log": f"futures/{plan.name}/drive.mcap", "scores": scores})
             sheets[plan.name] = sheet_frames(frames)
             front[plan.name] = (b.rig.names[0], encode_frames({b.rig.names[0]: frames[b.rig.names[0]]})[b.rig.names[0]])
         ranking = _ranking(cfg, b, cameras.name, results)
@@ -112,4 +114,7 @@ def describe_rule(rule: RankingConfig) -> str:
         "progress": f"progress (distance driven, in {rule.progress_step_m:g} m steps, more first)",
         "comfort": f"comfort (max |jerk| / {rule.jerk_ref_mps3:g} + max |lateral acc.| / {rule.lateral_ref_mps2:g})",
     }
-    return "sorted by " + ", then ".join(parts[k] for k in rule.order) + "; ties keep the plans' order."
+    return (
+        "feasible plans first (an infeasible one, e.g. a lane change with no lane on that side, ranks after them), "
+        "then sorted by " + ", then ".join(parts[k] for k in rule.order) + "; ties keep the plans' order."
+    )

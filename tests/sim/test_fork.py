@@ -42,10 +42,10 @@ def _layout(ticks):
 
 @pytest.mark.parametrize("source", ["highway", "sumo"])
 def test_futures_share_the_source_past_collide_into_a_stopped_car_and_repeat(source: str) -> None:
-    cfg, (past, futures, road) = _fork(source)
+    cfg, (past, futures, road, infeasible) = _fork(source)
     source_drive = record(cfg)
     assert _layout(past) == _layout(source_drive.ticks[: BRANCH_TICK + 1])  # bit-identical past
-    assert len(futures) == 2 and all(len(f) == 50 for f in futures)
+    assert len(futures) == 2 and all(len(f) == 50 for f in futures) and infeasible == ["", ""]
     ranked = rank(
         [{"plan": p.name, "scores": score_future(past, f, road)} for p, f in zip(PLANS, futures)], RankingConfig()
     )
@@ -55,7 +55,7 @@ def test_futures_share_the_source_past_collide_into_a_stopped_car_and_repeat(sou
     assert not brake["scores"]["collision"] and brake["scores"]["min_gap_m"] > 0.5
     assert [r["plan"] for r in ranked] == ["brake", "keep"]  # the collision ranks last
     assert keep["scores"]["progress_m"] > brake["scores"]["progress_m"] + 10  # it was not ranked on progress
-    _, (past2, futures2, _) = _fork(source)
+    _, (past2, futures2, _, _) = _fork(source)
     assert _layout(past2) == _layout(past) and [_layout(f) for f in futures2] == [_layout(f) for f in futures]
 
 
@@ -68,7 +68,7 @@ def _follower(future) -> tuple[list, np.ndarray]:
 def test_a_follower_brakes_behind_a_braking_ego() -> None:
     """highway-env: the IDM car placed 20 m behind at the ego's speed slows down behind the braking ego
     (until MOBIL takes it round) and never touches it; behind the ego that keeps its speed it does not brake."""
-    _, (past, futures, _) = _fork("highway")
+    _, (past, futures, _, _) = _fork("highway")
     boxes, brake_speeds = _follower(futures[1])
     _, center, yaw = ego_state(futures[1])
     gaps = [
