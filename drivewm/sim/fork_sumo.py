@@ -1,6 +1,6 @@
 """Fork a SUMO drive at a branch point: libsumo saves the simulation state there
 (``simulation.saveState``, random number generators included) and every future starts by loading it
-(``simulation.loadState``; sumo.dlr.de/docs/Simulation/SaveAndLoad.html).
+into a fresh SUMO (``simulation.loadState``; sumo.dlr.de/docs/Simulation/SaveAndLoad.html).
 
 The past (ticks 0 .. branch) is the drive :func:`drivewm.sim.source_sumo.record_sumo` makes with the
 same config (same network, traffic and ego). After the branch the ego follows the plan with SUMO's
@@ -59,9 +59,15 @@ def fork_sumo(
             past = _past(cfg, dt, branch_tick)
             state = str(Path(tmp) / "branch.xml")
             libsumo.simulation.saveState(state)
-            futures, infeasible = zip(
-                *[_future(cfg, state, branch_tick, i, plan, future_ticks, placed) for i, plan in enumerate(plans)]
-            )
+            results = []
+            for i, plan in enumerate(plans):
+                # A fresh SUMO for every future: loadState into the simulation that ran the previous future
+                # leaves some of its state behind (the ego froze on the lane that future ended on, its speed set
+                # but its position no longer advanced, after a lane change or turn brought it there again).
+                libsumo.close()
+                start_sumo(net, routes, dt, cfg.seed, STATE_OPTIONS)
+                results.append(_future(cfg, state, branch_tick, i, plan, future_ticks, placed))
+            futures, infeasible = zip(*results)
         finally:
             libsumo.close()
         xy = np.array([t.T_world_from_ego[:2, 3] for t in past + [t for f in futures for t in f]])
@@ -132,8 +138,31 @@ def _change_lane(lane_change: int) -> str:
     target = libsumo.vehicle.getLaneIndex("ego") + lane_change  # SUMO numbers lanes from the right
     if not 0 <= target < libsumo.edge.getLaneNumber(edge):
         return no_lane_reason(lane_change)
+    _route_from_lane(edge, f"{edge}_{target}")
     libsumo.vehicle.changeLane("ego", target, LANE_CHANGE_S)
     return ""
+
+
+def _route_from_lane(edge: str, lane: str) -> None:
+    """Route the ego on from ``lane`` where its route's next edge cannot be reached from there (straight on
+    where it can): otherwise SUMO stops it at the end of the lane it was sent to, holding it there for the
+    lane change's duration, and its strategic lane change then takes it back."""
+    route, idx = libsumo.vehicle.getRoute("ego"), libsumo.vehicle.getRouteIndex("ego")
+    links = libsumo.lane.getLinks(lane)  # (to lane, priority, open, foe, via, state, direction, length)
+    reachable = [libsumo.lane.getEdgeID(link[0]) for link in links]
+    if not links or (idx + 1 < len(route) and route[idx + 1] in reachable):
+        return
+    straight = [e for e, link in zip(reachable, links) if link[6] == "s"]
+    _route_via([edge], (straight or reachable)[0])
+
+
+def _route_via(edges: list[str], following: str) -> None:
+    """Route the ego along ``edges`` (from the one it is on), then ``following``, then on to its destination.
+    The route must reach well past ``following``: on a shorter one, drivewm.sim.source_sumo._extend_route's
+    ``changeTarget`` routes the ego afresh from the edge it is on, which undoes the turn or the lane's exit."""
+    destination = libsumo.vehicle.getRoute("ego")[-1]
+    onward = libsumo.simulation.findRoute(following, destination).edges if following != destination else ()
+    libsumo.vehicle.setRoute("ego", [*edges, *(onward or [following])])
 
 
 def _take_turn(side: str) -> str:
@@ -145,10 +174,12 @@ def _take_turn(side: str) -> str:
             if start >= len(route):
                 break
             edge = route[start]
-            for lane in range(libsumo.edge.getLaneNumber(edge)):
+            own = libsumo.vehicle.getLaneIndex("ego") if start == idx else 0  # its own lane's turns first
+            lanes = sorted(range(libsumo.edge.getLaneNumber(edge)), key=lambda lane: lane != own)
+            for lane in lanes:
                 for link in libsumo.lane.getLinks(f"{edge}_{lane}"):
                     if link[6] in directions:  # (to lane, priority, open, foe, via, state, direction, length)
-                        libsumo.vehicle.setRoute("ego", [*route[idx : start + 1], libsumo.lane.getEdgeID(link[0])])
+                        _route_via(list(route[idx : start + 1]), libsumo.lane.getEdgeID(link[0]))
                         return ""
     return f"the ego's next junction has no {'left or right' if side == 'any' else side} turn"
 
