@@ -1,9 +1,10 @@
 """Time of ``drivewm multiverse``: five 8-second futures of a nuscenes6 drive at 320x192, scoring included.
 
 The must-hold limit: at most 10 minutes on 2 cores. The cameras are the simulator's renderer
-(``--renderer sim``), or, with ``--model DIR``, a layout multi-view model generating each future from its
-layout (``--renderer model``, ``--steps`` sampler steps per window); ``--renderer both`` times the two
-interleaved, so the model's share is the difference.
+(``--renderer sim``), or, with ``--model DIR`` (``shipped:multiview``: the shipped multi-view model), a
+multi-view world model generating each future (``--renderer model``, ``--steps`` sampler steps per
+window; drivewm.multiverse.model_cameras); ``--renderer both`` times the two interleaved, so the model's
+share is the difference. The model's parameter counts (network, tokenizer) are printed with the times.
 
 Two sources, interleaved ``--repeats`` times (medians): a recorded nuscenes6 drive (simulated once, then
 branched as a log: road users replayed) and the same scenario forked in highway-env (reactive). Each run
@@ -12,7 +13,7 @@ seconds and the ratio of the wall time to the 600 s limit.
 
     python benchmarks/bench_multiverse.py                          # 8 s horizon, 1 repeat, both sources
     python benchmarks/bench_multiverse.py --horizon 2 --no-eval-runs  # a quick look, eval's share split off
-    python benchmarks/bench_multiverse.py --horizon 2 --sources highway-env --model MVDIR --renderer both
+    python benchmarks/bench_multiverse.py --sources log --renderer model --model shipped:multiview --steps 10
 """
 
 from __future__ import annotations
@@ -51,6 +52,16 @@ def with_renderers(runs: dict[str, MultiverseConfig], args: argparse.Namespace) 
     return {f"{k}, {r}": dataclasses.replace(v, **renderers[r]) for k, v in runs.items() for r in chosen}
 
 
+def model_parameters(folder: str) -> dict[str, int]:
+    """Parameter counts of the model renderer's network and tokenizer."""
+    from drivewm.model_folders import resolve_model_folder
+    from drivewm.multiverse.model_cameras import load_world_model
+
+    gen = load_world_model(resolve_model_folder(folder), "cpu")
+    count = lambda module: sum(p.numel() for p in module.parameters())  # noqa: E731
+    return {"network": count(gen.model.net), "tokenizer": count(gen.tokenizer)}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--horizon", type=float, default=8.0)
@@ -58,7 +69,7 @@ def main() -> None:
     p.add_argument("--at", type=float, default=2.0)
     p.add_argument("--sources", default="log,highway-env", help="which of log, highway-env to time")
     p.add_argument("--no-eval-runs", action="store_true", help="also time each source without drivewm eval")
-    p.add_argument("--model", default="", help="layout multi-view model folder of --renderer model")
+    p.add_argument("--model", default="", help="multi-view model folder (or shipped:multiview) of --renderer model")
     p.add_argument("--steps", type=int, default=35, help="sampler steps per window of --renderer model")
     p.add_argument("--renderer", default="sim", choices=["sim", "model", "both"], help="cameras to time")
     args = p.parse_args()
@@ -83,6 +94,9 @@ def main() -> None:
             for name, cfg in runs.items():
                 times[name].append(timed(cfg, tmp / "out"))
     print(f"five {args.horizon:g} s futures, nuscenes6 at 320x192, {args.repeats} repeat(s), medians:")
+    if args.renderer != "sim":
+        params = ", ".join(f"{k} {v / 1e6:.2f}M" for k, v in model_parameters(args.model).items())
+        print(f"  model {args.model}: {params} parameters, {args.steps} sampler steps per window")
     for name, ts in times.items():
         wall, cpu = statistics.median(t[0] for t in ts), statistics.median(t[1] for t in ts)
         print(f"  {name:34s} wall {wall:7.1f} s  cpu {cpu:7.1f} s  wall / limit {wall / LIMIT_S:.2f}")

@@ -160,6 +160,22 @@ class MultiViewGenerator:
         speed = float(np.linalg.norm(waypoints[0, :2]) / mv.trajectory_dt_s)
         return Conditions(rig, waypoints, speed, None, layout)
 
+    def trajectory_conditions(self, rig: Rig, waypoints: np.ndarray, first_frames: np.ndarray | None) -> Conditions:
+        """The conditions of one window along ``waypoints`` ((W, 3) m in its first ego frame, spaced
+        ``trajectory_dt_s``) continuing ``first_frames`` (uint8 (V, n, H, W, 3), the window's first frames,
+        Video2World as in drivewm.generate.rollout; None: every frame generated)."""
+        mv = self.model.cfg.multiview
+        waypoints = resample_waypoints(waypoints, mv.trajectory_waypoints)
+        speed = float(np.linalg.norm(waypoints[0, :2]) / mv.trajectory_dt_s)
+        if first_frames is None:
+            return Conditions(rig, waypoints, speed, None)
+        c, t, h, w = self.model.latent.latent_shape
+        sc = self.tokenizer.config.spatial_compression
+        z = encode_views(self.tokenizer, first_frames, (h * sc, w * sc), self.model.device)  # (V, c, t', h, w)
+        cond = torch.zeros(len(rig.cameras), c, t, h, w)
+        cond[:, :, : z.shape[2]] = z[:, :, :t]
+        return Conditions(rig, waypoints, speed, cond[None])
+
     def sample(
         self, prompt: str, seed: int, cond: Conditions, request: GenerateRequest, cfg: GenerateConfig
     ) -> GeneratedSample:

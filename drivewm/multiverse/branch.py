@@ -32,3 +32,6 @@ class Branch:
     """highway-env, sumo, or log (a replayed recording)."""
     reactive: bool
     """Whether the other road users react to the ego (simulators) or are replayed (logs)."""
+    infeasible: list[str]
+    """Per plan, why the simulator could not carry out its manoeuvre at the branch point ("" where it could;
+    a replayed log's open-loop manoeuvres always can)."""

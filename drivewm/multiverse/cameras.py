@@ -2,8 +2,8 @@
 boxes, the road) into one video per camera.
 
 - ``sim``: the simulator's own renderer (drivewm.sim.render), the stand-in for the world model;
-- ``model``: a layout-conditioned world model generating each future from its layout
-  (drivewm.multiverse.model_cameras), at the model's frame size.
+- ``model``: a multi-view world model generating each future from its ego trajectory (and its layout,
+  where the model was trained with one; drivewm.multiverse.model_cameras), at the model's frame size.
 """
 
 from __future__ import annotations
@@ -22,7 +22,9 @@ class FutureCameras(Protocol):
     """Renders ticks of a branch into camera frames."""
 
     name: str
-    """What the reports call it."""
+    """``sim`` or ``model`` (``--renderer``)."""
+    description: str
+    """What it is and what it renders each future from, for the reports."""
     rig: Rig
     """The cameras the frames are of (at the size of the frames)."""
 
@@ -36,6 +38,7 @@ class SimCameras:
     every future is drawn in the same world."""
 
     name = "sim"
+    description = "the simulator's renderer (drivewm.sim.render), standing in for the world model"
 
     def __init__(self, branch: Branch):
         from drivewm.sim.world import build_renderer

@@ -28,7 +28,12 @@ def register(subparsers) -> None:
     p.add_argument("--horizon", type=float, default=8.0, help="seconds of each future (default 8)")
     p.add_argument("--prompt", default="", help='conditions to render, e.g. "snow at night"')
     p.add_argument("--renderer", default="sim", choices=["sim", "model"], help="camera renderer (default sim)")
-    p.add_argument("--model", default="", help="--renderer model: a multi-view model folder trained with a layout")
+    p.add_argument(
+        "--model",
+        default="",
+        help="--renderer model: a multi-view model folder or shipped:multiview (from the ego trajectory; with the "
+        "layout too where the model was trained with one)",
+    )
     p.add_argument("--steps", type=int, default=35, help="--renderer model: sampler steps per window (default 35)")
     p.add_argument("--width", type=int, default=320, help="image width (default 320)")
     p.add_argument("--height", type=int, default=192, help="image height (default 192)")
@@ -62,6 +67,7 @@ def run_multiverse_command(args: argparse.Namespace) -> int:
     for f in ranking["futures"]:
         s = f["scores"]
         hit = f" collision with {s['collision_with']['track_id']}" if s["collision"] else ""
+        hit += "" if f["feasible"] else f" (infeasible: {f['infeasible']})"
         print(f"#{f['rank']} {f['plan']}: progress {s['progress_m']:.1f} m{hit}")
     print(f"{args.out}/report.html")
     return 0

@@ -68,7 +68,8 @@ class MultiverseConfig:
     renderer: str = "sim"
     """sim: the simulator's renderer; model: the world model ``model`` from each future's layout."""
     model: str = ""
-    """Model folder of ``renderer: model``: a multi-view model trained with a layout (multiview.layout)."""
+    """Model folder (or ``shipped:multiview``) of ``renderer: model``: a multi-view model, generating each future
+    from its ego trajectory, and from its layout where the model was trained with one (multiview.layout)."""
     model_steps: int = 35
     """Sampler steps per generated window of ``renderer: model``."""
     rig: str = "nuscenes6"
@@ -97,7 +98,7 @@ class MultiverseConfig:
         if self.renderer not in RENDERERS:
             raise DrivewmError(f"multiverse: renderer {self.renderer!r} is not one of {list(RENDERERS)}")
         if (self.renderer == "model") != bool(self.model):
-            raise DrivewmError("multiverse: --renderer model needs --model DIR (a layout multi-view model), only it")
+            raise DrivewmError("multiverse: --renderer model needs --model DIR (a multi-view model), only it")
         at_least(self, 1, "model_steps")
         require(bool(self.plans), "plans", self.plans, "at least one plan")
         above(self, 0, "horizon_s", "waypoint_dt_s")

@@ -1,14 +1,23 @@
-"""The ``model`` renderer of the futures: a layout-conditioned multi-view world model
-(drivewm.generate.multiview, ``multiview.layout`` != none) generates each stretch of ticks from its layout.
+"""The ``model`` renderer of the futures: a multi-view world model (``model_type: multiview``, loaded
+through drivewm.generate.registry and sampled by its generator) generates each future's cameras.
 
-Ticks are cut into consecutive windows of the model's frame count (1 + (latent t - 1) x temporal
-compression), generated one after another, each from its own first ego pose: the window's layout (road
-users' boxes, the props the simulator's renderer would place, road lines; drivewm.layout.build) drawn
-into the rig at the model's frame size, and its ego waypoints at the model's spacing. A window shorter
-than the model's frame count (the last) is padded with ticks extrapolated at the ego's last velocity
-(road users kept where they were last) and only its own frames are kept. Window k of every call draws
-its noise from seed + k, so futures differ by their layouts, not by their noise. The prompt is the
-run's, with the branch's weather and time of day where it names none. One tick is one generated frame.
+Ticks are cut into windows of the model's frame count (1 + (latent t - 1) x temporal compression), one
+generated frame per tick, each window conditioned on the ego waypoints that follow its first tick (at
+the model's spacing) and the prompt. What else a window is generated from depends on the model:
+
+- a model trained with a layout (``multiview.layout``): the window's layout (road users' boxes, the props
+  the simulator's renderer would place, road lines; drivewm.layout.build) drawn into the rig. Windows are
+  consecutive and independent;
+- a model without one (the shipped ``multiview``: text and ego trajectory): Video2World continuation, as
+  ``drivewm rollout`` does (drivewm.generate.rollout). The past is generated from the trajectory alone
+  for its first window, every later window starts from the last frames generated before it, and every
+  future starts from the past's frames at the branch tick, so the futures continue one shared past.
+  Road users are not conditioned: the model draws whatever traffic it imagines.
+
+A window that runs past the last tick is padded with ticks extrapolated at the ego's last velocity (road
+users kept where they were last) and only its own frames are kept. Window k of every call draws its
+noise from seed + k, so futures differ by their conditions, not by their noise. The prompt is the run's,
+with the branch's weather and time of day where it names none.
 """
 
 from __future__ import annotations
@@ -27,24 +36,26 @@ from drivewm.multiview.trajectories import waypoints_from_poses
 from drivewm.sim.scene import SceneRecording, SceneTick
 from drivewm.sim.world import place_world_props
 
+#: What each kind of model generates a future from (reports and ranking.json).
+CONDITIONING = {"layout": "layout, ego trajectory and prompt", "trajectory": "ego trajectory and prompt"}
 
-def load_layout_model(folder: str, device: str = "auto"):
-    """The multi-view generator of model folder ``folder``; a one-line DrivewmError unless it was trained
-    with a layout (only such a model generates a future from its layout)."""
+
+def load_world_model(folder: str, device: str = "auto"):
+    """The multi-view generator of model folder ``folder`` (drivewm.generate.registry); a one-line
+    DrivewmError for any other model family (only multi-view models take a rig and an ego trajectory)."""
     from drivewm.generate.registry import load_generator
 
     generator = load_generator(folder, device)
-    mv = getattr(getattr(generator, "model", None), "cfg", None)
-    if "layout" not in generator.inputs or getattr(getattr(mv, "multiview", None), "layout", "none") == "none":
+    if generator.model_type != "multiview":
         raise DrivewmError(
-            f"--model {folder}: not a multi-view model trained with a layout (multiview.layout); "
-            "--renderer model generates each future from its layout and needs one"
+            f"--model {folder}: a {generator.model_type} model; --renderer model needs a multi-view model "
+            "(model_type multiview, e.g. shipped:multiview)"
         )
     return generator
 
 
 class ModelCameras:
-    """The world model generating a branch's cameras from each window's layout (see the module)."""
+    """The world model generating a branch's cameras window by window (see the module)."""
 
     name = "model"
 
@@ -53,28 +64,70 @@ class ModelCameras:
         self.prompt = model_prompt(prompt, branch.tags)
         self.request = GenerateRequest([self.prompt])
         self.cfg = GenerateConfig(sampling=SamplingConfig(steps=steps, seed=seed))
+        mv = generator.model.cfg.multiview
         c, t, h, w = generator.model.latent.latent_shape
         sc = generator.tokenizer.config.spatial_compression
-        self.num_frames = 1 + (t - 1) * generator.model.cfg.multiview.temporal_compression
+        self.num_frames = 1 + (t - 1) * mv.temporal_compression
+        self.num_cond = 1 + (max(1, generator.model.cfg.edm.cond_frames) - 1) * mv.temporal_compression
+        """Frames a continued window starts from (its first latent frames)."""
         self.rig = branch.rig.scaled(w * sc, h * sc, fit="crop")
         """The branch's cameras at the model's frame size (the size of every generated frame)."""
-        if branch.source != "log" and not branch.road.props:  # the props the sim renderer would draw
-            ticks = branch.past + [t for f in branch.futures for t in f]
-            place_world_props(branch.sim, SceneRecording(branch.road, ticks, branch.tags))
-        self.static, self.road = branch.road.props, thin_road(branch.road.road_lines())
+        self.conditioning = "trajectory" if mv.layout == "none" else "layout"
+        self.description = (
+            f"a multi-view world model, generating each future from its {CONDITIONING[self.conditioning]}"
+        )
+        self.past, self._past_video = branch.past, None
+        if self.conditioning == "layout":
+            if branch.source != "log" and not branch.road.props:  # the props the sim renderer would draw
+                ticks = branch.past + [t for f in branch.futures for t in f]
+                place_world_props(branch.sim, SceneRecording(branch.road, ticks, branch.tags))
+            self.static, self.road = branch.road.props, thin_road(branch.road.road_lines())
 
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
         """uint8 RGB (T, H, W, 3) per camera, one generated frame per tick."""
         if not ticks:
             return {c.name: np.zeros((0, c.height, c.width, 3), np.uint8) for c in self.rig.cameras}
-        starts = range(0, len(ticks), self.num_frames)
-        starts = tqdm(starts, desc="model windows", leave=False, disable=not self.progress)
-        videos = [self.window(ticks, s, k) for k, s in enumerate(starts)]
-        joined = np.concatenate(videos, axis=1)  # (V, T, H, W, 3)
+        if self.conditioning == "layout":
+            starts = tqdm(
+                range(0, len(ticks), self.num_frames), desc="model windows", leave=False, disable=not self.progress
+            )
+            joined = np.concatenate([self.layout_window(ticks, s, k) for k, s in enumerate(starts)], axis=1)
+        elif ticks[0].timestamp_ns <= self.past[-1].timestamp_ns:  # the past (or a part of it)
+            first = next(i for i, t in enumerate(self.past) if t.timestamp_ns == ticks[0].timestamp_ns)
+            joined = self.past_video()[:, first : first + len(ticks)]
+        else:  # a future: it continues the past's frames at the branch tick
+            given = self.past_video()[:, -self.num_cond :]
+            joined = self.continued(self.past[-self.num_cond :] + ticks, given, 0)[:, self.num_cond :]
         return {c: joined[v] for v, c in enumerate(self.rig.names)}
 
-    def window(self, ticks: list[SceneTick], start: int, index: int) -> np.ndarray:
-        """The generated frames (V, n, H, W, 3) of ticks [start, start + num_frames) (n: those there are)."""
+    def past_video(self) -> np.ndarray:
+        """The past's frames (V, T, H, W, 3), generated once: its first window from the trajectory alone."""
+        if self._past_video is None:
+            self._past_video = self.continued(self.past, self.sample(self.past, 0, None, 0), 1)
+        return self._past_video
+
+    def continued(self, ticks: list[SceneTick], video: np.ndarray, index: int) -> np.ndarray:
+        """``video`` (V, n, H, W, 3), the frames of the first ``n`` ticks, continued window after window
+        (window k from seed + ``index`` + k) to the frames (V, T, H, W, 3) of every tick of ``ticks``."""
+        bar = tqdm(desc="model windows", leave=False, disable=not self.progress)
+        while video.shape[1] < len(ticks):
+            start = video.shape[1] - self.num_cond
+            new = self.sample(ticks, start, video[:, start:], index)
+            video, index = np.concatenate([video, new[:, self.num_cond :]], axis=1), index + 1
+            bar.update()
+        bar.close()
+        return video[:, : len(ticks)]
+
+    def sample(self, ticks: list[SceneTick], start: int, first_frames: np.ndarray | None, index: int) -> np.ndarray:
+        """The generated frames (V, num_frames, H, W, 3) of the window from ``ticks[start]`` along its ego
+        trajectory, continuing ``first_frames`` (None: generated whole)."""
+        waypoints, _ = window_waypoints(ticks, start, self.gen.model.cfg.multiview)
+        cond = self.gen.trajectory_conditions(self.rig, waypoints, first_frames)
+        return self.gen.sample(self.prompt, self.seed + index, cond, self.request, self.cfg).videos
+
+    def layout_window(self, ticks: list[SceneTick], start: int, index: int) -> np.ndarray:
+        """The generated frames (V, n, H, W, 3) of ticks [start, start + num_frames) from their layout (n:
+        those there are)."""
         window = padded(ticks[start:], self.num_frames)
         poses = np.stack([t.T_world_from_ego for t in window])
         where = f"multiverse model window at {window[0].timestamp_ns} ns"
@@ -82,16 +135,20 @@ class ModelCameras:
             np.array([t.timestamp_ns for t in window]), poses, [t.agents for t in window], self.static, self.road,
             where, thin=False,
         )  # fmt: skip
-        mv = self.gen.model.cfg.multiview
-        first, second = padded(ticks[start:], 2)
-        tick_s = (second.timestamp_ns - first.timestamp_ns) / 1e9
-        stride = max(1, int(round(mv.trajectory_dt_s / tick_s)))
-        following = np.stack([t.T_world_from_ego for t in padded(ticks[start:], stride * mv.trajectory_waypoints + 1)])
-        waypoints = waypoints_from_poses(following[::stride], 0, mv.trajectory_waypoints)
-        source = LayoutSource(where, layout, waypoints, stride * tick_s)
-        cond = self.gen.layout_conditions(self.rig, source)
+        waypoints, dt_s = window_waypoints(ticks, start, self.gen.model.cfg.multiview)
+        cond = self.gen.layout_conditions(self.rig, LayoutSource(where, layout, waypoints, dt_s))
         sample = self.gen.sample(self.prompt, self.seed + index, cond, self.request, self.cfg)
         return sample.videos[:, : min(self.num_frames, len(ticks) - start)]
+
+
+def window_waypoints(ticks: list[SceneTick], start: int, mv) -> tuple[np.ndarray, float]:
+    """(waypoints (W, 3) m in the ego frame of ``ticks[start]``, their spacing s): the ticks that follow at
+    the model's waypoint spacing ``mv.trajectory_dt_s`` (extrapolated past the last tick)."""
+    first, second = padded(ticks[start:], 2)
+    tick_s = (second.timestamp_ns - first.timestamp_ns) / 1e9
+    stride = max(1, int(round(mv.trajectory_dt_s / tick_s)))
+    following = np.stack([t.T_world_from_ego for t in padded(ticks[start:], stride * mv.trajectory_waypoints + 1)])
+    return waypoints_from_poses(following[::stride], 0, mv.trajectory_waypoints), stride * tick_s
 
 
 def model_prompt(prompt: str, tags: dict[str, str]) -> str:

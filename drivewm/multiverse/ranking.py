@@ -37,9 +37,14 @@ def sort_key(scores: dict, rule: RankingConfig) -> tuple:
 
 
 def rank(futures: list[dict], rule: RankingConfig) -> list[dict]:
-    """``futures`` ({"plan": name, "scores": {...}}) best first, each with its ``rank`` (1 = best),
-    ``safety_level`` and ``discomfort``; ties keep the plans' order."""
-    order = sorted(range(len(futures)), key=lambda i: sort_key(futures[i]["scores"], rule))
+    """``futures`` ({"plan": name, "scores": {...}, optional "feasible": bool}) best first, each with its
+    ``rank`` (1 = best), ``safety_level`` and ``discomfort``: infeasible plans (the simulator could not carry
+    out their manoeuvre) after every feasible one, each group sorted by the rule; ties keep the plans' order."""
+
+    def key(i: int) -> tuple:
+        return (not futures[i].get("feasible", True), *sort_key(futures[i]["scores"], rule))
+
+    order = sorted(range(len(futures)), key=key)
     ranked = []
     for r, i in enumerate(order, start=1):
         s = futures[i]["scores"]

@@ -48,7 +48,8 @@ def branch_log(cfg: MultiverseConfig) -> Branch:
     sim = _render_config(log, cfg)
     rig = log.rig.scaled(cfg.width, cfg.height, fit="stretch")
     tags = {**log.scene.tags, "weather": sim.weather, "time_of_day": sim.time_of_day}
-    return Branch(past, futures, plans, road_from_log(log), rig, sim, tags, log.scene.description, "log", False)
+    road, infeasible = road_from_log(log), [""] * len(plans)
+    return Branch(past, futures, plans, road, rig, sim, tags, log.scene.description, "log", False, infeasible)
 
 
 def _check_log(log: DriveLog) -> None:

@@ -110,8 +110,11 @@ def _row(f: dict) -> str:
     s, v = f["scores"], f["scores"].get("video", {})
     who = s.get("collision_with")
     collision = f"yes ({who['category']} {who['track_id']} at {who['time_s']:.1f} s)" if who else "no"
+    feasible = "yes" if f.get("feasible", True) else f"no: {f['infeasible']}"
     cells = (
-        [f["rank"], f["plan"], collision] + [s.get(k) for k, _ in COLUMNS[1:]] + [v.get(k) for k, _ in VIDEO_COLUMNS]
+        [f["rank"], f["plan"], feasible, collision]
+        + [s.get(k) for k, _ in COLUMNS[1:]]
+        + [v.get(k) for k, _ in VIDEO_COLUMNS]
     )
     return "<tr>" + "".join(f"<td>{_cell(c)}</td>" for c in cells) + "</tr>"
 
@@ -139,7 +142,7 @@ horizon {ranking["horizon_s"]:.2f} s. Cameras rendered by: <b>{renderer}</b>{mod
 <p>Ranking rule: {html.escape(ranking["rule"]["description"])}</p>
 <h2>Bird's-eye view</h2><img src="report/birds_eye.png" alt="bird's-eye view of all futures">
 <h2>Scores, best first</h2>
-<table><tr><th>rank</th><th>plan</th>{head}</tr>
+<table><tr><th>rank</th><th>plan</th><th>feasible</th>{head}</tr>
 {"".join(_row(f) for f in ranking["futures"])}
 </table>
 <h2>Cameras per future</h2><p>Rows: {cams}; columns: evenly spaced frames after the branch point.</p>

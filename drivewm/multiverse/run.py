@@ -20,10 +20,11 @@ from tqdm import tqdm
 
 from drivewm.atomic import atomic_path, write_json
 from drivewm.config import to_dict
+from drivewm.model_folders import SHIPPED_PREFIX, resolve_model_folder
 from drivewm.multiverse.branch import Branch
-from drivewm.multiverse.cameras import make_cameras
+from drivewm.multiverse.cameras import FutureCameras, make_cameras
 from drivewm.multiverse.config import MultiverseConfig, RankingConfig
-from drivewm.multiverse.model_cameras import load_layout_model
+from drivewm.multiverse.model_cameras import load_world_model
 from drivewm.multiverse.outputs import encode_frames, write_camera_videos, write_future_log
 from drivewm.multiverse.plans import check_plan_names
 from drivewm.multiverse.ranking import rank
@@ -36,17 +37,12 @@ from drivewm.multiverse.simulated import branch_scenario
 from drivewm.multiverse.video_scores import video_scores
 from drivewm.paths import child_path
 
-RENDERER_DESCRIPTIONS = {
-    "sim": "the simulator's renderer (drivewm.sim.render), standing in for the world model",
-    "model": "a layout-conditioned world model, generating each future from its layout",
-}
-
 
 def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = True) -> dict:
     """Every future of ``cfg`` into ``out_dir``; returns the ranking (as in ranking.json)."""
     cfg.validate()
     check_plan_names(cfg.plans)
-    generator = load_layout_model(cfg.model) if cfg.renderer == "model" else None
+    generator = load_world_model(resolve_model_folder(cfg.model)) if cfg.renderer == "model" else None
     b = branch_log(cfg) if cfg.log else branch_scenario(cfg, load_scenario(cfg.scenario, cfg))
     cameras = make_cameras(cfg, b, generator, progress)
     b = dataclasses.replace(b, rig=cameras.rig)  # the logs' calibration is the frames' size
@@ -55,8 +51,9 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
         tmp.mkdir(parents=True)
         past_jpeg = encode_frames(cameras.frames(b.past))
         results, sheets, front = [], {}, {}
-        bar = tqdm(list(zip(b.plans, b.futures)), desc="futures", unit="future", disable=not progress)
-        for plan, future in bar:
+        todo = list(zip(b.plans, b.futures, b.infeasible))
+        bar = tqdm(todo, desc="futures", unit="future", disable=not progress)
+        for plan, future, infeasible in bar:
             bar.set_postfix_str(plan.name)
             folder = child_path(tmp / "futures", plan.name, what="plan")
             frames = cameras.frames(future)
@@ -64,10 +61,11 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
             videos = write_camera_videos(folder / "cameras", frames, fps)
             scores = score_future(b.past, future, b.road)
             scores["video"] = video_scores(plan.name, b.rig, fps, future, videos, b.tags, cfg.eval_metrics)
-            results.append({"plan": plan.name, "log": f"futures/{plan.name}/drive.mcap", "scores": scores})
+            feasible = {"feasible": not infeasible, "infeasible": infeasible or None}
+            results.append({"plan": plan.name, **feasible, "log": f"futures/{plan.name}/drive.mcap", "scores": scores})
             sheets[plan.name] = sheet_frames(frames)
             front[plan.name] = (b.rig.names[0], encode_frames({b.rig.names[0]: frames[b.rig.names[0]]})[b.rig.names[0]])
-        ranking = _ranking(cfg, b, cameras.name, results)
+        ranking = _ranking(cfg, b, cameras, results)
         write_json(tmp / "ranking.json", ranking)
         write_json(tmp / "config.json", to_dict(cfg))
         write_report(tmp, b, ranking, sheets)
@@ -81,7 +79,7 @@ def _tick_rate(b: Branch) -> float:
     return float(1e9 / np.median(np.diff(ts))) if len(ts) > 1 else b.sim.fps
 
 
-def _ranking(cfg: MultiverseConfig, b: Branch, renderer: str, results: list[dict]) -> dict:
+def _ranking(cfg: MultiverseConfig, b: Branch, cameras: FutureCameras, results: list[dict]) -> dict:
     t0 = b.past[-1].timestamp_ns
     horizon = max((f[-1].timestamp_ns - t0) / 1e9 if f else 0.0 for f in b.futures)
     return {
@@ -89,14 +87,19 @@ def _ranking(cfg: MultiverseConfig, b: Branch, renderer: str, results: list[dict
         "reactive": b.reactive,
         "branch_time_s": (t0 - _first_time(cfg, b)) / 1e9,
         "horizon_s": horizon,
-        "renderer": renderer,
-        "renderer_description": RENDERER_DESCRIPTIONS[renderer],
-        "model": str(Path(cfg.model).resolve()) if cfg.model else "",
+        "renderer": cameras.name,
+        "renderer_description": cameras.description,
+        "model": _model_name(cfg.model),
         "cameras": list(b.rig.names),
         "prompt": cfg.prompt,
         "rule": {**to_dict(cfg.ranking), "description": describe_rule(cfg.ranking)},
         "futures": rank(results, cfg.ranking),
     }
+
+
+def _model_name(model: str) -> str:
+    """How ranking.json names the model: ``shipped:KIND`` as given, any other folder by its absolute path."""
+    return model if model.startswith(SHIPPED_PREFIX) or not model else str(Path(model).resolve())
 
 
 def _first_time(cfg: MultiverseConfig, b: Branch) -> int:
@@ -112,4 +115,7 @@ def describe_rule(rule: RankingConfig) -> str:
         "progress": f"progress (distance driven, in {rule.progress_step_m:g} m steps, more first)",
         "comfort": f"comfort (max |jerk| / {rule.jerk_ref_mps3:g} + max |lateral acc.| / {rule.lateral_ref_mps2:g})",
     }
-    return "sorted by " + ", then ".join(parts[k] for k in rule.order) + "; ties keep the plans' order."
+    return (
+        "feasible plans first (an infeasible one, e.g. a lane change with no lane on that side, ranks after them), "
+        "then sorted by " + ", then ".join(parts[k] for k in rule.order) + "; ties keep the plans' order."
+    )

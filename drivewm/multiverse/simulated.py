@@ -28,7 +28,7 @@ def branch_scenario(cfg: MultiverseConfig, scenario: Scenario) -> Branch:
         from drivewm.sim.fork_highway import fork_highway as fork
     else:
         from drivewm.sim.fork_sumo import fork_sumo as fork
-    past, futures, road = fork(sim, branch_tick, plans, future_ticks, scenario.placed)
+    past, futures, road, infeasible = fork(sim, branch_tick, plans, future_ticks, scenario.placed)
     keep = int(math.floor(cfg.past_s * sim.fps + 1e-9)) + 1
     from drivewm.sim.drives import describe
     from drivewm.sim.paired import drive_id
@@ -41,4 +41,5 @@ def branch_scenario(cfg: MultiverseConfig, scenario: Scenario) -> Branch:
     description = describe(sim, SceneRecording(road, past, tags))
     if not past:
         raise DrivewmError("multiverse: the scenario has no ticks before the branch point")
-    return Branch(past[-keep:], futures, plans, road, sim_rig(sim), sim, tags, description, tags["source"], True)
+    rig, source = sim_rig(sim), tags["source"]
+    return Branch(past[-keep:], futures, plans, road, rig, sim, tags, description, source, True, infeasible)

@@ -49,6 +49,11 @@ class EgoPlan:
         return self.T_branch_from_ego is not None
 
 
+def no_lane_reason(lane_change: int) -> str:
+    """Why a lane change is infeasible where the ego's road has no lane on that side."""
+    return f"no lane to the {'left' if lane_change > 0 else 'right'} of the ego at the branch point"
+
+
 def speed_profile(v0_mps: float, accel_mps2: float, max_speed_mps: float, times_s: np.ndarray) -> np.ndarray:
     """Speed (m/s) at ``times_s`` under a constant acceleration, clamped to [0, max(v0, max_speed)]."""
     return np.clip(v0_mps + accel_mps2 * np.asarray(times_s), 0.0, max(v0_mps, max_speed_mps))

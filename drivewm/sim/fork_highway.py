@@ -20,7 +20,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from drivewm.errors import DrivewmError
 from drivewm.geometry import T_from_xyz_yaw
 from drivewm.sim.config import SimConfig
-from drivewm.sim.ego_plan import EgoPlan, PlacedVehicle
+from drivewm.sim.ego_plan import EgoPlan, PlacedVehicle, no_lane_reason
 from drivewm.sim.scene import RoadMap, SceneTick
 from drivewm.sim.source_highway import (
     REAR_AXLE_BEHIND_CENTER_M,
@@ -82,14 +82,15 @@ def _wrap(angle: float) -> float:
 
 def fork_highway(
     cfg: SimConfig, branch_tick: int, plans: list[EgoPlan], future_ticks: int, placed: list[PlacedVehicle] = ()
-) -> tuple[list[SceneTick], list[list[SceneTick]], RoadMap]:
-    """(past ticks 0 .. branch_tick, one list of ``future_ticks`` ticks per plan, the road around them all)."""
+) -> tuple[list[SceneTick], list[list[SceneTick]], RoadMap, list[str]]:
+    """(past ticks 0 .. branch_tick, one list of ``future_ticks`` ticks per plan, the road around them all,
+    per plan why its manoeuvre cannot be carried out at the branch point, "" where it can)."""
     with idm_class_constants():
         drive, past = _past(cfg, branch_tick)
-        futures = [_future(drive, branch_tick, plan, future_ticks, placed) for plan in plans]
+        futures, infeasible = zip(*[_future(drive, branch_tick, plan, future_ticks, placed) for plan in plans])
         road = drive.road_map(past + [t for f in futures for t in f])
         drive.env.close()
-    return past, futures, road
+    return past, list(futures), road, list(infeasible)
 
 
 def _past(cfg: SimConfig, branch_tick: int) -> tuple[HighwayDrive, list[SceneTick]]:
@@ -112,10 +113,11 @@ def _past(cfg: SimConfig, branch_tick: int) -> tuple[HighwayDrive, list[SceneTic
 
 def _future(
     at_branch: HighwayDrive, branch_tick: int, plan: EgoPlan, future_ticks: int, placed: list[PlacedVehicle]
-) -> list[SceneTick]:
+) -> tuple[list[SceneTick], str]:
+    """The future's ticks and why its plan is infeasible ("" where it is not)."""
     drive = copy.deepcopy(at_branch)
     drive.ids = {id(v): (v, track) for v, track in drive.ids.values()}  # the copies' identities
-    _hand_over(drive, plan, future_ticks)
+    infeasible = _hand_over(drive, plan, future_ticks)
     for k, p in enumerate(placed):
         _place(drive, p, f"placed{k}")
     ticks = []
@@ -123,12 +125,13 @@ def _future(
         drive.step()
         ticks.append(drive.tick(branch_tick + k))
     drive.env.close()
-    return ticks
+    return ticks, infeasible
 
 
-def _hand_over(drive: HighwayDrive, plan: EgoPlan, future_ticks: int) -> None:
-    """Replace the ego's driver by the plan's."""
-    old = drive.ego
+def _hand_over(drive: HighwayDrive, plan: EgoPlan, future_ticks: int) -> str:
+    """Replace the ego's driver by the plan's; why the plan's lane change cannot be made ("": it can, or
+    there is none). The ego of an infeasible lane change keeps its lane."""
+    old, infeasible = drive.ego, ""
     if plan.turn:
         raise DrivewmError(f"plan {plan.name!r}: turns at a junction need a SUMO scenario")
     if plan.is_kinematic:
@@ -138,11 +141,13 @@ def _hand_over(drive: HighwayDrive, plan: EgoPlan, future_ticks: int) -> None:
         ego.plan_accel_mps2, ego.plan_max_speed_mps = plan.accel_mps2, plan.max_speed_mps
         _from, _to, lane = old.lane_index
         target = lane - plan.lane_change  # highway-env numbers lanes from the left
-        if 0 <= target < len(drive.env.road.network.graph[_from][_to]):
-            ego.target_lane_index = (_from, _to, target)
+        if not 0 <= target < len(drive.env.road.network.graph[_from][_to]):
+            infeasible, target = no_lane_reason(plan.lane_change), lane
+        ego.target_lane_index = (_from, _to, target)
     drive.env.road.vehicles[drive.env.road.vehicles.index(old)] = ego
     drive.env.controlled_vehicles = [ego]
     drive.ego = ego
+    return infeasible
 
 
 def _poses_vehicle(drive: HighwayDrive, old, plan: EgoPlan, future_ticks: int) -> PosesVehicle:

@@ -1,6 +1,6 @@
 """Fork a SUMO drive at a branch point: libsumo saves the simulation state there
 (``simulation.saveState``, random number generators included) and every future starts by loading it
-(``simulation.loadState``; sumo.dlr.de/docs/Simulation/SaveAndLoad.html).
+into a fresh SUMO (``simulation.loadState``; sumo.dlr.de/docs/Simulation/SaveAndLoad.html).
 
 The past (ticks 0 .. branch) is the drive :func:`drivewm.sim.source_sumo.record_sumo` makes with the
 same config (same network, traffic and ego). After the branch the ego follows the plan with SUMO's
@@ -19,7 +19,7 @@ import numpy as np
 
 from drivewm.errors import DrivewmError
 from drivewm.sim.config import SimConfig
-from drivewm.sim.ego_plan import LANE_CHANGE_S, EgoPlan, PlacedVehicle, speed_profile
+from drivewm.sim.ego_plan import LANE_CHANGE_S, EgoPlan, PlacedVehicle, no_lane_reason, speed_profile
 from drivewm.sim.scene import RoadMap, SceneTick
 from drivewm.sim.source_sumo import (
     REAR_OVERHANG_M,
@@ -46,8 +46,9 @@ TURN_DIRECTIONS = {"left": (("l", "L"),), "right": (("r", "R"),), "any": (("l", 
 
 def fork_sumo(
     cfg: SimConfig, branch_tick: int, plans: list[EgoPlan], future_ticks: int, placed: list[PlacedVehicle] = ()
-) -> tuple[list[SceneTick], list[list[SceneTick]], RoadMap]:
-    """(past ticks 0 .. branch_tick, one list of ``future_ticks`` ticks per plan, the road around them all)."""
+) -> tuple[list[SceneTick], list[list[SceneTick]], RoadMap, list[str]]:
+    """(past ticks 0 .. branch_tick, one list of ``future_ticks`` ticks per plan, the road around them all,
+    per plan why its manoeuvre cannot be carried out at the branch point, "" where it can)."""
     dt = 1.0 / cfg.fps
     with tempfile.TemporaryDirectory(prefix="drivewm-fork-") as tmp:
         net, routes = generate_network(
@@ -58,12 +59,20 @@ def fork_sumo(
             past = _past(cfg, dt, branch_tick)
             state = str(Path(tmp) / "branch.xml")
             libsumo.simulation.saveState(state)
-            futures = [_future(cfg, state, branch_tick, i, plan, future_ticks, placed) for i, plan in enumerate(plans)]
+            results = []
+            for i, plan in enumerate(plans):
+                # A fresh SUMO for every future: loadState into the simulation that ran the previous future
+                # leaves some of its state behind (the ego froze on the lane that future ended on, its speed set
+                # but its position no longer advanced, after a lane change or turn brought it there again).
+                libsumo.close()
+                start_sumo(net, routes, dt, cfg.seed, STATE_OPTIONS)
+                results.append(_future(cfg, state, branch_tick, i, plan, future_ticks, placed))
+            futures, infeasible = zip(*results)
         finally:
             libsumo.close()
         xy = np.array([t.T_world_from_ego[:2, 3] for t in past + [t for f in futures for t in f]])
         road = road_map_from_net(net, xy.min(axis=0) - cfg.max_range_m, xy.max(axis=0) + cfg.max_range_m)
-    return past, futures, road
+    return past, list(futures), road, list(infeasible)
 
 
 def _past(cfg: SimConfig, dt: float, branch_tick: int) -> list[SceneTick]:
@@ -82,10 +91,11 @@ def _past(cfg: SimConfig, dt: float, branch_tick: int) -> list[SceneTick]:
 
 def _future(
     cfg: SimConfig, state: str, branch_tick: int, index: int, plan: EgoPlan, future_ticks: int, placed
-) -> list[SceneTick]:
+) -> tuple[list[SceneTick], str]:
+    """The future's ticks and why its plan is infeasible ("" where it is not)."""
     libsumo.simulation.loadState(state)
     v0 = libsumo.vehicle.getSpeed("ego")
-    _hand_over(plan, v0)
+    infeasible = _hand_over(plan)
     for k, p in enumerate(placed):
         _place(p, k, index, v0)
     times = np.arange(1, future_ticks + 1) / cfg.fps
@@ -102,40 +112,76 @@ def _future(
         if poses is None:
             _extend_route(libsumo, cfg.seed, branch_tick + 1 + k)
         ticks.append(_tick(libsumo, int(round((branch_tick + 1 + k) * 1e9 / cfg.fps)), cfg.seed))
-    return ticks
+    return ticks, infeasible
 
 
-def _hand_over(plan: EgoPlan, v0_mps: float) -> None:
-    """The ego drops SUMO's safety checks and takes the plan's lane change and turn."""
+def _hand_over(plan: EgoPlan) -> str:
+    """The ego drops SUMO's safety checks and takes the plan's lane change and turn; why it cannot ("" where
+    it can: the ego of an infeasible plan keeps its lane and route)."""
     libsumo.vehicle.setSpeedMode("ego", 0)
     # The plan sets the ego's speed itself; SUMO's braking limits then only serve insertion checks, which
     # would refuse a placed vehicle (drivewm.sim.ego_plan.PlacedVehicle) the ego could not stop for.
     libsumo.vehicle.setDecel("ego", EGO_INSERTION_DECEL_MPS2)
     libsumo.vehicle.setEmergencyDecel("ego", EGO_INSERTION_DECEL_MPS2)
     libsumo.vehicle.setLaneChangeMode("ego", EGO_LANE_CHANGE_MODE)
-    if plan.lane_change:
-        edge = libsumo.vehicle.getRoadID("ego")
-        target = libsumo.vehicle.getLaneIndex("ego") + plan.lane_change  # SUMO numbers lanes from the right
-        if not edge.startswith(":") and 0 <= target < libsumo.edge.getLaneNumber(edge):
-            libsumo.vehicle.changeLane("ego", target, LANE_CHANGE_S)
+    infeasible = _change_lane(plan.lane_change) if plan.lane_change else ""
     if plan.turn:
-        _take_turn(plan.turn)
+        infeasible = infeasible or _take_turn(plan.turn)
+    return infeasible
 
 
-def _take_turn(side: str) -> None:
-    """Route the ego through a ``side`` turn (left, right, or any: left if there is one) at its next junction."""
+def _change_lane(lane_change: int) -> str:
+    """Ask SUMO for the lane change (over :data:`LANE_CHANGE_S`); why there is none to make ("": asked)."""
+    edge = libsumo.vehicle.getRoadID("ego")
+    if edge.startswith(":"):
+        return "the ego is inside a junction at the branch point"
+    target = libsumo.vehicle.getLaneIndex("ego") + lane_change  # SUMO numbers lanes from the right
+    if not 0 <= target < libsumo.edge.getLaneNumber(edge):
+        return no_lane_reason(lane_change)
+    _route_from_lane(edge, f"{edge}_{target}")
+    libsumo.vehicle.changeLane("ego", target, LANE_CHANGE_S)
+    return ""
+
+
+def _route_from_lane(edge: str, lane: str) -> None:
+    """Route the ego on from ``lane`` where its route's next edge cannot be reached from there (straight on
+    where it can): otherwise SUMO stops it at the end of the lane it was sent to, holding it there for the
+    lane change's duration, and its strategic lane change then takes it back."""
+    route, idx = libsumo.vehicle.getRoute("ego"), libsumo.vehicle.getRouteIndex("ego")
+    links = libsumo.lane.getLinks(lane)  # (to lane, priority, open, foe, via, state, direction, length)
+    reachable = [libsumo.lane.getEdgeID(link[0]) for link in links]
+    if not links or (idx + 1 < len(route) and route[idx + 1] in reachable):
+        return
+    straight = [e for e, link in zip(reachable, links) if link[6] == "s"]
+    _route_via([edge], (straight or reachable)[0])
+
+
+def _route_via(edges: list[str], following: str) -> None:
+    """Route the ego along ``edges`` (from the one it is on), then ``following``, then on to its destination.
+    The route must reach well past ``following``: on a shorter one, drivewm.sim.source_sumo._extend_route's
+    ``changeTarget`` routes the ego afresh from the edge it is on, which undoes the turn or the lane's exit."""
+    destination = libsumo.vehicle.getRoute("ego")[-1]
+    onward = libsumo.simulation.findRoute(following, destination).edges if following != destination else ()
+    libsumo.vehicle.setRoute("ego", [*edges, *(onward or [following])])
+
+
+def _take_turn(side: str) -> str:
+    """Route the ego through a ``side`` turn (left, right, or any: left if there is one) at its next junction;
+    why it cannot ("": routed)."""
     route, idx = libsumo.vehicle.getRoute("ego"), libsumo.vehicle.getRouteIndex("ego")
     for directions in TURN_DIRECTIONS[side]:
         for start in (idx, idx + 1):  # the edge it is on, or the next one when it is inside a junction
             if start >= len(route):
                 break
             edge = route[start]
-            for lane in range(libsumo.edge.getLaneNumber(edge)):
+            own = libsumo.vehicle.getLaneIndex("ego") if start == idx else 0  # its own lane's turns first
+            lanes = sorted(range(libsumo.edge.getLaneNumber(edge)), key=lambda lane: lane != own)
+            for lane in lanes:
                 for link in libsumo.lane.getLinks(f"{edge}_{lane}"):
                     if link[6] in directions:  # (to lane, priority, open, foe, via, state, direction, length)
-                        libsumo.vehicle.setRoute("ego", [*route[idx : start + 1], libsumo.lane.getEdgeID(link[0])])
-                        return
-    raise DrivewmError(f"plan turn ({side}): the ego's next junction has no such turn")
+                        _route_via(list(route[idx : start + 1]), libsumo.lane.getEdgeID(link[0]))
+                        return ""
+    return f"the ego's next junction has no {'left or right' if side == 'any' else side} turn"
 
 
 def _front_poses(plan: EgoPlan, future_ticks: int) -> np.ndarray:

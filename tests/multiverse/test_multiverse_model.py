@@ -1,5 +1,6 @@
-"""``drivewm multiverse --renderer model``: a layout multi-view model generates every future's cameras
-from its layout, window after window, at the model's frame size; a model without a layout is refused."""
+"""``drivewm multiverse --renderer model``: a multi-view model generates every future's cameras window
+after window at the model's frame size, from its layout where the model has one, else from its ego
+trajectory continuing the generated past; a model of another family is refused."""
 
 from __future__ import annotations
 
@@ -44,8 +45,31 @@ def test_the_model_renders_every_future_from_its_layout(layout_model, tmp_path) 
     assert futures["brake"][0] < futures["keep"][0] - 1.0  # two different futures were generated
 
 
-def test_a_model_without_layout_is_refused_before_any_work(layout_model, tmp_path, capsys) -> None:
-    for model, message in [(layout_model["none"], "trained with a layout"), ("", "needs --model")]:
+@pytest.mark.slow
+def test_the_shipped_model_renders_every_future_from_its_trajectory(tmp_path) -> None:
+    """shipped:multiview has no layout: the past is generated once (0 .. 0.5 s: one window) and each future
+    continues its frame at the branch tick (2 s: one conditioning frame + 16 new ones a window, two windows),
+    along the future's own ego trajectory, so keeping the speed and braking give different videos."""
+    assert main(_command("shipped:multiview", tmp_path / "out")) == 0
+    ranking = json.loads((tmp_path / "out/ranking.json").read_text())
+    assert ranking["renderer"] == "model" and ranking["model"] == "shipped:multiview"
+    assert ranking["renderer_description"].endswith("from its ego trajectory and prompt")
+    assert "from its ego trajectory and prompt" in (tmp_path / "out/report.html").read_text()
+    videos, past = {}, None
+    for plan in ("keep", "brake"):
+        log = read_log(tmp_path / "out/futures" / plan / "drive.mcap")
+        assert (log.rig.camera("CAM_FRONT").width, log.rig.camera("CAM_FRONT").height) == (160, 96)
+        assert len(log.pose_timestamps_ns) == 26 and len(log.images["CAM_FRONT"]) == 26
+        past = log.images["CAM_FRONT"][:6] if past is None else past
+        assert log.images["CAM_FRONT"][:6] == past  # one generated past, the same bytes in every future
+        videos[plan] = decode_mp4((tmp_path / "out/futures" / plan / "cameras/CAM_FRONT.mp4").read_bytes())
+        assert videos[plan].shape == (20, 96, 160, 3) and videos[plan].std() > 1.0
+    assert np.abs(videos["keep"].astype(int) - videos["brake"]).mean() > 1.0  # the trajectories differ
+
+
+def test_a_model_of_another_family_is_refused_before_any_work(layout_model, tmp_path, capsys) -> None:
+    tokenizer = layout_model["none"].parent / "tok"
+    for model, message in [(tokenizer, "cannot generate from model_type"), ("", "needs --model")]:
         assert main(_command(model, tmp_path / "out")) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error: ") and message in err[0], err

@@ -47,3 +47,14 @@ def test_safety_then_progress_then_comfort() -> None:
 def test_a_bad_rule_is_refused() -> None:
     with pytest.raises(DrivewmError, match="order"):
         RankingConfig(order=["safety", "speed"]).validate()
+
+
+def test_an_infeasible_plan_ranks_after_every_feasible_one() -> None:
+    futures = [
+        _future("no_lane", progress=90.0) | {"feasible": False},
+        _future("crash", collision=True, progress=80.0) | {"feasible": True},
+        _future("no_lane_slow", progress=20.0) | {"feasible": False},
+        _future("slow", progress=20.0),
+    ]
+    ranked = rank(futures, RankingConfig())
+    assert [f["plan"] for f in ranked] == ["slow", "crash", "no_lane", "no_lane_slow"]

@@ -42,10 +42,10 @@ def _layout(ticks):
 
 @pytest.mark.parametrize("source", ["highway", "sumo"])
 def test_futures_share_the_source_past_collide_into_a_stopped_car_and_repeat(source: str) -> None:
-    cfg, (past, futures, road) = _fork(source)
+    cfg, (past, futures, road, infeasible) = _fork(source)
     source_drive = record(cfg)
     assert _layout(past) == _layout(source_drive.ticks[: BRANCH_TICK + 1])  # bit-identical past
-    assert len(futures) == 2 and all(len(f) == 50 for f in futures)
+    assert len(futures) == 2 and all(len(f) == 50 for f in futures) and infeasible == ["", ""]
     ranked = rank(
         [{"plan": p.name, "scores": score_future(past, f, road)} for p, f in zip(PLANS, futures)], RankingConfig()
     )
@@ -55,7 +55,7 @@ def test_futures_share_the_source_past_collide_into_a_stopped_car_and_repeat(sou
     assert not brake["scores"]["collision"] and brake["scores"]["min_gap_m"] > 0.5
     assert [r["plan"] for r in ranked] == ["brake", "keep"]  # the collision ranks last
     assert keep["scores"]["progress_m"] > brake["scores"]["progress_m"] + 10  # it was not ranked on progress
-    _, (past2, futures2, _) = _fork(source)
+    _, (past2, futures2, _, _) = _fork(source)
     assert _layout(past2) == _layout(past) and [_layout(f) for f in futures2] == [_layout(f) for f in futures]
 
 
@@ -68,7 +68,7 @@ def _follower(future) -> tuple[list, np.ndarray]:
 def test_a_follower_brakes_behind_a_braking_ego() -> None:
     """highway-env: the IDM car placed 20 m behind at the ego's speed slows down behind the braking ego
     (until MOBIL takes it round) and never touches it; behind the ego that keeps its speed it does not brake."""
-    _, (past, futures, _) = _fork("highway")
+    _, (past, futures, _, _) = _fork("highway")
     boxes, brake_speeds = _follower(futures[1])
     _, center, yaw = ego_state(futures[1])
     gaps = [
@@ -81,3 +81,36 @@ def test_a_follower_brakes_behind_a_braking_ego() -> None:
     _, keep_speeds = _follower(futures[0])
     assert brake_speeds.min() < past[-1].ego_speed_mps - 5.0  # it braked hard, from about the ego's speed
     assert keep_speeds.min() > brake_speeds.min() + 1.5  # more than IDM falling back to its own gap
+
+
+def _heading_change_deg(past, future) -> float:
+    """The ego's heading at the future's end relative to the branch point (degrees, left positive)."""
+    T = np.linalg.inv(past[-1].T_world_from_ego) @ future[-1].T_world_from_ego
+    return float(np.degrees(np.arctan2(T[1, 0], T[0, 0])))
+
+
+def test_sumo_futures_drive_through_the_junction_after_a_lane_change_or_turn() -> None:
+    """SUMO grid, the ego at a constant 12.9 m/s on the right lane, reaching a junction after about 5 s
+    (its own route turns right there). Every future advances every tick: the ego never stands (SUMO's
+    collisions are off, so nothing can hold it up), not after a lane change onto a lane that cannot take
+    its route's next turn, not after a turn. The turns go their way; a plan gives the same future
+    whichever futures ran before it (each starts from the saved state alone)."""
+    from drivewm.sim.fork_sumo import fork_sumo
+
+    plans = [EgoPlan("keep"), EgoPlan("left", lane_change=1), EgoPlan("right", lane_change=-1)]
+    plans += [EgoPlan("turn-left", turn="left"), EgoPlan("turn-right", turn="right"), EgoPlan("keep_again")]
+    cfg = SimConfig(source="sumo", scenario="grid", duration_s=12.0, seed=6, traffic_density="low")
+    past, futures, _, infeasible = fork_sumo(cfg, 20, plans, 80)
+    assert [bool(r) for r in infeasible] == [False, False, True, False, False, False]
+    assert "no lane to the right" in infeasible[2]
+    speed = past[-1].ego_speed_mps
+    for plan, future in zip(plans, futures):
+        xy = np.array([t.T_world_from_ego[:2, 3] for t in [past[-1], *future]])
+        steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+        assert steps.min() > 0.8 * speed / cfg.fps, (plan.name, int(steps.argmin()))
+    assert _layout(futures[5]) == _layout(futures[0])
+    turns = {p.name: _heading_change_deg(past, f) for p, f in zip(plans, futures)}
+    assert turns["turn-left"] > 45.0 and turns["turn-right"] < -45.0 and turns["keep"] < -45.0
+    assert abs(turns["left"]) < 20.0  # the left lane goes straight on: so does the ego, routed on from it
+    lateral = [(np.linalg.inv(past[-1].T_world_from_ego) @ f[30].T_world_from_ego)[1, 3] for f in futures[:3]]
+    assert lateral[1] > lateral[0] + 2.0 and lateral[2] == lateral[0]  # left changed lanes; right could not
