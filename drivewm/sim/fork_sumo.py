@@ -40,6 +40,11 @@ STATE_OPTIONS = ("--save-state.rng", "true", "--save-state.precision", "17", "--
 EGO_LANE_CHANGE_MODE = 0b01
 PLACED_LENGTH_M = 5.0
 EGO_INSERTION_DECEL_MPS2 = 100.0
+#: Braking for a turn ahead (m/s^2), how many junctions ahead that looks, and the acceleration back to the
+#: plan's speed after one (m/s^2; a plan's own acceleration where it is higher).
+JUNCTION_DECEL_MPS2 = 3.0
+JUNCTIONS_AHEAD = 2
+RESUME_ACCEL_MPS2 = 2.0
 #: SUMO link directions of each turn plan, in order of preference.
 TURN_DIRECTIONS = {"left": (("l", "L"),), "right": (("r", "R"),), "any": (("l", "L"), ("r", "R"))}
 
@@ -101,10 +106,11 @@ def _future(
     times = np.arange(1, future_ticks + 1) / cfg.fps
     speeds = speed_profile(v0, plan.accel_mps2, plan.max_speed_mps, times)
     poses = _front_poses(plan, future_ticks) if plan.is_kinematic else None
-    ticks = []
+    ticks, v = [], v0
     for k in range(future_ticks):
         if poses is None:
-            libsumo.vehicle.setSpeed("ego", float(speeds[k]))
+            v = min(float(speeds[k]), _junction_speed_cap(), v + max(plan.accel_mps2, RESUME_ACCEL_MPS2) / cfg.fps)
+            libsumo.vehicle.setSpeed("ego", v)
         else:
             x, y, angle_deg = poses[k]
             libsumo.vehicle.moveToXY("ego", "", -1, x, y, angle_deg, keepRoute=2)
@@ -113,6 +119,23 @@ def _future(
             _extend_route(libsumo, cfg.seed, branch_tick + 1 + k)
         ticks.append(_tick(libsumo, int(round((branch_tick + 1 + k) * 1e9 / cfg.fps)), cfg.seed))
     return ticks, infeasible
+
+
+def _junction_speed_cap() -> float:
+    """The fastest the ego may drive now (m/s) to take the turns ahead on its route at their speed: netconvert
+    gives each turn through a junction a speed limit from its radius (``--junctions.limit-turn-speed``, 5.5 m/s^2
+    of lateral acceleration), and a driver brakes for it at :data:`JUNCTION_DECEL_MPS2` (v^2 = v_turn^2 + 2 b d).
+    The plan's own speed holds everywhere else: speed mode 0 ignores every limit."""
+    lane = libsumo.vehicle.getLaneID("ego")
+    cap = libsumo.lane.getMaxSpeed(lane) if lane.startswith(":") else math.inf  # inside a junction: its turn
+    distance = libsumo.lane.getLength(lane) - libsumo.vehicle.getLanePosition("ego")
+    for link in libsumo.vehicle.getNextLinks("ego")[:JUNCTIONS_AHEAD]:
+        # (to lane, priority, open, foe, via lane, state, direction, length through the junction)
+        via, length = link[4], link[7]
+        if via:
+            cap = min(cap, math.sqrt(libsumo.lane.getMaxSpeed(via) ** 2 + 2 * JUNCTION_DECEL_MPS2 * distance))
+        distance += length + libsumo.lane.getLength(link[0])
+    return cap
 
 
 def _hand_over(plan: EgoPlan) -> str:

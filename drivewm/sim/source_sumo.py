@@ -25,6 +25,7 @@ import sumolib
 from drivewm.errors import DrivewmError
 from drivewm.geometry import T_from_xyz_yaw
 from drivewm.sim.config import SimConfig
+from drivewm.sim.ego_plan import LANE_CHANGE_S
 from drivewm.sim.road_edges import road_edges_from_boundaries, stable_unit, vehicle_look
 from drivewm.sim.scene import LaneBoundary, RoadMap, SceneRecording, SceneTick, box_from_center, polyline_normals
 
@@ -168,6 +169,10 @@ def start_sumo(net_path: Path, routes: Path, dt: float, seed: int, extra: tuple[
             "true",
             "--collision.action",
             "none",
+            # SUMO's default lane change moves a vehicle to the next lane within one step (3.2 m sideways in
+            # 0.1 s on camera); the simple continuous model spreads it over the given seconds.
+            "--lanechange.duration",
+            f"{LANE_CHANGE_S}",
             *extra,
         ]
     )

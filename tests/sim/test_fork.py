@@ -90,11 +90,12 @@ def _heading_change_deg(past, future) -> float:
 
 
 def test_sumo_futures_drive_through_the_junction_after_a_lane_change_or_turn() -> None:
-    """SUMO grid, the ego at a constant 12.9 m/s on the right lane, reaching a junction after about 5 s
-    (its own route turns right there). Every future advances every tick: the ego never stands (SUMO's
-    collisions are off, so nothing can hold it up), not after a lane change onto a lane that cannot take
-    its route's next turn, not after a turn. The turns go their way; a plan gives the same future
-    whichever futures ran before it (each starts from the saved state alone)."""
+    """SUMO grid, the ego at 12.9 m/s on the right lane, reaching a junction after about 5 s (its own route
+    turns right there). Every future advances every tick: the ego never stands (SUMO's collisions are off,
+    so nothing can hold it up), not after a lane change onto a lane that cannot take its route's next turn,
+    not after a turn; it slows for a turn to the turn's speed limit (about 6 m/s), not to a stop. The turns
+    go their way; a plan gives the same future whichever futures ran before it (each starts from the saved
+    state alone)."""
     from drivewm.sim.fork_sumo import fork_sumo
 
     plans = [EgoPlan("keep"), EgoPlan("left", lane_change=1), EgoPlan("right", lane_change=-1)]
@@ -107,7 +108,9 @@ def test_sumo_futures_drive_through_the_junction_after_a_lane_change_or_turn() -
     for plan, future in zip(plans, futures):
         xy = np.array([t.T_world_from_ego[:2, 3] for t in [past[-1], *future]])
         steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
-        assert steps.min() > 0.8 * speed / cfg.fps, (plan.name, int(steps.argmin()))
+        assert steps.min() > 0.3 * speed / cfg.fps, (plan.name, int(steps.argmin()))
+        if plan.turn or plan.name == "keep":
+            assert steps.min() < 0.6 * speed / cfg.fps, plan.name  # it braked for the turn
     assert _layout(futures[5]) == _layout(futures[0])
     turns = {p.name: _heading_change_deg(past, f) for p, f in zip(plans, futures)}
     assert turns["turn-left"] > 45.0 and turns["turn-right"] < -45.0 and turns["keep"] < -45.0
