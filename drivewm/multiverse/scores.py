@@ -10,6 +10,7 @@ import math
 
 import cv2
 import numpy as np
+from scipy.signal import savgol_filter
 
 from drivewm.multiverse.geometry2d import box_corners, box_distance, polyline_distance
 from drivewm.sim.ego_plan import EGO_CENTER_AHEAD_OF_REAR_AXLE_M, EGO_LENGTH_M, EGO_WIDTH_M
@@ -121,22 +122,36 @@ def _lane_keeping(center: np.ndarray, road: RoadMap) -> dict:
     return {**out, "off_road_fraction": float(1.0 - np.mean(on))}
 
 
+#: Savitzky-Golay windows (ticks) of the comfort derivatives, as nuPlan's comfort metrics take them
+#: (nuplan-devkit, ``approximate_derivatives``: a local quadratic fit per window, Caesar et al. 2021): the
+#: velocity and acceleration over 5 ticks, the jerk over 15. Plain finite differences of a 10 Hz path turn a
+#: step in acceleration (a driver model's piecewise constant commands, a kink in a lane's polyline) into
+#: jerk of tens of m/s^3 that no passenger feels.
+COMFORT_WINDOW_TICKS = 5
+JERK_WINDOW_TICKS = 15
+
+
 def _comfort(times: np.ndarray, center: np.ndarray) -> dict:
     """Max |jerk| (m/s^3, of the speed along the path) and max |lateral acceleration| (m/s^2, the
-    acceleration across the direction of motion: (v x a) / |v|), from the ego box centre's path."""
-    if len(times) < 4:
+    acceleration across the direction of motion: (v x a) / |v|), from the ego box centre's path (equally
+    spaced ticks), differentiated by Savitzky-Golay filters (:data:`COMFORT_WINDOW_TICKS`)."""
+    if len(times) < COMFORT_WINDOW_TICKS:
         return {"max_abs_jerk_mps3": None, "max_abs_lateral_accel_mps2": None}
-    dt = np.diff(times)
-    vel = np.diff(center, axis=0) / dt[:, None]  # (N-1, 2) between ticks
+    dt = float(np.median(np.diff(times)))
+    vel = _derivative(center, dt, 1, COMFORT_WINDOW_TICKS)  # (N, 2)
+    acc = _derivative(center, dt, 2, COMFORT_WINDOW_TICKS)
     speed = np.linalg.norm(vel, axis=1)
-    accel_vec = np.diff(vel, axis=0) / (0.5 * (dt[1:] + dt[:-1]))[:, None]  # (N-2, 2) at the inner ticks
-    v_mid = 0.5 * (vel[1:] + vel[:-1])
-    lateral = (v_mid[:, 0] * accel_vec[:, 1] - v_mid[:, 1] * accel_vec[:, 0]) / np.maximum(
-        np.linalg.norm(v_mid, axis=1), 0.5
-    )
-    accel = np.diff(speed) / (0.5 * (dt[1:] + dt[:-1]))
-    jerk = np.diff(accel) / dt[1:-1]
+    lateral = (vel[:, 0] * acc[:, 1] - vel[:, 1] * acc[:, 0]) / np.maximum(speed, 0.5)
+    accel = _derivative(speed, dt, 1, COMFORT_WINDOW_TICKS)
+    jerk = _derivative(accel, dt, 1, JERK_WINDOW_TICKS)
     return {
         "max_abs_jerk_mps3": float(np.abs(jerk).max()),
         "max_abs_lateral_accel_mps2": float(np.abs(lateral).max()),
     }
+
+
+def _derivative(values: np.ndarray, dt: float, order: int, window: int) -> np.ndarray:
+    """The ``order``-th time derivative of equally spaced samples (N, ...) by a quadratic Savitzky-Golay
+    filter over ``window`` samples (fewer, odd, on a short path)."""
+    window = min(window, len(values) - (1 - len(values) % 2))
+    return savgol_filter(values, window, 2, deriv=order, delta=dt, axis=0, mode="interp")
