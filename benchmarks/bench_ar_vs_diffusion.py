@@ -329,6 +329,32 @@ def print_table(run: Path) -> None:
         print(f"  {family} at {points[-1]['cpu_s']:.0f} CPU-s: {json.dumps(points[-1])}")
 
 
+def draw_figure(run: Path, path: Path) -> None:
+    """Video2World window PSNR against training CPU-seconds per family, with copying the given frame and
+    the tokenizer's reconstruction as lines."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.4), dpi=110)
+    v = {}
+    for family in FAMILIES:
+        if (run / family / "results.json").exists():
+            points = json.loads((run / family / "results.json").read_text())
+            v = points[-1]["video2world"]
+            label = f"{family} ({points[-1]['params'] / 1e6:.1f}M)"
+            ax.plot([p["cpu_s"] for p in points], [p["video2world"]["window"] for p in points], "o-", label=label)
+    if v:
+        ax.axhline(v["copy_window"], ls="--", c="gray", label="copy the given frame")
+        ax.axhline(v["tokenizer_window"], ls=":", c="k", label="tokenizer reconstruction")
+    ax.set_xlabel("training CPU-seconds (one thread, shared loaded machine)")
+    ax.set_ylabel("Video2World window PSNR (dB)")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, required=True, help="training clip folder with latents/TOKENIZER")
@@ -348,11 +374,14 @@ def main() -> None:
     parser.add_argument("--top-k", type=int, default=50, help="AR sampling top-k")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--figure", type=Path, default=None, help="PNG of the Video2World curve against compute")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     for family in FAMILIES if args.family == "both" else [args.family] if args.family != "none" else []:
         run_family(family, args)
     print_table(args.out)
+    if args.figure:
+        draw_figure(args.out, args.figure)
 
 
 if __name__ == "__main__":
