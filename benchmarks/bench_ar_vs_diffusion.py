@@ -25,7 +25,8 @@ Training runs in calls of a few steps; after each the CPU spent is read, and at 
 
 Every point gets the Video2World figures (the curve); the last point gets all. Parameter counts are
 printed beside. Results: OUT/FAMILY/results.json; the table of every family found in OUT is
-printed at the end (run ``--family ar`` and ``--family diffusion`` in two processes to use two cores).
+printed at the end (run ``--family ar`` and ``--family diffusion`` in two processes to use two cores). A
+rerun with the same ``--out`` and more points goes on from the last one scored.
 
     python benchmarks/bench_ar_vs_diffusion.py --data CLIPS --heldout HELDOUT --tokenizer FSQDIR \\
         --out RUN --cpu-seconds 150,300,600
@@ -298,9 +299,14 @@ def score(family: str, folder: Path, args: argparse.Namespace, full: bool) -> di
 
 
 def run_family(family: str, args: argparse.Namespace) -> None:
+    """Train and score ``family`` at each point of ``--cpu-seconds``; a rerun with the same ``--out`` goes on
+    from its last scored point (points at or below it are skipped)."""
     out = args.out / family
-    budget, points = Budget(), []
+    points = json.loads((out / "results.json").read_text()) if (out / "results.json").exists() else []
+    budget = Budget(*(points[-1][k] for k in ("cpu_s", "steps", "calls"))) if points else Budget()
     for i, target in enumerate(args.cpu_seconds):
+        if target <= budget.cpu_s:
+            continue
         train_to(family, args, out, budget, target)
         full = i == len(args.cpu_seconds) - 1
         row = {**dataclasses.asdict(budget), "params": parameter_count(out), **score(family, out, args, full)}
