@@ -354,6 +354,7 @@ def draw_figure(run: Path, path: Path) -> None:
     if v:
         ax.axhline(v["copy_window"], ls="--", c="gray", label="copy the given frame")
         ax.axhline(v["tokenizer_window"], ls=":", c="k", label="tokenizer reconstruction")
+    ax.set_xscale("log")
     ax.set_xlabel("training CPU-seconds (one thread, shared loaded machine)")
     ax.set_ylabel("Video2World window PSNR (dB)")
     ax.legend(fontsize=7)
