@@ -29,7 +29,7 @@ printed at the end (run ``--family ar`` and ``--family diffusion`` in two proces
 rerun with the same ``--out`` and more points goes on from the last one scored.
 
     python benchmarks/bench_ar_vs_diffusion.py --data CLIPS --heldout HELDOUT --tokenizer FSQDIR \\
-        --out RUN --cpu-seconds 150,300,600
+        --out RUN --cpu-seconds 100,200,400,800 --figure ar_vs_diffusion.png
 """
 
 from __future__ import annotations
@@ -368,7 +368,7 @@ def main() -> None:
     parser.add_argument("--heldout", type=Path, required=True, help="held-out clip folder (other drives)")
     parser.add_argument("--tokenizer", type=Path, required=True, help="the FSQ tokenizer that encoded --data")
     parser.add_argument("--out", type=Path, required=True, help="run folder (model folders, results.json)")
-    parser.add_argument("--cpu-seconds", type=lambda s: [float(x) for x in s.split(",")], default=[150, 300, 600])
+    parser.add_argument("--cpu-seconds", type=lambda s: [float(x) for x in s.split(",")], default=[100, 200, 400, 800])
     parser.add_argument("--family", choices=[*FAMILIES, "both", "none"], default="both", help="none: table only")
     parser.add_argument("--ar-preset", default="debug")
     parser.add_argument("--dit-preset", default="debug")
