@@ -15,13 +15,16 @@ Training runs in calls of a few steps; after each the CPU spent is read, and at 
 (drives neither saw):
 
 - Video2World: one window from each clip's first frame under its own logged trajectory; PSNR of the
-  first generated frame and of the whole window against the truth, beside copying the given frame;
+  first generated frame and of the whole window against the truth, beside copying the given frame and
+  the tokenizer's own reconstruction (the ceiling of both);
 - consistency on those windows: the eval suite's TSE and CSE (fitted F, px) and verified matches;
 - turn sign: straight held-out clips continued under ``left`` and ``right``, the yaw read by the
   eval's dense-flow reader (drivewm.eval.trajectory.flow_fallback) from the front camera;
 - rollouts: ``--rollout-windows`` chunks under ``straight``; TSE matches per frame pair and image
   sharpness per chunk (the first against the last);
-- sampling CPU-seconds and wall seconds per window.
+- sampling CPU-seconds and wall seconds per window;
+- AR only, when ``--heldout`` holds the tokenizer's cache: held-out bits per token against the copy and
+  unigram baselines (drivewm.ar.evaluate).
 
 Every point gets the Video2World figures (the curve); the last point gets all. Parameter counts are
 printed beside. Results: OUT/FAMILY/results.json; the table of every family found in OUT is
