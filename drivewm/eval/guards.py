@@ -1,0 +1,214 @@
+"""Guards that keep degenerate videos from winning the headline figures (docs/eval-protocol.md, 'Guards').
+
+Epipolar errors reward what they cannot see: static points satisfy any F through the epipole, a
+slowly zoomed still is a plane homography that every F through its centre fits, one view copied
+into all cameras matches itself perfectly, and a time-reversed or camera-shifted video is as
+self-consistent as the real one. Each guard tests the evidence those figures take for granted:
+
+- **motion** (per frame pair): matches that no single homography explains (parallax, H&Z sec.
+  13.3: a homography relates two views of a plane, or of any scene under pure rotation or zoom).
+  A TSE pair without ``min_matches`` of them is scored as failed (``no_motion``).
+- **direction** (per camera): the direction the camera travels between frames t and t + g,
+  recovered from its own frames (:func:`drivewm.eval.epipolar.relative_pose`: E picks t's sign by
+  cheirality, H&Z sec. 9.6.3), against the direction the clip's ego poses, its conditioned
+  trajectory or, without either, a road vehicle driving forward (ego +x) put it in that camera's
+  frame through the rig's extrinsics. Reversed time reads about 180 degrees off (``guard_time``);
+  a view of another camera (shifted, swapped, copied, mirrored) reads that camera's mounting angle
+  off (``guard_views``).
+- **duplicate views**: two cameras whose frames are (mirror) copies of each other (``guard_views``).
+- **plausible poses**: the yaw structure from motion reconstructs against the one two-view
+  geometry reads, frame to frame (:func:`two_view_rotations`), and the distance it travels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from drivewm.eval.config import EpipolarConfig, GuardConfig
+from drivewm.eval.epipolar import rectify_matches, relative_pose
+from drivewm.eval.matching import FrameMatcher, Matches
+from drivewm.geometry import Camera, Rig, invert_T, nearest_rotation
+
+
+def parallax_count(m: Matches, threshold_px: float) -> int:
+    """Matches (pixels of one pinhole) farther than ``threshold_px`` from the best homography's
+    transfer (cv2.findHomography, RANSAC at that threshold): the matches whose motion a plane, a
+    rotation or a zoom cannot explain. 0 with fewer than 4 matches. RANSAC stops early on the
+    degenerate pairs (nearly every match an inlier); the cap of 500 samples only ever leaves a
+    real pair's homography short of the best, which counts more parallax, never less."""
+    if len(m) < 4:
+        return 0
+    try:
+        H, _ = cv2.findHomography(m.uv_a, m.uv_b, cv2.RANSAC, threshold_px, maxIters=500, confidence=0.99)
+    except cv2.error:
+        return 0
+    if H is None:
+        return len(m)
+    uv = cv2.perspectiveTransform(m.uv_a.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2)
+    return int(np.sum(np.linalg.norm(uv - m.uv_b, axis=1) > threshold_px))
+
+
+def travel_direction_cam(m: Matches, K: np.ndarray, cfg: EpipolarConfig, native_px_per_px: float) -> np.ndarray | None:
+    """Unit direction (3,) in which the camera moved from image a to image b, in a's camera frame
+    (the centre of b, -R^T t of T_b_from_a), or None when E cannot be fitted on ``min_matches`` inliers."""
+    T, inliers = relative_pose(m, K, cfg, native_px_per_px)
+    if T is None or inliers.sum() < cfg.min_matches:
+        return None
+    centre = -T[:3, :3].T @ T[:3, 3]
+    return centre / max(np.linalg.norm(centre), 1e-12)
+
+
+def expected_travel_cam(
+    camera: Camera, t: int, u: int, T_world_from_ego: np.ndarray | None, forward_ego: np.ndarray
+) -> np.ndarray | None:
+    """The unit direction (3,) the camera should travel from frame t to u, in its frame at t: from
+    the ego poses when known (None when the camera moves less than 1 cm), else ``forward_ego``
+    (ego frame) turned into the camera's frame."""
+    if T_world_from_ego is not None:
+        T_wc = T_world_from_ego @ camera.T_ego_from_cam
+        d = (invert_T(T_wc[t]) @ T_wc[u])[:3, 3]
+        return d / np.linalg.norm(d) if np.linalg.norm(d) >= 0.01 else None
+    return camera.T_ego_from_cam[:3, :3].T @ forward_ego
+
+
+def forward_direction_ego(trajectory_ego: list) -> np.ndarray:
+    """Unit ego-frame direction (3,) of travel: toward the first conditioned waypoint at least 1 m
+    away, else ego +x (a road vehicle drives forward)."""
+    w = np.asarray(trajectory_ego, dtype=np.float64).reshape(-1, 3) if len(trajectory_ego) else np.zeros((0, 3))
+    far = np.flatnonzero(np.linalg.norm(w[:, :2], axis=1) >= 1.0)
+    if len(far) == 0:
+        return np.array([1.0, 0.0, 0.0])
+    d = np.array([w[far[0], 0], w[far[0], 1], 0.0])
+    return d / np.linalg.norm(d)
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (degrees) between two unit vectors."""
+    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+
+
+@dataclasses.dataclass
+class DirectionVerdict:
+    """Per camera, the median angle (degrees) between recovered and expected travel over its
+    scored frame pairs (NaN when too few could be scored), and the two guards it decides."""
+
+    error_deg: dict[str, float]
+    reversed_fraction: float
+    time_ok: bool | None
+    views_ok: bool | None
+
+
+def direction_verdict(errors: dict[str, list[float]], cfg: GuardConfig) -> DirectionVerdict:
+    """``guard_time`` is False when more than ``max_reversed_fraction`` of all scored pairs travel
+    more than 90 degrees off and either every camera does (reversed) or some camera goes both ways
+    (shuffled); ``guard_views`` is False when a camera travels more than ``direction_tolerance_deg``
+    off and time does not explain it (its view is another camera's: copied, shifted, mirrored).
+    Only cameras with at least ``min_scored_pairs`` scored pairs are judged; None: no camera has
+    that many (e.g. a 3-frame clip), or time already failed (views)."""
+    judged = {c: e for c, e in errors.items() if len(e) >= cfg.min_scored_pairs}  # one pair's E can mislead
+    medians = {c: float(np.median(errors[c])) if c in judged else float("nan") for c in errors}
+    if not judged:
+        return DirectionVerdict(medians, float("nan"), None, None)
+    every = np.concatenate([np.asarray(e, float) for e in judged.values()])
+    reversed_fraction = float(np.mean(every > 90.0))
+    per_camera = [float(np.mean(np.asarray(e) > 90.0)) for e in judged.values()]
+    low, high = cfg.max_reversed_fraction, 1.0 - cfg.max_reversed_fraction
+    mixed = any(low < f < high for f in per_camera)
+    time_ok = not (reversed_fraction > low and (mixed or all(f >= high for f in per_camera)))
+    scored = [v for v in medians.values() if np.isfinite(v)]
+    views_ok = bool(all(v <= cfg.direction_tolerance_deg for v in scored)) if time_ok else None
+    return DirectionVerdict(medians, reversed_fraction, time_ok, views_ok)
+
+
+def duplicate_views(videos: dict[str, np.ndarray], rig: Rig, cfg: GuardConfig) -> list[str]:
+    """Camera pairs ``"a~b"`` (or ``"a~mirror(b)"``) whose frames are copies: the correlation of
+    their grey thumbnails (``thumbnail_px`` wide, every ``thumbnail_frame_step``-th frame, each
+    frame's mean removed) is at least ``duplicate_correlation``. Two real cameras look elsewhere."""
+    thumbs = {c: _thumbnails(videos[c], cfg) for c in rig.names}
+    out = []
+    for i, a in enumerate(rig.names):
+        for b in rig.names[i + 1 :]:
+            if _correlation(thumbs[a], thumbs[b]) >= cfg.duplicate_correlation:
+                out.append(f"{a}~{b}")
+            elif _correlation(thumbs[a], thumbs[b][..., ::-1]) >= cfg.duplicate_correlation:
+                out.append(f"{a}~mirror({b})")
+    return out
+
+
+def _thumbnails(frames: np.ndarray, cfg: GuardConfig) -> np.ndarray:
+    """(T', h, w) float grey thumbnails of every ``thumbnail_frame_step``-th frame, each zero-mean."""
+    _, h, w, _ = frames.shape
+    size = (cfg.thumbnail_px, max(2, round(h * cfg.thumbnail_px / w)))
+    out = []
+    for f in frames[:: cfg.thumbnail_frame_step]:
+        g = cv2.resize(cv2.cvtColor(np.ascontiguousarray(f), cv2.COLOR_RGB2GRAY), size, interpolation=cv2.INTER_AREA)
+        g = g.astype(np.float64)
+        out.append(g - g.mean())
+    return np.stack(out)
+
+
+def _correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Normalised correlation of two equally shaped zero-mean stacks (thumbnails of different
+    sizes are resized to a's); 0 when either is flat."""
+    if a.shape != b.shape:
+        b = np.stack([cv2.resize(f, (a.shape[2], a.shape[1]), interpolation=cv2.INTER_AREA) for f in b])
+    n = min(len(a), len(b))
+    a, b = a[:n].ravel(), b[:n].ravel()
+    denom = np.linalg.norm(a) * np.linalg.norm(b)
+    return float(a @ b / denom) if denom > 0 else 0.0
+
+
+@dataclasses.dataclass
+class TwoViewMotion:
+    """A camera's frame-to-frame motion from two-view geometry alone: ``R_first_from_t`` (T, 3, 3)
+    chained rotations (camera frame) and ``moved`` (T - 1,) whether each pair showed parallax."""
+
+    R_first_from_t: np.ndarray
+    moved: np.ndarray
+
+
+def two_view_rotations(
+    frames: np.ndarray, camera: Camera, matcher: FrameMatcher, K_c: np.ndarray, epi_cfg: EpipolarConfig, scale: float
+) -> TwoViewMotion:
+    """Chained rotations of one camera over consecutive frames (uint8 (T, H, W, 3)): each pair's
+    rotation from :func:`relative_pose` (USAC_ACCURATE E) on the matcher's (cached) matches
+    rectified to ``K_c``; a pair without parallax (pure rotation, zoom, frozen) from its homography
+    instead (R = K^-1 H K, H&Z sec. 8.4.2), and identity when neither fits. ``scale``: the
+    camera's native px per canonical px."""
+    R = [np.eye(3)]
+    moved = []
+    parallax_px = 1.0 / scale
+    for t in range(len(frames) - 1):
+        m = rectify_matches(
+            matcher.match((camera.name, t), frames[t], (camera.name, t + 1), frames[t + 1]), camera, camera, K_c
+        )
+        has_parallax = parallax_count(m, parallax_px) >= epi_cfg.min_matches
+        R_b_from_a = _pair_rotation(m, K_c, epi_cfg, scale, has_parallax)
+        moved.append(has_parallax)
+        R.append(R[-1] @ R_b_from_a.T)
+    return TwoViewMotion(np.stack(R), np.array(moved, dtype=bool))
+
+
+def _pair_rotation(m: Matches, K_c: np.ndarray, epi_cfg: EpipolarConfig, scale: float, moved: bool) -> np.ndarray:
+    """R_b_from_a of one frame pair: from E with parallax, else from the homography; identity if neither fits."""
+    if moved:
+        T, inliers = relative_pose(m, K_c, epi_cfg, scale)
+        if T is not None and inliers.sum() >= epi_cfg.min_matches:
+            return T[:3, :3]
+    if len(m) < 4:
+        return np.eye(3)
+    H, _ = cv2.findHomography(m.uv_a, m.uv_b, cv2.RANSAC, 1.0 / scale)
+    if H is None:
+        return np.eye(3)
+    return nearest_rotation(np.linalg.inv(K_c) @ H @ K_c)
+
+
+def ego_yaw_deg(R_first_from_last_cam: np.ndarray, camera: Camera) -> float:
+    """The ego's yaw change (degrees, left positive) for a camera rotation R_first_from_last (camera
+    frame), through the camera's extrinsics."""
+    R_ec = camera.T_ego_from_cam[:3, :3]
+    R = R_ec @ R_first_from_last_cam @ R_ec.T
+    return float(np.degrees(np.arctan2(R[1, 0], R[0, 0])))
