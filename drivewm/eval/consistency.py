@@ -18,7 +18,9 @@ pairs only (the Cosmos-style figure) and the value in the native pixels of the r
 
 from __future__ import annotations
 
+import functools
 import itertools
+from collections.abc import Callable
 
 import numpy as np
 
@@ -37,7 +39,15 @@ from drivewm.eval.epipolar import (
     score_matches,
     verified_mask,
 )
-from drivewm.eval.guards import angle_deg, expected_travel_cam, parallax_count, travel_direction_cam
+from drivewm.eval.guards import (
+    EgoPrior,
+    angle_deg,
+    camera_travel_m,
+    expected_travel_cam,
+    motion_demanded,
+    motion_evidence,
+    travel_direction_cam,
+)
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import Camera, Rig, invert_T, pixel_rays, project, transform_points
 
@@ -100,16 +110,15 @@ def _score_pair(
     K_c: np.ndarray,
     cfg: EpipolarConfig,
     min_verified: int,
-    parallax_px: float | None,
+    motion_check: Callable[[Matches], bool] | None,
     native_px_per_px: float,
 ) -> dict:
     """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated F of
     each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``), and the verified matches;
     fit and verification thresholds in the cameras' pixels (``native_px_per_px`` per canonical px).
-    ``parallax_px`` (TSE): a pair whose verified matches show no motion evidence (fewer than
-    ``min_matches`` that moved ``min_parallax_px`` and lie ``parallax_px`` off the best homography,
-    drivewm.eval.guards.parallax_count) fails under both F: static points, and a zoomed still,
-    satisfy any F through the epipole."""
+    ``motion_check`` (TSE, where the pair's expected parallax demands it): a pair whose verified
+    matches fail it (drivewm.eval.guards.motion_evidence) fails under both F: static points, and a
+    zoomed still, satisfy any F through the epipole."""
     F_fit, _ = fit_fundamental(m, cfg, native_px_per_px)
     keep = verified_mask(F_fit, m, cfg, native_px_per_px)
     verified, frames = Matches(m.uv_a[keep], m.uv_b[keep]), frame_of[keep]
@@ -118,7 +127,7 @@ def _score_pair(
         fitted.status = FIT_FAILED
     elif fitted.status == OK and len(verified) < min_verified:
         fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
-    no_motion = fitted.status == OK and parallax_px is not None and not _moved(verified, cfg, parallax_px)
+    no_motion = fitted.status == OK and motion_check is not None and not motion_check(verified)
     if no_motion:
         fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), NO_MOTION)
     out = {"fitted": fitted, "verified": verified}
@@ -131,16 +140,6 @@ def _score_pair(
     return out
 
 
-def _moved(verified: Matches, cfg: EpipolarConfig, parallax_px: float) -> bool:
-    """Motion evidence: ``min_matches`` verified matches that moved, and as many off the best homography.
-    Screen-fixed content (a snow overlay, a bonnet) is static in real clips too: what F needs is
-    enough matches that moved, not a moving median."""
-    moved = np.linalg.norm(verified.uv_b - verified.uv_a, axis=1) >= cfg.min_parallax_px
-    if moved.sum() < cfg.min_matches:
-        return False
-    return parallax_count(Matches(verified.uv_a[moved], verified.uv_b[moved]), parallax_px) >= cfg.min_matches
-
-
 def temporal_sampson(
     videos: dict[str, np.ndarray],
     rig: Rig,
@@ -150,17 +149,17 @@ def temporal_sampson(
     matcher: FrameMatcher,
     ego_at_camera: dict[str, np.ndarray] | None = None,
     guard_cfg: GuardConfig | None = None,
-    forward_ego: np.ndarray | None = None,
+    prior: EgoPrior | None = None,
 ) -> dict:
     """TSE of a clip. ``videos``: uint8 (T, H, W, 3) per camera of ``rig``; ``T_world_from_ego``
     (T, 4, 4) or None; ``ego_at_camera`` (optional): per camera, the ego poses (T, 4, 4) at that
     camera's exposure times (drivewm.eval.exposure.ego_at_cameras), used instead of ``T_world_from_ego``.
     Also returns ``direction_errors_deg`` (per camera, the angles between recovered and expected
     travel of every ``guard_cfg.direction_frame_step``-th pair; drivewm.eval.guards) and
-    ``motion_fraction`` (the share of pairs with motion evidence); ``forward_ego``: the expected
-    ego-frame travel direction without poses (drivewm.eval.guards.forward_direction_ego)."""
+    ``motion_fraction`` (:func:`motion_fraction`); ``prior``: the expected ego travel direction
+    and speed without poses (drivewm.eval.guards.ego_prior; default: forward, speed unknown)."""
     guard_cfg = guard_cfg or GuardConfig()
-    forward_ego = np.array([1.0, 0.0, 0.0]) if forward_ego is None else forward_ego
+    prior = prior or EgoPrior(np.array([1.0, 0.0, 0.0]), None, 0.0)
     K_c = canonical_K(epi_cfg)
     scale = {cam.name: native_px_per_canonical_px(cam, K_c) for cam in rig.cameras}
     matcher.prefetch(videos)
@@ -174,12 +173,17 @@ def temporal_sampson(
         if ego is not None:
             T_wc = ego @ cam.T_ego_from_cam
             T_rel = [invert_T(T_wc[u]) @ T_wc[t]]
-        parallax_px = guard_cfg.parallax_threshold_native_px / scale[cam.name]
-        out = _score_pair(
-            m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, parallax_px, scale[cam.name]
-        )
+        travel_m = camera_travel_m(cam, t, u, ego, prior.speed_mps, prior.fps)
+        demanded = motion_demanded(focal_native_px(cam), travel_m, guard_cfg)
+        check = None
+        if demanded:
+            parallax_px = guard_cfg.parallax_threshold_native_px / scale[cam.name]
+            check = functools.partial(motion_evidence, cfg=guard_cfg, epi_cfg=epi_cfg, parallax_px=parallax_px)
+        out = _score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, check, scale[cam.name])
+        out["motion_demanded"] = demanded
         if t % guard_cfg.direction_frame_step == 0 and out["fitted"].status == OK:
-            out["direction_deg"] = _direction_error(out["verified"], cam, t, u, ego, forward_ego, K_c, epi_cfg, scale)
+            forward = prior.forward_ego
+            out["direction_deg"] = _direction_error(out["verified"], cam, t, u, ego, forward, K_c, epi_cfg, scale)
         return out
 
     tasks = [(cam, t) for cam in rig.cameras for t in range(len(videos[cam.name]) - cfg.frame_gap)]
@@ -189,8 +193,25 @@ def temporal_sampson(
     out["direction_errors_deg"] = {
         c: [r["direction_deg"] for r in rs if r.get("direction_deg") is not None] for c, rs in per_camera.items()
     }
-    out["motion_fraction"] = float(np.mean([r["fitted"].status == OK for r in scores])) if scores else float("nan")
+    out["motion_fraction"] = motion_fraction(scores)
     return out
+
+
+def motion_fraction(scores: list[dict]) -> float:
+    """The share of frame pairs with motion evidence among those that demanded it and had an F fit
+    (status ok or no_motion): a pair too blurred or dark to verify enough matches already counts as
+    failed in TSE and says nothing about motion. 0 when pairs demanded motion and none had a fit
+    (no evidence of motion anywhere, e.g. a flat grey clip); NaN when no pair demanded it."""
+    fitted = [r["fitted"].status for r in scores if r["motion_demanded"]]
+    judged = [status == OK for status in fitted if status in (OK, NO_MOTION)]
+    if not fitted:
+        return float("nan")
+    return float(np.mean(judged)) if judged else 0.0
+
+
+def focal_native_px(camera: Camera) -> float:
+    """The camera's focal length (its own px): sqrt(fx fy)."""
+    return float(np.sqrt(camera.K[0, 0] * camera.K[1, 1]))
 
 
 def _direction_error(verified, cam, t, u, ego, forward_ego, K_c, epi_cfg, scale) -> float | None:

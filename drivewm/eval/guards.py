@@ -7,7 +7,10 @@ self-consistent as the real one. Each guard tests the evidence those figures tak
 
 - **motion** (per frame pair): matches that no single homography explains (parallax, H&Z sec.
   13.3: a homography relates two views of a plane, or of any scene under pure rotation or zoom).
-  A TSE pair without ``min_matches`` of them is scored as failed (``no_motion``).
+  Where the camera's travel (ego poses, else the conditioned trajectory's speed, else assumed)
+  makes parallax resolvable at the camera's focal length (:func:`expected_parallax_px`), a TSE
+  pair needs a share of its verified matches off the best homography (:func:`motion_evidence`),
+  else it is scored as failed (``no_motion``).
 - **direction** (per camera): the direction the camera travels between frames t and t + g,
   recovered from its own frames (:func:`drivewm.eval.epipolar.relative_pose`: E picks t's sign by
   cheirality, H&Z sec. 9.6.3), against the direction the clip's ego poses, its conditioned
@@ -28,9 +31,12 @@ import cv2
 import numpy as np
 
 from drivewm.eval.config import EpipolarConfig, GuardConfig
-from drivewm.eval.epipolar import rectify_matches, relative_pose
+from drivewm.eval.epipolar import fit_fundamental, rectify_matches, relative_pose, verified_mask
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import Camera, Rig, invert_T, nearest_rotation
+
+#: Matches off a plane's homography that fix the epipole, hence F (H&Z result 13.3).
+MIN_PARALLAX_MATCHES = 2
 
 
 def parallax_count(m: Matches, threshold_px: float) -> int:
@@ -49,6 +55,80 @@ def parallax_count(m: Matches, threshold_px: float) -> int:
         return len(m)
     uv = cv2.perspectiveTransform(m.uv_a.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2)
     return int(np.sum(np.linalg.norm(uv - m.uv_b, axis=1) > threshold_px))
+
+
+def motion_evidence(m: Matches, cfg: GuardConfig, epi_cfg: EpipolarConfig, parallax_px: float) -> bool:
+    """Whether a pair's verified matches (pixels of one pinhole) show the motion of a scene with
+    depth: of the matches that moved ``epi_cfg.min_parallax_px``, as many as F's robust fit needs
+    (``epi_cfg.min_matches``) or ``min_parallax_fraction`` of all, whichever is fewer, and at least
+    2, lie ``parallax_px`` off the best homography (:func:`parallax_count`). The share serves small
+    frames (a 160x96 pair verifies a tenth of a 320x192 one's matches), the count views where one
+    plane (a wall) holds most matches; keypoint noise and mismatches put only a few percent of an
+    exact homography's matches past ``parallax_px``. Two matches off a plane's homography fix F
+    (plane plus parallax, H&Z result 13.3)."""
+    moved = np.linalg.norm(m.uv_b - m.uv_a, axis=1) >= epi_cfg.min_parallax_px
+    share = int(np.ceil(cfg.min_parallax_fraction * len(m)))
+    need = max(MIN_PARALLAX_MATCHES, min(epi_cfg.min_matches, share))
+    if moved.sum() < need:
+        return False
+    return parallax_count(Matches(m.uv_a[moved], m.uv_b[moved]), parallax_px) >= need
+
+
+def expected_parallax_px(focal_native_px: float, travel_m: float | None, cfg: GuardConfig) -> float:
+    """Parallax (the camera's own px) that a translation of ``travel_m`` between two frames gives
+    between scene content at ``parallax_depth_m`` and the far background, seen across the
+    direction of travel: f t / Z (H&Z sec. 13.3: parallax is proportional to the baseline and the
+    inverse depth difference). Infinite when the travel is unknown (a road vehicle is assumed to drive)."""
+    if travel_m is None:
+        return float("inf")
+    return focal_native_px * travel_m / cfg.parallax_depth_m
+
+
+def motion_demanded(focal_native_px: float, travel_m: float | None, cfg: GuardConfig) -> bool:
+    """A frame pair must show motion evidence when its expected parallax reaches
+    ``parallax_threshold_native_px`` (the resolution at which :func:`motion_evidence` counts it):
+    a slow ego, a short frame gap or a small frame leave a pair without that demand."""
+    return expected_parallax_px(focal_native_px, travel_m, cfg) >= cfg.parallax_threshold_native_px
+
+
+def camera_travel_m(
+    camera: Camera, t: int, u: int, T_world_from_ego: np.ndarray | None, speed_mps: float | None, fps: float
+) -> float | None:
+    """How far (m) the camera travels from frame t to u: from the ego poses, else the conditioned
+    speed over (u - t) / fps, else None."""
+    if T_world_from_ego is not None:
+        T_wc = T_world_from_ego @ camera.T_ego_from_cam
+        return float(np.linalg.norm(T_wc[u, :3, 3] - T_wc[t, :3, 3]))
+    if speed_mps is not None and fps > 0:
+        return speed_mps * (u - t) / fps
+    return None
+
+
+def conditioned_speed_mps(trajectory_ego: list, dt_s: float) -> float | None:
+    """Mean speed (m/s) of a conditioned trajectory (ego-frame waypoints ``dt_s`` apart, from the
+    clip's start), or None without waypoints or a time step."""
+    w = np.asarray(trajectory_ego, dtype=np.float64).reshape(-1, 3) if len(trajectory_ego) else np.zeros((0, 3))
+    if len(w) == 0 or dt_s <= 0:
+        return None
+    path = np.linalg.norm(np.diff(np.vstack([np.zeros((1, 3)), w])[:, :2], axis=0), axis=1).sum()
+    return float(path / (len(w) * dt_s))
+
+
+@dataclasses.dataclass
+class EgoPrior:
+    """What the clip says of its ego motion beside its poses: the ego-frame travel direction
+    ``forward_ego`` (3,) (:func:`forward_direction_ego`), the conditioned speed ``speed_mps`` (None
+    when unknown, :func:`conditioned_speed_mps`) and the frame rate ``fps``."""
+
+    forward_ego: np.ndarray
+    speed_mps: float | None
+    fps: float
+
+
+def ego_prior(trajectory_ego: list, dt_s: float, fps: float) -> EgoPrior:
+    """The :class:`EgoPrior` of a clip's conditioned trajectory (ego-frame waypoints ``dt_s`` apart;
+    ``1 / fps`` when 0) and frame rate."""
+    return EgoPrior(forward_direction_ego(trajectory_ego), conditioned_speed_mps(trajectory_ego, dt_s or 1 / fps), fps)
 
 
 def travel_direction_cam(m: Matches, K: np.ndarray, cfg: EpipolarConfig, native_px_per_px: float) -> np.ndarray | None:
@@ -171,21 +251,30 @@ class TwoViewMotion:
 
 
 def two_view_rotations(
-    frames: np.ndarray, camera: Camera, matcher: FrameMatcher, K_c: np.ndarray, epi_cfg: EpipolarConfig, scale: float
+    frames: np.ndarray,
+    camera: Camera,
+    matcher: FrameMatcher,
+    K_c: np.ndarray,
+    epi_cfg: EpipolarConfig,
+    scale: float,
+    guard_cfg: GuardConfig,
 ) -> TwoViewMotion:
     """Chained rotations of one camera over consecutive frames (uint8 (T, H, W, 3)): each pair's
     rotation from :func:`relative_pose` (USAC_ACCURATE E) on the matcher's (cached) matches
-    rectified to ``K_c``; a pair without parallax (pure rotation, zoom, frozen) from its homography
-    instead (R = K^-1 H K, H&Z sec. 8.4.2), and identity when neither fits. ``scale``: the
-    camera's native px per canonical px."""
+    rectified to ``K_c``; a pair whose F-verified matches show no parallax (:func:`motion_evidence`:
+    pure rotation, zoom, frozen) from its homography instead (R = K^-1 H K, H&Z sec. 8.4.2), and
+    identity when neither fits. ``scale``: the camera's native px per canonical px."""
     R = [np.eye(3)]
     moved = []
-    parallax_px = 1.0 / scale
+    parallax_px = guard_cfg.parallax_threshold_native_px / scale
     for t in range(len(frames) - 1):
         m = rectify_matches(
             matcher.match((camera.name, t), frames[t], (camera.name, t + 1), frames[t + 1]), camera, camera, K_c
         )
-        has_parallax = parallax_count(m, parallax_px) >= epi_cfg.min_matches
+        F, _ = fit_fundamental(m, epi_cfg, scale)
+        keep = verified_mask(F, m, epi_cfg, scale)
+        verified = Matches(m.uv_a[keep], m.uv_b[keep])
+        has_parallax = motion_evidence(verified, guard_cfg, epi_cfg, parallax_px)
         R_b_from_a = _pair_rotation(m, K_c, epi_cfg, scale, has_parallax)
         moved.append(has_parallax)
         R.append(R[-1] @ R_b_from_a.T)

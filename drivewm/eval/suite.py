@@ -35,8 +35,8 @@ from drivewm.eval.framing import WHOLE_VIDEO, Framing, input_record
 from drivewm.eval.guards import (
     direction_verdict,
     duplicate_views,
+    ego_prior,
     ego_yaw_deg,
-    forward_direction_ego,
     two_view_rotations,
 )
 from drivewm.eval.inputs import EvalItem, load_items
@@ -237,37 +237,29 @@ def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
         )
         return
     ego = _ego_at_cameras(item, cfg)
-    forward = forward_direction_ego(item.trajectory_ego)
+    prior = ego_prior(item.trajectory_ego, item.trajectory_dt_s, item.fps)
     r = temporal_sampson(
-        videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego, cfg.guard, forward
+        videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego, cfg.guard, prior
     )
     _put_sampson(metrics, "tse", r)
     _put_direction_guards(item, cfg, r, metrics)
 
 
 def _put_direction_guards(item, cfg, r: dict, metrics: dict) -> None:
-    """``motion_fraction`` and ``guard_motion`` (an ego that travels must show motion in half of
-    the frame pairs), ``direction_error_deg`` per camera, ``guard_time`` and ``guard_views``
-    (drivewm.eval.guards.direction_verdict); a guard that cannot decide is None."""
-    metrics["motion_fraction"] = r["motion_fraction"]
-    travel = _expected_travel_m(item)
-    moving = travel is not None and travel > cfg.guard.moving_ego_m
-    metrics["guard_motion"] = bool(r["motion_fraction"] >= 0.5) if moving else None
+    """``motion_fraction`` and ``guard_motion`` (where the clip's ego poses or conditioned
+    trajectory are known, at least half of the frame pairs whose expected parallax demands motion
+    evidence must show it; drivewm.eval.consistency.motion_fraction), ``direction_error_deg`` per
+    camera, ``guard_time`` and ``guard_views`` (drivewm.eval.guards.direction_verdict); a guard
+    that cannot decide is None."""
+    metrics["motion_fraction"] = fraction = r["motion_fraction"]
+    known = item.T_world_from_ego is not None or bool(item.trajectory_ego)
+    metrics["guard_motion"] = bool(fraction >= 0.5) if known and np.isfinite(fraction) else None
     verdict = direction_verdict(r["direction_errors_deg"], cfg.guard)
     metrics["direction_error_deg"] = verdict.error_deg
     metrics["reversed_fraction"] = verdict.reversed_fraction
     metrics["guard_time"] = verdict.time_ok
     if metrics.get("guard_views") is not False:  # duplicate views already failed it
         metrics["guard_views"] = verdict.views_ok
-
-
-def _expected_travel_m(item) -> float | None:
-    """How far the clip's ego poses (else its conditioned trajectory) travel, m; None if neither is known."""
-    if item.T_world_from_ego is not None:
-        return float(np.linalg.norm(item.T_world_from_ego[-1, :3, 3] - item.T_world_from_ego[0, :3, 3]))
-    if item.trajectory_ego:
-        return float(np.linalg.norm(np.asarray(item.trajectory_ego, dtype=np.float64).reshape(-1, 3)[-1, :2]))
-    return None
 
 
 def _ego_at_cameras(item, cfg) -> dict[str, np.ndarray] | None:
@@ -367,7 +359,7 @@ def _pose_plausibility(item, videos, cfg, matcher, metrics, artifacts) -> None:
         return
     K_c = canonical_K(cfg.epipolar)
     scale = native_px_per_canonical_px(camera, K_c)
-    motion = two_view_rotations(videos[camera.name], camera, matcher, K_c, cfg.epipolar, scale)
+    motion = two_view_rotations(videos[camera.name], camera, matcher, K_c, cfg.epipolar, scale, cfg.guard)
     sfm_yaw = heading_change_deg(est.T_world_from_ego[est.registered])
     reg = np.flatnonzero(est.registered)
     two_view_yaw = ego_yaw_deg(motion.R_first_from_t[reg[0]].T @ motion.R_first_from_t[reg[-1]], camera)
