@@ -272,8 +272,8 @@ class GuardConfig:
     direction_frame_step: int = 2
     """Travel directions are recovered on every this-many-th TSE frame pair of each camera."""
     direction_tolerance_deg: float = 30.0
-    """``guard_views``: a camera whose median recovered travel direction is farther than this from
-    the one its extrinsics and the expected ego motion give shows another camera's view."""
+    """``guard_views``: two or more cameras whose median recovered travel direction is farther than
+    this from the one their extrinsics and the expected ego motion give show other cameras' views."""
     max_reversed_fraction: float = 0.25
     """``guard_time``: more than this share of scored frame pairs travelling over 90 degrees off
     the expected direction is a reversed or shuffled clip."""

@@ -181,11 +181,18 @@ class DirectionVerdict:
     views_ok: bool | None
 
 
+#: ``guard_views``: cameras whose travel reads off before their views count as other cameras'.
+MIN_CAMERAS_OFF = 2
+
+
 def direction_verdict(errors: dict[str, list[float]], cfg: GuardConfig) -> DirectionVerdict:
     """``guard_time`` is False when more than ``max_reversed_fraction`` of all scored pairs travel
     more than 90 degrees off and either every camera does (reversed) or some camera goes both ways
-    (shuffled); ``guard_views`` is False when a camera travels more than ``direction_tolerance_deg``
-    off and time does not explain it (its view is another camera's: copied, shifted, mirrored).
+    (shuffled); ``guard_views`` is False when two or more cameras travel more than
+    ``direction_tolerance_deg`` off and time does not explain it (their views are other cameras':
+    shifted, swapped, copied, mirrored). One camera alone cannot show another's view unless the
+    two are copies (:func:`duplicate_views`) or its own view is elsewhere (a second camera off);
+    one camera's E alone can be misled (falling snow near the lens).
     Only cameras with at least ``min_scored_pairs`` scored pairs are judged; None: no camera has
     that many (e.g. a 3-frame clip), or time already failed (views)."""
     judged = {c: e for c, e in errors.items() if len(e) >= cfg.min_scored_pairs}  # one pair's E can mislead
@@ -199,7 +206,8 @@ def direction_verdict(errors: dict[str, list[float]], cfg: GuardConfig) -> Direc
     mixed = any(low < f < high for f in per_camera)
     time_ok = not (reversed_fraction > low and (mixed or all(f >= high for f in per_camera)))
     scored = [v for v in medians.values() if np.isfinite(v)]
-    views_ok = bool(all(v <= cfg.direction_tolerance_deg for v in scored)) if time_ok else None
+    off = sum(v > cfg.direction_tolerance_deg for v in scored)
+    views_ok = bool(off < MIN_CAMERAS_OFF) if time_ok else None
     return DirectionVerdict(medians, reversed_fraction, time_ok, views_ok)
 
 
