@@ -61,9 +61,9 @@ class EpipolarConfig:
     """Height (px) of the canonical pinhole."""
     canonical_hfov_deg: float = 120.0
     """Horizontal field of view of the canonical pinhole (focal = W / (2 tan(hfov/2)) = 277.1 px)."""
-    ransac_threshold_native_px: float = 0.4
+    ransac_threshold_native_px: float = 0.41
     """Inlier threshold of cv2.USAC_MAGSAC for F, in the cameras' own pixels (keypoint noise is a
-    fraction of a native pixel at any resolution; 0.5 canonical px is 0.4 native px of a 320 px
+    fraction of a native pixel at any resolution; 0.5 canonical px is 0.41 native px of a 320 px
     70 deg camera, 2.3 of a 1600 px nuScenes one). Scaled to canonical px by f_canonical / f."""
     ransac_confidence: float = 0.999
     """RANSAC confidence."""
