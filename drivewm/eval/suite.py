@@ -242,18 +242,17 @@ def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
         videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego, cfg.guard, prior
     )
     _put_sampson(metrics, "tse", r)
-    _put_direction_guards(item, cfg, r, metrics)
+    _put_direction_guards(cfg, r, metrics)
 
 
-def _put_direction_guards(item, cfg, r: dict, metrics: dict) -> None:
-    """``motion_fraction`` and ``guard_motion`` (where the clip's ego poses or conditioned
-    trajectory are known, at least half of the frame pairs whose expected parallax demands motion
-    evidence must show it; drivewm.eval.consistency.motion_fraction), ``direction_error_deg`` per
-    camera, ``guard_time`` and ``guard_views`` (drivewm.eval.guards.direction_verdict); a guard
-    that cannot decide is None."""
+def _put_direction_guards(cfg, r: dict, metrics: dict) -> None:
+    """``motion_fraction`` and ``guard_motion`` (at least half of the frame pairs whose expected
+    parallax demands motion evidence must show it, drivewm.eval.consistency.motion_fraction; without
+    ego poses or a conditioned trajectory every pair demands it, as a road vehicle drives),
+    ``direction_error_deg`` per camera, ``guard_time`` and ``guard_views``
+    (drivewm.eval.guards.direction_verdict); a guard that cannot decide is None."""
     metrics["motion_fraction"] = fraction = r["motion_fraction"]
-    known = item.T_world_from_ego is not None or bool(item.trajectory_ego)
-    metrics["guard_motion"] = bool(fraction >= 0.5) if known and np.isfinite(fraction) else None
+    metrics["guard_motion"] = bool(fraction >= 0.5) if np.isfinite(fraction) else None
     verdict = direction_verdict(r["direction_errors_deg"], cfg.guard)
     metrics["direction_error_deg"] = verdict.error_deg
     metrics["reversed_fraction"] = verdict.reversed_fraction

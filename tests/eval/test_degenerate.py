@@ -3,8 +3,9 @@ shuffled, time-reversed, a still slowly zoomed, and on several cameras one view 
 cameras shifted to their neighbour's video) scores worse than the real clip on every headline figure
 it has, or is flagged by a guard that voids them (``voided_by``: pass rates 0, the rest NaN). Checked
 on a simulated straight drive and a turning drive with ego poses (every figure), on a simulated clip
-without poses (TSE, CSE and the pass rates), and on the shared real dashcam video (TSE and the pass
-rates: one camera, no poses); and the dashcam's recovered turn agrees with an independent estimate."""
+without poses (TSE, CSE and the pass rates), on a 160x96 simulated clip (TSE and CSE), and on the
+shared real dashcam video (TSE and the pass rates: one camera, no poses); and the dashcam's
+recovered turn agrees with an independent estimate."""
 
 from __future__ import annotations
 
@@ -85,6 +86,18 @@ def test_degraded_simulated_clip_without_poses_scores_worse_or_is_flagged(sim_it
     keys = ("tse", "cse", "cse_calibrated", "pose_success", "registered_fraction")
     assert "tse_calibrated" not in scores["real"] and "pose_success_path" not in scores["real"]
     assert check(scores, keys) == []
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+def test_degraded_small_simulated_clip_scores_worse_or_is_flagged(small_clip_dir):
+    """The CLI golden chain's 160x96 clip (rain at dusk, ego poses): TSE and CSE; a 160x96 pair
+    verifies about 20 matches, so the motion guard must work from a share of them."""
+    from drivewm.eval.inputs import load_items
+
+    item = load_items(small_clip_dir)[0]
+    scores = score_variants(item, EvalConfig(metrics=["tse", "cse"]))
+    assert check(scores, ("tse", "tse_calibrated", "cse", "cse_calibrated")) == []
 
 
 def dashcam_camera() -> Camera:

@@ -149,18 +149,12 @@ def unvoided(items) -> dict[str, dict]:
 
 
 @pytest.mark.slow
-def test_no_guard_voids_a_real_simulated_clip_at_160x96(tmp_path):
-    """The CLI golden chain's drives (tests/test_outputs_unchanged.py: 160x96, rain at dusk, 17 frames):
-    a pair verifies a tenth of a 320x192 pair's matches, and no guard may read that as no motion."""
-    from drivewm.curate import curate, load_curate_config
+def test_no_guard_voids_a_real_simulated_clip_at_160x96(small_clip_dir):
+    """The CLI golden chain's clips (160x96, rain at dusk, 17 frames): a pair verifies a tenth of a
+    320x192 pair's matches, and no guard may read that as no motion."""
     from drivewm.eval.inputs import load_items
-    from drivewm.sim import SimConfig, simulate
 
-    for seed in (11, 12):
-        fields = dict(source="highway", scenario="merge", weather="rain", time_of_day="dusk", duration_s=1.8)
-        simulate(SimConfig(**fields, width=160, height=96, seed=seed), tmp_path / "logs" / f"d{seed}.mcap")
-    curate(sorted((tmp_path / "logs").glob("*.mcap")), tmp_path / "clips", load_curate_config("test"), workers=1)
-    items = load_items(tmp_path / "clips")
+    items = load_items(small_clip_dir)
     assert len(items) == 2 and items[0].rig.cameras[0].width == 160
     assert unvoided(items) == {}
 

@@ -175,7 +175,9 @@ def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
     resolved, _, rest = stdout.partition("\n")  # the resolved config's line comes first
     assert json.loads(resolved)["metrics"] == ["tse", "pose", "traj"]
     summary = json.loads(rest[: rest.rindex("}") + 1])
-    assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1 and summary["tse_counted"] is None
+    assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1
+    # no frame pair shows motion: guard_motion voids the clip, whose TSE counts as failed, not as null
+    assert summary["tse_counted"] == 4.0 and summary["voided_clips"]["tse_counted"] == 1
     metrics = json.loads((out / "metrics.json").read_text())
     assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
 
