@@ -61,15 +61,23 @@ class EpipolarConfig:
     """Height (px) of the canonical pinhole."""
     canonical_hfov_deg: float = 120.0
     """Horizontal field of view of the canonical pinhole (focal = W / (2 tan(hfov/2)) = 277.1 px)."""
-    ransac_threshold_px: float = 0.5
-    """Inlier threshold of cv2.USAC_MAGSAC in canonical pixels."""
+    ransac_threshold_native_px: float = 0.41
+    """Inlier threshold of cv2.USAC_MAGSAC for F, in the cameras' own pixels (keypoint noise is a
+    fraction of a native pixel at any resolution; 0.5 canonical px is 0.41 native px of a 320 px
+    70 deg camera, 2.3 of a 1600 px nuScenes one). Scaled to canonical px by f_canonical / f."""
     ransac_confidence: float = 0.999
     """RANSAC confidence."""
     ransac_max_iters: int = 10000
     """RANSAC iteration cap."""
-    verify_threshold_px: float = 4.0
-    """Matches with a Sampson error above this (canonical px) under the fitted F are outliers and not
-    scored, under either F: the scored set is the video's own geometrically verified matches."""
+    pose_threshold_native_px: float = 0.33
+    """Inlier threshold (the cameras' own px) of the USAC_ACCURATE essential matrix behind relative
+    poses (drivewm.eval.epipolar.relative_pose): on EuRoC's stereo pairs, rotation errors grow with
+    it (median 0.06 deg at 0.33 native px, 0.15 at 0.8)."""
+    verify_threshold_native_px: float = 3.3
+    """Matches with a Sampson error above this (the cameras' own px, scaled to canonical px like
+    ``ransac_threshold_native_px``) under the fitted F are outliers and not scored, under either F:
+    the scored set is the video's own geometrically verified matches. 3.3 native px is 4 canonical
+    px on a 320 px 70 deg camera, 0.7 on a 1600 px nuScenes camera (not 18 native px)."""
     min_matches: int = 16
     """Fewer verified matches than this in a frame pair: status 'too_few_matches' (the pair is not
     scored; a clip value counts it at ``failed_pair_px``)."""
@@ -79,13 +87,13 @@ class EpipolarConfig:
     status 'no_motion', counted as failed."""
     failed_pair_px: float = 4.0
     """A pair that cannot be scored (too few verified matches, no fit, no motion) counts at this
-    error in the clip value: the worst a verified match may have (``verify_threshold_px``). A blurred,
+    error in the clip value: at least the worst a verified match may have (``verify_threshold_native_px``). A blurred,
     frozen or shuffled video loses pairs and so scores worse, instead of scoring only its easy pairs."""
 
     def validate(self) -> None:
         at_least(self, 16, "canonical_width", "canonical_height")
         require(0 < self.canonical_hfov_deg < 180, "canonical_hfov_deg", self.canonical_hfov_deg, "in (0, 180)")
-        above(self, 0, "ransac_threshold_px", "verify_threshold_px")
+        above(self, 0, "ransac_threshold_native_px", "verify_threshold_native_px", "pose_threshold_native_px")
         require(0 < self.ransac_confidence < 1, "ransac_confidence", self.ransac_confidence, "in (0, 1)")
         at_least(self, 1, "ransac_max_iters")
         at_least(self, 8, "min_matches")  # the fundamental matrix needs 8 correspondences (H&Z 11.1)
@@ -142,7 +150,7 @@ class PoseConfig:
     """features='shared': overlapping cameras a, b are also matched as a at t with b at t + gap and back."""
     verify: str = "drivewm"
     """features='shared': geometric verification of each image pair's matches by the benchmark's own
-    robust F fit ('drivewm', as TSE and CSE verify: matches within ``verify_threshold_px`` of it) or by
+    robust F fit ('drivewm', as TSE and CSE verify: matches within ``verify_threshold_native_px`` of it) or by
     COLMAP ('colmap': E / F / H model selection with the known cameras). On the reference clips
     'colmap' left a snow clip 53% registered and two clips at ATE 0.35 and 0.42 m; 'drivewm'
     registers all 12 (mean ATE 0.024 m against 0.052 m with features='colmap')."""
@@ -244,6 +252,61 @@ class TrajectoryConfig:
 
 
 @dataclasses.dataclass
+class GuardConfig:
+    """Guards against degenerate videos (drivewm.eval.guards; docs/eval-protocol.md, 'Guards')."""
+
+    parallax_threshold_native_px: float = 1.0
+    """A TSE match shows parallax when it lies farther than this (the camera's own px: a few times
+    keypoint noise at any resolution) from the best homography between the two frames."""
+    min_parallax_fraction: float = 0.1
+    """A TSE frame pair that must show motion has motion evidence when this share of its verified
+    matches, or ``epipolar.min_matches`` of them if fewer (and at least 2), show parallax; else (a
+    frozen, static or zoomed frame pair) it counts as failed (``no_motion``). Keypoint noise and
+    mismatches put a few percent of an exact homography's matches past
+    ``parallax_threshold_native_px``; a driving scene's depth puts a large share there."""
+    parallax_depth_m: float = 30.0
+    """A frame pair must show motion evidence when its camera's travel t (ego poses, else the
+    conditioned speed; unknown: always) gives scene content this far away a parallax f t / Z of
+    at least ``parallax_threshold_native_px`` against the far background (f: the camera's focal
+    length, its own px): kerbs, lane markings, vehicles and roadside objects within 30 m."""
+    direction_frame_step: int = 2
+    """Travel directions are recovered on every this-many-th TSE frame pair of each camera."""
+    direction_tolerance_deg: float = 30.0
+    """``guard_views``: two or more cameras whose median recovered travel direction is farther than
+    this from the one their extrinsics and the expected ego motion give show other cameras' views."""
+    max_reversed_fraction: float = 0.25
+    """``guard_time``: more than this share of scored frame pairs travelling over 90 degrees off
+    the expected direction is a reversed or shuffled clip."""
+    min_scored_pairs: int = 3
+    """A camera with fewer scored frame pairs than this is not judged by the direction guards (one
+    pair's E can be wrong); with no camera judged both read None."""
+    duplicate_correlation: float = 0.95
+    """``guard_views``: two cameras whose zero-mean grey thumbnails correlate at least this much
+    (directly or mirrored) are copies of one view."""
+    thumbnail_px: int = 64
+    """Width (px) of the thumbnails compared for duplicate views."""
+    thumbnail_frame_step: int = 4
+    """Duplicate views are compared on every this-many-th frame."""
+    pose_yaw_tolerance_deg: float = 2.0
+    """``pose_plausible``: structure from motion's yaw change over the clip must lie within this
+    plus ``pose_yaw_tolerance_fraction`` x |flow yaw| of the one dense flow reads (planar model)."""
+    pose_yaw_tolerance_fraction: float = 0.2
+    """See ``pose_yaw_tolerance_deg``."""
+    pose_min_travel_m: float = 0.1
+    """``pose_plausible``: a multi-camera reconstruction (metric scale) of a clip whose flow moves
+    must travel at least this far; less is a rotation-only solution."""
+
+    def validate(self) -> None:
+        above(self, 0, "parallax_threshold_native_px", "parallax_depth_m", "direction_tolerance_deg")
+        above(self, 0, "duplicate_correlation")
+        in_range(self, "min_parallax_fraction", 0, 1)
+        at_least(self, 1, "direction_frame_step", "min_scored_pairs", "thumbnail_frame_step")
+        at_least(self, 8, "thumbnail_px")
+        in_range(self, "max_reversed_fraction", 0, 1)
+        at_least(self, 0, "pose_yaw_tolerance_deg", "pose_yaw_tolerance_fraction", "pose_min_travel_m")
+
+
+@dataclasses.dataclass
 class EvalConfig:
     """The whole protocol. ``metrics`` picks what runs."""
 
@@ -259,6 +322,8 @@ class EvalConfig:
     """SfM."""
     trajectory: TrajectoryConfig = dataclasses.field(default_factory=TrajectoryConfig)
     """Trajectory errors."""
+    guard: GuardConfig = dataclasses.field(default_factory=GuardConfig)
+    """Guards against degenerate videos."""
 
     def validate(self) -> None:
         unknown = sorted(set(self.metrics) - set(ALL_METRICS))
@@ -266,6 +331,7 @@ class EvalConfig:
             raise DrivewmError(f"eval config: unknown metric(s) {unknown}; known: {list(ALL_METRICS)}")
         require(len(self.metrics) > 0, "metrics", self.metrics, f"a non-empty subset of {list(ALL_METRICS)}")
         self.trajectory.validate()
+        self.guard.validate()
 
 
 EVAL_RECIPES = RecipeBook("eval", EvalConfig, {"default": {}}, "default", recipes="eval")

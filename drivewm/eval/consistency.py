@@ -2,7 +2,7 @@
 
 TSE (Cosmos paper, multi-view table; docs/eval-protocol.md): per camera, frames t and t + frame_gap are
 matched, keypoints rectified to the canonical pinhole, an F fitted robustly, and the pair scored by
-the median Sampson error of its verified matches (within ``verify_threshold_px`` of the fitted F)
+the median Sampson error of its verified matches (within ``verify_threshold_native_px`` of the fitted F)
 under (a) that fitted F and (b), when ego poses are known, the F implied by the ego motion and the
 camera's extrinsics, with the ego pose at each image's own exposure time (drivewm.eval.exposure).
 CSE: for every pair of cameras whose frusta overlap (from the rig geometry, not names), the distinct
@@ -18,11 +18,13 @@ pairs only (the Cosmos-style figure) and the value in the native pixels of the r
 
 from __future__ import annotations
 
+import functools
 import itertools
+from collections.abc import Callable
 
 import numpy as np
 
-from drivewm.eval.config import ConsistencyConfig, EpipolarConfig
+from drivewm.eval.config import ConsistencyConfig, EpipolarConfig, GuardConfig
 from drivewm.eval.epipolar import (
     FIT_FAILED,
     NO_MOTION,
@@ -36,6 +38,15 @@ from drivewm.eval.epipolar import (
     sampson_px,
     score_matches,
     verified_mask,
+)
+from drivewm.eval.guards import (
+    EgoPrior,
+    angle_deg,
+    camera_travel_m,
+    expected_travel_cam,
+    motion_demanded,
+    motion_evidence,
+    travel_direction_cam,
 )
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import Camera, Rig, invert_T, pixel_rays, project, transform_points
@@ -99,30 +110,32 @@ def _score_pair(
     K_c: np.ndarray,
     cfg: EpipolarConfig,
     min_verified: int,
-    check_motion: bool,
+    motion_check: Callable[[Matches], bool] | None,
+    native_px_per_px: float,
 ) -> dict:
     """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated F of
-    each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``)."""
-    F_fit, _ = fit_fundamental(m, cfg)
-    keep = verified_mask(F_fit, m, cfg)
+    each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``), and the verified matches;
+    fit and verification thresholds in the cameras' pixels (``native_px_per_px`` per canonical px).
+    ``motion_check`` (TSE, where the pair's expected parallax demands it): a pair whose verified
+    matches fail it (drivewm.eval.guards.motion_evidence) fails under both F: static points, and a
+    zoomed still, satisfy any F through the epipole."""
+    F_fit, _ = fit_fundamental(m, cfg, native_px_per_px)
+    keep = verified_mask(F_fit, m, cfg, native_px_per_px)
     verified, frames = Matches(m.uv_a[keep], m.uv_b[keep]), frame_of[keep]
     fitted = score_matches(F_fit, verified, cfg)
     if F_fit is None and len(m) >= cfg.min_matches:
         fitted.status = FIT_FAILED
     elif fitted.status == OK and len(verified) < min_verified:
         fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
-    elif fitted.status == OK and check_motion:
-        # Screen-fixed content (a snow overlay, a bonnet) is static in real clips too: what F needs is
-        # enough matches that moved, not a moving median.
-        moved = np.linalg.norm(verified.uv_b - verified.uv_a, axis=1) >= cfg.min_parallax_px
-        if moved.sum() < cfg.min_matches:
-            fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), NO_MOTION)
-    out = {"fitted": fitted}
+    no_motion = fitted.status == OK and motion_check is not None and not motion_check(verified)
+    if no_motion:
+        fitted = SampsonResult(np.zeros(0), float("nan"), len(verified), NO_MOTION)
+    out = {"fitted": fitted, "verified": verified}
     if T_b_from_a is not None:
         Fs = [_calibrated(T, K_c) for T in T_b_from_a]
         cal = _score_calibrated(Fs, frames, verified, cfg)
-        if cal.status == OK and len(verified) < min_verified:
-            cal = SampsonResult(np.zeros(0), float("nan"), len(verified), TOO_FEW_MATCHES)
+        if cal.status == OK and (len(verified) < min_verified or no_motion):
+            cal = SampsonResult(np.zeros(0), float("nan"), len(verified), NO_MOTION if no_motion else TOO_FEW_MATCHES)
         out["calibrated"] = cal
     return out
 
@@ -135,29 +148,77 @@ def temporal_sampson(
     cfg: ConsistencyConfig,
     matcher: FrameMatcher,
     ego_at_camera: dict[str, np.ndarray] | None = None,
+    guard_cfg: GuardConfig | None = None,
+    prior: EgoPrior | None = None,
 ) -> dict:
     """TSE of a clip. ``videos``: uint8 (T, H, W, 3) per camera of ``rig``; ``T_world_from_ego``
     (T, 4, 4) or None; ``ego_at_camera`` (optional): per camera, the ego poses (T, 4, 4) at that
-    camera's exposure times (drivewm.eval.exposure.ego_at_cameras), used instead of ``T_world_from_ego``."""
+    camera's exposure times (drivewm.eval.exposure.ego_at_cameras), used instead of ``T_world_from_ego``.
+    Also returns ``direction_errors_deg`` (per camera, the angles between recovered and expected
+    travel of every ``guard_cfg.direction_frame_step``-th pair; drivewm.eval.guards) and
+    ``motion_fraction`` (:func:`motion_fraction`); ``prior``: the expected ego travel direction
+    and speed without poses (drivewm.eval.guards.ego_prior; default: forward, speed unknown)."""
+    guard_cfg = guard_cfg or GuardConfig()
+    prior = prior or EgoPrior(np.array([1.0, 0.0, 0.0]), None, 0.0)
     K_c = canonical_K(epi_cfg)
+    scale = {cam.name: native_px_per_canonical_px(cam, K_c) for cam in rig.cameras}
     matcher.prefetch(videos)
 
     def score(task: tuple[Camera, int]) -> dict:
         cam, t = task
         frames, u = videos[cam.name], t + cfg.frame_gap
         m = rectify_matches(matcher.match((cam.name, t), frames[t], (cam.name, u), frames[u]), cam, cam, K_c)
+        ego = None if T_world_from_ego is None else (ego_at_camera or {}).get(cam.name, T_world_from_ego)
         T_rel = None
-        if T_world_from_ego is not None:
-            ego = (ego_at_camera or {}).get(cam.name, T_world_from_ego)
+        if ego is not None:
             T_wc = ego @ cam.T_ego_from_cam
             T_rel = [invert_T(T_wc[u]) @ T_wc[t]]
-        return _score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, True)
+        travel_m = camera_travel_m(cam, t, u, ego, prior.speed_mps, prior.fps)
+        demanded = motion_demanded(focal_native_px(cam), travel_m, guard_cfg)
+        check = None
+        if demanded:
+            parallax_px = guard_cfg.parallax_threshold_native_px / scale[cam.name]
+            check = functools.partial(motion_evidence, cfg=guard_cfg, epi_cfg=epi_cfg, parallax_px=parallax_px)
+        out = _score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, check, scale[cam.name])
+        out["motion_demanded"] = demanded
+        if t % guard_cfg.direction_frame_step == 0 and out["fitted"].status == OK:
+            forward = prior.forward_ego
+            out["direction_deg"] = _direction_error(out["verified"], cam, t, u, ego, forward, K_c, epi_cfg, scale)
+        return out
 
     tasks = [(cam, t) for cam in rig.cameras for t in range(len(videos[cam.name]) - cfg.frame_gap)]
     scores = matcher.map(score, tasks)
     per_camera = {cam.name: [r for (c, _), r in zip(tasks, scores) if c is cam] for cam in rig.cameras}
-    scale = {cam.name: native_px_per_canonical_px(cam, K_c) for cam in rig.cameras}
-    return summarize(per_camera, {g: scale[g] for g in per_camera}, epi_cfg.failed_pair_px)
+    out = summarize(per_camera, {g: scale[g] for g in per_camera}, epi_cfg.failed_pair_px)
+    out["direction_errors_deg"] = {
+        c: [r["direction_deg"] for r in rs if r.get("direction_deg") is not None] for c, rs in per_camera.items()
+    }
+    out["motion_fraction"] = motion_fraction(scores)
+    return out
+
+
+def motion_fraction(scores: list[dict]) -> float:
+    """The share of frame pairs with motion evidence among those that demanded it and had an F fit
+    (status ok or no_motion): a pair too blurred or dark to verify enough matches already counts as
+    failed in TSE and says nothing about motion. 0 when pairs demanded motion and none had a fit
+    (no evidence of motion anywhere, e.g. a flat grey clip); NaN when no pair demanded it."""
+    fitted = [r["fitted"].status for r in scores if r["motion_demanded"]]
+    judged = [status == OK for status in fitted if status in (OK, NO_MOTION)]
+    if not fitted:
+        return float("nan")
+    return float(np.mean(judged)) if judged else 0.0
+
+
+def focal_native_px(camera: Camera) -> float:
+    """The camera's focal length (its own px): sqrt(fx fy)."""
+    return float(np.sqrt(camera.K[0, 0] * camera.K[1, 1]))
+
+
+def _direction_error(verified, cam, t, u, ego, forward_ego, K_c, epi_cfg, scale) -> float | None:
+    """Angle (degrees) between the travel the pair's verified matches show and the expected one."""
+    expected = expected_travel_cam(cam, t, u, ego, forward_ego)
+    seen = travel_direction_cam(verified, K_c, epi_cfg, scale[cam.name]) if expected is not None else None
+    return None if seen is None else angle_deg(seen, expected)
 
 
 def _pooled_matches(videos, cam_a: Camera, cam_b: Camera, matcher: FrameMatcher, K_c) -> tuple[Matches, np.ndarray]:
@@ -206,7 +267,8 @@ def cross_sampson(
             T_rel = list(invert_T(T_wb) @ T_wa)
         else:
             T_rel = [T_b_from_a] * num_frames
-        return _score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, False), pooled
+        scale = 0.5 * (native_px_per_canonical_px(cam_a, K_c) + native_px_per_canonical_px(cam_b, K_c))
+        return _score_pair(pooled, T_rel, frame_of, K_c, epi_cfg, min_verified, None, scale), pooled
 
     matcher.prefetch(videos, {c for p in pairs for c in p})
     for (name_a, name_b), (scored, pooled) in zip(pairs, matcher.map(score, pairs)):

@@ -13,7 +13,6 @@ import dataclasses
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from drivewm.eval.config import EpipolarConfig
 from drivewm.eval.matching import Matches
@@ -51,13 +50,21 @@ def sampson_px(F: np.ndarray, x_a: np.ndarray, x_b: np.ndarray) -> np.ndarray:
     return np.sqrt(sampson_distance_sq(F, x_a, x_b))
 
 
-def fit_fundamental(m: Matches, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """Robust F (x_b^T F x_a = 0) with cv2.USAC_MAGSAC (Barath et al. 2020); (None, empty) when it fails."""
+def fit_fundamental(
+    m: Matches, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """Robust F (x_b^T F x_a = 0) with cv2.USAC_MAGSAC (Barath et al. 2020) at ``ransac_threshold_native_px``
+    (``native_px_per_px``: the cameras' pixels per pixel of ``m``); (None, empty) when it fails."""
     if len(m) < max(cfg.min_matches, 8):
         return None, np.zeros(len(m), bool)
     try:
         F, mask = cv2.findFundamentalMat(
-            m.uv_a, m.uv_b, cv2.USAC_MAGSAC, cfg.ransac_threshold_px, cfg.ransac_confidence, cfg.ransac_max_iters
+            m.uv_a,
+            m.uv_b,
+            cv2.USAC_MAGSAC,
+            cfg.ransac_threshold_native_px / native_px_per_px,
+            cfg.ransac_confidence,
+            cfg.ransac_max_iters,
         )
     except cv2.error:  # USAC asserts on degenerate samples (e.g. all matches on one plane) instead of failing
         return None, np.zeros(len(m), bool)
@@ -66,64 +73,44 @@ def fit_fundamental(m: Matches, cfg: EpipolarConfig) -> tuple[np.ndarray | None,
     return F / np.linalg.norm(F), mask.reshape(-1).astype(bool)
 
 
-def fit_essential(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """Robust E from matches in pixels of a camera with intrinsics K (both views), USAC_MAGSAC."""
-    if len(m) < max(cfg.min_matches, 5):
-        return None, np.zeros(len(m), bool)
-    try:
-        E, mask = cv2.findEssentialMat(
-            m.uv_a,
-            m.uv_b,
-            K,
-            cv2.USAC_MAGSAC,
-            cfg.ransac_confidence,
-            cfg.ransac_threshold_px,
-            maxIters=cfg.ransac_max_iters,
-        )
-    except cv2.error:
-        return None, np.zeros(len(m), bool)
-    if E is None or E.shape != (3, 3):
-        return None, np.zeros(len(m), bool)
-    return E, mask.reshape(-1).astype(bool)
-
-
 #: recoverPose's triangulation cut-off in baselines. OpenCV's default (50) drops every point farther
 #: than 50 baselines from its cheirality count and mask: on a driving stereo pair (0.5 m baseline,
 #: scene to 100 m and beyond) that is nearly all of them. Far points are valid epipolar inliers.
 CHEIRALITY_DISTANCE_BASELINES = 1e9
 
 
-def relative_pose(m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> tuple[np.ndarray | None, np.ndarray]:
-    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) from E, and the inlier mask.
-
-    The inliers are E's RANSAC inliers: cheirality (cv2.recoverPose, points at any distance) only
-    picks which of E's four (R, t) decompositions is in front of both cameras (H&Z sec. 9.6.3); a far
-    point's triangulated depth sign is noise and says nothing about the match. (None, empty mask)
-    when the fit fails."""
-    E, mask = fit_essential(m, K, cfg)
-    if E is None:
-        return None, mask
-    _, R, t, _, _ = cv2.recoverPose(
-        E, m.uv_a, m.uv_b, K, distanceThresh=CHEIRALITY_DISTANCE_BASELINES, mask=mask.astype(np.uint8)[:, None].copy()
-    )
-    T = refine_relative_pose(make_T(R, t.reshape(3)), Matches(m.uv_a[mask], m.uv_b[mask]), K, cfg)
-    return T, mask
+def normalised(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) of a pinhole with intrinsics K -> normalised image coordinates (N, 2) (K^-1 x)."""
+    return (np.c_[uv, np.ones(len(uv))] @ np.linalg.inv(K).T)[:, :2]
 
 
-def refine_relative_pose(T_b_from_a: np.ndarray, m: Matches, K: np.ndarray, cfg: EpipolarConfig) -> np.ndarray:
-    """Gold-standard style refinement of a minimal-solver pose: minimise the Huber-robust Sampson
-    error (px) of the inliers over rotation (axis-angle) and translation direction (H&Z sec. 11.4.3)."""
-    if len(m) < 8:
-        return T_b_from_a
-    r0 = cv2.Rodrigues(T_b_from_a[:3, :3])[0].reshape(3)
-    t0 = T_b_from_a[:3, 3] / np.linalg.norm(T_b_from_a[:3, 3])
+def relative_pose(
+    m: Matches, K: np.ndarray, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """T_b_from_a (4x4, unit-norm translation: monocular scale is unknown) and the inlier mask, from
+    matches in pixels of a pinhole with intrinsics K (both views).
 
-    def residuals(p: np.ndarray) -> np.ndarray:
-        T = make_T(cv2.Rodrigues(p[:3])[0], p[3:] / np.linalg.norm(p[3:]))
-        return sampson_px(fundamental_from_T(K, K, T), m.uv_a, m.uv_b)
-
-    sol = least_squares(residuals, np.concatenate([r0, t0]), loss="huber", f_scale=cfg.ransac_threshold_px)
-    return make_T(cv2.Rodrigues(sol.x[:3])[0], sol.x[3:] / np.linalg.norm(sol.x[3:]))
+    E is fitted on normalised coordinates by OpenCV's USAC_ACCURATE (graph-cut local optimisation,
+    Barath & Matas 2018, and a final least-squares fit on the inliers) with an inlier threshold of
+    ``pose_threshold_native_px`` native pixels (``native_px_per_px``: native pixels per pixel of K,
+    drivewm.eval.consistency.native_px_per_canonical_px), so a 1600 px and a 320 px camera keep the
+    same matches. Cheirality (cv2.recoverPose, points at any distance) only picks which of E's four
+    (R, t) decompositions is in front of both cameras (H&Z sec. 9.6.3); a far point's triangulated
+    depth sign is noise and says nothing about the match. (None, empty mask) when the fit fails."""
+    if len(m) < max(cfg.min_matches, 5):
+        return None, np.zeros(len(m), bool)
+    x_a, x_b = normalised(m.uv_a, K), normalised(m.uv_b, K)
+    threshold = cfg.pose_threshold_native_px / native_px_per_px / np.sqrt(K[0, 0] * K[1, 1])
+    try:
+        E, mask = cv2.findEssentialMat(
+            x_a, x_b, np.eye(3), cv2.USAC_ACCURATE, cfg.ransac_confidence, threshold, maxIters=cfg.ransac_max_iters
+        )
+    except cv2.error:  # USAC asserts on degenerate samples instead of failing
+        return None, np.zeros(len(m), bool)
+    if E is None or E.shape != (3, 3):
+        return None, np.zeros(len(m), bool)
+    _, R, t, _, _ = cv2.recoverPose(E, x_a, x_b, np.eye(3), distanceThresh=CHEIRALITY_DISTANCE_BASELINES, mask=mask)
+    return make_T(R, t.reshape(3)), mask.reshape(-1).astype(bool)
 
 
 def calibrated_fundamental(K_canonical: np.ndarray, T_b_from_a: np.ndarray) -> np.ndarray:
@@ -144,11 +131,14 @@ class SampsonResult:
         return {"median_px": self.median_px, "num_matches": self.num_matches, "status": self.status}
 
 
-def verified_mask(F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> np.ndarray:
-    """(N,) bool: the matches within ``verify_threshold_px`` of the fitted F (none when the fit failed)."""
+def verified_mask(
+    F_fit: np.ndarray | None, m: Matches, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> np.ndarray:
+    """(N,) bool: the matches within ``verify_threshold_native_px`` (``native_px_per_px``: the cameras'
+    pixels per pixel of ``m``) of the fitted F (none when the fit failed)."""
     if F_fit is None or len(m) == 0:
         return np.zeros(len(m), bool)
-    return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_px
+    return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_native_px / native_px_per_px
 
 
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:

@@ -158,7 +158,7 @@ def sfm_image_pairs(rig: Rig, num_frames: int, cfg: PoseConfig, pairs: list[tupl
 def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, matcher, epi_cfg, pairs) -> list[str]:
     """Cameras, images, the matcher's keypoints and matches (F-verified for verify='drivewm') into a
     new COLMAP database; returns the image-name pairs written ("CAM/TTTT.png CAM/TTTT.png")."""
-    from drivewm.eval.consistency import overlapping_pairs
+    from drivewm.eval.consistency import native_px_per_canonical_px, overlapping_pairs
     from drivewm.eval.epipolar import canonical_K, fit_fundamental, rectify_matches, verified_mask
     from drivewm.eval.matching import Matches
 
@@ -173,8 +173,9 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
         if cfg.verify == "drivewm":
             fa, fb = matcher.features(a, None), matcher.features(b, None)
             m = rectify_matches(Matches(fa.uv[idx[:, 0]], fb.uv[idx[:, 1]]), rig.camera(a[0]), rig.camera(b[0]), K_c)
-            F, _ = fit_fundamental(m, epi_cfg)
-            idx = idx[verified_mask(F, m, epi_cfg)]
+            scale = 0.5 * sum(native_px_per_canonical_px(rig.camera(c), K_c) for c in (a[0], b[0]))
+            F, _ = fit_fundamental(m, epi_cfg, scale)
+            idx = idx[verified_mask(F, m, epi_cfg, scale)]
         return idx
 
     matcher.prefetch(videos)

@@ -27,10 +27,18 @@ from drivewm.clips.shards import spread
 from drivewm.config import to_dict
 from drivewm.errors import DrivewmError, no_room
 from drivewm.eval.adherence import adherence, condition_scores
-from drivewm.eval.config import EvalConfig
+from drivewm.eval.config import EpipolarConfig, EvalConfig
 from drivewm.eval.consistency import cross_sampson, native_px_per_canonical_px, overlapping_pairs, temporal_sampson
+from drivewm.eval.ego import forward_camera
 from drivewm.eval.epipolar import canonical_K
 from drivewm.eval.framing import WHOLE_VIDEO, Framing, input_record
+from drivewm.eval.guards import (
+    direction_verdict,
+    duplicate_views,
+    ego_prior,
+    ego_yaw_deg,
+    two_view_rotations,
+)
 from drivewm.eval.inputs import EvalItem, load_items
 from drivewm.eval.matching import FrameMatcher, check_threads
 from drivewm.eval.paths_record import ego_paths
@@ -73,6 +81,17 @@ AGGREGATE_KEYS = (
     "adherence_weather",
     "adherence_time_of_day",
 )
+#: Per-clip figures a failed guard (``guard_motion``, ``guard_time``, ``guard_views``) voids: pass
+#: rates read 0, every other one NaN, and aggregates count them as failures (:func:`aggregate`).
+VOIDED_KEYS = (
+    *(k for k in AGGREGATE_KEYS if not k.startswith("adherence")),
+    "yaw_change_deg",
+    "path_ratio",
+)
+#: Pass rates: a voided one reads 0 (failed), not NaN.
+PASS_RATES = ("pose_success", "pose_success_path", "registered_fraction", "pose_auc")
+#: Sampson figures a voided clip counts at ``epipolar.failed_pair_px`` in the aggregates.
+SAMPSON_KEYS = tuple(f"{m}{s}" for m in ("tse", "tse_calibrated", "cse", "cse_calibrated") for s in ("", "_counted"))
 #: Per-clip fields aggregated as a median (``KEY_median``): a ratio where one clip's exploded path (a
 #: reconstruction 5,000x its drive) would carry a mean.
 MEDIAN_KEYS = ("path_ratio",)
@@ -117,6 +136,7 @@ def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResu
     videos = item.videos()
 
     matcher = FrameMatcher(cfg.match, threads)
+    _view_copies(item, videos, cfg, metrics)
     stages = [(n, fn) for n, fn in _stages() if n in cfg.metrics or (n == "pose" and "traj" in cfg.metrics)]
     names = [n for n, _ in stages]
     with ThreadPoolExecutor(1) as side:
@@ -136,7 +156,35 @@ def _evaluate_metrics(item: EvalItem, cfg: EvalConfig, threads: int) -> ClipResu
                 _merge(metrics, artifacts, *pose.result())  # in stage order: the same JSON as one thread
             else:
                 _timed_stage(name, fn, item, videos, cfg, matcher, metrics, artifacts)
+    if "sfm" in artifacts:
+        t0 = time.perf_counter()
+        _pose_plausibility(item, videos, cfg, matcher, metrics, artifacts)
+        metrics["seconds"]["pose_plausibility"] = time.perf_counter() - t0
+    _void_guarded(metrics)
     return ClipResult(item.key, metrics, artifacts)
+
+
+def _view_copies(item, videos, cfg, metrics) -> None:
+    """``duplicate_views``: camera pairs whose videos are (mirror) copies; any fails ``guard_views``."""
+    if len(item.rig.cameras) < 2:
+        return
+    copies = duplicate_views(videos, item.rig, cfg.guard)
+    metrics["duplicate_views"] = copies
+    if copies:
+        metrics["guard_views"] = False
+
+
+def _void_guarded(metrics: dict) -> None:
+    """A failed guard voids the clip's headline figures (:data:`VOIDED_KEYS`): pass rates read 0,
+    the rest NaN; ``voided_by`` names the guards, ``status["voided"]`` says so."""
+    failed = [g for g in ("guard_motion", "guard_time", "guard_views") if metrics.get(g) is False]
+    if not failed:
+        return
+    metrics["voided_by"] = failed
+    metrics["status"]["voided"] = ", ".join(failed)
+    for key in VOIDED_KEYS:
+        if key in metrics:
+            metrics[key] = 0.0 if key in PASS_RATES else math.nan
 
 
 def _pose_beside(ready: threading.Event, item, videos, cfg, matcher) -> tuple[dict, dict]:
@@ -189,8 +237,28 @@ def _tse(item, videos, cfg, matcher, metrics, artifacts) -> None:
         )
         return
     ego = _ego_at_cameras(item, cfg)
-    r = temporal_sampson(videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego)
+    prior = ego_prior(item.trajectory_ego, item.trajectory_dt_s, item.fps)
+    r = temporal_sampson(
+        videos, item.rig, item.T_world_from_ego, cfg.epipolar, cfg.consistency, matcher, ego, cfg.guard, prior
+    )
     _put_sampson(metrics, "tse", r)
+    _put_direction_guards(cfg, r, metrics)
+
+
+def _put_direction_guards(cfg, r: dict, metrics: dict) -> None:
+    """``motion_fraction`` and ``guard_motion`` (at least half of the frame pairs whose expected
+    parallax demands motion evidence must show it, drivewm.eval.consistency.motion_fraction; without
+    ego poses or a conditioned trajectory every pair demands it, as a road vehicle drives),
+    ``direction_error_deg`` per camera, ``guard_time`` and ``guard_views``
+    (drivewm.eval.guards.direction_verdict); a guard that cannot decide is None."""
+    metrics["motion_fraction"] = fraction = r["motion_fraction"]
+    metrics["guard_motion"] = bool(fraction >= 0.5) if np.isfinite(fraction) else None
+    verdict = direction_verdict(r["direction_errors_deg"], cfg.guard)
+    metrics["direction_error_deg"] = verdict.error_deg
+    metrics["reversed_fraction"] = verdict.reversed_fraction
+    metrics["guard_time"] = verdict.time_ok
+    if metrics.get("guard_views") is not False:  # duplicate views already failed it
+        metrics["guard_views"] = verdict.views_ok
 
 
 def _ego_at_cameras(item, cfg) -> dict[str, np.ndarray] | None:
@@ -231,9 +299,10 @@ OVERLAP_WIDTH_PX = 320
 def _overlap_disagreement(rig, videos: dict[str, np.ndarray], step: int) -> float:
     """Mean colour difference (8-bit levels) where two cameras see the same flat-world point, over
     every ``step``-th frame (drivewm.views.blend.overlap_disagreement), every camera at the first
-    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. Real clips read about 8, the parallax of what
-    stands beside the road; views stitched through a flat world read about 2, so a CSE won by
-    stitching shows here (docs/eval-protocol.md)."""
+    one's size, at most :data:`OVERLAP_WIDTH_PX` wide. The simulated drives read about 8, the parallax
+    of what stands beside the road (real nuScenes far more, with exposure differences between
+    cameras); views stitched through a flat world read about 2, so a CSE won by stitching shows
+    here as a value far below the real clips' of the same rig (docs/eval-protocol.md)."""
     from drivewm.multiview.coding import resize_views
     from drivewm.views.blend import overlap_disagreement
 
@@ -267,10 +336,48 @@ def _pose(item, videos, cfg, matcher, metrics, artifacts, database_ready=None) -
     sfm = run_sfm(
         videos, item.rig, cfg.pose, matcher=matcher, epi_cfg=cfg.epipolar, pairs=pairs, database_ready=database_ready
     )
-    metrics["pose_success"] = float(sfm.all_registered)
+    metrics["pose_success"] = float(sfm.all_registered)  # and pose_plausible (_pose_plausibility)
     metrics["registered_fraction"] = sfm.registered_fraction
     metrics["seconds"].update({f"pose_{stage}": s for stage, s in sfm.seconds.items()})  # parts of "pose"
     artifacts["sfm"] = sfm
+
+
+def _pose_plausibility(item, videos, cfg, matcher, metrics, artifacts) -> None:
+    """``pose_plausible``: the reconstruction turns as two-view geometry of the trajectory camera
+    does, frame to frame (drivewm.eval.guards.two_view_rotations; yaw change within
+    ``guard.pose_yaw_tolerance_deg`` + ``pose_yaw_tolerance_fraction`` x |two-view yaw|), and, on a
+    rig with a metric scale (several cameras), travels ``pose_min_travel_m`` where half the frame
+    pairs show parallax (no rotation-only solution). The calibration is held fixed in COLMAP, so
+    the intrinsics are respected by construction. Where it fails, ``pose_success`` and
+    ``pose_success_path`` read 0 and ``yaw_change_deg`` is the two-view one. None (undecided) when
+    SfM registers fewer than 3 frames of the camera."""
+    camera = item.rig.camera(cfg.trajectory.camera or forward_camera(item.rig))
+    est = ego_from_sfm(artifacts["sfm"], item.rig, camera.name)
+    if est.registered.sum() < 3:
+        metrics["pose_plausible"] = None
+        return
+    K_c = canonical_K(cfg.epipolar)
+    scale = native_px_per_canonical_px(camera, K_c)
+    motion = two_view_rotations(videos[camera.name], camera, matcher, K_c, cfg.epipolar, scale, cfg.guard)
+    sfm_yaw = heading_change_deg(est.T_world_from_ego[est.registered])
+    reg = np.flatnonzero(est.registered)
+    two_view_yaw = ego_yaw_deg(motion.R_first_from_t[reg[0]].T @ motion.R_first_from_t[reg[-1]], camera)
+    metrics["pose_yaw_change_deg"], metrics["two_view_yaw_change_deg"] = sfm_yaw, two_view_yaw
+    g, reasons = cfg.guard, []
+    if abs(sfm_yaw - two_view_yaw) > g.pose_yaw_tolerance_deg + g.pose_yaw_tolerance_fraction * abs(two_view_yaw):
+        reasons.append(f"turns {sfm_yaw:.1f} deg where two-view geometry turns {two_view_yaw:.1f}")
+    positions = est.T_world_from_ego[est.registered][:, :3, 3]
+    travel_m = float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
+    if len(item.rig.cameras) > 1 and motion.moved.mean() >= 0.5 and travel_m < g.pose_min_travel_m:
+        reasons.append(f"travels {travel_m:.2f} m where the frames move (rotation only)")
+    metrics["pose_plausible"] = not reasons
+    if reasons:
+        metrics["status"]["pose_plausible"] = "; ".join(reasons)
+        for key in ("pose_success", "pose_success_path"):
+            if key in metrics:
+                metrics[key] = 0.0
+        if metrics.get("yaw_source") == "sfm":
+            metrics["yaw_change_deg"], metrics["yaw_source"] = two_view_yaw, "two_view"
 
 
 def _traj(item, videos, cfg, matcher, metrics, artifacts) -> None:
@@ -373,21 +480,32 @@ def _adherence(item, videos, cfg, matcher, metrics, artifacts) -> None:
     metrics["adherence_time_of_day"] = result.get("time_of_day_match", math.nan)
 
 
-def aggregate(results: list[ClipResult]) -> dict:
+def aggregate(results: list[ClipResult], failed_px: float = EpipolarConfig.failed_pair_px) -> dict:
     """Top-level means over clips of finite values (medians for MEDIAN_KEYS, as ``KEY_median``);
-    ``nan_clips`` counts clips left out per key."""
+    ``nan_clips`` counts clips left out per key. A clip whose guards voided its figures counts as a
+    failure: its Sampson figures (:data:`SAMPSON_KEYS`) at ``failed_px``, its pass rates at 0, and
+    ``voided_clips`` counts it per key."""
     out: dict = {"num_clips": len(results), "num_failed_clips": sum("error" in r.metrics for r in results)}
-    nan_clips = {}
+    nan_clips, voided = {}, {}
     reduced = [(k, k, np.mean) for k in AGGREGATE_KEYS] + [(k, f"{k}_median", np.median) for k in MEDIAN_KEYS]
     for key, name, reduce in reduced:
-        values = [r.metrics[key] for r in results if key in r.metrics]
+        values = [_counted(r.metrics, key, failed_px) for r in results if key in r.metrics]
         finite = [v for v in values if v is not None and np.isfinite(v)]
         if values:
             out[name] = float(reduce(finite)) if finite else math.nan
             nan_clips[name] = len(values) - len(finite)
+            voided[name] = sum(bool(r.metrics.get("voided_by")) for r in results if key in r.metrics)
     out["nan_clips"] = nan_clips
+    out["voided_clips"] = voided
     out["seconds_per_clip"] = _mean_seconds(results)
     return out
+
+
+def _counted(metrics: dict, key: str, failed_px: float):
+    """A clip's value of ``key`` in the aggregates: a voided Sampson figure at ``failed_px``."""
+    if metrics.get("voided_by") and key in SAMPSON_KEYS:
+        return failed_px
+    return metrics[key]
 
 
 def _mean_seconds(results: list[ClipResult]) -> dict[str, float]:
@@ -463,7 +581,7 @@ def evaluate(
     if not items:
         raise DrivewmError(f"{location}: no clips to evaluate")
     results = run_items(items, cfg, workers, progress, threads)
-    metrics = aggregate(results)
+    metrics = aggregate(results, cfg.epipolar.failed_pair_px)
     metrics["clips"] = {r.key: r.metrics for r in results}
     metrics["config"] = to_dict(cfg)
     metrics["location"] = str(location)

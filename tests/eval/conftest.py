@@ -1,4 +1,5 @@
-"""Session fixtures of the eval tests: one synthetic nuscenes6 clip (exact geometry) as an EvalItem."""
+"""Session fixtures of the eval tests: one synthetic nuscenes6 clip (exact geometry) as an EvalItem;
+the CLI golden chain's two small simulated drives as clips."""
 
 from __future__ import annotations
 
@@ -44,3 +45,18 @@ def synth_item(synth_clip6):
 @pytest.fixture(scope="session")
 def synth_videos(synth_item) -> dict[str, np.ndarray]:
     return synth_item.videos()
+
+
+@pytest.fixture(scope="session")
+def small_clip_dir(tmp_path_factory):
+    """The CLI golden chain's drives (tests/test_outputs_unchanged.py: highway merge in rain at dusk,
+    160x96, seeds 11 and 12, 1.8 s) curated with the ``test`` recipe: two 17-frame clips."""
+    from drivewm.curate import curate, load_curate_config
+    from drivewm.sim import SimConfig, simulate
+
+    root = tmp_path_factory.mktemp("small")
+    fields = dict(source="highway", scenario="merge", weather="rain", time_of_day="dusk", duration_s=1.8)
+    for seed in (11, 12):
+        simulate(SimConfig(**fields, width=160, height=96, seed=seed), root / "logs" / f"d{seed}.mcap")
+    curate(sorted((root / "logs").glob("*.mcap")), root / "clips", load_curate_config("test"), workers=1)
+    return root / "clips"

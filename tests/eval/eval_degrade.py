@@ -1,5 +1,7 @@
-"""Degenerate copies of real videos that a consistency benchmark must not prefer (issue 14, item 8):
-blurred, noised, frozen and shuffled, each a uint8 (T, H, W, 3) per camera, like the original."""
+"""Degenerate copies of real videos that a consistency benchmark must not prefer: blurred, noised,
+frozen, shuffled, time-reversed, a still slowly zoomed, and (several cameras) one view copied into
+all and every camera shifted to its neighbour's video; each a uint8 (T, H, W, 3) per camera, like
+the original."""
 
 from __future__ import annotations
 
@@ -37,7 +39,47 @@ def shuffled(videos: dict[str, np.ndarray], seed: int = 0) -> dict[str, np.ndarr
     return {c: v[rng.permutation(len(v))] for c, v in videos.items()}
 
 
-DEGRADATIONS = {"blurred": blurred, "noised": noised, "frozen": frozen, "shuffled": shuffled}
+def reversed_time(videos: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every camera's frames last to first."""
+    return {c: v[::-1].copy() for c, v in videos.items()}
+
+
+def zoomed_still(videos: dict[str, np.ndarray], zoom_per_frame: float = 0.01) -> dict[str, np.ndarray]:
+    """The first frame, zoomed about its centre by ``zoom_per_frame`` more each frame: the image
+    motion of driving toward a flat picture, with no parallax."""
+    out = {}
+    for c, v in videos.items():
+        h, w = v.shape[1:3]
+        frames = []
+        for t in range(len(v)):
+            M = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), 0.0, (1 + zoom_per_frame) ** t)
+            frames.append(cv2.warpAffine(v[0], M, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT))
+        out[c] = np.stack(frames)
+    return out
+
+
+def copied_view(videos: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The first camera's video in every camera."""
+    first = next(iter(videos.values()))
+    return {c: first.copy() for c in videos}
+
+
+def shifted_cameras(videos: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every camera shows the next camera's video (rig order, the last the first's)."""
+    names = list(videos)
+    return {c: videos[names[(i + 1) % len(names)]] for i, c in enumerate(names)}
+
+
+DEGRADATIONS = {
+    "blurred": blurred,
+    "noised": noised,
+    "frozen": frozen,
+    "shuffled": shuffled,
+    "reversed": reversed_time,
+    "zoomed_still": zoomed_still,
+}
+#: Degradations of a rig's views: they change nothing on a one-camera rig.
+MULTIVIEW_DEGRADATIONS = {"copied_view": copied_view, "shifted_cameras": shifted_cameras}
 
 
 def worse(key: str, degraded: float | None, real: float | None) -> bool:

@@ -36,10 +36,11 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
     item = EvalItem("grey", rig, 10.0, poses)
     item.videos = lambda: grey  # the decoded frames of a flat grey video
     m = evaluate_item(item, EvalConfig(metrics=["tse", "cse", "pose", "traj"])).metrics
-    # A pair that cannot be scored counts at failed_pair_px (issue 14: a constant frame must not win);
-    # the values were NaN before.
-    assert m["tse"] == 4.0 and m["status"]["tse"] == {"too_few_matches": 8 * 3} and m["tse_counted_fraction"] == 0
-    assert m["cse"] == 4.0 and set(m["status"]["cse"]) == {"too_few_matches"} and math.isnan(m["cse_counted"])
+    # An ego that drives 8 m through frames without motion evidence fails guard_motion, which voids
+    # the clip's headline figures: NaN in the clip, pass rates 0, failures in the aggregates.
+    assert m["guard_motion"] is False and m["voided_by"] == ["guard_motion"] and m["motion_fraction"] == 0.0
+    assert math.isnan(m["tse"]) and m["status"]["tse"] == {"too_few_matches": 8 * 3}
+    assert math.isnan(m["cse"]) and set(m["status"]["cse"]) == {"too_few_matches"}
     assert m["pose_success"] == 0.0 and m["registered_fraction"] == 0.0
     assert m["pose_auc"] == 0.0 and math.isnan(m["pose_error_m"])  # nothing registered: every image counts 0
     assert math.isnan(m["ate"]) and m["status"]["traj"] == "not_registered"
@@ -47,7 +48,8 @@ def test_grey_clip_is_nan_with_status_not_a_crash_or_zero():
 
     agg = aggregate([ClipResult("grey", m, {})])
     assert math.isnan(agg["ate"]) and agg["nan_clips"]["ate"] == 1 and agg["pose_success"] == 0.0
-    assert agg["tse"] == 4.0 and math.isnan(agg["tse_counted"]) and agg["nan_clips"]["tse_counted"] == 1
+    assert agg["tse"] == 4.0 and agg["tse_counted"] == 4.0 and agg["cse"] == 4.0  # voided: counted as failed
+    assert agg["voided_clips"]["tse"] == 1 and agg["nan_clips"]["tse"] == 0
 
 
 def test_path_ratio_is_aggregated_as_a_median_so_one_exploded_path_does_not_carry_it():
@@ -173,7 +175,9 @@ def test_cli_summary_is_strict_json_with_null_for_nan(tmp_path, capsys):
     resolved, _, rest = stdout.partition("\n")  # the resolved config's line comes first
     assert json.loads(resolved)["metrics"] == ["tse", "pose", "traj"]
     summary = json.loads(rest[: rest.rindex("}") + 1])
-    assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1 and summary["tse_counted"] is None
+    assert summary["ate"] is None and summary["nan_clips"]["ate"] == 1
+    # no frame pair shows motion: guard_motion voids the clip, whose TSE counts as failed, not as null
+    assert summary["tse_counted"] == 4.0 and summary["voided_clips"]["tse_counted"] == 1
     metrics = json.loads((out / "metrics.json").read_text())
     assert summary == {k: v for k, v in metrics.items() if k not in ("clips", "config")}
 
