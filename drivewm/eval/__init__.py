@@ -1,6 +1,6 @@
 """The geometric-consistency benchmark (docs/DESIGN.md stage 4): TSE, CSE, pose success, trajectory errors, adherence.
 
-``evaluate(location, rig=None, out_dir=...)`` scores clip shards, per-camera mp4 folders or a grid mp4;
+``evaluate(location, rig=None, out_dir=...)`` scores clip shards, per-camera mp4 folders or a grid video;
 the pieces (matching, epipolar, consistency, sfm, trajectory, adherence) are usable alone.
 ``evaluate`` is imported on first use (:mod:`drivewm.lazy`: it pulls in pycolmap and matplotlib).
 """

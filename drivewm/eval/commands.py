@@ -26,13 +26,13 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "eval",
         help="score clips or generated videos: TSE, CSE, pose success, ATE/RPE/TFE, adherence",
-        description="Score clip shards, a folder of per-camera mp4, or one grid mp4.",
+        description="Score clip shards, a folder of per-camera mp4, or one grid video (mp4, gif, png...).",
     )
     p.add_argument(
         "location",
         nargs="+",
         metavar="LOCATION",
-        help="clip shards (.tar or folder), a folder of CAMERA.mp4 (or of such folders) or a grid .mp4; "
+        help="clip shards (.tar or folder), a folder of CAMERA.mp4 (or of such folders), a grid video (mp4, gif, png); "
         "'distribution GENERATED' (FID/FVD); 'compare EVALDIR ...'",
     )
     p.add_argument("--rig", default=None, help="rig name or YAML (required for mp4 inputs; overrides a clip's own rig)")
@@ -66,7 +66,7 @@ def register(subparsers) -> None:
         help="videos of another aspect ratio than the rig: were they stretched or centre-cropped from it? "
         "(default: refuse them)",
     )
-    p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single mp4, e.g. 2x3")
+    p.add_argument("--grid", default=None, help="ROWSxCOLS of views in a single video or image, e.g. 2x3")
     p.add_argument("--cameras", default=None, help="comma list naming the grid cells row by row ('-' skips a cell)")
     p.add_argument("--crop", type=_crop, metavar="X,Y,W,H", help="pixel box of each frame holding the view(s)")
     p.add_argument("--frames", type=_frames, metavar="START:END", help="the frames scored (END exclusive)")

@@ -1,4 +1,8 @@
-"""What the benchmark reads: clip shards, a folder of per-camera mp4 + a rig, or one grid mp4.
+"""What the benchmark reads: clip shards, a folder of per-camera mp4 + a rig, or one grid video.
+
+A grid video is any single file FFmpeg (through PyAV) decodes: mp4, mov, mkv, webm, an animated GIF,
+or one still image (png, jpg, webp) scored as a one-frame clip (cross-view figures only), as
+generators publish their samples.
 
 Every input becomes a list of :class:`EvalItem` (one per clip) that a worker process can decode
 on its own: clips keep their encoded mp4 bytes; mp4 folders and grid videos keep file paths.
@@ -79,6 +83,10 @@ class EvalItem:
         if len(set(counts.values())) > 1:  # cutting all to the shortest would score a different clip
             raise DrivewmError(f"{self.key}: the cameras' videos have different frame counts {counts}")
         return videos
+
+
+GRID_SUFFIXES = (".mp4", ".mov", ".mkv", ".webm", ".gif", ".png", ".jpg", ".jpeg", ".webp")
+"""File types read as one grid video (each decoded by FFmpeg through PyAV)."""
 
 
 def _decode_file(path: str) -> np.ndarray:
@@ -233,7 +241,7 @@ def load_items(
         return items_from_clip_folders(location, rig_obj, fit)
     if rig_obj is None:
         raise DrivewmError(f"{location}: mp4 inputs need --rig (camera names, intrinsics and extrinsics)")
-    if location.is_file() and location.suffix == ".mp4":
+    if location.is_file() and location.suffix.lower() in GRID_SUFFIXES:
         if not grid:
             if len(rig_obj.cameras) != 1:
                 raise DrivewmError(
@@ -243,4 +251,6 @@ def load_items(
         return items_from_grid(location, rig_obj, GridLayout.parse(grid, cameras or rig_obj.names), fit, framing)
     if location.is_dir():
         return items_from_mp4_folder(location, rig_obj, fit, framing)
-    raise DrivewmError(f"{location}: expected clip shards, a folder of per-camera mp4, or a grid mp4")
+    raise DrivewmError(
+        f"{location}: expected clip shards, a folder of per-camera mp4, or a grid video ({', '.join(GRID_SUFFIXES)})"
+    )

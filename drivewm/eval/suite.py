@@ -563,7 +563,7 @@ def evaluate(
     threads: int | None = None,
     framing: Framing | None = None,
 ) -> dict:
-    """Score clips at ``location`` (shards, mp4 folder or grid mp4; see drivewm.eval.inputs).
+    """Score clips at ``location`` (shards, mp4 folder or grid video; see drivewm.eval.inputs).
 
     Returns the metrics dict (aggregates at the top, per clip under ``clips``); with ``out_dir``
     also writes metrics.json, metrics.md (beside ``reference`` values), error-distribution plots

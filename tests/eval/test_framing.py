@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import io
 import json
 
+import av
+import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -91,6 +94,36 @@ def test_cli_scores_a_published_grid_and_refuses_bad_framing(synth_videos, tmp_p
         assert main(["eval", str(path), "--out", str(tmp_path / name), *common, *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("error:") and message in err[0], (name, err)
+
+
+def _gif(frames: np.ndarray) -> bytes:
+    """An animated GIF (FFmpeg's gif encoder through PyAV, 3-3-2 bit colour) of uint8 RGB frames."""
+    buf = io.BytesIO()
+    with av.open(buf, "w", format="gif") as container:
+        stream = container.add_stream("gif", rate=10)
+        stream.width, stream.height, stream.pix_fmt = frames.shape[2], frames.shape[1], "rgb8"
+        for frame in frames:
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")))
+        container.mux(stream.encode())
+    return buf.getvalue()
+
+
+def test_published_gifs_and_still_images_are_read_as_grids(synth_videos, tmp_path):
+    """A grid published as an animated GIF keeps its frames; a PNG still is a one-frame clip, exact."""
+    names = list(synth_videos)
+    grid = _published_grid({n: v[:4] for n, v in synth_videos.items()}, names, line_px=2, caption_px=16)
+    H, W = grid.shape[1:3]
+    framing = Framing((0, 16, W, H - 16), cell_border_px=2)
+    (tmp_path / "grid.gif").write_bytes(_gif(grid))
+    cv2.imwrite(str(tmp_path / "grid.PNG"), grid[2, :, :, ::-1])
+    for name, frames in (("grid.gif", slice(0, 4)), ("grid.PNG", slice(2, 3))):
+        (item,) = load_items(tmp_path / name, "nuscenes6", "2x3", names, framing=framing)
+        views = item.videos()
+        for cam in names:
+            truth = synth_videos[cam][frames]
+            assert views[cam].shape == truth.shape, (name, cam)
+            error = np.abs(views[cam].astype(int) - truth).mean()
+            assert error == 0 if name.endswith("PNG") else error < 20, (name, cam, error)  # GIF: 256 colours
 
 
 def test_nuscenes_calibrated_rig_is_the_dataset_record():

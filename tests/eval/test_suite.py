@@ -1,4 +1,4 @@
-"""The benchmark end to end: inputs (shards, mp4 folder, grid mp4), CLI outputs, documented failures."""
+"""The benchmark end to end: inputs (shards, mp4 folder, grid video), CLI outputs, documented failures."""
 
 import dataclasses
 import json
