@@ -159,7 +159,7 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
     """Cameras, images, the matcher's keypoints and matches (F-verified for verify='drivewm') into a
     new COLMAP database; returns the image-name pairs written ("CAM/TTTT.png CAM/TTTT.png")."""
     from drivewm.eval.consistency import native_px_per_canonical_px, overlapping_pairs
-    from drivewm.eval.epipolar import canonical_K, fit_fundamental, rectify_matches, verified_mask
+    from drivewm.eval.epipolar import canonical_K, frame_pair_fit, rectify_matches
     from drivewm.eval.matching import Matches
 
     num_frames = len(next(iter(videos.values())))
@@ -174,8 +174,8 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
             fa, fb = matcher.features(a, None), matcher.features(b, None)
             m = rectify_matches(Matches(fa.uv[idx[:, 0]], fb.uv[idx[:, 1]]), rig.camera(a[0]), rig.camera(b[0]), K_c)
             scale = 0.5 * sum(native_px_per_canonical_px(rig.camera(c), K_c) for c in (a[0], b[0]))
-            F, _ = fit_fundamental(m, epi_cfg, scale)
-            idx = idx[verified_mask(F, m, epi_cfg, scale)]
+            _, keep = frame_pair_fit(matcher, a, b, m, epi_cfg, scale)
+            idx = idx[keep]
         return idx
 
     matcher.prefetch(videos)
