@@ -280,10 +280,12 @@ def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> l
 def mapper_options(cfg: PoseConfig):
     """pycolmap.IncrementalPipelineOptions of the protocol: the rig's calibration held fixed, one
     thread, and the global bundle adjustments capped (``ba_global_max_iterations``,
-    ``ba_global_max_refinements``): they are most of a long clip's mapping time."""
+    ``ba_global_max_refinements``): they are most of a long clip's mapping time. No point colours:
+    poses do not use them, and with shared features there are no images to read them from."""
     import pycolmap
 
     options = pycolmap.IncrementalPipelineOptions(
+        extract_colors=False,
         min_model_size=cfg.min_model_size,
         random_seed=cfg.seed,
         num_threads=1,
