@@ -33,11 +33,11 @@ from drivewm.eval.epipolar import (
     SampsonResult,
     calibrated_fundamental,
     canonical_K,
-    fit_fundamental,
+    fit_verified,
+    frame_pair_fit,
     rectify_matches,
     sampson_px,
     score_matches,
-    verified_mask,
 )
 from drivewm.eval.guards import (
     EgoPrior,
@@ -112,15 +112,16 @@ def _score_pair(
     min_verified: int,
     motion_check: Callable[[Matches], bool] | None,
     native_px_per_px: float,
+    fit: tuple | None = None,
 ) -> dict:
     """Scores of one match set (canonical px) under a fitted F and, if known, the calibrated F of
     each frame (``T_b_from_a[t]`` for the matches with ``frame_of == t``), and the verified matches;
     fit and verification thresholds in the cameras' pixels (``native_px_per_px`` per canonical px).
     ``motion_check`` (TSE, where the pair's expected parallax demands it): a pair whose verified
     matches fail it (drivewm.eval.guards.motion_evidence) fails under both F: static points, and a
-    zoomed still, satisfy any F through the epipole."""
-    F_fit, _ = fit_fundamental(m, cfg, native_px_per_px)
-    keep = verified_mask(F_fit, m, cfg, native_px_per_px)
+    zoomed still, satisfy any F through the epipole. ``fit``: the (F, verified mask) of ``m`` when
+    already known (drivewm.eval.epipolar.fit_verified)."""
+    F_fit, keep = fit or fit_verified(m, cfg, native_px_per_px)
     verified, frames = Matches(m.uv_a[keep], m.uv_b[keep]), frame_of[keep]
     fitted = score_matches(F_fit, verified, cfg)
     if F_fit is None and len(m) >= cfg.min_matches:
@@ -179,7 +180,9 @@ def temporal_sampson(
         if demanded:
             parallax_px = guard_cfg.parallax_threshold_native_px / scale[cam.name]
             check = functools.partial(motion_evidence, cfg=guard_cfg, epi_cfg=epi_cfg, parallax_px=parallax_px)
-        out = _score_pair(m, T_rel, np.zeros(len(m), int), K_c, epi_cfg, epi_cfg.min_matches, check, scale[cam.name])
+        fit = frame_pair_fit(matcher, (cam.name, t), (cam.name, u), m, epi_cfg, scale[cam.name])
+        frame_of = np.zeros(len(m), int)
+        out = _score_pair(m, T_rel, frame_of, K_c, epi_cfg, epi_cfg.min_matches, check, scale[cam.name], fit)
         out["motion_demanded"] = demanded
         if t % guard_cfg.direction_frame_step == 0 and out["fitted"].status == OK:
             forward = prior.forward_ego

@@ -141,6 +141,22 @@ def verified_mask(
     return sampson_px(F_fit, m.uv_a, m.uv_b) <= cfg.verify_threshold_native_px / native_px_per_px
 
 
+def fit_verified(
+    m: Matches, cfg: EpipolarConfig, native_px_per_px: float = 1.0
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """The robust F of ``m`` (:func:`fit_fundamental`) and the matches it verifies (:func:`verified_mask`)."""
+    F, _ = fit_fundamental(m, cfg, native_px_per_px)
+    return F, verified_mask(F, m, cfg, native_px_per_px)
+
+
+def frame_pair_fit(matcher, id_a, id_b, m: Matches, cfg: EpipolarConfig, native_px_per_px: float) -> tuple:
+    """:func:`fit_verified` of the rectified matches ``m`` of frames ``id_a`` and ``id_b``, once per
+    pair and ``matcher`` (drivewm.eval.matching.FrameMatcher.memo): TSE, structure from motion's
+    database and the pose check verify the same consecutive frame pairs."""
+    key = ("fit_verified", id_a, id_b, native_px_per_px)
+    return matcher.memo(key, lambda: fit_verified(m, cfg, native_px_per_px))
+
+
 def score_matches(F: np.ndarray | None, m: Matches, cfg: EpipolarConfig) -> SampsonResult:
     """Median Sampson error of the verified matches ``m`` under F -- the same set for the fitted
     and the calibrated F (docs/eval-protocol.md, 'Per-pair error')."""

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from drivewm.eval.config import EpipolarConfig, GuardConfig
-from drivewm.eval.epipolar import fit_fundamental, rectify_matches, relative_pose, verified_mask
+from drivewm.eval.epipolar import frame_pair_fit, rectify_matches, relative_pose
 from drivewm.eval.matching import FrameMatcher, Matches
 from drivewm.geometry import Camera, Rig, invert_T, nearest_rotation
 
@@ -279,8 +279,7 @@ def two_view_rotations(
         m = rectify_matches(
             matcher.match((camera.name, t), frames[t], (camera.name, t + 1), frames[t + 1]), camera, camera, K_c
         )
-        F, _ = fit_fundamental(m, epi_cfg, scale)
-        keep = verified_mask(F, m, epi_cfg, scale)
+        _, keep = frame_pair_fit(matcher, (camera.name, t), (camera.name, t + 1), m, epi_cfg, scale)
         verified = Matches(m.uv_a[keep], m.uv_b[keep])
         has_parallax = motion_evidence(verified, guard_cfg, epi_cfg, parallax_px)
         R_b_from_a = _pair_rotation(m, K_c, epi_cfg, scale, has_parallax)

@@ -135,6 +135,7 @@ class FrameMatcher:
         self.threads = threads
         self._cache: dict[object, Features] = {}
         self._pairs: dict[tuple, np.ndarray] = {}
+        self._memo: dict[tuple, object] = {}
         self._learned = load_learned_matcher(cfg.learned_weights) if cfg.matcher == "learned" else None
         if cfg.matcher not in ("sift", "learned"):
             raise DrivewmError(f"eval config: match.matcher {cfg.matcher!r} is not 'sift' or 'learned'")
@@ -170,6 +171,13 @@ class FrameMatcher:
         if key not in self._pairs:
             self._pairs[key] = match_indices(self.features(id_a, image_a), self.features(id_b, image_b), self.cfg)
         return self._pairs[key]
+
+    def memo(self, key: tuple, compute: Callable[[], object]) -> object:
+        """``compute()``, once per ``key``: e.g. the F fit of a frame pair that TSE, structure from
+        motion and the pose check each verify (deterministic, so a race computes the same value twice)."""
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
 
     def match(self, id_a: object, image_a: np.ndarray, id_b: object, image_b: np.ndarray) -> Matches:
         """Matches between two uint8 RGB frames; ids key the feature cache (e.g. (camera, t))."""

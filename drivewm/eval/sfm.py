@@ -159,7 +159,7 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
     """Cameras, images, the matcher's keypoints and matches (F-verified for verify='drivewm') into a
     new COLMAP database; returns the image-name pairs written ("CAM/TTTT.png CAM/TTTT.png")."""
     from drivewm.eval.consistency import native_px_per_canonical_px, overlapping_pairs
-    from drivewm.eval.epipolar import canonical_K, fit_fundamental, rectify_matches, verified_mask
+    from drivewm.eval.epipolar import canonical_K, frame_pair_fit, rectify_matches
     from drivewm.eval.matching import Matches
 
     num_frames = len(next(iter(videos.values())))
@@ -174,8 +174,8 @@ def _write_shared(pycolmap, db_path: Path, videos, rig: Rig, cfg: PoseConfig, ma
             fa, fb = matcher.features(a, None), matcher.features(b, None)
             m = rectify_matches(Matches(fa.uv[idx[:, 0]], fb.uv[idx[:, 1]]), rig.camera(a[0]), rig.camera(b[0]), K_c)
             scale = 0.5 * sum(native_px_per_canonical_px(rig.camera(c), K_c) for c in (a[0], b[0]))
-            F, _ = fit_fundamental(m, epi_cfg, scale)
-            idx = idx[verified_mask(F, m, epi_cfg, scale)]
+            _, keep = frame_pair_fit(matcher, a, b, m, epi_cfg, scale)
+            idx = idx[keep]
         return idx
 
     matcher.prefetch(videos)
@@ -280,10 +280,12 @@ def _map(pycolmap, db_path: Path, images: Path, out: Path, cfg: PoseConfig) -> l
 def mapper_options(cfg: PoseConfig):
     """pycolmap.IncrementalPipelineOptions of the protocol: the rig's calibration held fixed, one
     thread, and the global bundle adjustments capped (``ba_global_max_iterations``,
-    ``ba_global_max_refinements``): they are most of a long clip's mapping time."""
+    ``ba_global_max_refinements``): they are most of a long clip's mapping time. No point colours:
+    poses do not use them, and with shared features there are no images to read them from."""
     import pycolmap
 
     options = pycolmap.IncrementalPipelineOptions(
+        extract_colors=False,
         min_model_size=cfg.min_model_size,
         random_seed=cfg.seed,
         num_threads=1,

@@ -70,6 +70,16 @@ def shifted_cameras(videos: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {c: videos[names[(i + 1) % len(names)]] for i, c in enumerate(names)}
 
 
+def swapped_cameras(videos: dict[str, np.ndarray], a: str, b: str) -> dict[str, np.ndarray]:
+    """Cameras ``a`` and ``b`` show each other's video."""
+    return {**videos, a: videos[b], b: videos[a]}
+
+
+def mirrored_view(videos: dict[str, np.ndarray], camera: str) -> dict[str, np.ndarray]:
+    """``camera``'s video mirrored left-right."""
+    return {**videos, camera: videos[camera][:, :, ::-1].copy()}
+
+
 DEGRADATIONS = {
     "blurred": blurred,
     "noised": noised,

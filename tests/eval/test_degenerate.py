@@ -14,7 +14,16 @@ import dataclasses
 import cv2
 import numpy as np
 import pytest
-from eval_degrade import DEGRADATIONS, GATES, HIGHER_IS_BETTER, LOWER_IS_BETTER, MULTIVIEW_DEGRADATIONS, worse
+from eval_degrade import (
+    DEGRADATIONS,
+    GATES,
+    HIGHER_IS_BETTER,
+    LOWER_IS_BETTER,
+    MULTIVIEW_DEGRADATIONS,
+    mirrored_view,
+    swapped_cameras,
+    worse,
+)
 
 from drivewm.eval.config import EvalConfig
 from drivewm.eval.suite import evaluate_item
@@ -25,12 +34,13 @@ HEADLINE = LOWER_IS_BETTER + HIGHER_IS_BETTER + GATES
 EXPECTED_GUARD = {"reversed": "guard_time", "shifted_cameras": "guard_views", "copied_view": "guard_views"}
 
 
-def score_variants(item, cfg: EvalConfig) -> dict[str, dict]:
-    """Metrics of the item's real videos and of each degraded copy (same rig, poses, conditioning)."""
+def score_variants(item, cfg: EvalConfig, degradations: dict | None = None) -> dict[str, dict]:
+    """Metrics of the item's real videos and of each degraded copy (same rig, poses, conditioning):
+    ``degradations`` (name: videos -> videos), by default every one of eval_degrade that the rig has."""
     real = item.videos()
-    variants = {"real": lambda v: v, **DEGRADATIONS}
-    if len(item.rig.cameras) > 1:
-        variants.update(MULTIVIEW_DEGRADATIONS)
+    if degradations is None:
+        degradations = {**DEGRADATIONS, **(MULTIVIEW_DEGRADATIONS if len(item.rig.cameras) > 1 else {})}
+    variants = {"real": lambda v: v, **degradations}
     out = {}
     for name, fn in variants.items():
         copy = dataclasses.replace(item)
@@ -75,6 +85,36 @@ def test_degraded_simulated_drive_scores_worse_or_is_flagged(sim_items, key):
     assert set(keys) == set(HEADLINE)
     assert scores["real"]["pose_plausible"] is True and scores["real"]["pose_success"] == 1.0
     assert check(scores, keys) == []
+
+
+#: Swapped cameras (front sides, front and back) and one camera mirrored left-right (the symmetric
+#: front camera, a side camera): issue 69's "swapped or mirrored cameras" before CSE counts.
+VIEW_MIXUPS = {
+    "swapped_front_sides": lambda v: swapped_cameras(v, "CAM_FRONT_LEFT", "CAM_FRONT_RIGHT"),
+    "swapped_front_back": lambda v: swapped_cameras(v, "CAM_FRONT", "CAM_BACK"),
+    "mirrored_front": lambda v: mirrored_view(v, "CAM_FRONT"),
+    "mirrored_front_left": lambda v: mirrored_view(v, "CAM_FRONT_LEFT"),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(3600)
+@pytest.mark.parametrize("key", ["highway_clear-000000", "roundabout_clear-000000"])
+def test_swapped_cameras_are_flagged_and_a_mirrored_one_scores_worse_on_cse(sim_items, key):
+    """Two swapped cameras travel their mounting angles apart off the rig's direction (110 and 180
+    degrees): ``guard_views`` voids the clip. One mirrored camera passes the guards (one camera off
+    is not enough, and the front camera's travel is its own mirror image) but no longer matches its
+    neighbours' geometry: CSE, fitted and calibrated, is worse than the real clip's."""
+    scores = score_variants(sim_items[key], EvalConfig(metrics=["tse", "cse"]), VIEW_MIXUPS)
+    keys = ("cse", "cse_calibrated", "guard_views", "voided_by")
+    print({name: {k: m.get(k) for k in keys} for name, m in scores.items()})
+    real = scores["real"]
+    assert not real.get("voided_by")
+    for name in ("swapped_front_sides", "swapped_front_back"):
+        assert scores[name]["guard_views"] is False and "guard_views" in scores[name]["voided_by"]
+    for name in ("mirrored_front", "mirrored_front_left"):
+        m = scores[name]
+        assert m.get("voided_by") or all(worse(k, m[k], real[k]) for k in ("cse", "cse_calibrated")), m
 
 
 @pytest.mark.slow
