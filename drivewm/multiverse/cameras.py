@@ -28,6 +28,8 @@ class FutureCameras(Protocol):
     """What it is and what it renders each future from, for the reports."""
     rig: Rig
     """The cameras the frames are of (at the size of the frames)."""
+    sampling: dict | None
+    """The model's sampler settings (drivewm.generate.config.SamplingConfig.record); None: no model."""
 
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
         """uint8 RGB (T, H, W, 3) per camera of the branch's rig, one frame per tick."""
@@ -44,6 +46,7 @@ class SimCameras:
 
     name = "sim"
     description = "the simulator's renderer (drivewm.sim.render), standing in for the world model"
+    sampling = None
 
     def __init__(self, branch: Branch):
         from drivewm.sim.world import build_renderer

@@ -65,6 +65,7 @@ class ModelCameras:
         self.prompt = model_prompt(prompt, branch.tags)
         self.request = GenerateRequest([self.prompt])
         self.cfg = GenerateConfig(sampling=SamplingConfig(steps=steps, seed=seed))
+        self.sampling = self.cfg.sampling.record()
         mv = generator.model.cfg.multiview
         c, t, h, w = generator.model.latent.latent_shape
         sc = generator.tokenizer.config.spatial_compression

@@ -89,6 +89,7 @@ def _ranking(cfg: MultiverseConfig, b: Branch, cameras: FutureCameras, results: 
         "renderer": cameras.name,
         "renderer_description": cameras.description,
         "model": _model_name(cfg.model),
+        "model_sampling": cameras.sampling,
         "cameras": list(b.rig.names),
         "prompt": cfg.prompt,
         "rule": {**to_dict(cfg.ranking), "description": describe_rule(cfg.ranking)},

@@ -58,7 +58,9 @@ def test_the_shipped_model_renders_every_future_from_its_trajectory(tmp_path) ->
     ranking = json.loads((tmp_path / "out/ranking.json").read_text())
     assert ranking["renderer"] == "model" and ranking["model"] == "shipped:multiview"
     assert ranking["renderer_description"].endswith("from its ego trajectory and prompt")
-    assert "from its ego trajectory and prompt" in (tmp_path / "out/report.html").read_text()
+    assert ranking["model_sampling"]["steps"] == 1 and ranking["model_sampling"]["sampler"] == "heun"
+    html = (tmp_path / "out/report.html").read_text()
+    assert "from its ego trajectory and prompt" in html and "1 heun steps a window, guidance 7" in html
     videos, past = {}, None
     for plan in ("keep", "brake"):
         log = read_log(tmp_path / "out/futures" / plan / "drive.mcap")
