@@ -14,7 +14,7 @@ wait policy passive) and the ratio of the wall time to the 600 s limit.
 
     python benchmarks/bench_multiverse.py                          # 8 s horizon, 1 repeat, both sources
     python benchmarks/bench_multiverse.py --horizon 2 --no-eval-runs  # a quick look, eval's share split off
-    python benchmarks/bench_multiverse.py --sources log --renderer model --model shipped:multiview --steps 10
+    python benchmarks/bench_multiverse.py --sources log --renderer model --model shipped:multiview  # 10 steps
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def main() -> None:
     p.add_argument("--sources", default="log,highway-env", help="which of log, highway-env to time")
     p.add_argument("--no-eval-runs", action="store_true", help="also time each source without drivewm eval")
     p.add_argument("--model", default="", help="multi-view model folder (or shipped:multiview) of --renderer model")
-    p.add_argument("--steps", type=int, default=35, help="sampler steps per window of --renderer model")
+    p.add_argument("--steps", type=int, default=MultiverseConfig.model_steps, help="sampler steps a model window")
     p.add_argument("--renderer", default="sim", choices=["sim", "model", "both"], help="cameras to time")
     p.add_argument("--threads", type=int, default=os.cpu_count(), help="torch threads (default: every core)")
     args = p.parse_args()
