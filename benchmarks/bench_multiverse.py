@@ -9,11 +9,12 @@ share is the difference. The model's parameter counts (network, tokenizer) are p
 Two sources, interleaved ``--repeats`` times (medians): a recorded nuscenes6 drive (simulated once, then
 branched as a log: road users replayed) and the same scenario forked in highway-env (reactive). Each run
 can also run without ``drivewm eval`` (``--no-eval-runs``) to split the video scores' cost off. Prints wall and CPU
-seconds and the ratio of the wall time to the 600 s limit.
+seconds, the torch threads (``--threads``, default every core: the model's network uses both of 2; OpenMP's
+wait policy passive) and the ratio of the wall time to the 600 s limit.
 
     python benchmarks/bench_multiverse.py                          # 8 s horizon, 1 repeat, both sources
     python benchmarks/bench_multiverse.py --horizon 2 --no-eval-runs  # a quick look, eval's share split off
-    python benchmarks/bench_multiverse.py --sources log --renderer model --model shipped:multiview --steps 10
+    python benchmarks/bench_multiverse.py --sources log --renderer model --model shipped:multiview  # 10 steps
 """
 
 from __future__ import annotations
@@ -28,6 +29,11 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
+# Idle OpenMP threads sleep rather than spin: on a shared 2-core machine spinning threads took 2.3x the
+# wall time of one thread (load 6); sleeping ones 0.8x. Read when torch loads OpenMP, so set before it.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import torch  # noqa: E402
 
 from drivewm.multiverse import MultiverseConfig, run_multiverse  # noqa: E402
 from drivewm.sim import SimConfig, simulate  # noqa: E402
@@ -70,9 +76,11 @@ def main() -> None:
     p.add_argument("--sources", default="log,highway-env", help="which of log, highway-env to time")
     p.add_argument("--no-eval-runs", action="store_true", help="also time each source without drivewm eval")
     p.add_argument("--model", default="", help="multi-view model folder (or shipped:multiview) of --renderer model")
-    p.add_argument("--steps", type=int, default=35, help="sampler steps per window of --renderer model")
+    p.add_argument("--steps", type=int, default=MultiverseConfig.model_steps, help="sampler steps a model window")
     p.add_argument("--renderer", default="sim", choices=["sim", "model", "both"], help="cameras to time")
+    p.add_argument("--threads", type=int, default=os.cpu_count(), help="torch threads (default: every core)")
     args = p.parse_args()
+    torch.set_num_threads(args.threads)
     if args.renderer != "sim" and not args.model:
         p.error("--renderer model/both needs --model DIR")
     with tempfile.TemporaryDirectory(prefix="bench-multiverse-") as tmp:
@@ -94,6 +102,7 @@ def main() -> None:
             for name, cfg in runs.items():
                 times[name].append(timed(cfg, tmp / "out"))
     print(f"five {args.horizon:g} s futures, nuscenes6 at 320x192, {args.repeats} repeat(s), medians:")
+    print(f"  torch threads {torch.get_num_threads()} of {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
     if args.renderer != "sim":
         params = ", ".join(f"{k} {v / 1e6:.2f}M" for k, v in model_parameters(args.model).items())
         print(f"  model {args.model}: {params} parameters, {args.steps} sampler steps per window")

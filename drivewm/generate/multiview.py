@@ -180,15 +180,32 @@ class MultiViewGenerator:
         self, prompt: str, seed: int, cond: Conditions, request: GenerateRequest, cfg: GenerateConfig
     ) -> GeneratedSample:
         """One clip: the network's sampling, then the post-steps ``cfg`` asks for."""
-        dt_s = self.model.cfg.multiview.trajectory_dt_s
+        return self.sample_batch(prompt, [seed], [cond], request, cfg)[0]
+
+    def sample_batch(
+        self, prompt: str, seeds: list[int], conds: list[Conditions], request: GenerateRequest, cfg: GenerateConfig
+    ) -> list[GeneratedSample]:
+        """Clip b from ``conds[b]`` (one rig for all) and noise seed ``seeds[b]``, every clip in one denoiser
+        batch, then each clip's post-steps. Noise is drawn per clip, so these are the clips of one call
+        each, up to float rounding."""
+        dt_s, rig = self.model.cfg.multiview.trajectory_dt_s, conds[0].rig
         if cfg.prompt_template:
-            caps = template_view_captions(prompt, cond.rig, cond.waypoints, dt_s)
+            caps = [template_view_captions(prompt, c.rig, c.waypoints, dt_s) for c in conds]
         else:
-            caps = view_captions(prompt, cond.rig)
+            caps = [view_captions(prompt, c.rig) for c in conds]
         z = self.model.sample_latents(
-            cond.rig, [caps], cond.waypoints[None], [seed], cfg.sampling.steps, cond_latents=cond.cond_latents,
-            layout_latents=cond.layout_latents, **cfg.sampling.sample_kwargs(),
-        )[0]  # fmt: skip
+            rig, caps, np.stack([c.waypoints for c in conds]), seeds, cfg.sampling.steps,
+            cond_latents=_stacked([c.cond_latents for c in conds]),
+            layout_latents=_stacked([c.layout_latents for c in conds]), **cfg.sampling.sample_kwargs(),
+        )  # fmt: skip
+        return [self._sampled(prompt, *clip, request, cfg) for clip in zip(seeds, conds, caps, z)]
+
+    def _sampled(
+        self, prompt: str, seed: int, cond: Conditions, caps: list[str], z: torch.Tensor, request: GenerateRequest,
+        cfg: GenerateConfig,
+    ) -> GeneratedSample:  # fmt: skip
+        """One sampled clip's raw latents (V, c, t, h, w) decoded, post-stepped and recorded."""
+        dt_s = self.model.cfg.multiview.trajectory_dt_s
         videos = self.decode(z)
         if cfg.post("reproject"):
             videos = self.reproject(videos, caps, cond, seed, cfg)
@@ -237,6 +254,15 @@ class MultiViewGenerator:
 
     def write(self, samples: list[GeneratedSample], out_dir: Path, name: str = "generated") -> list[Path]:
         return write_samples(out_dir, samples, self.model.latent.fps, name=name)
+
+
+def _stacked(latents: list[torch.Tensor | None]) -> torch.Tensor | None:
+    """Per clip (1, V, c, t, h, w) latents -> (B, V, c, t, h, w); None when no clip has any."""
+    if all(z is None for z in latents):
+        return None
+    if any(z is None for z in latents):
+        raise DrivewmError("sample_batch: give condition latents for every clip of a batch or for none")
+    return torch.cat(latents)
 
 
 def check_post_steps(request: GenerateRequest, cfg: GenerateConfig) -> None:

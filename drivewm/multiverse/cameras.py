@@ -8,6 +8,7 @@ boxes, the road) into one video per camera.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Protocol
 
 import numpy as np
@@ -27,9 +28,15 @@ class FutureCameras(Protocol):
     """What it is and what it renders each future from, for the reports."""
     rig: Rig
     """The cameras the frames are of (at the size of the frames)."""
+    sampling: dict | None
+    """The model's sampler settings (drivewm.generate.config.SamplingConfig.record); None: no model."""
 
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
         """uint8 RGB (T, H, W, 3) per camera of the branch's rig, one frame per tick."""
+        ...
+
+    def futures_frames(self, futures: list[list[SceneTick]]) -> Iterable[dict[str, np.ndarray]]:
+        """:meth:`frames` of each future in turn (the model renderer samples them together)."""
         ...
 
 
@@ -39,6 +46,7 @@ class SimCameras:
 
     name = "sim"
     description = "the simulator's renderer (drivewm.sim.render), standing in for the world model"
+    sampling = None
 
     def __init__(self, branch: Branch):
         from drivewm.sim.world import build_renderer
@@ -50,6 +58,9 @@ class SimCameras:
     def frames(self, ticks: list[SceneTick]) -> dict[str, np.ndarray]:
         shots = [self.renderer.render(t.T_world_from_ego, t.agents, t.timestamp_ns) for t in ticks]
         return {c: np.stack([s[c] for s in shots]) for c in self.rig.names}
+
+    def futures_frames(self, futures: list[list[SceneTick]]) -> Iterable[dict[str, np.ndarray]]:
+        return (self.frames(f) for f in futures)  # one future's frames in memory at a time
 
 
 def make_cameras(cfg: MultiverseConfig, branch: Branch, generator=None, progress: bool = True) -> FutureCameras:

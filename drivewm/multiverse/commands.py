@@ -34,7 +34,9 @@ def register(subparsers) -> None:
         help="--renderer model: a multi-view model folder or shipped:multiview (from the ego trajectory; with the "
         "layout too where the model was trained with one)",
     )
-    p.add_argument("--steps", type=int, default=35, help="--renderer model: sampler steps per window (default 35)")
+    p.add_argument(
+        "--steps", type=int, default=10, help="--renderer model: sampler steps per window (default 10; generate: 35)"
+    )
     p.add_argument("--width", type=int, default=320, help="image width (default 320)")
     p.add_argument("--height", type=int, default=192, help="image height (default 192)")
     p.add_argument("--rig", default="nuscenes6", help="rig of simulated scenarios (default nuscenes6)")

@@ -70,8 +70,10 @@ class MultiverseConfig:
     model: str = ""
     """Model folder (or ``shipped:multiview``) of ``renderer: model``: a multi-view model, generating each future
     from its ego trajectory, and from its layout where the model was trained with one (multiview.layout)."""
-    model_steps: int = 35
-    """Sampler steps per generated window of ``renderer: model``."""
+    model_steps: int = 10
+    """Sampler steps per generated window of ``renderer: model`` (generate's sampler, Heun with guidance 7;
+    generate's default is 35). 10 scores as 35 against the simulator's truth at 0.26x the CPU; 6 breaks
+    (docs/results.md, benchmarks/bench_multiverse_steps.py)."""
     rig: str = "nuscenes6"
     """Camera rig of simulated scenarios (a log keeps its own)."""
     width: int = 320

@@ -16,7 +16,8 @@ the model's spacing) and the prompt. What else a window is generated from depend
 
 A window that runs past the last tick is padded with ticks extrapolated at the ego's last velocity (road
 users kept where they were last) and only its own frames are kept. Window k of every call draws its
-noise from seed + k, so futures differ by their conditions, not by their noise. The prompt is the run's,
+noise from seed + k, so futures differ by their conditions, not by their noise; a trajectory model
+samples window k of every future in one denoiser batch (:meth:`ModelCameras.futures_frames`). The prompt is the run's,
 with the branch's weather and time of day where it names none.
 """
 
@@ -64,6 +65,7 @@ class ModelCameras:
         self.prompt = model_prompt(prompt, branch.tags)
         self.request = GenerateRequest([self.prompt])
         self.cfg = GenerateConfig(sampling=SamplingConfig(steps=steps, seed=seed))
+        self.sampling = self.cfg.sampling.record()
         mv = generator.model.cfg.multiview
         c, t, h, w = generator.model.latent.latent_shape
         sc = generator.tokenizer.config.spatial_compression
@@ -77,6 +79,8 @@ class ModelCameras:
             f"a multi-view world model, generating each future from its {CONDITIONING[self.conditioning]}"
         )
         self.past, self._past_video = branch.past, None
+        self.windows_sampled = 0
+        """Windows generated so far (one sampler run of every camera each; benchmarks)."""
         if self.conditioning == "layout":
             if branch.source != "log" and not branch.road.props:  # the props the sim renderer would draw
                 ticks = branch.past + [t for f in branch.futures for t in f]
@@ -95,35 +99,57 @@ class ModelCameras:
         elif ticks[0].timestamp_ns <= self.past[-1].timestamp_ns:  # the past (or a part of it)
             first = next(i for i, t in enumerate(self.past) if t.timestamp_ns == ticks[0].timestamp_ns)
             joined = self.past_video()[:, first : first + len(ticks)]
-        else:  # a future: it continues the past's frames at the branch tick
-            given = self.past_video()[:, -self.num_cond :]
-            joined = self.continued(self.past[-self.num_cond :] + ticks, given, 0)[:, self.num_cond :]
+        else:
+            return self.futures_frames([ticks])[0]
         return {c: joined[v] for v, c in enumerate(self.rig.names)}
+
+    def futures_frames(self, futures: list[list[SceneTick]]) -> list[dict[str, np.ndarray]]:
+        """:meth:`frames` of each future (the ticks after the branch tick). Video2World: every future
+        continues the past's frames at the branch tick, window k of every future sampled in one denoiser
+        batch (the frames of one call per future, up to float rounding)."""
+        if self.conditioning == "layout" or not any(futures):
+            return [self.frames(f) for f in futures]
+        given = self.past_video()[:, -self.num_cond :]
+        videos = self.continued([self.past[-self.num_cond :] + f for f in futures], [given] * len(futures), 0)
+        return [{c: video[v, self.num_cond :] for v, c in enumerate(self.rig.names)} for video in videos]
 
     def past_video(self) -> np.ndarray:
         """The past's frames (V, T, H, W, 3), generated once: its first window from the trajectory alone."""
         if self._past_video is None:
-            self._past_video = self.continued(self.past, self.sample(self.past, 0, None, 0), 1)
+            first = self.sample_windows([self.past], [0], [None], 0)[0]
+            self._past_video = self.continued([self.past], [first], 1)[0]
         return self._past_video
 
-    def continued(self, ticks: list[SceneTick], video: np.ndarray, index: int) -> np.ndarray:
-        """``video`` (V, n, H, W, 3), the frames of the first ``n`` ticks, continued window after window
-        (window k from seed + ``index`` + k) to the frames (V, T, H, W, 3) of every tick of ``ticks``."""
+    def continued(self, ticks: list[list[SceneTick]], videos: list[np.ndarray], index: int) -> list[np.ndarray]:
+        """Each ``videos[i]`` (V, n, H, W, 3), the frames of the first n ticks of ``ticks[i]``, continued
+        window after window to the frames (V, T, H, W, 3) of every tick of ``ticks[i]``; window k of every
+        clip from seed + ``index`` + k, all clips' window k in one batch."""
         bar = tqdm(desc="model windows", leave=False, disable=not self.progress)
-        while video.shape[1] < len(ticks):
-            start = video.shape[1] - self.num_cond
-            new = self.sample(ticks, start, video[:, start:], index)
-            video, index = np.concatenate([video, new[:, self.num_cond :]], axis=1), index + 1
-            bar.update()
+        while todo := [i for i, v in enumerate(videos) if v.shape[1] < len(ticks[i])]:
+            starts = [videos[i].shape[1] - self.num_cond for i in todo]
+            firsts = [videos[i][:, s:] for i, s in zip(todo, starts)]
+            new = self.sample_windows([ticks[i] for i in todo], starts, firsts, index)
+            for i, window in zip(todo, new):
+                videos[i] = np.concatenate([videos[i], window[:, self.num_cond :]], axis=1)
+            index += 1
+            bar.update(len(todo))
         bar.close()
-        return video[:, : len(ticks)]
+        return [v[:, : len(t)] for v, t in zip(videos, ticks)]
 
-    def sample(self, ticks: list[SceneTick], start: int, first_frames: np.ndarray | None, index: int) -> np.ndarray:
-        """The generated frames (V, num_frames, H, W, 3) of the window from ``ticks[start]`` along its ego
-        trajectory, continuing ``first_frames`` (None: generated whole)."""
-        waypoints, _ = window_waypoints(ticks, start, self.gen.model.cfg.multiview)
-        cond = self.gen.trajectory_conditions(self.rig, waypoints, first_frames)
-        return self.gen.sample(self.prompt, self.seed + index, cond, self.request, self.cfg).videos
+    def sample_windows(
+        self, ticks: list[list[SceneTick]], starts: list[int], first_frames: list[np.ndarray | None], index: int
+    ) -> list[np.ndarray]:
+        """The generated frames (V, num_frames, H, W, 3) of each window from ``ticks[i][starts[i]]`` along
+        its ego trajectory, continuing ``first_frames[i]`` (None: generated whole), in one denoiser batch
+        with noise seed + ``index``."""
+        mv = self.gen.model.cfg.multiview
+        conds = [
+            self.gen.trajectory_conditions(self.rig, window_waypoints(t, s, mv)[0], f)
+            for t, s, f in zip(ticks, starts, first_frames)
+        ]
+        self.windows_sampled += len(conds)
+        samples = self.gen.sample_batch(self.prompt, [self.seed + index] * len(conds), conds, self.request, self.cfg)
+        return [s.videos for s in samples]
 
     def layout_window(self, ticks: list[SceneTick], start: int, index: int) -> np.ndarray:
         """The generated frames (V, n, H, W, 3) of ticks [start, start + num_frames) from their layout (n:
@@ -137,6 +163,7 @@ class ModelCameras:
         )  # fmt: skip
         waypoints, dt_s = window_waypoints(ticks, start, self.gen.model.cfg.multiview)
         cond = self.gen.layout_conditions(self.rig, LayoutSource(where, layout, waypoints, dt_s))
+        self.windows_sampled += 1
         sample = self.gen.sample(self.prompt, self.seed + index, cond, self.request, self.cfg)
         return sample.videos[:, : min(self.num_frames, len(ticks) - start)]
 

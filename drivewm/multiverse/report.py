@@ -124,13 +124,22 @@ def _sheet(f: dict) -> str:
     return f'<h3>#{f["rank"]} {name}</h3><img src="report/{name}.png" alt="{name} cameras">'
 
 
+def _sampling(sampling: dict | None) -> str:
+    """The model's sampler settings in a few words, e.g. ", 10 heun steps a window, guidance 7"."""
+    if not sampling:
+        return ""
+    return f", {sampling['steps']} {html.escape(sampling['sampler'])} steps a window, guidance {sampling['guidance']:g}"
+
+
 def render_html(ranking: dict) -> str:
     """The page: what was branched and rendered how, the plot, the score table best first, the sheets."""
     head = "".join(f"<th>{html.escape(t)}</th>" for _, t in COLUMNS + VIDEO_COLUMNS)
     users = "reactive road users" if ranking["reactive"] else "road users replayed from the log"
     cams = ", ".join(html.escape(c) for c in ranking["cameras"])
     renderer = html.escape(ranking["renderer_description"])
-    model = f" (model {html.escape(ranking['model'])})" if ranking["model"] else ""
+    model = (
+        f" (model {html.escape(ranking['model'])}{_sampling(ranking['model_sampling'])})" if ranking["model"] else ""
+    )
     return f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>drivewm multiverse</title>
 <style>body{{font-family:sans-serif;margin:1.5em}} table{{border-collapse:collapse}}

@@ -51,12 +51,11 @@ def run_multiverse(cfg: MultiverseConfig, out_dir: str | Path, progress: bool = 
         tmp.mkdir(parents=True)
         past_jpeg = encode_frames(cameras.frames(b.past))
         results, sheets, front = [], {}, {}
-        todo = list(zip(b.plans, b.futures, b.infeasible))
-        bar = tqdm(todo, desc="futures", unit="future", disable=not progress)
-        for plan, future, infeasible in bar:
+        todo = zip(b.plans, b.futures, b.infeasible, cameras.futures_frames(b.futures))  # frames made lazily
+        bar = tqdm(todo, desc="futures", unit="future", total=len(b.plans), disable=not progress)
+        for plan, future, infeasible, frames in bar:
             bar.set_postfix_str(plan.name)
             folder = child_path(tmp / "futures", plan.name, what="plan")
-            frames = cameras.frames(future)
             write_future_log(folder / "drive.mcap", b, plan.name, past_jpeg, future, frames)
             videos = write_camera_videos(folder / "cameras", frames, fps)
             scores = score_future(b.past, future, b.road)
@@ -90,6 +89,7 @@ def _ranking(cfg: MultiverseConfig, b: Branch, cameras: FutureCameras, results: 
         "renderer": cameras.name,
         "renderer_description": cameras.description,
         "model": _model_name(cfg.model),
+        "model_sampling": cameras.sampling,
         "cameras": list(b.rig.names),
         "prompt": cfg.prompt,
         "rule": {**to_dict(cfg.ranking), "description": describe_rule(cfg.ranking)},

@@ -43,6 +43,7 @@ def test_a_scenario_gives_the_same_ranking_and_logs_twice(tmp_path) -> None:
         a, b = (tmp_path / x / "futures" / plan / "drive.mcap" for x in "ab")
         assert a.read_bytes() == b.read_bytes()
     assert [f["rank"] for f in first["futures"]] == [1, 2, 3] and first["renderer"] == "sim"
+    assert first["model_sampling"] is None
     keys = [sort_key(f["scores"], cfg.ranking) for f in first["futures"]]
     assert keys == sorted(keys)  # best first by the rule
     progress = {f["plan"]: f["scores"]["progress_m"] for f in first["futures"]}
